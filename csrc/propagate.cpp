@@ -1,0 +1,4 @@
+// propagate kernels (see propagate.h).
+#include "propagate.h"
+
+namespace voxgi {}

@@ -1,0 +1,4 @@
+// propagate kernels.
+#pragma once
+
+namespace voxgi {}

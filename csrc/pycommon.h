@@ -1,0 +1,58 @@
+// pybind11 helpers shared by the bind_*.cpp files.
+#pragma once
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <chrono>
+#include <string>
+
+#include "common.h"
+
+namespace voxgi::py_helpers {
+namespace py = pybind11;
+
+using I32 = py::array_t<int32_t, py::array::c_style>;
+using I64 = py::array_t<int64_t, py::array::c_style>;
+using F32 = py::array_t<float, py::array::c_style>;
+using F64 = py::array_t<double, py::array::c_style>;
+using U8 = py::array_t<uint8_t, py::array::c_style>;
+
+// A StopCheck for kernels running with the GIL released: at most every
+// 50 ms it re-acquires the GIL and asks Python whether a signal (Ctrl-C)
+// is pending. The pending KeyboardInterrupt stays set and is raised when
+// the binding returns through `error_already_set`.
+inline voxgi::StopCheck make_stop_check() {
+    auto last = std::make_shared<std::chrono::steady_clock::time_point>(
+        std::chrono::steady_clock::now());
+    auto flagged = std::make_shared<bool>(false);
+    return [last, flagged]() -> bool {
+        if (*flagged) return true;
+        auto now = std::chrono::steady_clock::now();
+        if (now - *last < std::chrono::milliseconds(50)) return false;
+        *last = now;
+        py::gil_scoped_acquire gil;
+        if (PyErr_CheckSignals() != 0) {
+            *flagged = true;
+            return true;
+        }
+        return false;
+    };
+}
+
+// Check shape of a 2-D array: (n, cols), n == -1 accepts any n.
+template <class A>
+void check_2d(const A &a, py::ssize_t n, py::ssize_t cols, const char *name) {
+    if (a.ndim() != 2 || a.shape(1) != cols || (n >= 0 && a.shape(0) != n))
+        throw py::value_error(std::string(name) + " must have shape (" +
+                              (n >= 0 ? std::to_string(n) : std::string("N")) + ", " +
+                              std::to_string(cols) + ")");
+}
+template <class A>
+void check_1d(const A &a, py::ssize_t n, const char *name) {
+    if (a.ndim() != 1 || (n >= 0 && a.shape(0) != n))
+        throw py::value_error(std::string(name) + " must have shape (" +
+                              (n >= 0 ? std::to_string(n) : std::string("N")) + ",)");
+}
+
+}  // namespace voxgi::py_helpers

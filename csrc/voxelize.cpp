@@ -1,0 +1,4 @@
+// voxelize kernels (see voxelize.h).
+#include "voxelize.h"
+
+namespace voxgi {}

@@ -1,0 +1,4 @@
+// voxelize kernels.
+#pragma once
+
+namespace voxgi {}

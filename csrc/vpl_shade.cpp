@@ -1,0 +1,4 @@
+// vpl_shade kernels (see vpl_shade.h).
+#include "vpl_shade.h"
+
+namespace voxgi {}

@@ -1,0 +1,4 @@
+// vpl_shade kernels.
+#pragma once
+
+namespace voxgi {}

@@ -1,0 +1,46 @@
+"""voxgi: voxel-based global illumination.
+
+Linear-complexity discrete-line radiosity on sparse surface voxels
+(Malgouyres 2002; Chatelier & Malgouyres 2006; Piwowar & Malgouyres 2008),
+displayed without aliasing by progressive VPL ray tracing (Piwowar &
+Malgouyres, "Affichage non aliasé pour l'illumination globale par voxels").
+
+>>> import voxgi
+>>> scene = voxgi.scenes.cornell_box(width=64, height=64)
+>>> vox = voxgi.voxelize(scene, resolution=32)
+>>> sol = voxgi.solve(vox)                                  # doctest: +SKIP
+>>> out = voxgi.render(scene, sol, progress=False)         # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from importlib.metadata import PackageNotFoundError, version
+
+from . import _core, io, metrics, scenes
+from .display import RenderResult, render
+from .radiosity import Solution, solve
+from .scene import AshikhminShirley, Camera, Material, Scene, SceneObject
+from .voxels import VoxelSet, voxelize
+
+try:
+    __version__ = version("voxgi")
+except PackageNotFoundError:  # pragma: no cover - running from a source tree
+    __version__ = getattr(_core, "__version__", "0+unknown")
+
+__all__ = [
+    "AshikhminShirley",
+    "Camera",
+    "Material",
+    "RenderResult",
+    "Scene",
+    "SceneObject",
+    "Solution",
+    "VoxelSet",
+    "__version__",
+    "io",
+    "metrics",
+    "render",
+    "scenes",
+    "solve",
+    "voxelize",
+]

@@ -1,0 +1,121 @@
+"""Shared argument checks: every public entry point validates through here.
+
+Each helper names the offending argument (``what``) in its message so that a
+user sees which mesh, field or value was wrong.
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Sequence
+
+import numpy as np
+
+
+def as_c_array(value, dtype, shape: Sequence[int], what: str, *, finite: bool = True) -> np.ndarray:
+    """Return ``value`` as a C-contiguous array of ``dtype`` and ``shape``.
+
+    ``-1`` in ``shape`` accepts any length on that axis. Always returns a copy
+    or a fresh conversion when needed; the caller's array is never modified.
+    """
+    try:
+        arr = np.asarray(value)
+    except Exception as exc:  # ragged lists and the like
+        raise TypeError(f"{what}: cannot be read as an array ({exc})") from None
+    if arr.dtype == object or not (
+        np.issubdtype(arr.dtype, np.number) or np.issubdtype(arr.dtype, np.bool_)
+    ):
+        raise TypeError(f"{what}: expected a numeric array, got dtype {arr.dtype}")
+    if arr.ndim != len(shape) or any(s != -1 and s != a for s, a in zip(shape, arr.shape)):
+        want = "(" + ", ".join("N" if s == -1 else str(s) for s in shape) + ")"
+        raise ValueError(f"{what}: expected shape {want}, got {arr.shape}")
+    if np.issubdtype(np.dtype(dtype), np.integer) and not np.issubdtype(arr.dtype, np.integer):
+        if arr.size and not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
+            raise ValueError(f"{what}: expected integers")
+    out = np.ascontiguousarray(arr, dtype=dtype)
+    if finite and np.issubdtype(out.dtype, np.floating) and not np.all(np.isfinite(out)):
+        bad = np.argwhere(~np.isfinite(out))[0]
+        raise ValueError(f"{what}: non-finite value {arr[tuple(bad)]} at index {tuple(int(i) for i in bad)}")
+    return out
+
+
+def rgb(value, what: str, *, low: float = 0.0, high: float | None = None,
+        high_inclusive: bool = True) -> tuple[float, float, float]:
+    """Colour argument: a scalar or 3 finite numbers within [low, high]."""
+    if isinstance(value, bool):
+        raise TypeError(f"{what}: expected a number or 3 numbers, got bool")
+    if isinstance(value, numbers.Real):
+        vals = (float(value),) * 3
+    else:
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise TypeError(f"{what}: expected a number or 3 numbers, got {value!r}") from None
+        if arr.shape != (3,):
+            raise ValueError(f"{what}: expected a scalar or 3 values, got shape {arr.shape}")
+        vals = tuple(float(v) for v in arr)
+    for v in vals:
+        if not np.isfinite(v):
+            raise ValueError(f"{what}: non-finite value {v}")
+        if v < low:
+            raise ValueError(f"{what}: value {v} is below {low}")
+        if high is not None and (v > high or (v == high and not high_inclusive)):
+            rng = f"[{low}, {high}]" if high_inclusive else f"[{low}, {high})"
+            raise ValueError(f"{what}: value {v} is outside {rng}")
+    return vals  # type: ignore[return-value]
+
+
+def vec3(value, what: str) -> np.ndarray:
+    """A finite 3-vector as float64."""
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"{what}: expected 3 numbers, got {value!r}")
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{what}: expected 3 numbers, got {value!r}") from None
+    if arr.shape != (3,):
+        raise ValueError(f"{what}: expected 3 values, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{what}: non-finite value in {arr.tolist()}")
+    return arr
+
+
+def integer(value, what: str, *, low: int | None = None, high: int | None = None,
+            allow_none: bool = False) -> int | None:
+    """An int (numpy integers accepted, bools and floats refused)."""
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{what}: expected an integer, got {type(value).__name__} {value!r}")
+    v = int(value)
+    if low is not None and v < low:
+        raise ValueError(f"{what}: must be >= {low}, got {v}")
+    if high is not None and v > high:
+        raise ValueError(f"{what}: must be <= {high}, got {v}")
+    return v
+
+
+def real(value, what: str, *, low: float | None = None, high: float | None = None,
+         low_open: bool = False, high_open: bool = False, allow_none: bool = False) -> float | None:
+    """A finite real number within optional (open or closed) bounds."""
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{what}: expected a number, got {type(value).__name__} {value!r}")
+    v = float(value)
+    if not np.isfinite(v):
+        raise ValueError(f"{what}: must be finite, got {v}")
+    if low is not None and (v < low or (low_open and v == low)):
+        raise ValueError(f"{what}: must be {'>' if low_open else '>='} {low}, got {v}")
+    if high is not None and (v > high or (high_open and v == high)):
+        raise ValueError(f"{what}: must be {'<' if high_open else '<='} {high}, got {v}")
+    return v
+
+
+def threads(value, what: str = "threads") -> int:
+    """Thread count: None means all hardware threads."""
+    from . import _core
+
+    if value is None:
+        return int(_core.hardware_threads())
+    return integer(value, what, low=1, high=1024)  # type: ignore[return-value]

@@ -1,0 +1,588 @@
+"""Scene description: materials, camera, meshes, and TOML scene files.
+
+A :class:`Scene` holds triangle meshes (``trimesh.Trimesh``) with a
+:class:`Material` each, and a :class:`Camera`. Meshes are copied when added,
+so nothing the user passes in is modified later.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import sys
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from . import _validate
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+__all__ = ["AshikhminShirley", "Camera", "Material", "Scene", "SceneObject"]
+
+
+@dataclass(frozen=True)
+class AshikhminShirley:
+    """Ashikhmin–Shirley anisotropic Phong specular layer (display only).
+
+    Parameters
+    ----------
+    rs : float or (3,) float
+        Specular reflectance at normal incidence, per RGB channel, in [0, 1].
+    nu, nv : float
+        Phong exponents along the tangent ``u`` and bitangent ``v`` (> 0).
+
+    References
+    ----------
+    M. Ashikhmin and P. Shirley, "An anisotropic Phong BRDF model",
+    Journal of Graphics Tools 5(2), 2000.
+    """
+
+    rs: tuple[float, float, float] = (0.04, 0.04, 0.04)
+    nu: float = 100.0
+    nv: float = 100.0
+
+    def __post_init__(self):
+        object.__setattr__(self, "rs", _validate.rgb(self.rs, "AshikhminShirley.rs", high=1.0))
+        object.__setattr__(self, "nu", _validate.real(self.nu, "AshikhminShirley.nu", low=0.0,
+                                                      low_open=True, high=1e6))
+        object.__setattr__(self, "nv", _validate.real(self.nv, "AshikhminShirley.nv", low=0.0,
+                                                      low_open=True, high=1e6))
+
+
+@dataclass(frozen=True)
+class Material:
+    """A Lambertian material with optional emission and glossy layer.
+
+    Parameters
+    ----------
+    albedo : float or (3,) float
+        Diffuse reflectance ``rho`` per RGB channel, in [0, 1).
+    emission : float or (3,) float
+        Emitted radiance ``Le`` per RGB channel (>= 0), as for an area emitter
+        in Mitsuba 3 or pbrt; the emitted radiosity is ``pi * Le``.
+    specular : AshikhminShirley or None
+        Optional glossy layer, used by the display only.
+    """
+
+    albedo: tuple[float, float, float] = (0.8, 0.8, 0.8)
+    emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    specular: AshikhminShirley | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "albedo", _validate.rgb(self.albedo, "Material.albedo",
+                                                         high=1.0, high_inclusive=False))
+        object.__setattr__(self, "emission", _validate.rgb(self.emission, "Material.emission"))
+        if self.specular is not None and not isinstance(self.specular, AshikhminShirley):
+            raise TypeError("Material.specular: expected voxgi.AshikhminShirley or None, got "
+                            f"{type(self.specular).__name__}")
+
+    @property
+    def is_emitter(self) -> bool:
+        return max(self.emission) > 0.0
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole or thin-lens perspective camera.
+
+    Parameters
+    ----------
+    eye, target, up : (3,) float
+        Position, look-at point and up hint (need not be orthogonal).
+    fov : float
+        Vertical field of view in degrees, in (0, 180).
+    width, height : int
+        Image size in pixels (>= 1).
+    aperture : float
+        Thin-lens radius in scene units; 0 gives a pinhole.
+    focus_distance : float or None
+        Distance to the plane in focus; None means ``|target - eye|``.
+
+    Notes
+    -----
+    Image conventions: ``image[0, 0]`` is the top-left pixel; rows go down
+    (``-up``) and columns go right, ``right = forward x up``.
+    """
+
+    eye: tuple = (0.0, 0.0, 1.0)
+    target: tuple = (0.0, 0.0, 0.0)
+    up: tuple = (0.0, 1.0, 0.0)
+    fov: float = 39.3
+    width: int = 512
+    height: int = 512
+    aperture: float = 0.0
+    focus_distance: float | None = None
+
+    def __post_init__(self):
+        eye = _validate.vec3(self.eye, "Camera.eye")
+        target = _validate.vec3(self.target, "Camera.target")
+        up = _validate.vec3(self.up, "Camera.up")
+        object.__setattr__(self, "eye", tuple(eye.tolist()))
+        object.__setattr__(self, "target", tuple(target.tolist()))
+        object.__setattr__(self, "up", tuple(up.tolist()))
+        fwd = target - eye
+        if np.linalg.norm(fwd) <= 1e-12 * max(1.0, np.linalg.norm(eye)):
+            raise ValueError(f"Camera: eye {eye.tolist()} and target {target.tolist()} coincide")
+        if np.linalg.norm(np.cross(fwd / np.linalg.norm(fwd), up)) < 1e-6 * max(np.linalg.norm(up), 1e-300):
+            raise ValueError(f"Camera.up {up.tolist()} is zero or parallel to the view direction")
+        object.__setattr__(self, "fov", _validate.real(self.fov, "Camera.fov", low=0.0, high=180.0,
+                                                       low_open=True, high_open=True))
+        object.__setattr__(self, "width", _validate.integer(self.width, "Camera.width", low=1,
+                                                            high=1 << 15))
+        object.__setattr__(self, "height", _validate.integer(self.height, "Camera.height", low=1,
+                                                             high=1 << 15))
+        object.__setattr__(self, "aperture", _validate.real(self.aperture, "Camera.aperture",
+                                                            low=0.0))
+        object.__setattr__(self, "focus_distance", _validate.real(
+            self.focus_distance, "Camera.focus_distance", low=0.0, low_open=True, allow_none=True))
+
+    def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Orthonormal ``(right, up, forward)`` basis, float64 (3,) each."""
+        eye, target = np.asarray(self.eye), np.asarray(self.target)
+        fwd = (target - eye) / np.linalg.norm(target - eye)
+        right = np.cross(fwd, np.asarray(self.up))
+        right /= np.linalg.norm(right)
+        up = np.cross(right, fwd)
+        return right, up, fwd
+
+    @property
+    def focus(self) -> float:
+        """Focus distance actually used (``|target - eye|`` when unset)."""
+        if self.focus_distance is not None:
+            return float(self.focus_distance)
+        return float(np.linalg.norm(np.asarray(self.target) - np.asarray(self.eye)))
+
+    def replace(self, **changes) -> Camera:
+        """A copy with some fields changed (validated again)."""
+        kw = {f: getattr(self, f) for f in self.__dataclass_fields__}
+        kw.update(changes)
+        return Camera(**kw)
+
+
+@dataclass
+class SceneObject:
+    """One mesh of a scene: float64 vertices, int64 faces, a material."""
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    material: Material
+    two_sided: bool = False
+    vertex_normals: np.ndarray | None = None
+    source: str | None = None  # mesh file it came from, if any
+    transform: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def n_triangles(self) -> int:
+        return len(self.faces)
+
+    def area(self) -> float:
+        """Total area of the non-degenerate triangles (scene units²)."""
+        t = self.vertices[self.faces]
+        return float(0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum())
+
+    def to_trimesh(self) -> trimesh.Trimesh:
+        return trimesh.Trimesh(self.vertices.copy(), self.faces.copy(), process=False)
+
+
+def _mesh_arrays(mesh, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Copy and check a trimesh's vertices and faces; drop degenerate faces."""
+    if isinstance(mesh, trimesh.Scene):
+        mesh = mesh.to_geometry() if hasattr(mesh, "to_geometry") else mesh.dump(concatenate=True)
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise TypeError(f"mesh {name!r}: expected trimesh.Trimesh, got {type(mesh).__name__}")
+    v = np.array(mesh.vertices, dtype=np.float64, copy=True)
+    f = np.array(mesh.faces, dtype=np.int64, copy=True)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"mesh {name!r}: vertices must have shape (V, 3), got {v.shape}")
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise ValueError(f"mesh {name!r}: faces must have shape (F, 3), got {f.shape}")
+    if len(f) == 0:
+        raise ValueError(f"mesh {name!r}: has no faces")
+    if not np.all(np.isfinite(v)):
+        bad = int(np.argwhere(~np.isfinite(v).all(axis=1))[0, 0])
+        raise ValueError(f"mesh {name!r}: vertex {bad} is not finite: {v[bad].tolist()}")
+    if f.min() < 0 or f.max() >= len(v):
+        raise ValueError(f"mesh {name!r}: face indices out of range [0, {len(v)})")
+    # Degenerate faces (zero area, repeated vertex) carry no light: drop them.
+    t = v[f]
+    cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    dbl_area = np.linalg.norm(cross, axis=1)
+    scale = np.max(np.abs(v)) if len(v) else 1.0
+    keep = dbl_area > (1e-12 * max(scale, 1e-300)) ** 2
+    if not keep.all():
+        warnings.warn(f"mesh {name!r}: skipped {int((~keep).sum())} degenerate face(s) "
+                      "(zero area)", UserWarning, stacklevel=3)
+        f = f[keep]
+        if len(f) == 0:
+            raise ValueError(f"mesh {name!r}: all faces are degenerate")
+    vn = None
+    # Shading normals only when the file carried them (trimesh otherwise derives them).
+    if "vertex_normals" in mesh._cache.cache:
+        vn = np.array(mesh.vertex_normals, dtype=np.float64, copy=True)
+        if vn.shape != v.shape or not np.all(np.isfinite(vn)):
+            vn = None
+    return v, f, vn
+
+
+class Scene:
+    """Meshes with materials, and a camera.
+
+    Parameters
+    ----------
+    camera : Camera, optional
+        The view used by :func:`voxgi.render`; may be set later.
+
+    Examples
+    --------
+    >>> import trimesh, voxgi
+    >>> scene = voxgi.Scene()
+    >>> scene.add(trimesh.creation.box(), voxgi.Material(albedo=0.5), name="box")
+    >>> len(scene.objects)
+    1
+    """
+
+    def __init__(self, camera: Camera | None = None):
+        self.objects: list[SceneObject] = []
+        self.camera = camera
+
+    # -- camera -------------------------------------------------------------
+    @property
+    def camera(self) -> Camera | None:
+        return self._camera
+
+    @camera.setter
+    def camera(self, cam: Camera | None) -> None:
+        if cam is not None and not isinstance(cam, Camera):
+            raise TypeError(f"Scene.camera: expected voxgi.Camera, got {type(cam).__name__}")
+        self._camera = cam
+
+    # -- building -----------------------------------------------------------
+    def add(self, mesh, material: Material | None = None, name: str | None = None,
+            two_sided: bool = False) -> SceneObject:
+        """Add a triangle mesh with a material.
+
+        Parameters
+        ----------
+        mesh : trimesh.Trimesh
+            Copied; the caller's mesh is not modified. Faces of zero area are
+            dropped with a warning.
+        material : Material, optional
+            Defaults to ``Material()`` (albedo 0.8, no emission).
+        name : str, optional
+            Used in messages; defaults to ``"mesh<k>"``.
+        two_sided : bool
+            Both sides reflect (and emit, for an emitter). A one-sided surface
+            is black and opaque from behind.
+
+        Returns
+        -------
+        SceneObject
+        """
+        if name is None:
+            name = f"mesh{len(self.objects)}"
+        if not isinstance(name, str):
+            raise TypeError(f"Scene.add: name must be a str, got {type(name).__name__}")
+        if material is None:
+            material = Material()
+        if not isinstance(material, Material):
+            raise TypeError(f"mesh {name!r}: material must be voxgi.Material, got "
+                            f"{type(material).__name__}")
+        if not isinstance(two_sided, (bool, np.bool_)):
+            raise TypeError(f"mesh {name!r}: two_sided must be a bool, got {two_sided!r}")
+        v, f, vn = _mesh_arrays(mesh, name)
+        obj = SceneObject(name=name, vertices=v, faces=f, material=material,
+                          two_sided=bool(two_sided), vertex_normals=vn)
+        self.objects.append(obj)
+        return obj
+
+    # -- queries ------------------------------------------------------------
+    def __len__(self) -> int:
+        return len(self.objects)
+
+    def __repr__(self) -> str:
+        return (f"Scene({len(self.objects)} objects, {self.n_triangles} triangles, "
+                f"camera={'set' if self.camera else 'None'})")
+
+    @property
+    def n_triangles(self) -> int:
+        return int(sum(o.n_triangles for o in self.objects))
+
+    def check_nonempty(self) -> None:
+        if not self.objects:
+            raise ValueError("scene is empty: add at least one mesh (Scene.add)")
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float64 axis-aligned bounding box of all meshes."""
+        self.check_nonempty()
+        lo = np.min([o.vertices[np.unique(o.faces)].min(axis=0) for o in self.objects], axis=0)
+        hi = np.max([o.vertices[np.unique(o.faces)].max(axis=0) for o in self.objects], axis=0)
+        return np.stack([lo, hi])
+
+    def area(self) -> float:
+        """Total surface area of the scene (scene units²)."""
+        return float(sum(o.area() for o in self.objects))
+
+    def triangles(self) -> dict[str, np.ndarray]:
+        """All triangles concatenated.
+
+        Returns
+        -------
+        dict
+            ``triangles`` (F, 3, 3) float64 corner positions, ``object`` (F,)
+            int32 index into :attr:`objects`, ``albedo``/``emission`` (O, 3)
+            float32 per object, ``two_sided`` (O,) bool per object.
+        """
+        self.check_nonempty()
+        tri = np.concatenate([o.vertices[o.faces] for o in self.objects])
+        obj = np.concatenate([np.full(len(o.faces), i, np.int32) for i, o in enumerate(self.objects)])
+        return {
+            "triangles": np.ascontiguousarray(tri),
+            "object": obj,
+            "albedo": np.array([o.material.albedo for o in self.objects], np.float32),
+            "emission": np.array([o.material.emission for o in self.objects], np.float32),
+            "two_sided": np.array([o.two_sided for o in self.objects], bool),
+        }
+
+    def fingerprint(self) -> str:
+        """Hash of geometry and materials: tells a solution which scene it belongs to.
+
+        The camera is not part of it: a new view reuses a solution.
+        """
+        h = hashlib.sha1()
+        for o in self.objects:
+            h.update(o.vertices.tobytes())
+            h.update(o.faces.tobytes())
+            h.update(repr((o.material.albedo, o.material.emission, o.two_sided)).encode())
+        return h.hexdigest()[:16]
+
+    @property
+    def has_specular(self) -> bool:
+        return any(o.material.specular is not None for o in self.objects)
+
+    # -- files --------------------------------------------------------------
+    @classmethod
+    def load(cls, path) -> Scene:
+        """Load a TOML scene file; meshes are read through trimesh.
+
+        The file has an optional ``[camera]`` table (the :class:`Camera`
+        fields), optional ``[materials.NAME]`` tables and ``[[object]]``
+        entries::
+
+            [camera]
+            eye = [0, 1, 3]
+            target = [0, 1, 0]
+            fov = 40
+            width = 256
+            height = 256
+
+            [materials.white]
+            albedo = [0.8, 0.8, 0.8]
+
+            [[object]]
+            mesh = "floor.ply"      # relative to the TOML file; OBJ, PLY, STL, GLB
+            material = "white"      # or inline: albedo = ..., emission = ...
+            name = "floor"
+            two_sided = false
+            translate = [0, 0, 0]   # optional transform: scale, then rotate, then translate
+            rotate = [90, 1, 0, 0]  # degrees about an axis
+            scale = 1.0             # or [sx, sy, sz]
+            # matrix = [[...4x4...]] instead of the three above
+
+        Raises
+        ------
+        ValueError
+            Malformed TOML (with line and column), unknown keys, bad values
+            (naming the object and key), missing mesh files.
+        """
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise FileNotFoundError(f"scene file not found: {path}") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ValueError(f"scene file {path}: cannot be read ({exc})") from None
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"scene file {path}: malformed TOML: {exc}") from None
+        return cls.from_dict(data, base_dir=path.parent, source=str(path))
+
+    @classmethod
+    def from_dict(cls, data: dict, base_dir=".", source: str = "<dict>") -> Scene:
+        """Build a scene from the parsed contents of a scene file (see :meth:`load`)."""
+        base_dir = Path(base_dir)
+        if not isinstance(data, dict):
+            raise TypeError(f"{source}: expected a table at the top level")
+        unknown = set(data) - {"camera", "materials", "object"}
+        if unknown:
+            raise ValueError(f"{source}: unknown top-level key(s) {sorted(unknown)}; "
+                             "expected camera, materials, object")
+        scene = cls()
+        if "camera" in data:
+            cam = data["camera"]
+            if not isinstance(cam, dict):
+                raise ValueError(f"{source}: [camera] must be a table")
+            try:
+                scene.camera = Camera(**cam)
+            except TypeError as exc:
+                raise ValueError(f"{source}: [camera]: {exc}") from None
+            except ValueError as exc:
+                raise ValueError(f"{source}: [camera]: {exc}") from None
+        materials = {}
+        mats = data.get("materials", {})
+        if not isinstance(mats, dict):
+            raise ValueError(f"{source}: [materials] must be a table of tables")
+        for mname, m in mats.items():
+            materials[mname] = _material_from_dict(m, f"{source}: [materials.{mname}]")
+        objs = data.get("object", [])
+        if not isinstance(objs, list):
+            raise ValueError(f"{source}: 'object' must be an array of tables ([[object]])")
+        mat_keys = {"albedo", "emission", "specular"}
+        allowed = {"mesh", "material", "name", "two_sided", "translate", "rotate", "scale",
+                   "matrix"} | mat_keys
+        for k, o in enumerate(objs):
+            where = f"{source}: object #{k}"
+            if not isinstance(o, dict):
+                raise ValueError(f"{where}: must be a table")
+            if "name" in o:
+                where += f" ({o['name']!r})"
+            bad = set(o) - allowed
+            if bad:
+                raise ValueError(f"{where}: unknown key(s) {sorted(bad)}")
+            if "mesh" not in o:
+                raise ValueError(f"{where}: missing key 'mesh'")
+            if "material" in o:
+                if set(o) & mat_keys:
+                    raise ValueError(f"{where}: give either 'material' or inline albedo/emission")
+                if o["material"] not in materials:
+                    raise ValueError(f"{where}: unknown material {o['material']!r}; defined: "
+                                     f"{sorted(materials)}")
+                mat = materials[o["material"]]
+            else:
+                mat = _material_from_dict({kk: o[kk] for kk in mat_keys if kk in o}, where)
+            mesh_path = Path(o["mesh"])
+            if not mesh_path.is_absolute():
+                mesh_path = base_dir / mesh_path
+            if not mesh_path.exists():
+                raise ValueError(f"{where}: mesh file not found: {mesh_path}")
+            try:
+                mesh = trimesh.load(mesh_path, force="mesh", process=False,
+                                    maintain_order=True)
+            except Exception as exc:
+                raise ValueError(f"{where}: cannot load mesh {mesh_path}: {exc}") from None
+            matrix = _transform_from_dict(o, where)
+            if matrix is not None:
+                mesh = mesh.copy()
+                mesh.apply_transform(matrix)
+            name = o.get("name", mesh_path.stem)
+            try:
+                obj = scene.add(mesh, mat, name=name, two_sided=o.get("two_sided", False))
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"{where}: {exc}") from None
+            obj.source = str(o["mesh"])
+            obj.transform = matrix
+        return scene
+
+    def save(self, path) -> Path:
+        """Write the scene as a TOML file with one mesh file per object beside it.
+
+        Meshes are written already transformed as OBJ with 17 significant
+        digits (PLY and GLB would round vertices to float32), so ``Scene.load``
+        of the result gives bit-identical geometry, materials and camera.
+        """
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        lines = []
+        if self.camera is not None:
+            c = self.camera
+            lines.append("[camera]")
+            for f in ("eye", "target", "up"):
+                lines.append(f"{f} = {_toml_list(getattr(c, f))}")
+            for f in ("fov", "aperture"):
+                lines.append(f"{f} = {float(getattr(c, f))!r}")
+            lines.append(f"width = {c.width}")
+            lines.append(f"height = {c.height}")
+            if c.focus_distance is not None:
+                lines.append(f"focus_distance = {float(c.focus_distance)!r}")
+            lines.append("")
+        for i, o in enumerate(self.objects):
+            fname = f"{path.stem}_{i:03d}.obj"
+            (path.parent / fname).write_text(o.to_trimesh().export(file_type="obj", digits=17))
+            lines.append("[[object]]")
+            lines.append(f"name = {_toml_str(o.name)}")
+            lines.append(f"mesh = {_toml_str(fname)}")
+            lines.append(f"albedo = {_toml_list(o.material.albedo)}")
+            lines.append(f"emission = {_toml_list(o.material.emission)}")
+            lines.append(f"two_sided = {'true' if o.two_sided else 'false'}")
+            s = o.material.specular
+            if s is not None:
+                lines.append(f"specular = {{ rs = {_toml_list(s.rs)}, nu = {s.nu!r}, nv = {s.nv!r} }}")
+            lines.append("")
+        path.write_text("\n".join(lines), encoding="utf-8")
+        return path
+
+
+def _toml_list(v) -> str:
+    return "[" + ", ".join(repr(float(x)) for x in v) + "]"
+
+
+def _toml_str(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _material_from_dict(m, where: str) -> Material:
+    if not isinstance(m, dict):
+        raise ValueError(f"{where}: material must be a table")
+    bad = set(m) - {"albedo", "emission", "specular"}
+    if bad:
+        raise ValueError(f"{where}: unknown material key(s) {sorted(bad)}")
+    spec = m.get("specular")
+    try:
+        if spec is not None:
+            if not isinstance(spec, dict):
+                raise ValueError("specular must be a table {rs, nu, nv}")
+            spec = AshikhminShirley(**spec)
+        kw = {k: m[k] for k in ("albedo", "emission") if k in m}
+        return Material(specular=spec, **kw)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def _transform_from_dict(o: dict, where: str) -> np.ndarray | None:
+    keys = {"translate", "rotate", "scale", "matrix"} & set(o)
+    if not keys:
+        return None
+    try:
+        if "matrix" in o:
+            if keys - {"matrix"}:
+                raise ValueError("give either 'matrix' or translate/rotate/scale")
+            m = np.asarray(o["matrix"], dtype=np.float64)
+            if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+                raise ValueError(f"matrix must be 4x4 finite, got shape {m.shape}")
+            return m
+        m = np.eye(4)
+        if "scale" in o:
+            s = np.broadcast_to(np.asarray(o["scale"], dtype=np.float64), (3,))
+            if not np.all(np.isfinite(s)) or np.any(s == 0):
+                raise ValueError(f"scale must be finite and non-zero, got {o['scale']!r}")
+            m = np.diag([*s, 1.0]) @ m
+        if "rotate" in o:
+            r = np.asarray(o["rotate"], dtype=np.float64)
+            if r.shape != (4,) or not np.all(np.isfinite(r)) or np.linalg.norm(r[1:]) == 0:
+                raise ValueError(f"rotate must be [degrees, ax, ay, az], got {o['rotate']!r}")
+            m = trimesh.transformations.rotation_matrix(math.radians(r[0]), r[1:]) @ m
+        if "translate" in o:
+            t = _validate.vec3(o["translate"], "translate")
+            m = trimesh.transformations.translation_matrix(t) @ m
+        return m
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None

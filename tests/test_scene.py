@@ -1,0 +1,187 @@
+"""Scene model: materials, camera, meshes, TOML files, built-in scenes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+import voxgi
+from voxgi.scene import Scene
+
+
+def test_material_scalar_and_rgb():
+    m = voxgi.Material(albedo=0.5, emission=(1, 2, 3))
+    assert m.albedo == (0.5, 0.5, 0.5)
+    assert m.emission == (1.0, 2.0, 3.0)
+    assert m.is_emitter
+
+
+@pytest.mark.parametrize(("kw", "match"), [
+    ({"albedo": 1.0}, r"Material.albedo.*\[0.0, 1.0\)"),
+    ({"albedo": -0.1}, "Material.albedo"),
+    ({"albedo": float("nan")}, "Material.albedo: non-finite"),
+    ({"emission": -1.0}, "Material.emission"),
+    ({"emission": (1, 2)}, "Material.emission.*shape"),
+])
+def test_material_bad_values(kw, match):
+    with pytest.raises(ValueError, match=match):
+        voxgi.Material(**kw)
+
+
+def test_material_bad_types():
+    with pytest.raises(TypeError, match="Material.albedo"):
+        voxgi.Material(albedo="red")
+    with pytest.raises(TypeError, match="Material.specular"):
+        voxgi.Material(specular=0.5)
+
+
+def test_camera_frame_is_right_handed_as_documented():
+    cam = voxgi.Camera(eye=(0, 0, 0), target=(0, 0, -1), up=(0, 1, 0))
+    right, up, fwd = cam.frame()
+    np.testing.assert_allclose(fwd, [0, 0, -1])
+    np.testing.assert_allclose(up, [0, 1, 0])
+    np.testing.assert_allclose(right, np.cross(fwd, up))
+    np.testing.assert_allclose(right, [1, 0, 0])
+    assert cam.focus == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize(("kw", "exc", "match"), [
+    ({"width": 0}, ValueError, "Camera.width"),
+    ({"height": -3}, ValueError, "Camera.height"),
+    ({"width": 2.5}, TypeError, "Camera.width"),
+    ({"fov": 0.0}, ValueError, "Camera.fov"),
+    ({"fov": 180.0}, ValueError, "Camera.fov"),
+    ({"eye": (0, 0, 0), "target": (0, 0, 0)}, ValueError, "coincide"),
+    ({"up": (0, 0, 1), "eye": (0, 0, 0), "target": (0, 0, -1)}, ValueError, "parallel"),
+    ({"eye": (0, np.inf, 0)}, ValueError, "Camera.eye"),
+    ({"aperture": -1.0}, ValueError, "Camera.aperture"),
+])
+def test_camera_bad_input(kw, exc, match):
+    with pytest.raises(exc, match=match):
+        voxgi.Camera(**kw)
+
+
+def test_add_copies_the_mesh():
+    mesh = trimesh.creation.box()
+    before = mesh.vertices.copy()
+    s = Scene()
+    obj = s.add(mesh, voxgi.Material(), name="box")
+    obj.vertices[:] = 0.0
+    np.testing.assert_array_equal(mesh.vertices, before)
+
+
+def test_add_bad_meshes():
+    s = Scene()
+    with pytest.raises(TypeError, match="mesh 'x'.*trimesh.Trimesh"):
+        s.add(np.zeros((3, 3)), name="x")
+    bad = trimesh.creation.box()
+    v = bad.vertices.copy()
+    v[3, 1] = np.nan
+    with pytest.raises(ValueError, match="mesh 'nanbox': vertex 3 is not finite"):
+        s.add(trimesh.Trimesh(v, bad.faces, process=False), name="nanbox")
+    with pytest.raises(TypeError, match="material"):
+        s.add(trimesh.creation.box(), material="white")
+
+
+def test_degenerate_faces_are_skipped_with_a_warning():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]], float)
+    f = np.array([[0, 1, 2], [0, 1, 3], [1, 1, 2]])  # 2nd collinear, 3rd repeats a vertex
+    s = Scene()
+    with pytest.warns(UserWarning, match="skipped 2 degenerate"):
+        obj = s.add(trimesh.Trimesh(v, f, process=False), name="tri")
+    assert obj.n_triangles == 1
+
+
+def test_empty_scene_is_an_error():
+    with pytest.raises(ValueError, match="scene is empty"):
+        Scene().bounds  # noqa: B018
+
+
+def test_toml_round_trip(tmp_path):
+    s = voxgi.scenes.cornell_box(width=32, height=24)
+    s.objects[0].material = voxgi.Material(
+        albedo=0.3, specular=voxgi.AshikhminShirley(rs=0.2, nu=10, nv=1000))
+    path = s.save(tmp_path / "cbox.toml")
+    t = Scene.load(path)
+    assert t.camera == s.camera
+    assert [o.name for o in t.objects] == [o.name for o in s.objects]
+    for a, b in zip(s.objects, t.objects):
+        assert a.material == b.material
+        np.testing.assert_allclose(a.vertices[a.faces], b.vertices[b.faces], rtol=1e-12)
+    assert t.fingerprint() == s.fingerprint()
+
+
+def test_toml_transforms_and_named_materials(tmp_path):
+    trimesh.creation.box().export(tmp_path / "box.obj")
+    (tmp_path / "s.toml").write_text(
+        '[materials.grey]\nalbedo = 0.5\n\n'
+        '[[object]]\nmesh = "box.obj"\nmaterial = "grey"\nscale = 2.0\n'
+        'rotate = [90, 0, 0, 1]\ntranslate = [10, 0, 0]\n')
+    s = Scene.load(tmp_path / "s.toml")
+    np.testing.assert_allclose(s.bounds, [[9, -1, -1], [11, 1, 1]], atol=1e-12)
+    assert s.objects[0].material.albedo == (0.5, 0.5, 0.5)
+    assert s.area() == pytest.approx(24.0)
+
+
+@pytest.mark.parametrize(("text", "match"), [
+    ("[camera\n", r"malformed TOML.*line 1"),
+    ("[[object]]\nmesh = 'nope.ply'\n", "object #0.*mesh file not found"),
+    ("[[object]]\nname='a'\nmesh = 'box.obj'\nalbedo = 2.0\n", r"object #0 \('a'\).*albedo"),
+    ("[[object]]\nmesh = 'box.obj'\ncolour = 1\n", r"unknown key\(s\) \['colour'\]"),
+    ("[[object]]\nmesh = 'box.obj'\nmaterial = 'x'\n", "unknown material 'x'"),
+    ("[camera]\nfov = 200\n", r"\[camera\].*Camera.fov"),
+    ("[camera]\nzoom = 2\n", r"\[camera\]"),
+    ("lights = 3\n", "unknown top-level"),
+])
+def test_toml_errors_name_where(tmp_path, text, match):
+    trimesh.creation.box().export(tmp_path / "box.obj")
+    p = tmp_path / "bad.toml"
+    p.write_text(text)
+    with pytest.raises(ValueError, match=match):
+        Scene.load(p)
+
+
+def test_missing_scene_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match="scene file not found"):
+        Scene.load(tmp_path / "none.toml")
+
+
+def test_cornell_box_dimensions(cornell):
+    # Published Cornell data: 556 x 548.8 x 559.2 mm, light 130 x 105 mm.
+    np.testing.assert_allclose(cornell.bounds, [[0, 0, 0], [0.556, 0.5488, 0.5592]], atol=1e-9)
+    light = next(o for o in cornell.objects if o.name == "light")
+    assert light.area() == pytest.approx(0.130 * 0.105, rel=1e-9)
+    centre = np.array([0.278, 0.2744, 0.2796])
+    for o in cornell.objects:
+        t = o.vertices[o.faces]
+        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        to_centre = centre - t.mean(axis=1)
+        if o.name in ("floor", "ceiling", "back", "red", "green", "light"):
+            assert np.all(np.einsum("ij,ij->i", n, to_centre) > 0), o.name  # face the room
+        else:
+            assert np.all(np.einsum("ij,ij->i", n, t.mean(axis=1) - t.mean(axis=(0, 1))) > 0)
+
+
+@pytest.mark.parametrize("make", [voxgi.scenes.furnace_sphere, voxgi.scenes.furnace_box])
+def test_furnace_normals_point_inward(make):
+    s = make(inner=True)
+    enclosure = s.objects[0]
+    t = enclosure.vertices[enclosure.faces]
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    assert np.all(np.einsum("ij,ij->i", n, -t.mean(axis=1)) > 0)
+    inner = s.objects[1].to_trimesh()
+    assert inner.is_watertight and inner.volume > 0  # outward-facing closed object
+
+
+def test_bunny_room_is_closed_and_lit():
+    s = voxgi.scenes.bunny_room()
+    room, bunny, light = s.objects
+    assert bunny.to_trimesh().is_watertight
+    assert light.material.is_emitter and not room.material.is_emitter
+
+
+def test_scene_registry():
+    assert "cornell-box" in voxgi.scenes.names()
+    with pytest.raises(ValueError, match="unknown built-in scene 'nope'"):
+        voxgi.scenes.get("nope")
