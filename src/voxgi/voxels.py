@@ -238,8 +238,10 @@ def voxelize(scene, resolution: int = 128, *, max_memory: int | None = None,
         If ``scene`` is not a :class:`voxgi.Scene` or ``resolution`` is not
         an integer.
     ValueError
-        If the scene is empty, ``resolution < 2``, or the memory bound
-        exceeds ``max_memory`` (the message gives the estimate).
+        If the scene is empty, ``resolution < 2``, the memory bound exceeds
+        ``max_memory`` (the message gives the estimate), or the voxel size
+        is so large or small that float32 areas would overflow (pitch² outside
+        [1e-30, 1e30] scene units²).
 
     Notes
     -----
@@ -283,6 +285,12 @@ def voxelize(scene, resolution: int = 128, *, max_memory: int | None = None,
     if not longest > 0:
         raise ValueError("voxelize: the scene's bounding box has zero size")
     pitch = longest / resolution
+    # Areas and normals are float32 (API): a voxel face must be representable
+    # with room to spare (normal float32 range ~1e-38 .. 3e38).
+    if not 1e-30 <= pitch * pitch <= 1e30:
+        raise ValueError(f"voxelize: voxel pitch {pitch:.3g} (scene size {longest:.3g} over "
+                         f"resolution {resolution}) gives voxel areas outside float32's range; "
+                         "rescale the scene")
     origin = lo - 0.5 * pitch
     dims = (np.floor((hi - origin) / pitch) + 1).astype(np.int32)
 
