@@ -336,11 +336,12 @@ struct Context {
 // Exact piece of T in voxel `cell` (closed cube). A triangle lying exactly in
 // the plane of a voxel face gives its area to the voxel below that plane
 // only, so that no area is counted twice; the voxel above just touches it.
+// On the grid's lower boundary (index 0) there is no voxel below: keep it.
 void clip_exact(const Tri &T, const int64_t *cell, Poly &out, Poly &tmp) {
     out.n = 0;
     out.overflow = false;
     for (int d = 0; d < 3; ++d)
-        if (T.g[0][d] == double(cell[d]) && T.g[1][d] == double(cell[d]) &&
+        if (cell[d] > 0 && T.g[0][d] == double(cell[d]) && T.g[1][d] == double(cell[d]) &&
             T.g[2][d] == double(cell[d]))
             return;
     for (int v = 0; v < 3; ++v) out.push(T.g[v]);
