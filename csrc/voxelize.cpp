@@ -611,6 +611,10 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
             for (size_t sj = 0; sj < ncl && sj < 64; ++sj) {
                 if (sj == ci || !planes[sj].ok) continue;
                 const Plane &pl = planes[sj];
+                // A surface of the same orientation (as clustering judges it)
+                // is the same sheet continued, e.g. where two objects of one
+                // curved surface meet: nothing to separate.
+                if (ci < 64 && planes[ci].ok && dot3(pl.n, planes[ci].n) >= P.cos_cluster) continue;
                 bool straddles = false;
                 for (const PartRef &pt : parts) {
                     if (!(pt.area > 0)) continue;

@@ -394,6 +394,24 @@ def test_floor_is_cut_by_a_thin_divider():
         vox.area[front(vox)].sum(dtype=np.float64), rel=1e-6)
 
 
+def test_same_orientation_surfaces_do_not_cut_each_other():
+    # cap_sphere: the emitting cap and the rest of one sphere are two objects
+    # meeting along a circle. Where they share voxels their planes are nearly
+    # parallel and the curved pieces of one straddle the other's plane; they
+    # are one sheet continued, so no cut, and each object keeps its exact area.
+    s = voxgi.scenes.cap_sphere(subdivisions=3)
+    vox = voxgi.voxelize(s, 24)
+    assert vox.stats["cut_clusters"] == 0
+    f = front(vox)
+    for o, obj in enumerate(s.objects):
+        got = vox.area[f & (vox.object_id == o)].sum(dtype=np.float64)
+        assert got == pytest.approx(obj.area(), rel=1e-5)
+    shared = np.intersect1d(
+        np.unique(vox.ijk[f & (vox.object_id == 0)], axis=0).view([("", np.int32)] * 3),
+        np.unique(vox.ijk[f & (vox.object_id == 1)], axis=0).view([("", np.int32)] * 3))
+    assert len(shared) > 0  # they do share voxels
+
+
 # ------------------------------------------------------ order, stats, memory
 
 
