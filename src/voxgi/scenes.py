@@ -272,7 +272,7 @@ def labyrinth(width: int = 512, height: int = 512, cells: int = 6, seed: int = 3
     rng = np.random.default_rng(seed)
     n, size, wall_h, t = cells, 6.0, 1.0, 0.06
     c = size / n
-    s = Scene(Camera(eye=(2.6, 5.0, 3.6), target=(0.0, 0.0, 0.0), up=(0, 1, 0), fov=60.0,
+    s = Scene(Camera(eye=(2.8, 1.35, 2.8), target=(-1.0, 0.0, -1.0), up=(0, 1, 0), fov=75.0,
                      width=width, height=height))
     room, _ = _room((size, wall_h * 1.4, size), 0.7)
     s.add(room, Material(albedo=0.7), name="room")
@@ -346,7 +346,7 @@ def shadow(width: int = 512, height: int = 512) -> Scene:
     Thin plates and a sphere hang above the floor of a closed room; the
     shadows' penumbrae widen with the gap, which the display must resolve.
     """
-    s = Scene(Camera(eye=(0.0, 2.2, 3.2), target=(0.0, 0.2, 0.0), up=(0, 1, 0), fov=50.0,
+    s = Scene(Camera(eye=(0.0, 2.2, 2.4), target=(0.0, 0.2, 0.0), up=(0, 1, 0), fov=50.0,
                      width=width, height=height))
     room, _ = _room((5.0, 3.0, 5.0), 0.75)
     s.add(room, Material(albedo=0.75), name="room")
@@ -367,7 +367,7 @@ def geometric(width: int = 512, height: int = 512) -> Scene:
     A torus, a cylinder, a cone, a thin slab leaning on a wall, a concave
     open box and a cluster of small cubes, under a ceiling light.
     """
-    s = Scene(Camera(eye=(0.0, 1.8, 3.4), target=(0.0, 0.5, 0.0), up=(0, 1, 0), fov=55.0,
+    s = Scene(Camera(eye=(0.0, 1.8, 2.8), target=(0.0, 0.5, 0.0), up=(0, 1, 0), fov=55.0,
                      width=width, height=height))
     room, _ = _room((5.0, 3.0, 6.0), 0.7)
     s.add(room, Material(albedo=0.7), name="room")
