@@ -511,3 +511,18 @@ def test_scene_is_unchanged(cornell):
 def test_progress_bar_runs(capsys):
     vox = voxgi.voxelize(scene_of(voxgi.scenes.load_bunny()), 32, progress=True)
     assert len(vox) > 0
+
+
+def test_ctrl_c_interrupts(cornell):
+    # SIGINT 50 ms into a voxelization that takes seconds (Cornell box at 768:
+    # ~7M records) must surface as KeyboardInterrupt (the kernel polls for it).
+    import signal
+    import threading
+
+    timer = threading.Timer(0.05, signal.pthread_kill, (threading.main_thread().ident, signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            voxgi.voxelize(cornell, 768)
+    finally:
+        timer.cancel()
