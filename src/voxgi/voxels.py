@@ -18,7 +18,8 @@ __all__ = ["VoxelSet", "estimate_memory", "voxelize"]
 class VoxelSet:
     """Sparse surface records of a voxelized scene.
 
-    One record per voxel, surface orientation (side) and material; see
+    One record per voxel, object, orientation cluster, side of the other
+    surfaces' planes in the voxel, and side of the surface; see
     :func:`voxelize`. All arrays have length ``N = len(vox)``.
 
     Attributes
@@ -29,9 +30,15 @@ class VoxelSet:
     normal : (N, 3) float32
         Unit normal, area-weighted over the record's pieces.
     area : (N,) float32
-        Surface area represented, scene units².
+        Surface area represented, scene units²: the exact area of the
+        record's triangles clipped to the voxel. The front records
+        (``side == 0``) sum to the scene's area; every reverse-side record
+        repeats its front record's area, so ``area.sum()`` is twice it. It
+        is 0 for a surface that only touches the voxel's closed cube (kept:
+        the voxel must still block lines, DESIGN-NOTES §2); see
+        ``stats["touch_records"]``.
     albedo, emission : (N, 3) float32
-        Area-weighted albedo and emitted radiance.
+        The object's albedo and emitted radiance (0 on black back records).
     centroid : (N, 3) float64
         A point on the surface inside the voxel (where a VPL sits).
     object_id : (N,) int32
