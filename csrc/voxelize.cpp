@@ -49,6 +49,13 @@ struct Poly {
     }
 };
 
+// A read-only view of polygon vertices (a Poly, or a run of a vertex pool).
+struct PolyView {
+    const double (*v)[3];
+    int n;
+};
+inline PolyView view(const Poly &P) { return PolyView{P.v, P.n}; }
+
 inline double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 inline void cross3(const double *a, const double *b, double *o) {
     o[0] = a[1] * b[2] - a[2] * b[1];
@@ -79,9 +86,9 @@ void clip_axis(const Poly &in, Poly &out, int axis, double c, double sgn) {
 }
 
 // Keep the part of `in` where sgn * (n·v - off) >= 0.
-void clip_plane(const Poly &in, Poly &out, const double *nrm, double off, double sgn) {
+void clip_plane(const PolyView &in, Poly &out, const double *nrm, double off, double sgn) {
     out.n = 0;
-    out.overflow = in.overflow;
+    out.overflow = false;
     const int n = in.n;
     for (int p = 0; p < n; ++p) {
         const double *a = in.v[p];
@@ -99,7 +106,7 @@ void clip_plane(const Poly &in, Poly &out, const double *nrm, double off, double
 
 // Area (along the unit normal n of the polygon's plane) and area-weighted
 // centroid; the mean of the vertices when the area is zero.
-double area_centroid(const Poly &P, const double *n, double *c) {
+double area_centroid(const PolyView &P, const double *n, double *c) {
     c[0] = c[1] = c[2] = 0;
     if (P.n == 0) return 0;
     double A = 0;
@@ -127,7 +134,7 @@ double area_centroid(const Poly &P, const double *n, double *c) {
 }
 
 // Closest point of the convex polygon P (plane normal n) to x; returns squared distance.
-double closest_on_poly(const Poly &P, const double *n, const double *x, double *out) {
+double closest_on_poly(const PolyView &P, const double *n, const double *x, double *out) {
     const double *v0 = P.v[0];
     const double h = (x[0] - v0[0]) * n[0] + (x[1] - v0[1]) * n[1] + (x[2] - v0[2]) * n[2];
     const double y[3] = {x[0] - h * n[0], x[1] - h * n[1], x[2] - h * n[2]};
@@ -293,8 +300,7 @@ struct Piece {
     double n[3];     // normal aligned with its cluster (flipped for two-sided objects)
     double area;     // voxel units²
     double c[3];     // area-weighted centroid, or the touching point when area == 0
-    Poly poly;
-    Piece() {}       // no value-initialisation of the polygon (hot path)
+    int v_off, v_n;  // its polygon: vertices [v_off, v_off + v_n) of Scratch::verts
 };
 
 struct Cluster {
@@ -309,7 +315,7 @@ struct Cluster {
 
 // A piece, or the part of a piece on one side of the cutting planes.
 struct PartRef {
-    const Poly *poly;
+    PolyView poly;
     int piece;
     uint64_t sig;  // bit b set: on the positive side of the cluster's b-th cutting plane
     double area;
@@ -318,6 +324,7 @@ struct PartRef {
 
 struct Scratch {
     std::vector<Piece> pieces;
+    std::vector<double> verts;  // piece polygons, 3 doubles per vertex
     std::vector<Cluster> clusters;
     std::vector<int> order, cl_start, cl_items, next;
     std::vector<PartRef> parts, parts2;
@@ -375,7 +382,7 @@ void clamp_to_cell(double *p, const int64_t *cell) {
     for (int d = 0; d < 3; ++d) p[d] = std::min(double(cell[d] + 1), std::max(double(cell[d]), p[d]));
 }
 
-void signed_range(const Poly &P, const double *n, double off, double &mn, double &mx) {
+void signed_range(const PolyView &P, const double *n, double off, double &mn, double &mx) {
     mn = std::numeric_limits<double>::infinity();
     mx = -mn;
     for (int i = 0; i < P.n; ++i) {
@@ -421,7 +428,7 @@ void emit_records(const Context &ctx, const int64_t *cell, const Cluster &cl,
             for (size_t k = begin; k < end; ++k) {
                 const PartRef &pt = parts[k];
                 if (!(pt.area > 0)) continue;
-                const double dd = closest_on_poly(*pt.poly, pieces[pt.piece].tn, cen, q);
+                const double dd = closest_on_poly(pt.poly, pieces[pt.piece].tn, cen, q);
                 if (dd < best) {
                     best = dd;
                     std::memcpy(bq, q, sizeof(q));
@@ -482,7 +489,9 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
     auto &pieces = S.pieces;
     if (pieces.size() < size_t(np)) pieces.resize(size_t(np));
     int n_pieces = 0;
-    Poly tmp;
+    Poly tmp, work;
+    auto &verts = S.verts;
+    verts.clear();
     for (int64_t q = 0; q < np; ++q) {
         Tri T;
         if (!load_tri(ctx.tris, pairs[q].tri, P, T)) continue;  // counted in phase 1
@@ -491,25 +500,29 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
         pc.cluster = -1;
         std::memcpy(pc.tn, T.n, sizeof(T.n));
         std::memcpy(pc.n, T.n, sizeof(T.n));
-        clip_exact(T, cell, pc.poly, tmp);
-        pc.area = pc.poly.n >= 3 ? area_centroid(pc.poly, T.n, pc.c) : 0.0;
+        Poly &poly = work;
+        clip_exact(T, cell, poly, tmp);
+        pc.area = poly.n >= 3 ? area_centroid(view(poly), T.n, pc.c) : 0.0;
         if (!(pc.area > 0)) {
             // Touches the closed cube (within eps) without area inside it.
             pc.area = 0;
-            if (pc.poly.n == 0) clip_grown(T, cell, P.eps, pc.poly, tmp);
-            if (pc.poly.n == 0) clip_grown(T, cell, 4 * P.eps, pc.poly, tmp);
-            if (pc.poly.n == 0) {
-                pc.poly.push(T.g[0]);  // cannot happen short of round-off trouble
-                pc.poly.push(T.g[1]);
-                pc.poly.push(T.g[2]);
+            if (poly.n == 0) clip_grown(T, cell, P.eps, poly, tmp);
+            if (poly.n == 0) clip_grown(T, cell, 4 * P.eps, poly, tmp);
+            if (poly.n == 0) {
+                poly.push(T.g[0]);  // cannot happen short of round-off trouble
+                poly.push(T.g[1]);
+                poly.push(T.g[2]);
             }
             // The vertex mean of the (grown) piece: a point of the triangle.
             pc.c[0] = pc.c[1] = pc.c[2] = 0;
-            for (int i = 0; i < pc.poly.n; ++i)
-                for (int d = 0; d < 3; ++d) pc.c[d] += pc.poly.v[i][d] / pc.poly.n;
+            for (int i = 0; i < poly.n; ++i)
+                for (int d = 0; d < 3; ++d) pc.c[d] += poly.v[i][d] / poly.n;
             clamp_to_cell(pc.c, cell);
         }
-        if (pc.poly.overflow) ++cs.overflows;
+        if (poly.overflow) ++cs.overflows;
+        pc.v_off = int(verts.size() / 3);
+        pc.v_n = poly.n;
+        verts.insert(verts.end(), &poly.v[0][0], &poly.v[0][0] + 3 * poly.n);
     }
     if (n_pieces == 0) return;
     ++cs.cells;
@@ -604,7 +617,9 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
         parts.clear();
         for (int q = cl_start[ci]; q < cl_start[ci + 1]; ++q) {
             const Piece &pc = pieces[cl_items[q]];
-            parts.push_back(PartRef{&pc.poly, cl_items[q], 0, pc.area, {pc.c[0], pc.c[1], pc.c[2]}});
+            const PolyView pv{reinterpret_cast<const double(*)[3]>(verts.data() + 3 * size_t(pc.v_off)),
+                              pc.v_n};
+            parts.push_back(PartRef{pv, cl_items[q], 0, pc.area, {pc.c[0], pc.c[1], pc.c[2]}});
         }
         int n_cuts = 0;
         if (do_cut) {
@@ -619,7 +634,7 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
                 for (const PartRef &pt : parts) {
                     if (!(pt.area > 0)) continue;
                     double mn, mx;
-                    signed_range(*pt.poly, pl.n, pl.off, mn, mx);
+                    signed_range(pt.poly, pl.n, pl.off, mn, mx);
                     if (mx > P.cut_delta && mn < -P.cut_delta) {
                         straddles = true;
                         break;
@@ -634,19 +649,19 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
                 parts2.clear();
                 for (const PartRef &pt : parts) {
                     double mn = 0, mx = 0;
-                    if (pt.area > 0) signed_range(*pt.poly, pl.n, pl.off, mn, mx);
+                    if (pt.area > 0) signed_range(pt.poly, pl.n, pl.off, mn, mx);
                     if (pt.area > 0 && mx > P.cut_delta && mn < -P.cut_delta) {
                         const double *tn = pieces[pt.piece].tn;
                         for (int s = 0; s < 2; ++s) {
                             pool.emplace_back();
                             Poly &poly = pool.back();
-                            clip_plane(*pt.poly, poly, pl.n, pl.off, s == 0 ? 1.0 : -1.0);
+                            clip_plane(pt.poly, poly, pl.n, pl.off, s == 0 ? 1.0 : -1.0);
                             if (poly.n == 0) continue;
-                            PartRef np_{&poly, pt.piece, pt.sig | (s == 0 ? bit : 0), 0.0, {0, 0, 0}};
-                            np_.area = poly.n >= 3 ? area_centroid(poly, tn, np_.c) : 0.0;
+                            PartRef np_{view(poly), pt.piece, pt.sig | (s == 0 ? bit : 0), 0.0, {0, 0, 0}};
+                            np_.area = poly.n >= 3 ? area_centroid(view(poly), tn, np_.c) : 0.0;
                             if (!(np_.area > 0)) {
                                 np_.area = 0;
-                                area_centroid(poly, tn, np_.c);
+                                area_centroid(view(poly), tn, np_.c);
                             }
                             if (poly.overflow) ++cs.overflows;
                             parts2.push_back(np_);
