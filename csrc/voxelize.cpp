@@ -210,7 +210,7 @@ inline int64_t iceil(double x) { return static_cast<int64_t>(std::ceil(x)); }
 void triangle_cells(const Tri &T, uint32_t tri, const VoxelizeParams &P, std::vector<Pair> &out,
                     int64_t &overflows) {
     const double eps = P.eps;
-    const int64_t D0 = P.dims[0], D1 = P.dims[1], D2 = P.dims[2];
+    const int64_t D1 = P.dims[1], D2 = P.dims[2];
     // Voxel i along an axis meets [lo - eps, hi + eps] iff i <= hi + eps and i + 1 >= lo - eps.
     int64_t lo[3], hi[3];
     for (int d = 0; d < 3; ++d) {
@@ -226,7 +226,6 @@ void triangle_cells(const Tri &T, uint32_t tri, const VoxelizeParams &P, std::ve
         emit(lo[0], lo[1], lo[2]);
         return;
     }
-    (void)D0;
     // Slabs along the two axes where the triangle is widest in projection;
     // the range along the dominant normal axis c is then short (1-2 voxels).
     int c = 0;
@@ -728,7 +727,6 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tri
     const int64_t n_tchunks = (n_tris + tri_chunk - 1) / tri_chunk;
     std::vector<std::vector<Pair>> chunk_pairs(n_tchunks);
     std::vector<int64_t> chunk_skipped(n_tchunks, 0), chunk_overflow(n_tchunks, 0);
-    std::vector<std::string> chunk_error(n_tchunks);
     set_phase(1, n_tris);
     parallel_for(n_tchunks, threads, stop, [&](int64_t ch, int) {
         const int64_t t_end = std::min(n_tris, (ch + 1) * tri_chunk);
