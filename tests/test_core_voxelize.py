@@ -53,7 +53,8 @@ def test_no_triangles_gives_empty_arrays():
     a["triangles"] = np.zeros((0, 3, 3))
     a["tri_object"] = np.zeros(0, np.int32)
     out = _core.voxelize(**a)
-    assert out["ijk"].shape == (0, 3) and out["area"].shape == (0,)
+    assert out["ijk"].shape == (0, 3)
+    assert out["area"].shape == (0,)
 
 
 @pytest.mark.parametrize(("name", "bad"), [

@@ -150,8 +150,8 @@ def estimate_memory(triangles: np.ndarray, pitch: float) -> dict:
                  _PAIR_BYTES * pairs + _KERNEL_RECORD_BYTES * records,      # pairs + records
                  (_KERNEL_RECORD_BYTES + _ARRAY_RECORD_BYTES) * records)    # records -> numpy
     nbytes += t.nbytes  # the concatenated triangles
-    return {"pairs": int(math.ceil(pairs)), "expected_pairs": int(math.ceil(expected)),
-            "records": int(math.ceil(records)), "bytes": int(math.ceil(nbytes))}
+    return {"pairs": math.ceil(pairs), "expected_pairs": math.ceil(expected),
+            "records": math.ceil(records), "bytes": math.ceil(nbytes)}
 
 
 def _available_memory() -> int:
