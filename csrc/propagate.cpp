@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <mutex>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -149,21 +150,29 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
         }
     }
 
-    // Occupancy bitset and voxel index, from the (x, y, z) order.
-    const int64_t nx = int64_t(hi_[0]) - lo_[0] + 1, ny = int64_t(hi_[1]) - lo_[1] + 1,
-                  nz = int64_t(hi_[2]) - lo_[2] + 1;
-    if (nx * ny * nz > (int64_t(1) << 36)) throw std::invalid_argument("voxel box too large");
-    occ_.assign((nx * ny * nz + 63) / 64, 0);
+    // Voxel index from the (x, y, z) order (the occupancy bitset is built on
+    // the first shoot: gathering does not need it).
     const Axis &a0 = ax_[0];
     for (int64_t i = 0; i < n; ++i) {
         const int64_t k = linear(a0.X[i], a0.Y[i], a0.Z[i]);
         if (vkey_.empty() || vkey_.back() != k) {
             vkey_.push_back(k);
             vstart_.push_back(static_cast<int32_t>(i));
-            occ_[k >> 6] |= uint64_t(1) << (k & 63);
         }
     }
     vstart_.push_back(static_cast<int32_t>(n));
+}
+
+void LineSystem::build_occupancy() const {
+    std::call_once(occ_once_, [this] {
+        const int64_t nx = int64_t(hi_[0]) - lo_[0] + 1, ny = int64_t(hi_[1]) - lo_[1] + 1,
+                      nz = int64_t(hi_[2]) - lo_[2] + 1;
+        // one bit per voxel of the bounding box: 2^34 bits = 2 GiB at most
+        if (nx * ny * nz > (int64_t(1) << 34))
+            throw std::invalid_argument("voxel box too large for the shooting bitset");
+        occ_.assign((nx * ny * nz + 63) / 64, 0);
+        for (int64_t k : vkey_) occ_[k >> 6] |= uint64_t(1) << (k & 63);
+    });
 }
 
 int64_t LineSystem::linear(int32_t x, int32_t y, int32_t z) const {
@@ -495,6 +504,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                           const float *val, double *hd, double *unfound, int threads,
                           const StopCheck &stop, int64_t *steps_out) const {
     threads = resolve_threads(threads);
+    build_occupancy();
     for (int64_t k = 0; k < ne; ++k)
         if (emit[k] < 0 || emit[k] >= n_) throw std::invalid_argument("emitter index out of range");
     std::vector<LineFrame> frames;

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <mutex>
 #include <vector>
 
 #include "common.h"
@@ -106,7 +107,9 @@ private:
     int32_t lo_[3], hi_[3];
     Axis ax_[3];
     // shooting: occupancy bitset over the box and the records of each voxel
-    std::vector<uint64_t> occ_;
+    mutable std::vector<uint64_t> occ_;
+    mutable std::once_flag occ_once_;
+    void build_occupancy() const;
     std::vector<int64_t> vkey_;    // sorted linear keys of occupied voxels (one per voxel)
     std::vector<int32_t> vstart_;  // records of voxel k: ax_[0].order[vstart_[k] .. vstart_[k+1])
     std::vector<float> own_normal_, own_point_;  // copies in the global record order
