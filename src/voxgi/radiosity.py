@@ -323,7 +323,10 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
         Facing-rule margin in voxels (DESIGN-NOTES §4).
     history : int
         F records remembered per line (1..32).
-
+    gs_blocks : int
+        Blocks of families for ``method="gauss-seidel"``.
+    max_iterations : int
+        Bound on the iterations when ``max_bounces`` is None.
     Returns
     -------
     Solution
@@ -401,6 +404,8 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
 
     # --- shooting: direct irradiance H_d from the emitters
     t = time.perf_counter()
+    # receiver-side deposit: the exact transpose of gathering (see the
+    # kernel's `send_scale` for the sender-side alternative and its aliasing)
     hd_raw, unfound, shoot_rays, steps = sysm.shoot(
         emitters, sds.families, sds.weights, np.ascontiguousarray(E, dtype=np.float32), nthreads)
     Hd = hd_raw / Ss[:, None]
