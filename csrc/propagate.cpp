@@ -138,6 +138,7 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
         ax.Z.resize(n);
         ax.nrm.resize(3 * n);
         ax.pt.resize(3 * n);
+        ax.pn.assign(8 * n, 0.0f);
         for (int64_t i = 0; i < n; ++i) {
             const int64_t r = ax.order[i];
             ax.X[i] = ijk[3 * r + m];
@@ -146,6 +147,8 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
             for (int c = 0; c < 3; ++c) {
                 ax.nrm[3 * i + c] = normal[3 * r + c];
                 ax.pt[3 * i + c] = point[3 * r + c];
+                ax.pn[8 * i + c] = point[3 * r + c];
+                ax.pn[8 * i + 3 + c] = normal[3 * r + c];
             }
         }
     }
@@ -288,8 +291,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         double *acc = w.acc[m].data();
         double *vs = vis ? w.vis[m].data() : nullptr;
         const float *vl = valax[m].data();
-        const float *nrm = ax.nrm.data();
-        const float *pt = ax.pt.data();
+        const float *pn = ax.pn.data();  // point and normal, 8 floats per record
         const int32_t *AX = ax.X.data(), *AY = ax.Y.data(), *AZ = ax.Z.data();
         const double wgt = F.weight;
         const float len = std::sqrt(float(F.v[0]) * F.v[0] + float(F.v[1]) * F.v[1] + float(F.v[2]) * F.v[2]);
@@ -311,7 +313,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             Hit *g = w.group.data();
             for (int a = 0; a < gn; ++a) {
                 const int32_t p = static_cast<int32_t>(i + a);
-                g[a] = Hit{p, gn > 1 ? dot3(pt + 3 * int64_t(p), dh) : 0.0f, dot3(nrm + 3 * int64_t(p), dh)};
+                g[a] = Hit{p, gn > 1 ? dot3(pn + 8 * int64_t(p), dh) : 0.0f, dot3(pn + 3 + 8 * int64_t(p), dh)};
             }
             if (gn > 1) sort_group(g, gn);
             for (int a = 0; a < gn; ++a) {
@@ -321,12 +323,12 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                     prevF[p] = lastF;
                     lastF = p;
                 } else if (c < -kTiny && lastF >= 0) {
-                    const float *pp = pt + 3 * int64_t(p), *np = nrm + 3 * int64_t(p);
+                    const float *pp = pn + 8 * int64_t(p), *np = pn + 3 + 8 * int64_t(p);
                     const double cb = -double(c) * wgt;
                     bool got = false;
                     int32_t f = lastF;
                     for (int h = 0; h < K && f >= 0; ++h, f = prevF[f]) {
-                        const float *pf = pt + 3 * int64_t(f), *nf = nrm + 3 * int64_t(f);
+                        const float *pf = pn + 8 * int64_t(f), *nf = pn + 3 + 8 * int64_t(f);
                         if (!facing(pf, nf, pp, np, eps)) continue;
                         if (!got) {
                             const float *vf = vl + 3 * int64_t(f);
@@ -370,8 +372,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         double *acc = w.acc[m].data();
         double *vs = vis ? w.vis[m].data() : nullptr;
         const float *vl = valax[m].data();
-        const float *nrm = ax.nrm.data();
-        const float *pt = ax.pt.data();
+        const float *pn = ax.pn.data();  // point and normal, 8 floats per record
         const double wgt = F.weight;
         const float len = std::sqrt(float(F.v[0]) * F.v[0] + float(F.v[1]) * F.v[1] + float(F.v[2]) * F.v[2]);
         const float dh[3] = {F.v[0] / len, F.v[1] / len, F.v[2] / len};
@@ -420,7 +421,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 Hit *g = w.group.data();
                 for (int a = 0; a < gn; ++a) {
                     const int32_t p = line[j + a];
-                    g[a] = Hit{p, dot3(pt + 3 * int64_t(p), dh), dot3(nrm + 3 * int64_t(p), dh)};
+                    g[a] = Hit{p, dot3(pn + 8 * int64_t(p), dh), dot3(pn + 3 + 8 * int64_t(p), dh)};
                 }
                 if (gn > 1) sort_group(g, gn);
                 for (int a = 0; a < gn; ++a) {
@@ -436,12 +437,12 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                         ha[hn] = false;
                         ++hn;
                     } else if (c < -kTiny) {  // B: receives from the nearest facing F
-                        const float *pp = pt + 3 * int64_t(p), *np = nrm + 3 * int64_t(p);
+                        const float *pp = pn + 8 * int64_t(p), *np = pn + 3 + 8 * int64_t(p);
                         const double cb = -double(c) * wgt;
                         bool got = false;
                         for (int h = hn - 1; h >= 0; --h) {
                             const int32_t f = hp[h];
-                            const float *pf = pt + 3 * int64_t(f), *nf = nrm + 3 * int64_t(f);
+                            const float *pf = pn + 8 * int64_t(f), *nf = pn + 3 + 8 * int64_t(f);
                             if (!facing(pf, nf, pp, np, eps)) continue;
                             if (!got) {
                                 const float *vf = vl + 3 * int64_t(f);

@@ -108,6 +108,7 @@ private:
         std::vector<int32_t> order;  // record index at each position
         std::vector<int32_t> X, Y, Z;  // coordinates along m, o1, o2
         std::vector<float> nrm, pt;    // (n,3) world-axis normal and point, in this order
+        std::vector<float> pn;         // (n,8) point then normal: one 32-byte line per record
     };
     int64_t n_;
     float eps_;
