@@ -64,14 +64,14 @@ def test_furnace_sphere(sphere32, rho):
 
 
 def test_cap_sphere_and_acceleration(sphere32):
-    # rho = 0.99: plain Jacobi would need ~ log(1e-5)/log(0.99) = 1146
-    # iterations; the geometric-tail extrapolation converges in 6 (measured),
-    # to the same error as at lower albedo plus the δ amplification
+    # rho = 0.99: plain Jacobi would need ~ log(1e-7)/log(0.99) = 1600
+    # iterations for the error estimate r·99 < 1e-5; the geometric-tail
+    # extrapolation gets there in 15 (measured)
     rho = 0.99
     vox = voxelset(sphere32, albedo=rho, emit_mask=_cap(sphere32))
     sol = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-5)
-    assert sol.bounces <= 12
-    assert sol.residuals[-1] < 1e-5
+    assert sol.bounces <= 25
+    assert sol.residuals[-1] * 99 < 1e-5
     front = ~vox.back
     err = np.abs(sol.radiance / _cap_exact(vox, rho) - 1)[front]
     # measured: mean 3.4%, max 5.4% (R = 8 direct-light aliasing at the cap's
@@ -79,7 +79,7 @@ def test_cap_sphere_and_acceleration(sphere32):
     assert err.mean() < 0.05
     assert err.max() < 0.08
     plain = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-5,
-                        accelerate=False, max_bounces=12)
+                        accelerate=False, max_bounces=25)
     err_plain = np.abs(plain.radiance / _cap_exact(vox, rho) - 1)[front]
     assert err_plain.mean() > 5 * err.mean()
 
