@@ -357,3 +357,28 @@ def test_sender_side_deposit_conserves_power(sphere24):
     # (rel 1e-7: directions with |n·σ| < 1e-6 count in S but cast no ray)
     assert hd[:, 0].sum() + lost == pytest.approx(emitted, rel=1e-7)
     assert lost < 3e-2 * emitted  # closed sphere: measured 1.6% lost (shadowed / history)
+
+
+@pytest.mark.parametrize("kernel", ["gather", "shoot"])
+def test_ctrl_c_stops_a_long_kernel(kernel):
+    # SIGINT (simulated by interrupt_main) must stop the kernel within a
+    # second; the whole call would take many seconds here
+    import _thread
+    import threading
+    import time
+
+    rec = sphere_records(48, back=False)
+    s = system(rec)
+    ds, fams = all_families(35)
+    vals = np.ones((len(rec["ijk"]), 3), np.float32)
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    t = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        if kernel == "gather":
+            for _ in range(20):
+                s.gather(ds.families, ds.weights, vals, fams, False, 2)
+        else:
+            s.shoot(np.arange(len(vals), dtype=np.int32), ds.families, ds.weights, vals, 2)
+    timer.join()
+    assert time.perf_counter() - t < 1.5
