@@ -298,8 +298,11 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
         At most this many gathering iterations (None: until converged, at
         most ``max_iterations``). 0 gives direct light only.
     tol : float
-        Stop when ``Σ area·|R_{k+1} − R_k| / Σ area·|B_{k+1}|`` (all channels)
-        falls under it (> 0).
+        Stop when the estimated remaining relative error of the iteration,
+        ``r λ / (1 − λ)`` with ``r = Σ area·|R_{k+1} − R_k| / Σ area·|B_{k+1}|``
+        (all channels; one entry of ``residuals`` per iteration) and ``λ`` the
+        largest albedo (at least 0.5), falls under it (> 0). For albedos up
+        to 0.5 this is ``r < tol``; at 0.99 it asks ``r < tol / 99``.
     threads : int or None
         Threads (None: all hardware threads). Results do not depend on it
         beyond float rounding.
@@ -323,7 +326,10 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
         Facing-rule margin in voxels (DESIGN-NOTES §4).
     history : int
         F records remembered per line (1..32).
-
+    gs_blocks : int
+        Blocks of families for ``method="gauss-seidel"``.
+    max_iterations : int
+        Bound on the iterations when ``max_bounces`` is None.
     Returns
     -------
     Solution
@@ -401,6 +407,8 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
 
     # --- shooting: direct irradiance H_d from the emitters
     t = time.perf_counter()
+    # receiver-side deposit: the exact transpose of gathering (see the
+    # kernel's `send_scale` for the sender-side alternative and its aliasing)
     hd_raw, unfound, shoot_rays, steps = sysm.shoot(
         emitters, sds.families, sds.weights, np.ascontiguousarray(E, dtype=np.float32), nthreads)
     Hd = hd_raw / Ss[:, None]
@@ -430,6 +438,7 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
         bar = tqdm(total=mb, desc="gather", unit="it", leave=False)
     lines_walked = 0
     it = 0
+    lam_bound = float(min(max(rho.max(), 0.5), 1 - 1e-6))
     vis_S = Sg
     try:
         while it < limit:
@@ -480,7 +489,11 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix(residual=f"{res:.2e}")
-            if res < tol:
+            # stop on the estimated remaining error of the geometric tail,
+            # res * lam / (1 - lam), lam <= max albedo (every record gathers at
+            # most one hemisphere): at rho 0.99 a residual of tol would still
+            # leave ~99 tol of error
+            if res * lam_bound / (1 - lam_bound) < tol:
                 break
             if extrap is not None:
                 tail = extrap(d)
