@@ -143,18 +143,41 @@ def _concentric_disc(u: float, v: float) -> tuple[float, float]:
     return r * math.cos(phi), r * math.sin(phi)
 
 
+def _vdc2(i: int) -> int:
+    """Van der Corput base 2 as a 32-bit integer (bit reversal)."""
+    return int(f"{i & 0xFFFFFFFF:032b}"[::-1], 2)
+
+
+def _sobol2(i: int) -> int:
+    """Second dimension of Sobol' as a 32-bit integer (Kollig & Keller 2002)."""
+    v, r = 1 << 31, 0
+    while i:
+        if i & 1:
+            r ^= v
+        i >>= 1
+        v ^= v >> 1
+    return r
+
+
 def frame_samples(frame: int, seed: int = 0) -> tuple[tuple[float, float], tuple[float, float]]:
     """Sub-pixel offset in [0, 1)² and lens point in the unit disc for a frame.
 
     One sample per frame, shared by all pixels (the paper, section 6). The
-    frames follow the Halton sequence (bases 2, 3 for the pixel, 5, 7 for
-    the lens), so any first n frames are stratified over the pixel and the
-    lens; a Cranley–Patterson rotation drawn from ``seed`` decorrelates seeds.
+    offsets follow the (0, 2)-sequence in base 2 (van der Corput and Sobol'
+    dimension 2) with a random digit scramble (XOR) drawn from ``seed``, which
+    keeps its stratification: any first 4^k frames put exactly one offset in
+    each cell of a 2^k x 2^k grid of the pixel. The lens points follow Halton
+    bases 3 and 5 (Cranley–Patterson rotated), mapped to the disc by the
+    area-preserving concentric map.
     """
-    rot = np.random.default_rng([int(seed), 0x5EED]).random(4)
-    i = int(frame) + 1
-    h = [(_radical_inverse(i, b) + r) % 1.0 for b, r in zip((2, 3, 5, 7), rot)]
-    return (h[0], h[1]), _concentric_disc(h[2], h[3])
+    rng = np.random.default_rng([int(seed), 0x5EED])
+    s1, s2 = (int(x) for x in rng.integers(0, 1 << 32, size=2, dtype=np.uint64))
+    rot = rng.random(2)
+    i = int(frame)
+    off = ((_vdc2(i) ^ s1) / 2.0 ** 32, (_sobol2(i) ^ s2) / 2.0 ** 32)
+    lu = (_radical_inverse(i + 1, 3) + rot[0]) % 1.0
+    lv = (_radical_inverse(i + 1, 5) + rot[1]) % 1.0
+    return off, _concentric_disc(lu, lv)
 
 
 def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
