@@ -185,3 +185,26 @@ def test_scene_registry():
     assert "cornell-box" in voxgi.scenes.names()
     with pytest.raises(ValueError, match="unknown built-in scene 'nope'"):
         voxgi.scenes.get("nope")
+
+
+@pytest.mark.parametrize("name", ["labyrinth", "emission", "shadow", "geometric", "sponza-atrium",
+                                  "bunny-room", "cornell-box"])
+def test_paper_scenes_are_lit_and_inside_their_enclosure(name):
+    s = voxgi.scenes.get(name, width=16, height=16)
+    assert any(o.material.is_emitter for o in s.objects)
+    lo, hi = s.bounds
+    assert np.all(hi > lo)
+    # the camera sits inside the scene's bounding box (these are interiors)
+    eye = np.asarray(s.camera.eye)
+    if name != "cornell-box":  # the Cornell camera stands in front of the open side
+        assert np.all(eye > lo) and np.all(eye < hi)
+    # objects other than the enclosure and the one-sided light quads are closed solids
+    for o in s.objects:
+        m = o.to_trimesh()
+        if o.name not in ("room", "hall", "light", "small_light", "panel_light", "sky") \
+                and name != "cornell-box":
+            assert m.is_watertight, o.name
+
+
+def test_sponza_atrium_has_many_triangles():
+    assert voxgi.scenes.sponza_atrium().n_triangles > 4000
