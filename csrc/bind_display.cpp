@@ -35,7 +35,8 @@ void bind_display(py::module_ &m) {
         "vpl_prepare",
         [](F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, F32 mat_albedo,
            F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, F64 vpl_pos, F32 vpl_normal,
-           F32 vpl_weight, F32 vpl_area, double eps, int threads) {
+           F32 vpl_weight, F32 vpl_area, double eps, I64 ray_count, F32 ray_org, F32 ray_dir,
+           F32 ray_len, F32 ray_contrib, int threads) {
             check_2d(hit_pos, -1, 3, "hit_pos");
             const py::ssize_t P = hit_pos.shape(0);
             check_2d(hit_normal, P, 3, "hit_normal");
@@ -57,6 +58,19 @@ void bind_display(py::module_ &m) {
                                               " out of range (" + std::to_string(mats.count) +
                                               " materials)");
             }
+            // Output buffers, reused across frames by the caller: room for P*K rays.
+            check_1d(ray_count, P, "ray_count");
+            check_2d(ray_org, -1, 3, "ray_org");
+            const py::ssize_t cap = ray_org.shape(0);
+            if (cap < P * K)
+                throw py::value_error("ray buffers hold " + std::to_string(cap) + " rays, need " +
+                                      std::to_string(P * K));
+            check_2d(ray_dir, cap, 3, "ray_dir");
+            check_1d(ray_len, cap, "ray_len");
+            check_2d(ray_contrib, cap, 3, "ray_contrib");
+            if (!ray_count.writeable() || !ray_org.writeable() || !ray_dir.writeable() ||
+                !ray_len.writeable() || !ray_contrib.writeable())
+                throw py::value_error("ray buffers must be writeable");
             voxgi::ShadeHits hits;
             hits.count = P;
             hits.pos = hit_pos.data();
@@ -70,27 +84,24 @@ void bind_display(py::module_ &m) {
             vpls.normal = vpl_normal.data();
             vpls.weight = vpl_weight.data();
             vpls.area = vpl_area.data();
-            const py::ssize_t cap = std::max<py::ssize_t>(P * K, 1);
-            I64 count({P});
-            F32 org({cap, py::ssize_t(3)}), dir({cap, py::ssize_t(3)}), len({cap}),
-                contrib({cap, py::ssize_t(3)});
-            int64_t *pc = count.mutable_data();
-            float *po = org.mutable_data(), *pd = dir.mutable_data(), *pl = len.mutable_data(),
-                  *pr = contrib.mutable_data();
+            int64_t *pc = ray_count.mutable_data();
+            float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data(),
+                  *pl = ray_len.mutable_data(), *pr = ray_contrib.mutable_data();
             auto stop = make_stop_check();
             int64_t n;
             {
                 py::gil_scoped_release release;
                 n = voxgi::vpl_prepare(hits, mats, vpls, eps, pc, po, pd, pl, pr, threads, stop);
             }
-            py::slice s(0, n, 1);
-            return py::make_tuple(count, org[s], dir[s], len[s], contrib[s]);
+            return n;
         },
         "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(),
         "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(),
         "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(),
         "mat_glossy"_a.noconvert(), "vpl_pos"_a.noconvert(), "vpl_normal"_a.noconvert(),
-        "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(), "eps"_a, "threads"_a = 0,
+        "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(), "eps"_a,
+        "ray_count"_a.noconvert(), "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(),
+        "ray_len"_a.noconvert(), "ray_contrib"_a.noconvert(), "threads"_a = 0,
         R"doc(Pass 1 of a display frame: per (pixel, VPL) pair the unoccluded contribution
 and a shadow ray where it is non-zero.
 
@@ -100,8 +111,10 @@ Inputs are C-contiguous: hit_pos (P, 3) float64, hit_normal / hit_ng / hit_wo
 mat_nv (M,) float32, mat_glossy (M,) uint8; vpl_pos (K, 3) float64,
 vpl_normal (K, 3), vpl_weight (K, 3) = (TA/n) B/pi, vpl_area (K,) float32.
 
-Returns (ray_count (P,) int64, ray_org (R, 3), ray_dir (R, 3), ray_len (R,),
-ray_contrib (R, 3)) float32, rays pixel-major in VPL order.)doc");
+Outputs, written in place (buffers reused across frames, room for >= P*K
+rays): ray_count (P,) int64, ray_org (C, 3), ray_dir (C, 3), ray_len (C,),
+ray_contrib (C, 3) float32, rays pixel-major in VPL order. Returns the
+number R of rays written (the first R rows).)doc");
 
     m.def(
         "vpl_accumulate",

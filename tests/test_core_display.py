@@ -41,8 +41,16 @@ def vpls(pos, normal, weight, area):
                 vpl_area=np.array(area, np.float32).reshape(-1))
 
 
-def prepare(h, m, v, eps=1e-4, threads=0):
-    return _core.vpl_prepare(**h, **m, **v, eps=eps, threads=threads)
+def prepare(h, m, v, eps=1e-4, threads=0, cap=None):
+    p, k = len(h["hit_pos"]), len(v["vpl_pos"])
+    cap = p * k if cap is None else cap
+    out = dict(ray_count=np.full(p, -7, np.int64), ray_org=np.full((cap, 3), np.nan, np.float32),
+               ray_dir=np.full((cap, 3), np.nan, np.float32),
+               ray_len=np.full(cap, np.nan, np.float32),
+               ray_contrib=np.full((cap, 3), np.nan, np.float32))
+    n = _core.vpl_prepare(**h, **m, **v, eps=eps, **out, threads=threads)
+    return (out["ray_count"], out["ray_org"][:n], out["ray_dir"][:n], out["ray_len"][:n],
+            out["ray_contrib"][:n])
 
 
 def test_single_pair_exact_value():
@@ -205,6 +213,8 @@ def test_bad_arguments_are_errors_not_crashes():
         prepare({**h, "hit_material": np.array([3], np.int32)}, m, v)
     with pytest.raises(ValueError, match="eps"):
         prepare(h, m, v, eps=float("nan"))
+    with pytest.raises(ValueError, match="ray buffers hold"):
+        prepare(h, m, v, cap=0)
     with pytest.raises(ValueError, match="sums to"):
         _core.vpl_accumulate(np.array([2], np.int64), np.zeros((1, 3), np.float32),
                              np.zeros(1, np.uint8))
@@ -229,5 +239,5 @@ def test_fuzz_prepare(p, k, mat, dt, cols):
         count, org, d, length, contrib = prepare(h, mats(), v)
     except (TypeError, ValueError):
         return
-    assert dt is np.float32 and cols == 3 and mat < 1
+    assert dt is np.float32 and cols == 3 and (mat < 1 or p == 0)
     assert count.sum() == len(org) and np.all(np.isfinite(contrib)) and np.all(contrib >= 0)

@@ -348,6 +348,7 @@ class _FrameShader:
         self.mat_nu = np.array([s.nu if s else 1.0 for s in spec], np.float32)
         self.mat_nv = np.array([s.nv if s else 1.0 for s in spec], np.float32)
         self.tile = 1 << 16
+        self._buffers = None
         self.primary_rays = 0
         self.shadow_rays = 0
         self.seconds = {"primary": 0.0, "shade": 0.0, "shadow": 0.0}
@@ -407,13 +408,25 @@ class _FrameShader:
         out = h["emission"].astype(np.float32, copy=True)
         if vpl is None or len(vpl["index"]) == 0:
             return out
+        K = len(vpl["index"])
+        cap = min(P, self.tile) * K
+        if self._buffers is None or len(self._buffers[1]) < cap:
+            # Reused by every frame: fresh pages for ~40 bytes x P x K rays
+            # each frame cost as much as the shading itself.
+            self._buffers = (np.zeros(self.tile, np.int64), np.zeros((cap, 3), np.float32),
+                             np.zeros((cap, 3), np.float32), np.zeros(cap, np.float32),
+                             np.zeros((cap, 3), np.float32))
+        cnt_buf, org_buf, dir_buf, len_buf, con_buf = self._buffers
         for a in range(0, P, self.tile):
             b = min(P, a + self.tile)
             t0 = time.perf_counter()
-            count, org, dirs, length, contrib = _core.vpl_prepare(
+            count = cnt_buf[: b - a]
+            n = _core.vpl_prepare(
                 h["pos"][a:b], h["normal"][a:b], h["ng"][a:b], h["wo"][a:b], h["material"][a:b],
                 self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv, self.mat_glossy,
-                vpl["pos"], vpl["normal"], vpl["weight"], vpl["area"], self.eps, self.threads)
+                vpl["pos"], vpl["normal"], vpl["weight"], vpl["area"], self.eps,
+                count, org_buf, dir_buf, len_buf, con_buf, self.threads)
+            org, dirs, length, contrib = org_buf[:n], dir_buf[:n], len_buf[:n], con_buf[:n]
             t1 = time.perf_counter()
             occ = self.tracer.occluded(org, dirs, length)
             t2 = time.perf_counter()
