@@ -1,6 +1,8 @@
 // pybind11 bindings for the display kernels (vpl_shade.h).
 #include <pybind11/stl.h>
 
+#include <limits>
+
 #include "pycommon.h"
 #include "vpl_shade.h"
 
@@ -28,6 +30,39 @@ voxgi::ShadeMaterials materials(const F32 &albedo, const F32 &rs, const F32 &nu,
     return s;
 }
 
+voxgi::ShadeMIS make_mis(double nv_over_ta, double n_gather) {
+    if (!(nv_over_ta >= 0.0) || !std::isfinite(nv_over_ta) || !(n_gather >= 0.0) ||
+        !std::isfinite(n_gather))
+        throw py::value_error("nv_over_ta and n_gather must be finite and >= 0");
+    voxgi::ShadeMIS mis;
+    mis.nv_over_ta = nv_over_ta;
+    mis.n_gather = n_gather;
+    return mis;
+}
+
+voxgi::ShadeHits make_hits(const F64 &hit_pos, const F32 &hit_normal, const F32 &hit_ng,
+                           const F32 &hit_wo, const I32 &hit_material, py::ssize_t n_mat) {
+    check_2d(hit_pos, -1, 3, "hit_pos");
+    const py::ssize_t P = hit_pos.shape(0);
+    check_2d(hit_normal, P, 3, "hit_normal");
+    check_2d(hit_ng, P, 3, "hit_ng");
+    check_2d(hit_wo, P, 3, "hit_wo");
+    check_1d(hit_material, P, "hit_material");
+    const int32_t *mi = hit_material.data();
+    for (py::ssize_t p = 0; p < P; ++p)
+        if (mi[p] >= n_mat)
+            throw py::value_error("hit_material: index " + std::to_string(mi[p]) +
+                                  " out of range (" + std::to_string(n_mat) + " materials)");
+    voxgi::ShadeHits hits;
+    hits.count = P;
+    hits.pos = hit_pos.data();
+    hits.normal = hit_normal.data();
+    hits.ng = hit_ng.data();
+    hits.wo = hit_wo.data();
+    hits.material = hit_material.data();
+    return hits;
+}
+
 }  // namespace
 
 void bind_display(py::module_ &m) {
@@ -35,8 +70,9 @@ void bind_display(py::module_ &m) {
         "vpl_prepare",
         [](F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, F32 mat_albedo,
            F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, F64 vpl_pos, F32 vpl_normal,
-           F32 vpl_weight, F32 vpl_area, double eps, I64 ray_count, F32 ray_org, F32 ray_dir,
-           F32 ray_len, F32 ray_contrib, int threads) {
+           F32 vpl_weight, F32 vpl_area, U8 vpl_mis, double nv_over_ta, double n_gather,
+           double eps, I64 ray_count, F32 ray_org, F32 ray_dir, F32 ray_len, F32 ray_contrib,
+           int threads) {
             check_2d(hit_pos, -1, 3, "hit_pos");
             const py::ssize_t P = hit_pos.shape(0);
             check_2d(hit_normal, P, 3, "hit_normal");
@@ -48,7 +84,15 @@ void bind_display(py::module_ &m) {
             check_2d(vpl_normal, K, 3, "vpl_normal");
             check_2d(vpl_weight, K, 3, "vpl_weight");
             check_1d(vpl_area, K, "vpl_area");
+            check_1d(vpl_mis, K, "vpl_mis");
             if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+            voxgi::ShadeMIS mis = make_mis(nv_over_ta, n_gather);
+            {
+                const uint8_t *vm = vpl_mis.data();
+                for (py::ssize_t k = 0; k < K; ++k)
+                    if (vm[k] && !(nv_over_ta > 0.0 && n_gather > 0.0))
+                        throw py::value_error("vpl_mis: MIS VPLs need nv_over_ta > 0 and n_gather > 0");
+            }
             voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
             {
                 const int32_t *mi = hit_material.data();
@@ -84,6 +128,7 @@ void bind_display(py::module_ &m) {
             vpls.normal = vpl_normal.data();
             vpls.weight = vpl_weight.data();
             vpls.area = vpl_area.data();
+            vpls.mis = vpl_mis.data();
             int64_t *pc = ray_count.mutable_data();
             float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data(),
                   *pl = ray_len.mutable_data(), *pr = ray_contrib.mutable_data();
@@ -91,7 +136,8 @@ void bind_display(py::module_ &m) {
             int64_t n;
             {
                 py::gil_scoped_release release;
-                n = voxgi::vpl_prepare(hits, mats, vpls, eps, pc, po, pd, pl, pr, threads, stop);
+                n = voxgi::vpl_prepare(hits, mats, vpls, mis, eps, pc, po, pd, pl, pr, threads,
+                                       stop);
             }
             return n;
         },
@@ -99,8 +145,8 @@ void bind_display(py::module_ &m) {
         "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(),
         "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(),
         "mat_glossy"_a.noconvert(), "vpl_pos"_a.noconvert(), "vpl_normal"_a.noconvert(),
-        "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(), "eps"_a,
-        "ray_count"_a.noconvert(), "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(),
+        "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(), "vpl_mis"_a.noconvert(),
+        "nv_over_ta"_a, "n_gather"_a, "eps"_a, "ray_count"_a.noconvert(), "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(),
         "ray_len"_a.noconvert(), "ray_contrib"_a.noconvert(), "threads"_a = 0,
         R"doc(Pass 1 of a display frame: per (pixel, VPL) pair the unoccluded contribution
 and a shadow ray where it is non-zero.
@@ -109,12 +155,155 @@ Inputs are C-contiguous: hit_pos (P, 3) float64, hit_normal / hit_ng / hit_wo
 (P, 3) float32 unit vectors on the viewer's side, hit_material (P,) int32
 (-1: not shaded), per-material mat_albedo (M, 3), mat_rs (M, 3), mat_nu,
 mat_nv (M,) float32, mat_glossy (M,) uint8; vpl_pos (K, 3) float64,
-vpl_normal (K, 3), vpl_weight (K, 3) = (TA/n) B/pi, vpl_area (K,) float32.
+vpl_normal (K, 3), vpl_weight (K, 3) = (TA/n) B/pi, vpl_area (K,) float32,
+vpl_mis (K,) uint8: 1 for VPLs combined with gather rays (their weight is
+B/pi; nv_over_ta = n_v / TA of their set, n_gather rays per pixel).
 
 Outputs, written in place (buffers reused across frames, room for >= P*K
 rays): ray_count (P,) int64, ray_org (C, 3), ray_dir (C, 3), ray_len (C,),
 ray_contrib (C, 3) float32, rays pixel-major in VPL order. Returns the
 number R of rays written (the first R rows).)doc");
+
+    m.def(
+        "gather_rays",
+        [](F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, int n_gather,
+           uint64_t seed, int64_t frame, double eps, I64 ray_count, F32 ray_org, F32 ray_dir,
+           int threads) {
+            voxgi::ShadeHits hits = make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material,
+                                              std::numeric_limits<int32_t>::max());
+            const py::ssize_t P = hits.count;
+            if (n_gather < 0 || n_gather > 4096) throw py::value_error("n_gather must be in [0, 4096]");
+            if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+            check_1d(ray_count, P, "ray_count");
+            check_2d(ray_org, -1, 3, "ray_org");
+            check_2d(ray_dir, ray_org.shape(0), 3, "ray_dir");
+            if (ray_org.shape(0) < P * n_gather)
+                throw py::value_error("ray buffers hold " + std::to_string(ray_org.shape(0)) +
+                                      " rays, need " + std::to_string(P * n_gather));
+            int64_t *pc = ray_count.mutable_data();
+            float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data();
+            auto stop = make_stop_check();
+            int64_t n;
+            {
+                py::gil_scoped_release release;
+                n = voxgi::gather_rays(hits, n_gather, seed, frame, eps, pc, po, pd, threads, stop);
+            }
+            return n;
+        },
+        "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(),
+        "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(), "n_gather"_a, "seed"_a, "frame"_a,
+        "eps"_a, "ray_count"_a.noconvert(), "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(),
+        "threads"_a = 0,
+        R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
+hashed from seed/frame/pixel), written in place into ray_count (P,) int64 and
+ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc");
+
+    m.def(
+        "gather_shade",
+        [](F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, F32 mat_albedo,
+           F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, double nv_over_ta, double n_gather,
+           F64 tri_v, I32 tri_object, U8 obj_two_sided, U8 obj_emitter, I64 rec_sorted_key,
+           I32 rec_order, F64 rec_centroid, F32 rec_normal, I32 rec_object, F32 rec_radiance,
+           U8 rec_mis, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count,
+           F32 ray_dir, I32 prim, F32 out, int threads) {
+            voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+            voxgi::ShadeHits hits = make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material,
+                                              mats.count);
+            const py::ssize_t P = hits.count;
+            voxgi::ShadeMIS mis = make_mis(nv_over_ta, n_gather);
+            if (!(n_gather > 0.0)) throw py::value_error("n_gather must be > 0");
+            if (tri_v.ndim() != 3 || tri_v.shape(1) != 3 || tri_v.shape(2) != 3)
+                throw py::value_error("tri_v must have shape (F, 3, 3)");
+            const py::ssize_t F = tri_v.shape(0);
+            check_1d(tri_object, F, "tri_object");
+            check_1d(obj_two_sided, -1, "obj_two_sided");
+            const py::ssize_t O = obj_two_sided.shape(0);
+            check_1d(obj_emitter, O, "obj_emitter");
+            {
+                const int32_t *to = tri_object.data();
+                for (py::ssize_t f = 0; f < F; ++f)
+                    if (to[f] < 0 || to[f] >= O) throw py::value_error("tri_object: index out of range");
+            }
+            check_1d(rec_sorted_key, -1, "rec_sorted_key");
+            const py::ssize_t N = rec_sorted_key.shape(0);
+            check_1d(rec_order, N, "rec_order");
+            check_2d(rec_centroid, N, 3, "rec_centroid");
+            check_2d(rec_normal, N, 3, "rec_normal");
+            check_1d(rec_object, N, "rec_object");
+            check_2d(rec_radiance, N, 3, "rec_radiance");
+            check_1d(rec_mis, N, "rec_mis");
+            check_1d(grid_dims, 3, "grid_dims");
+            check_1d(grid_lo, 3, "grid_lo");
+            check_1d(grid_origin, 3, "grid_origin");
+            if (!(pitch > 0.0) || !std::isfinite(pitch)) throw py::value_error("pitch must be > 0");
+            {
+                const int32_t *ro = rec_order.data();
+                const int64_t *sk = rec_sorted_key.data();
+                for (py::ssize_t i = 0; i < N; ++i) {
+                    if (ro[i] < 0 || ro[i] >= N) throw py::value_error("rec_order: index out of range");
+                    if (i && sk[i] < sk[i - 1]) throw py::value_error("rec_sorted_key must be ascending");
+                }
+            }
+            check_1d(ray_count, P, "ray_count");
+            check_2d(ray_dir, -1, 3, "ray_dir");
+            const py::ssize_t R = ray_dir.shape(0);
+            check_1d(prim, R, "prim");
+            {
+                const int64_t *rc = ray_count.data();
+                int64_t total = 0;
+                for (py::ssize_t p = 0; p < P; ++p) {
+                    if (rc[p] < 0) throw py::value_error("ray_count: negative count");
+                    total += rc[p];
+                }
+                if (total != R) throw py::value_error("ray_count does not sum to the number of rays");
+            }
+            check_2d(out, P, 3, "out");
+            if (!out.writeable()) throw py::value_error("out must be writeable");
+            voxgi::ShadeTriangles tris;
+            tris.count = F;
+            tris.v = tri_v.data();
+            tris.object = tri_object.data();
+            tris.two_sided = obj_two_sided.data();
+            tris.emitter = obj_emitter.data();
+            voxgi::RecordGrid grid;
+            grid.count = N;
+            grid.sorted_key = rec_sorted_key.data();
+            grid.order = rec_order.data();
+            grid.centroid = rec_centroid.data();
+            grid.normal = rec_normal.data();
+            grid.object = rec_object.data();
+            grid.radiance = rec_radiance.data();
+            grid.mis = rec_mis.data();
+            for (int a = 0; a < 3; ++a) {
+                grid.dims[a] = grid_dims.data()[a];
+                grid.lo[a] = grid_lo.data()[a];
+                grid.origin[a] = grid_origin.data()[a];
+                if (grid.dims[a] < 1) throw py::value_error("grid_dims must be >= 1");
+            }
+            grid.pitch = pitch;
+            const int64_t *pc = ray_count.data();
+            const float *pd = ray_dir.data();
+            const int32_t *pp = prim.data();
+            float *po = out.mutable_data();
+            auto stop = make_stop_check();
+            {
+                py::gil_scoped_release release;
+                voxgi::gather_shade(hits, mats, mis, tris, grid, pc, pd, pp, po, threads, stop);
+            }
+        },
+        "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(),
+        "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(),
+        "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(),
+        "mat_glossy"_a.noconvert(), "nv_over_ta"_a, "n_gather"_a, "tri_v"_a.noconvert(),
+        "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "obj_emitter"_a.noconvert(),
+        "rec_sorted_key"_a.noconvert(), "rec_order"_a.noconvert(), "rec_centroid"_a.noconvert(),
+        "rec_normal"_a.noconvert(), "rec_object"_a.noconvert(), "rec_radiance"_a.noconvert(),
+        "rec_mis"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
+        "grid_origin"_a.noconvert(), "pitch"_a, "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(),
+        "prim"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0,
+        R"doc(Shade the gather rays (prim: first triangle hit, -1 none) with the radiance
+of the record at each hit point, MIS-weighted against the VPLs; adds into
+out (P, 3) float32.)doc");
 
     m.def(
         "vpl_accumulate",

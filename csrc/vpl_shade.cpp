@@ -1,6 +1,7 @@
 // VPL shading kernels (see vpl_shade.h and DESIGN-NOTES §6).
 #include "vpl_shade.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <vector>
@@ -78,7 +79,7 @@ void shade_brdf(const ShadeMaterials &mats, int32_t m, const float n[3], const f
 }
 
 int64_t vpl_prepare(const ShadeHits &hits, const ShadeMaterials &mats, const ShadeVPLs &vpls,
-                    double eps, int64_t *ray_count, float *ray_org, float *ray_dir,
+                    const ShadeMIS &mis, double eps, int64_t *ray_count, float *ray_org, float *ray_dir,
                     float *ray_len, float *ray_contrib, int threads, const StopCheck &stop) {
     const int64_t P = hits.count, K = vpls.count;
     const int64_t n_chunks = (P + kChunk - 1) / kChunk;
@@ -108,10 +109,17 @@ int64_t vpl_prepare(const ShadeHits &hits, const ShadeMaterials &mats, const Sha
                     if (dot3(ng, wi) <= 0.f) continue;  // below the geometric surface
                     const float cos_x = dot3(n, wi);
                     if (cos_x <= 0.f) continue;
-                    // The VPL is a disc of area dA: on the axis of a disc the exact
-                    // point-to-disc term is cos cos / (r² + dA/pi); bounded, and
-                    // the point formula far away (DESIGN-NOTES §6).
-                    const double g = double(cos_x) * cos_y / (r2 + double(vpls.area[k]) / kPi);
+                    const double cc = double(cos_x) * cos_y;
+                    double g;
+                    if (vpls.mis && vpls.mis[k]) {
+                        // Balance heuristic with the gather rays (see ShadeMIS).
+                        g = cc / (r2 * mis.nv_over_ta + mis.n_gather * cc / kPi);
+                    } else {
+                        // The VPL is a disc of area dA: on the axis of a disc the exact
+                        // point-to-disc term is cos cos / (r² + dA/pi); bounded, and
+                        // the point formula far away (DESIGN-NOTES §6).
+                        g = cc / (r2 + double(vpls.area[k]) / kPi);
+                    }
                     float f[3];
                     shade_brdf(mats, m, n, wi, wo, f);
                     const float *wk = vpls.weight + 3 * k;
@@ -158,6 +166,155 @@ int64_t vpl_prepare(const ShadeHits &hits, const ShadeMaterials &mats, const Sha
         total += n;
     }
     return total;
+}
+
+namespace {
+
+inline uint64_t splitmix64(uint64_t x) {
+    x += 0x9E3779B97F4A7C15ull;
+    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+    x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+    return x ^ (x >> 31);
+}
+
+inline double to_unit(uint64_t x) { return double(x >> 11) * (1.0 / 9007199254740992.0); }
+
+}  // namespace
+
+int64_t gather_rays(const ShadeHits &hits, int n_gather, uint64_t seed, int64_t frame, double eps,
+                    int64_t *ray_count, float *ray_org, float *ray_dir, int threads,
+                    const StopCheck &stop) {
+    const int64_t P = hits.count;
+    std::vector<int64_t> offset(P + 1, 0);
+    for (int64_t p = 0; p < P; ++p) {
+        const int32_t m = hits.material[p];
+        ray_count[p] = m >= 0 ? n_gather : 0;
+        offset[p + 1] = offset[p] + ray_count[p];
+    }
+    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
+    const uint64_t base = splitmix64(seed ^ splitmix64(uint64_t(frame) + 0x6A09E667F3BCC909ull));
+    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
+        const int64_t p1 = std::min(P, (c + 1) * kChunk);
+        for (int64_t p = c * kChunk; p < p1; ++p) {
+            if (ray_count[p] == 0) continue;
+            const double *x = hits.pos + 3 * p;
+            const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
+            float u[3], v[3];
+            tangent_frame(n, u, v);
+            uint64_t h = splitmix64(base ^ uint64_t(p) * 0xD1B54A32D192ED03ull);
+            for (int k = 0; k < n_gather; ++k) {
+                h = splitmix64(h);
+                const double u1 = (k + to_unit(h)) / n_gather;  // stratified in cos²θ
+                h = splitmix64(h);
+                const double phi = 2.0 * kPi * to_unit(h);
+                const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
+                const double lx = r * std::cos(phi), ly = r * std::sin(phi);
+                const int64_t w = offset[p] + k;
+                float *ro = ray_org + 3 * w, *rd = ray_dir + 3 * w;
+                for (int a = 0; a < 3; ++a) {
+                    ro[a] = float(x[a] + eps * ng[a]);
+                    rd[a] = float(lx * u[a] + ly * v[a] + z * n[a]);
+                }
+            }
+        }
+    });
+    return offset[P];
+}
+
+int64_t lookup_record(const RecordGrid &g, const double y[3], const float n[3], int32_t obj) {
+    int64_t c[3];
+    for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((y[a] - g.origin[a]) / g.pitch));
+    const double p2 = g.pitch * g.pitch;
+    int64_t best = -1;
+    double best_score = 0.0;
+    auto scan = [&](int64_t i, int64_t j, int64_t k) {
+        i -= g.lo[0], j -= g.lo[1], k -= g.lo[2];
+        if (i < 0 || j < 0 || k < 0 || i >= g.dims[0] || j >= g.dims[1] || k >= g.dims[2]) return;
+        const int64_t key = (i * g.dims[1] + j) * g.dims[2] + k;
+        const int64_t *first = std::lower_bound(g.sorted_key, g.sorted_key + g.count, key);
+        for (const int64_t *q = first; q != g.sorted_key + g.count && *q == key; ++q) {
+            const int64_t r = g.order[q - g.sorted_key];
+            const double *cr = g.centroid + 3 * r;
+            const float *nr = g.normal + 3 * r;
+            const double dx = y[0] - cr[0], dy = y[1] - cr[1], dz = y[2] - cr[2];
+            // Nearest centroid, strongly preferring the same side and object.
+            const double score = dx * dx + dy * dy + dz * dz +
+                                 p2 * (4.0 * (1.0 - dot3(nr, n)) + (g.object[r] != obj ? 4.0 : 0.0));
+            if (best < 0 || score < best_score) best = r, best_score = score;
+        }
+    };
+    scan(c[0], c[1], c[2]);
+    if (best >= 0 && best_score < 0.5 * p2 * 4.0) return best;  // a good match in its own voxel
+    for (int di = -1; di <= 1; ++di)
+        for (int dj = -1; dj <= 1; ++dj)
+            for (int dk = -1; dk <= 1; ++dk)
+                if (di || dj || dk) scan(c[0] + di, c[1] + dj, c[2] + dk);
+    return best;
+}
+
+void gather_shade(const ShadeHits &hits, const ShadeMaterials &mats, const ShadeMIS &mis,
+                  const ShadeTriangles &tris, const RecordGrid &grid, const int64_t *ray_count,
+                  const float *ray_dir, const int32_t *prim, float *out, int threads,
+                  const StopCheck &stop) {
+    const int64_t P = hits.count;
+    std::vector<int64_t> offset(P + 1, 0);
+    for (int64_t p = 0; p < P; ++p) offset[p + 1] = offset[p] + ray_count[p];
+    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
+    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
+        const int64_t p1 = std::min(P, (c + 1) * kChunk);
+        for (int64_t p = c * kChunk; p < p1; ++p) {
+            const int32_t m = hits.material[p];
+            if (m < 0 || offset[p + 1] == offset[p]) continue;
+            const double *x = hits.pos + 3 * p;
+            const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
+            double s[3] = {0.0, 0.0, 0.0};
+            for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
+                const int32_t t = prim[r];
+                if (t < 0 || t >= tris.count) continue;
+                const float *df = ray_dir + 3 * r;
+                const double d[3] = {df[0], df[1], df[2]};
+                const double dl = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+                const float wi[3] = {float(d[0] / dl), float(d[1] / dl), float(d[2] / dl)};
+                const float cos_x = dot3(n, wi);
+                if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) continue;
+                // Hit point: the ray against the hit triangle's plane, in double.
+                const double *v0 = tris.v + 9 * int64_t(t), *v1 = v0 + 3, *v2 = v0 + 6;
+                const double e1[3] = {v1[0] - v0[0], v1[1] - v0[1], v1[2] - v0[2]};
+                const double e2[3] = {v2[0] - v0[0], v2[1] - v0[1], v2[2] - v0[2]};
+                double nt[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                                e1[0] * e2[1] - e1[1] * e2[0]};
+                const double nl = std::sqrt(nt[0] * nt[0] + nt[1] * nt[1] + nt[2] * nt[2]);
+                if (!(nl > 0.0)) continue;
+                nt[0] /= nl, nt[1] /= nl, nt[2] /= nl;
+                const double o[3] = {x[0] + 0.0, x[1] + 0.0, x[2] + 0.0};
+                const double dn = (d[0] * nt[0] + d[1] * nt[1] + d[2] * nt[2]) / dl;
+                if (dn == 0.0) continue;
+                const double tt = ((v0[0] - o[0]) * nt[0] + (v0[1] - o[1]) * nt[1] +
+                                   (v0[2] - o[2]) * nt[2]) / dn;
+                const double y[3] = {o[0] + tt * wi[0], o[1] + tt * wi[1], o[2] + tt * wi[2]};
+                const bool front = dn < 0.0;
+                const int32_t obj = tris.object[t];
+                if (!front && !tris.two_sided[obj]) continue;  // black back of a one-sided surface
+                if (tris.emitter[obj]) continue;                 // emitters: their own VPL set
+                const float ns[3] = {float(front ? nt[0] : -nt[0]), float(front ? nt[1] : -nt[1]),
+                                     float(front ? nt[2] : -nt[2])};
+                const int64_t rec = lookup_record(grid, y, ns, obj);
+                if (rec < 0) continue;
+                const float cos_y = -dot3(ns, wi);
+                if (cos_y <= 0.f) continue;
+                const double r2 = (y[0] - x[0]) * (y[0] - x[0]) + (y[1] - x[1]) * (y[1] - x[1]) +
+                                  (y[2] - x[2]) * (y[2] - x[2]);
+                const double pa = grid.mis[rec] ? mis.nv_over_ta : 0.0;
+                const double denom = pa * r2 / cos_y + mis.n_gather * cos_x / kPi;
+                if (!(denom > 0.0)) continue;
+                float f[3];
+                shade_brdf(mats, m, n, wi, wo, f);
+                const float *L = grid.radiance + 3 * rec;
+                for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * cos_x / denom;
+            }
+            for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += float(s[ch]);
+        }
+    });
 }
 
 void vpl_accumulate(int64_t n_pixels, const int64_t *ray_count, const float *ray_contrib,

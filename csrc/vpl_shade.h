@@ -42,8 +42,46 @@ struct ShadeVPLs {
     int64_t count = 0;
     const double *pos = nullptr;     // (K, 3) point on the surface
     const float *normal = nullptr;   // (K, 3) unit normal
-    const float *weight = nullptr;   // (K, 3) (TA_set / n_set) * B / pi: radiance times the estimator weight
+    const float *weight = nullptr;   // (K, 3) (TA_set / n_set) * B / pi: radiance times the estimator
+                                     // weight; for an MIS VPL just its radiance B / pi
     const float *area = nullptr;     // (K,) area the record stands for (bounds the geometry term)
+    const uint8_t *mis = nullptr;    // (K,) 1: combined with gather rays (balance heuristic), or null
+};
+
+// Multiple importance sampling of the non-emitter set between VPLs (area
+// pdf n_v / TA per unit area, summed over the frame's n_v VPLs) and n_g
+// cosine-distributed gather rays per pixel (pdf n_g cos_x cos_y / (pi r²)
+// per unit area). Balance heuristic: every sample of either kind adds
+//     f L cos_x cos_y / (r² n_v/TA + n_g cos_x cos_y / pi),
+// which is at most pi f L / n_g: no 1/r² spike at contact, and no bias.
+struct ShadeMIS {
+    double nv_over_ta = 0.0;  // n_v / TA of the MIS set
+    double n_gather = 0.0;    // gather rays per pixel per frame
+};
+
+// Voxel records for looking up the radiance where a gather ray lands.
+struct RecordGrid {
+    int64_t count = 0;
+    const int64_t *sorted_key = nullptr;  // (N,) linear voxel keys, ascending
+    const int32_t *order = nullptr;       // (N,) record of each sorted key
+    const double *centroid = nullptr;     // (N, 3)
+    const float *normal = nullptr;        // (N, 3)
+    const int32_t *object = nullptr;      // (N,)
+    const float *radiance = nullptr;      // (N, 3) B / pi
+    const uint8_t *mis = nullptr;         // (N,) 1: record of the MIS (VPL) set
+    int64_t dims[3] = {0, 0, 0};          // key = (i * dims[1] + j) * dims[2] + k
+    int64_t lo[3] = {0, 0, 0};            // ijk of key 0
+    double origin[3] = {0.0, 0.0, 0.0};
+    double pitch = 1.0;
+};
+
+// Scene triangles for the gather rays' hit points.
+struct ShadeTriangles {
+    int64_t count = 0;
+    const double *v = nullptr;           // (F, 3, 3) corners
+    const int32_t *object = nullptr;     // (F,)
+    const uint8_t *two_sided = nullptr;  // (O,) per object
+    const uint8_t *emitter = nullptr;    // (O,) per object: its records are sampled as VPLs only
 };
 
 // Pass 1. Writes per pixel the number of shadow rays (`ray_count`, (P,)), and
@@ -52,13 +90,36 @@ struct ShadeVPLs {
 // normal, shortened by `eps`) and unoccluded RGB contribution. The output
 // arrays need room for P*K rays. Returns the number of rays written.
 int64_t vpl_prepare(const ShadeHits &hits, const ShadeMaterials &mats, const ShadeVPLs &vpls,
-                    double eps, int64_t *ray_count, float *ray_org, float *ray_dir,
+                    const ShadeMIS &mis, double eps, int64_t *ray_count, float *ray_org, float *ray_dir,
                     float *ray_len, float *ray_contrib, int threads, const StopCheck &stop);
 
 // Pass 2. `ray_count` as written by vpl_prepare, `occluded` (R,) non-zero
 // where the shadow ray was blocked. Writes out (P, 3) the summed radiance.
 void vpl_accumulate(int64_t n_pixels, const int64_t *ray_count, const float *ray_contrib,
                     const uint8_t *occluded, float *out, int threads, const StopCheck &stop);
+
+// Gather rays: n_g cosine-distributed directions around the shading normal
+// of each shaded pixel (material >= 0), stratified (n_g strata in azimuth x
+// elevation) and jittered with a hash of (seed, frame, pixel, k): the same
+// for any thread count. Writes `ray_count` (P,) and rays pixel-major into
+// org (R, 3) / dir (R, 3); returns R.
+int64_t gather_rays(const ShadeHits &hits, int n_gather, uint64_t seed, int64_t frame, double eps,
+                    int64_t *ray_count, float *ray_org, float *ray_dir, int threads,
+                    const StopCheck &stop);
+
+// Shade the gather rays: `prim` (R,) the first triangle hit (-1: none).
+// Rays that hit the black back of a one-sided surface, an emitter (covered
+// by the emitter VPLs) or nothing add nothing; others look up the record at
+// the hit point (same voxel or a neighbour, same side and object preferred,
+// nearest centroid) and add the MIS-weighted f L term. Adds into out (P, 3).
+void gather_shade(const ShadeHits &hits, const ShadeMaterials &mats, const ShadeMIS &mis,
+                  const ShadeTriangles &tris, const RecordGrid &grid, const int64_t *ray_count,
+                  const float *ray_dir, const int32_t *prim, float *out, int threads,
+                  const StopCheck &stop);
+
+// Index of the record that stands for the surface point y on object `obj`
+// seen from the side of normal n, or -1.
+int64_t lookup_record(const RecordGrid &grid, const double y[3], const float n[3], int32_t obj);
 
 // The BRDF used by the display for one pair of directions (exposed for tests):
 // Lambertian rho/pi, or with a specular layer the Ashikhmin-Shirley pair

@@ -259,7 +259,7 @@ class VPLSampler:
     """
 
     def __init__(self, sol, vpls_per_frame: int = 16, seed: int = 0,
-                 emitter_share: float | None = None):
+                 emitter_share: float | None = None, mis: bool = False):
         vox = sol.vox
         n = len(vox)
         B = _validate.as_c_array(sol.radiosity, np.float64, (n, 3), "sol.radiosity")
@@ -295,10 +295,15 @@ class VPLSampler:
             nd = self.K if has_d else 0
         self.counts = (nd, self.K - nd if has_i else 0)
         self.seed = int(seed)
+        self.mis = bool(mis) and self.counts[1] > 0
+        #: n_v / TA of the non-emitter set (the VPL side of the MIS weights).
+        self.nv_over_ta = self.counts[1] / float(cum_i[-1]) if self.mis else 0.0
+        self.useful_other = useful & ~emit
         self.pos = np.ascontiguousarray(vox.centroid, dtype=np.float64)
         self.normal = np.ascontiguousarray(vox.normal, dtype=np.float32)
         self.area32 = area.astype(np.float32)
         self.B = B
+        self.vox = vox
 
     @property
     def empty(self) -> bool:
@@ -307,19 +312,23 @@ class VPLSampler:
     def frame(self, f: int) -> dict:
         """The VPLs of frame ``f``: the same for every pixel and every view."""
         rng = np.random.default_rng([self.seed, int(f), 0x1B1])
-        idx_all, w_all = [], []
-        for (idx, cum, _), k in zip(self.sets, self.counts):
+        idx_all, w_all, mis_all = [], [], []
+        for s, ((idx, cum, _), k) in enumerate(zip(self.sets, self.counts)):
             if k == 0:
                 continue
             ta = float(cum[-1])
             u = (np.arange(k) + rng.random(k)) / k * ta  # stratified along the table
             pick = idx[np.minimum(np.searchsorted(cum, u, side="right"), len(idx) - 1)]
             idx_all.append(pick)
-            # E ≈ (TA/n) Σ (B/π) G V: the estimator weight times the VPL's radiance.
-            w_all.append(np.full(k, ta / k))
+            mis = s == 1 and self.mis
+            # E ≈ (TA/n) Σ (B/π) G V: the estimator weight times the VPL's radiance;
+            # an MIS VPL carries B/π only (the kernel applies n_v/TA in its weight).
+            w_all.append(np.full(k, 1.0 if mis else ta / k))
+            mis_all.append(np.full(k, mis, np.uint8))
         idx = np.concatenate(idx_all)
         w = np.concatenate(w_all)
         return {
+            "mis": np.concatenate(mis_all),
             "index": idx,
             "pos": np.ascontiguousarray(self.pos[idx]),
             "normal": np.ascontiguousarray(self.normal[idx]),
@@ -335,9 +344,11 @@ class _FrameShader:
     """Everything a frame needs that does not change between frames."""
 
     def __init__(self, scene: Scene, cam: Camera, tracer: _Tracer, sampler: VPLSampler,
-                 eps: float, threads: int):
+                 eps: float, threads: int, gather: int = 0, seed: int = 0):
         self.scene, self.cam, self.tracer, self.sampler = scene, cam, tracer, sampler
         self.eps, self.threads = float(eps), int(threads)
+        self.gather = int(gather) if sampler.mis else 0
+        self.seed = int(seed)
         objs = scene.objects
         self.mat_albedo = np.array([o.material.albedo for o in objs], np.float32)
         self.mat_emission = np.array([o.material.emission for o in objs], np.float32)
@@ -349,9 +360,39 @@ class _FrameShader:
         self.mat_nv = np.array([s.nv if s else 1.0 for s in spec], np.float32)
         self.tile = 1 << 16
         self._buffers = None
+        self._gbuffers = None
         self.primary_rays = 0
         self.shadow_rays = 0
-        self.seconds = {"primary": 0.0, "shade": 0.0, "shadow": 0.0}
+        self.gather_rays = 0
+        self.seconds = {"primary": 0.0, "shade": 0.0, "shadow": 0.0, "gather": 0.0}
+        if self.gather:
+            self._grid = self._record_grid(sampler)
+            self._tri = {"tri_v": tracer.tris, "tri_object": tracer.obj,
+                         "obj_two_sided": self.two_sided.astype(np.uint8),
+                         "obj_emitter": np.array([o.material.is_emitter for o in objs], np.uint8)}
+
+    @staticmethod
+    def _record_grid(sampler: VPLSampler) -> dict:
+        """Records sorted by voxel key, to find the record under a gather hit."""
+        vox = sampler.vox
+        ijk = np.asarray(vox.ijk, dtype=np.int64)
+        lo = ijk.min(axis=0)
+        dims = ijk.max(axis=0) - lo + 1
+        rel = ijk - lo
+        key = (rel[:, 0] * dims[1] + rel[:, 1]) * dims[2] + rel[:, 2]
+        order = np.argsort(key, kind="stable")
+        return {
+            "rec_sorted_key": np.ascontiguousarray(key[order]),
+            "rec_order": order.astype(np.int32),
+            "rec_centroid": sampler.pos,
+            "rec_normal": sampler.normal,
+            "rec_object": np.ascontiguousarray(vox.object_id, dtype=np.int32),
+            "rec_radiance": np.ascontiguousarray(sampler.B / math.pi, dtype=np.float32),
+            "rec_mis": sampler.useful_other.astype(np.uint8),
+            "grid_dims": dims.astype(np.int64), "grid_lo": lo.astype(np.int64),
+            "grid_origin": np.asarray(vox.origin, dtype=np.float64).reshape(3),
+            "pitch": float(vox.pitch),
+        }
 
     def hits(self, org: np.ndarray, dirs: np.ndarray) -> dict:
         """Primary hits: points in float64 on the hit triangle's plane, normals
@@ -424,7 +465,8 @@ class _FrameShader:
             n = _core.vpl_prepare(
                 h["pos"][a:b], h["normal"][a:b], h["ng"][a:b], h["wo"][a:b], h["material"][a:b],
                 self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv, self.mat_glossy,
-                vpl["pos"], vpl["normal"], vpl["weight"], vpl["area"], self.eps,
+                vpl["pos"], vpl["normal"], vpl["weight"], vpl["area"], vpl["mis"],
+                self.sampler.nv_over_ta, float(self.gather), self.eps,
                 count, org_buf, dir_buf, len_buf, con_buf, self.threads)
             org, dirs, length, contrib = org_buf[:n], dir_buf[:n], len_buf[:n], con_buf[:n]
             t1 = time.perf_counter()
@@ -435,10 +477,35 @@ class _FrameShader:
             self.shadow_rays += len(occ)
             self.seconds["shade"] += (t1 - t0) + (t3 - t2)
             self.seconds["shadow"] += t2 - t1
+            if self.gather:
+                self._gather(h, a, b, out)
         return out
+
+    def _gather(self, h: dict, a: int, b: int, out: np.ndarray) -> None:
+        """Add the gather rays' MIS-weighted share of the non-emitter light."""
+        t0 = time.perf_counter()
+        cap = self.tile * self.gather
+        if self._gbuffers is None:
+            self._gbuffers = (np.zeros(self.tile, np.int64), np.zeros((cap, 3), np.float32),
+                              np.zeros((cap, 3), np.float32))
+        cnt_buf, org_buf, dir_buf = self._gbuffers
+        count = cnt_buf[: b - a]
+        hh = {k: h[k][a:b] for k in ("pos", "normal", "ng", "wo", "material")}
+        n = _core.gather_rays(hh["pos"], hh["normal"], hh["ng"], hh["wo"], hh["material"],
+                              self.gather, self.seed, self._frame, self.eps, count, org_buf,
+                              dir_buf, self.threads)
+        prim = self.tracer.intersect(org_buf[:n], dir_buf[:n])
+        self.gather_rays += n
+        _core.gather_shade(hh["pos"], hh["normal"], hh["ng"], hh["wo"], hh["material"],
+                           self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv,
+                           self.mat_glossy, self.sampler.nv_over_ta, float(self.gather),
+                           **self._tri, **self._grid, ray_count=count, ray_dir=dir_buf[:n],
+                           prim=prim, out=out[a:b], threads=self.threads)
+        self.seconds["gather"] += time.perf_counter() - t0
 
     def frame(self, f: int, seed: int) -> np.ndarray:
         """(H*W, 3) radiance estimate of frame ``f``."""
+        self._frame = int(f)
         offset, lens = frame_samples(f, seed)
         t0 = time.perf_counter()
         org, dirs = camera_rays(self.cam, offset, lens)
@@ -470,7 +537,7 @@ def _check_solution(scene: Scene, sol) -> None:
 def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = None,
            tol: float | None = None, seed: int = 0, progress: bool = True,
            threads: int | None = None, client=None, *, camera: Camera | None = None,
-           min_frames: int = 4, emitter_share: float | None = None,
+           min_frames: int = 4, emitter_share: float | None = None, gather: int = 4,
            resolution: int | None = None, directions: int | None = None) -> RenderResult:
     r"""Render ``scene`` from its camera using the voxel solution ``sol``.
 
@@ -501,6 +568,20 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     energy within about √ΔA of contact). Back-facing VPLs give nothing and
     cost no shadow ray. With a glossy material f is the Ashikhmin–Shirley
     coupled diffuse + anisotropic Phong pair, lit by the same VPLs.
+
+    Near-field noise (``gather > 0``, the default): the bounded term removes
+    the singularity but not the variance of VPLs close to x (in corners a
+    VPL drawn at a few millimetres outshines the rest of the frame: measured
+    on the Cornell box, the estimated noise relMSE after 64 frames was 8.7e-3
+    with VPLs alone, 9.7e-4 with 4 gather rays per pixel and frame). So the
+    non-emitter set is also sampled by ``gather`` cosine-distributed rays per
+    pixel, whose hit points take their radiance ``B/π`` from the voxel record
+    there, and the two are combined by multiple importance sampling (balance
+    heuristic): each sample of either kind adds
+    ``f L cosθx cosθy / (r² n_v/TA + n_g cosθx cosθy/π)``, at most
+    ``π f L / n_g`` at contact, unbiased (no ΔA bound needed for that set).
+    Emitters stay VPLs only (small and bright: area sampling is right for
+    them). ``gather=0`` is the paper's pure VPL display.
 
     Parameters
     ----------
@@ -535,6 +616,9 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     emitter_share : float or None
         Share of each frame's VPLs taken from emitters; None splits by power
         (see :class:`VPLSampler`).
+    gather : int
+        Cosine-distributed gather rays per pixel and frame for the
+        non-emitter light, MIS-combined with its VPLs (0: VPLs only).
     resolution, directions : int, optional
         Passed to :func:`voxgi.voxelize` / :func:`voxgi.solve` when ``sol`` is None.
 
@@ -544,7 +628,7 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         ``image`` (H, W, 3) float32 linear radiance, ``image[0, 0]`` top-left;
         ``stderr`` (H, W, 3) float32; ``frames``; ``stats`` with ``seconds``
         (voxelize, solve, setup, primary, shade, shadow, total),
-        ``primary_rays``, ``shadow_rays``, ``vpls`` (per pixel),
+        ``primary_rays``, ``shadow_rays``, ``gather_rays``, ``vpls`` (per pixel),
         ``vpl_split`` (emitters, others per frame), ``est_rel_mse``,
         ``skipped`` and ``interrupted``. Ctrl-C stops after the current frame
         and returns the image so far.
@@ -594,12 +678,13 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
 
     t0 = time.perf_counter()
     tracer = _Tracer(scene, nthreads)
-    sampler = VPLSampler(sol, K, seed, emitter_share)
+    gather = _validate.integer(gather, "gather", low=0, high=4096)
+    sampler = VPLSampler(sol, K, seed, emitter_share, mis=gather > 0)
     diag = float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
     # Shadow-ray offsets: well above float32 rounding of the coordinates
     # (~1e-7 relative) and well below any feature of a sensible scene.
     eps = 1e-4 * diag
-    shader = _FrameShader(scene, cam, tracer, sampler, eps, nthreads)
+    shader = _FrameShader(scene, cam, tracer, sampler, eps, nthreads, gather, seed)
     seconds["setup"] = time.perf_counter() - t0
     if not shader.mat_glossy.any():
         skipped.append("glossy: no material has a specular layer")
@@ -650,6 +735,8 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         "seconds": seconds,
         "primary_rays": int(shader.primary_rays),
         "shadow_rays": int(shader.shadow_rays),
+        "gather_rays": int(shader.gather_rays),
+        "gather_per_frame": int(shader.gather),
         "vpls": int(frames * sum(sampler.counts)),
         "vpl_split": [int(c) for c in sampler.counts],
         "frames": int(frames),
