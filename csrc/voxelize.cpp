@@ -1,4 +1,792 @@
-// voxelize kernels (see voxelize.h).
+// Exact sparse supercover voxelization (see voxelize.h).
+//
+// Three phases, each deterministic whatever the thread count:
+//  1. per triangle (threads over chunks of triangles): the voxels whose closed
+//     cube, grown by eps, meets it, found by clipping the triangle to slabs
+//     along two axes and reading the range along the third (work follows the
+//     output, never the bounding box); emits (voxel key, triangle) pairs;
+//  2. a stable LSD radix sort of the pairs by voxel key (ties keep triangle
+//     order, so the pair list is fully determined);
+//  3. per voxel (threads over chunks of voxels): clip each triangle exactly to
+//     the cube, cluster the pieces by object and orientation, cut them by the
+//     other surfaces' planes, and write the records.
 #include "voxelize.h"
 
-namespace voxgi {}
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace voxgi {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// A convex polygon: a triangle (3) clipped by 6 planes has at most 9
+// vertices; each cutting plane adds at most one more.
+constexpr int kMaxV = 9 + kMaxCuts + 2;
+struct Poly {
+    int n = 0;
+    bool overflow = false;
+    double v[kMaxV][3];
+    void push(const double *p) {
+        if (n == kMaxV) {
+            overflow = true;
+            return;
+        }
+        v[n][0] = p[0];
+        v[n][1] = p[1];
+        v[n][2] = p[2];
+        ++n;
+    }
+};
+
+inline double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+inline void cross3(const double *a, const double *b, double *o) {
+    o[0] = a[1] * b[2] - a[2] * b[1];
+    o[1] = a[2] * b[0] - a[0] * b[2];
+    o[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+// Keep the part of `in` where sgn * (v[axis] - c) >= 0 (closed half-space).
+// New vertices get v[axis] = c exactly, so neighbouring voxels' pieces share
+// their boundary bit for bit.
+void clip_axis(const Poly &in, Poly &out, int axis, double c, double sgn) {
+    out.n = 0;
+    out.overflow = in.overflow;
+    const int n = in.n;
+    for (int p = 0; p < n; ++p) {
+        const double *a = in.v[p];
+        const double *b = in.v[p + 1 == n ? 0 : p + 1];
+        const double da = sgn * (a[axis] - c), db = sgn * (b[axis] - c);
+        if (da >= 0) out.push(a);
+        if ((da >= 0) != (db >= 0)) {
+            const double t = da / (da - db);
+            double q[3] = {a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]),
+                           a[2] + t * (b[2] - a[2])};
+            q[axis] = c;
+            out.push(q);
+        }
+    }
+}
+
+// Keep the part of `in` where sgn * (n·v - off) >= 0.
+void clip_plane(const Poly &in, Poly &out, const double *nrm, double off, double sgn) {
+    out.n = 0;
+    out.overflow = in.overflow;
+    const int n = in.n;
+    for (int p = 0; p < n; ++p) {
+        const double *a = in.v[p];
+        const double *b = in.v[p + 1 == n ? 0 : p + 1];
+        const double da = sgn * (dot3(nrm, a) - off), db = sgn * (dot3(nrm, b) - off);
+        if (da >= 0) out.push(a);
+        if ((da >= 0) != (db >= 0)) {
+            const double t = da / (da - db);
+            const double q[3] = {a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]),
+                                 a[2] + t * (b[2] - a[2])};
+            out.push(q);
+        }
+    }
+}
+
+// Area (along the unit normal n of the polygon's plane) and area-weighted
+// centroid; the mean of the vertices when the area is zero.
+double area_centroid(const Poly &P, const double *n, double *c) {
+    c[0] = c[1] = c[2] = 0;
+    if (P.n == 0) return 0;
+    double A = 0;
+    const double *v0 = P.v[0];
+    for (int i = 1; i + 1 < P.n; ++i) {
+        const double e1[3] = {P.v[i][0] - v0[0], P.v[i][1] - v0[1], P.v[i][2] - v0[2]};
+        const double e2[3] = {P.v[i + 1][0] - v0[0], P.v[i + 1][1] - v0[1],
+                              P.v[i + 1][2] - v0[2]};
+        double cr[3];
+        cross3(e1, e2, cr);
+        const double a = 0.5 * dot3(cr, n);
+        A += a;
+        for (int d = 0; d < 3; ++d) c[d] += a * (v0[d] + P.v[i][d] + P.v[i + 1][d]);
+    }
+    if (A > 0) {
+        for (int d = 0; d < 3; ++d) c[d] /= 3 * A;
+        return A;
+    }
+    // Zero (or round-off negative) area: a segment or a point.
+    c[0] = c[1] = c[2] = 0;
+    for (int i = 0; i < P.n; ++i)
+        for (int d = 0; d < 3; ++d) c[d] += P.v[i][d];
+    for (int d = 0; d < 3; ++d) c[d] /= P.n;
+    return 0;
+}
+
+// Closest point of the convex polygon P (plane normal n) to x; returns squared distance.
+double closest_on_poly(const Poly &P, const double *n, const double *x, double *out) {
+    const double *v0 = P.v[0];
+    const double h = (x[0] - v0[0]) * n[0] + (x[1] - v0[1]) * n[1] + (x[2] - v0[2]) * n[2];
+    const double y[3] = {x[0] - h * n[0], x[1] - h * n[1], x[2] - h * n[2]};
+    if (P.n >= 3) {
+        bool pos = true, neg = true;
+        for (int i = 0; i < P.n; ++i) {
+            const double *a = P.v[i], *b = P.v[i + 1 == P.n ? 0 : i + 1];
+            const double e[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+            const double w[3] = {y[0] - a[0], y[1] - a[1], y[2] - a[2]};
+            double cr[3];
+            cross3(e, w, cr);
+            const double s = dot3(cr, n);
+            if (s < 0) pos = false;
+            if (s > 0) neg = false;
+        }
+        if (pos || neg) {
+            std::memcpy(out, y, sizeof(y));
+            return h * h;
+        }
+    }
+    double best = std::numeric_limits<double>::infinity();
+    for (int i = 0; i < P.n; ++i) {
+        const double *a = P.v[i], *b = P.v[i + 1 == P.n ? 0 : i + 1];
+        const double e[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        const double ee = dot3(e, e);
+        double t = 0;
+        if (ee > 0) {
+            const double w[3] = {x[0] - a[0], x[1] - a[1], x[2] - a[2]};
+            t = std::min(1.0, std::max(0.0, dot3(w, e) / ee));
+        }
+        const double q[3] = {a[0] + t * e[0], a[1] + t * e[1], a[2] + t * e[2]};
+        const double d[3] = {x[0] - q[0], x[1] - q[1], x[2] - q[2]};
+        const double dd = dot3(d, d);
+        if (dd < best) {
+            best = dd;
+            std::memcpy(out, q, sizeof(q));
+        }
+    }
+    return best;
+}
+
+struct Pair {
+    uint64_t key;
+    uint32_t tri;
+};
+
+// Grid-space triangle and its unit normal; false when the normal is unusable.
+struct Tri {
+    double g[3][3];
+    double n[3];
+};
+bool load_tri(const double *tris, int64_t t, const VoxelizeParams &P, Tri &T) {
+    const double inv = 1.0 / P.pitch;
+    for (int v = 0; v < 3; ++v)
+        for (int d = 0; d < 3; ++d) T.g[v][d] = (tris[t * 9 + v * 3 + d] - P.origin[d]) * inv;
+    const double e1[3] = {T.g[1][0] - T.g[0][0], T.g[1][1] - T.g[0][1], T.g[1][2] - T.g[0][2]};
+    const double e2[3] = {T.g[2][0] - T.g[0][0], T.g[2][1] - T.g[0][1], T.g[2][2] - T.g[0][2]};
+    double cr[3];
+    cross3(e1, e2, cr);
+    const double len = std::sqrt(dot3(cr, cr));
+    // A normal needs a doubled area well above underflow: below 1e-200
+    // voxel faces the triangle carries no light at any useful resolution.
+    if (!(len > 1e-200) || !std::isfinite(len)) return false;
+    for (int d = 0; d < 3; ++d) T.n[d] = cr[d] / len;
+    return true;
+}
+
+inline int64_t ifloor(double x) { return static_cast<int64_t>(std::floor(x)); }
+inline int64_t iceil(double x) { return static_cast<int64_t>(std::ceil(x)); }
+
+// Phase 1 for one triangle: append the keys of every voxel whose cube, grown
+// by eps, meets the triangle.
+void triangle_cells(const Tri &T, uint32_t tri, const VoxelizeParams &P, std::vector<Pair> &out,
+                    int64_t &overflows) {
+    const double eps = P.eps;
+    const int64_t D0 = P.dims[0], D1 = P.dims[1], D2 = P.dims[2];
+    // Voxel i along an axis meets [lo - eps, hi + eps] iff i <= hi + eps and i + 1 >= lo - eps.
+    int64_t lo[3], hi[3];
+    for (int d = 0; d < 3; ++d) {
+        const double mn = std::min({T.g[0][d], T.g[1][d], T.g[2][d]});
+        const double mx = std::max({T.g[0][d], T.g[1][d], T.g[2][d]});
+        lo[d] = std::max<int64_t>(0, iceil(mn - eps - 1.0));
+        hi[d] = std::min<int64_t>(P.dims[d] - 1, ifloor(mx + eps));
+    }
+    auto emit = [&](int64_t i, int64_t j, int64_t k) {
+        out.push_back({static_cast<uint64_t>((i * D1 + j) * D2 + k), tri});
+    };
+    if (lo[0] == hi[0] && lo[1] == hi[1] && lo[2] == hi[2]) {  // small triangle: one voxel
+        emit(lo[0], lo[1], lo[2]);
+        return;
+    }
+    (void)D0;
+    // Slabs along the two axes where the triangle is widest in projection;
+    // the range along the dominant normal axis c is then short (1-2 voxels).
+    int c = 0;
+    for (int d = 1; d < 3; ++d)
+        if (std::fabs(T.n[d]) > std::fabs(T.n[c])) c = d;
+    const int a = (c + 1) % 3, b = (c + 2) % 3;
+    Poly tri0, s1, s2, t1, t2;
+    for (int v = 0; v < 3; ++v) tri0.push(T.g[v]);
+    int64_t cell[3];
+    for (int64_t i = lo[a]; i <= hi[a]; ++i) {
+        clip_axis(tri0, t1, a, double(i) - eps, 1.0);
+        clip_axis(t1, s1, a, double(i + 1) + eps, -1.0);
+        if (s1.n == 0) continue;
+        double bmn = s1.v[0][b], bmx = bmn;
+        for (int q = 1; q < s1.n; ++q) {
+            bmn = std::min(bmn, s1.v[q][b]);
+            bmx = std::max(bmx, s1.v[q][b]);
+        }
+        const int64_t jlo = std::max<int64_t>(lo[b], iceil(bmn - eps - 1.0));
+        const int64_t jhi = std::min<int64_t>(hi[b], ifloor(bmx + eps));
+        for (int64_t j = jlo; j <= jhi; ++j) {
+            clip_axis(s1, t2, b, double(j) - eps, 1.0);
+            clip_axis(t2, s2, b, double(j + 1) + eps, -1.0);
+            if (s2.n == 0) continue;
+            if (s2.overflow) ++overflows;
+            double cmn = s2.v[0][c], cmx = cmn;
+            for (int q = 1; q < s2.n; ++q) {
+                cmn = std::min(cmn, s2.v[q][c]);
+                cmx = std::max(cmx, s2.v[q][c]);
+            }
+            const int64_t klo = std::max<int64_t>(lo[c], iceil(cmn - eps - 1.0));
+            const int64_t khi = std::min<int64_t>(hi[c], ifloor(cmx + eps));
+            cell[a] = i;
+            cell[b] = j;
+            for (int64_t k = klo; k <= khi; ++k) {
+                cell[c] = k;
+                emit(cell[0], cell[1], cell[2]);
+            }
+        }
+    }
+}
+
+// Stable LSD radix sort of pairs by key (16-bit digits).
+void radix_sort(std::vector<Pair> &v, uint64_t max_key, const StopCheck &stop) {
+    if (v.size() < 2) return;
+    int bits = 0;
+    while (bits < 64 && (max_key >> bits) != 0) ++bits;
+    std::vector<Pair> tmp(v.size());
+    std::vector<size_t> count(1 << 16);
+    for (int shift = 0; shift < bits; shift += 16) {
+        std::fill(count.begin(), count.end(), 0);
+        for (const Pair &p : v) ++count[(p.key >> shift) & 0xFFFF];
+        size_t sum = 0;
+        for (auto &cnt : count) {
+            const size_t c = cnt;
+            cnt = sum;
+            sum += c;
+        }
+        for (const Pair &p : v) tmp[count[(p.key >> shift) & 0xFFFF]++] = p;
+        v.swap(tmp);
+        if (stop && stop()) throw Interrupted();
+    }
+}
+
+// ---- phase 3: records of one voxel -----------------------------------------
+
+struct Piece {
+    int32_t obj;
+    int32_t cluster;
+    double tn[3];    // the triangle's unit normal (winding)
+    double n[3];     // normal aligned with its cluster (flipped for two-sided objects)
+    double area;     // voxel units²
+    double c[3];     // area-weighted centroid, or the touching point when area == 0
+    Poly poly;
+};
+
+struct Cluster {
+    int32_t obj;
+    double seed[3];
+    double sum_an[3] = {0, 0, 0};
+    double sum_n[3] = {0, 0, 0};
+    double sum_ac[3] = {0, 0, 0};
+    double sum_a = 0;
+    std::vector<int> pieces;
+};
+
+struct Part {
+    int piece;
+    uint64_t sig;  // bit b set: on the positive side of the cluster's b-th cutting plane
+    double area;
+    double c[3];
+    Poly poly;
+};
+
+struct Scratch {
+    std::vector<Piece> pieces;
+    std::vector<Cluster> clusters;
+    std::vector<Part> parts, parts2;
+    std::vector<int> order;
+};
+
+struct ChunkStats {
+    int64_t cells = 0, records = 0, back = 0, two_sided = 0, touch = 0, clusters = 0,
+            cut_clusters = 0, cut_records = 0, cut_limit = 0, overflows = 0;
+};
+
+struct Context {
+    const double *tris;
+    const int32_t *tri_object;
+    const bool *two_sided;
+    const float *albedo;
+    const float *emission;
+    const VoxelizeParams *P;
+};
+
+// Exact piece of T in voxel `cell` (closed cube). A triangle lying exactly in
+// the plane of a voxel face gives its area to the voxel below that plane
+// only, so that no area is counted twice; the voxel above just touches it.
+// On the grid's lower boundary (index 0) there is no voxel below: keep it.
+void clip_exact(const Tri &T, const int64_t *cell, Poly &out, Poly &tmp) {
+    out.n = 0;
+    out.overflow = false;
+    for (int d = 0; d < 3; ++d)
+        if (cell[d] > 0 && T.g[0][d] == double(cell[d]) && T.g[1][d] == double(cell[d]) &&
+            T.g[2][d] == double(cell[d]))
+            return;
+    for (int v = 0; v < 3; ++v) out.push(T.g[v]);
+    for (int d = 0; d < 3; ++d) {
+        clip_axis(out, tmp, d, double(cell[d]), 1.0);
+        clip_axis(tmp, out, d, double(cell[d] + 1), -1.0);
+        if (out.n == 0) return;
+    }
+}
+void clip_grown(const Tri &T, const int64_t *cell, double eps, Poly &out, Poly &tmp) {
+    out.n = 0;
+    out.overflow = false;
+    for (int v = 0; v < 3; ++v) out.push(T.g[v]);
+    for (int d = 0; d < 3; ++d) {
+        clip_axis(out, tmp, d, double(cell[d]) - eps, 1.0);
+        clip_axis(tmp, out, d, double(cell[d] + 1) + eps, -1.0);
+        if (out.n == 0) return;
+    }
+}
+
+void clamp_to_cell(double *p, const int64_t *cell) {
+    for (int d = 0; d < 3; ++d) p[d] = std::min(double(cell[d] + 1), std::max(double(cell[d]), p[d]));
+}
+
+void signed_range(const Poly &P, const double *n, double off, double &mn, double &mx) {
+    mn = std::numeric_limits<double>::infinity();
+    mx = -mn;
+    for (int i = 0; i < P.n; ++i) {
+        const double d = dot3(n, P.v[i]) - off;
+        mn = std::min(mn, d);
+        mx = std::max(mx, d);
+    }
+}
+
+void emit_records(const Context &ctx, const int64_t *cell, const Cluster &cl,
+                  const std::vector<Piece> &pieces, const std::vector<Part> &parts, size_t begin,
+                  size_t end, std::vector<VoxelRecord> &out, ChunkStats &cs) {
+    const VoxelizeParams &P = *ctx.P;
+    double sa = 0, san[3] = {0, 0, 0}, sn[3] = {0, 0, 0}, sac[3] = {0, 0, 0};
+    int n_pos = 0;
+    for (size_t q = begin; q < end; ++q) {
+        const Part &pt = parts[q];
+        const Piece &pc = pieces[pt.piece];
+        sa += pt.area;
+        for (int d = 0; d < 3; ++d) {
+            san[d] += pt.area * pc.n[d];
+            sn[d] += pc.n[d];
+            sac[d] += pt.area * pt.c[d];
+        }
+        if (pt.area > 0) ++n_pos;
+    }
+    double nrm[3];
+    double len = std::sqrt(dot3(san, san));
+    if (sa > 0 && len > 0) {
+        for (int d = 0; d < 3; ++d) nrm[d] = san[d] / len;
+    } else {
+        len = std::sqrt(dot3(sn, sn));  // > 0: all normals lie within 60° of the seed
+        for (int d = 0; d < 3; ++d) nrm[d] = sn[d] / len;
+    }
+    double cen[3];
+    if (sa > 0) {
+        for (int d = 0; d < 3; ++d) cen[d] = sac[d] / sa;
+        if (n_pos > 1) {
+            // The mean of several pieces may lie off a curved or folded
+            // surface: snap it onto the nearest piece (the VPL must sit on it).
+            double best = std::numeric_limits<double>::infinity(), q[3], bq[3] = {cen[0], cen[1], cen[2]};
+            for (size_t k = begin; k < end; ++k) {
+                const Part &pt = parts[k];
+                if (!(pt.area > 0)) continue;
+                const double dd = closest_on_poly(pt.poly, pieces[pt.piece].tn, cen, q);
+                if (dd < best) {
+                    best = dd;
+                    std::memcpy(bq, q, sizeof(q));
+                }
+            }
+            std::memcpy(cen, bq, sizeof(bq));
+        }
+    } else {
+        // Touching only: the touching point nearest to their mean.
+        double m[3] = {0, 0, 0};
+        for (size_t k = begin; k < end; ++k)
+            for (int d = 0; d < 3; ++d) m[d] += parts[k].c[d] / double(end - begin);
+        double best = std::numeric_limits<double>::infinity();
+        for (size_t k = begin; k < end; ++k) {
+            const double dv[3] = {parts[k].c[0] - m[0], parts[k].c[1] - m[1], parts[k].c[2] - m[2]};
+            const double dd = dot3(dv, dv);
+            if (dd < best) {
+                best = dd;
+                std::memcpy(cen, parts[k].c, sizeof(cen));
+            }
+        }
+        ++cs.touch;
+    }
+    clamp_to_cell(cen, cell);
+    VoxelRecord r;
+    for (int d = 0; d < 3; ++d) {
+        r.ijk[d] = static_cast<int32_t>(cell[d]);
+        r.normal[d] = static_cast<float>(nrm[d]);
+        r.albedo[d] = ctx.albedo[cl.obj * 3 + d];
+        r.emission[d] = ctx.emission[cl.obj * 3 + d];
+        r.centroid[d] = P.origin[d] + cen[d] * P.pitch;
+    }
+    r.object = cl.obj;
+    r.area = static_cast<float>(sa * P.pitch * P.pitch);
+    r.back = 0;
+    r.side = 0;
+    out.push_back(r);
+    // The reverse side: live for a two-sided object, black (but opaque) otherwise.
+    for (int d = 0; d < 3; ++d) r.normal[d] = -r.normal[d];
+    r.side = 1;
+    if (ctx.two_sided[cl.obj]) {
+        ++cs.two_sided;
+    } else {
+        r.back = 1;
+        for (int d = 0; d < 3; ++d) r.albedo[d] = r.emission[d] = 0.0f;
+        ++cs.back;
+    }
+    out.push_back(r);
+    cs.records += 2;
+}
+
+void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t np, Scratch &S,
+                  std::vector<VoxelRecord> &out, ChunkStats &cs) {
+    const VoxelizeParams &P = *ctx.P;
+    const uint64_t D1 = P.dims[1], D2 = P.dims[2];
+    const int64_t cell[3] = {int64_t(key / (D1 * D2)), int64_t((key / D2) % D1), int64_t(key % D2)};
+    auto &pieces = S.pieces;
+    pieces.clear();
+    Poly tmp;
+    for (int64_t q = 0; q < np; ++q) {
+        Tri T;
+        if (!load_tri(ctx.tris, pairs[q].tri, P, T)) continue;  // counted in phase 1
+        pieces.emplace_back();
+        Piece &pc = pieces.back();
+        pc.obj = ctx.tri_object[pairs[q].tri];
+        pc.cluster = -1;
+        std::memcpy(pc.tn, T.n, sizeof(T.n));
+        std::memcpy(pc.n, T.n, sizeof(T.n));
+        clip_exact(T, cell, pc.poly, tmp);
+        pc.area = pc.poly.n >= 3 ? area_centroid(pc.poly, T.n, pc.c) : 0.0;
+        if (!(pc.area > 0)) {
+            // Touches the closed cube (within eps) without area inside it.
+            pc.area = 0;
+            if (pc.poly.n == 0) clip_grown(T, cell, P.eps, pc.poly, tmp);
+            if (pc.poly.n == 0) clip_grown(T, cell, 4 * P.eps, pc.poly, tmp);
+            if (pc.poly.n == 0) {
+                pc.poly.push(T.g[0]);  // cannot happen short of round-off trouble
+                pc.poly.push(T.g[1]);
+                pc.poly.push(T.g[2]);
+            }
+            area_centroid(pc.poly, T.n, pc.c);  // zero area: mean of the vertices
+            if (pc.poly.n >= 3) {
+                // A grown-cube polygon can have area; its vertex mean is still on the triangle.
+                pc.c[0] = pc.c[1] = pc.c[2] = 0;
+                for (int i = 0; i < pc.poly.n; ++i)
+                    for (int d = 0; d < 3; ++d) pc.c[d] += pc.poly.v[i][d] / pc.poly.n;
+            }
+            clamp_to_cell(pc.c, cell);
+        }
+        if (pc.poly.overflow) ++cs.overflows;
+    }
+    if (pieces.empty()) return;
+    ++cs.cells;
+
+    // Clusters: per object (ascending), greedy by orientation in triangle order.
+    auto &order = S.order;
+    order.resize(pieces.size());
+    for (size_t q = 0; q < pieces.size(); ++q) order[q] = int(q);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](int x, int y) { return pieces[x].obj < pieces[y].obj; });
+    auto &clusters = S.clusters;
+    clusters.clear();
+    size_t obj_first = 0;
+    for (int idx : order) {
+        Piece &pc = pieces[idx];
+        if (clusters.empty() || clusters.back().obj != pc.obj) obj_first = clusters.size();
+        const bool ts = ctx.two_sided[pc.obj];
+        int found = -1;
+        for (size_t q = obj_first; q < clusters.size(); ++q) {
+            const double dd = dot3(pc.tn, clusters[q].seed);
+            // Two-sided surfaces have no preferred side: a flipped winding
+            // joins the cluster with its normal turned around.
+            if (dd >= P.cos_cluster || (ts && -dd >= P.cos_cluster)) {
+                found = int(q);
+                if (dd < 0)
+                    for (int d = 0; d < 3; ++d) pc.n[d] = -pc.tn[d];
+                break;
+            }
+        }
+        if (found < 0) {
+            clusters.emplace_back();
+            Cluster &c = clusters.back();
+            c.obj = pc.obj;
+            std::memcpy(c.seed, pc.tn, sizeof(c.seed));
+            c.pieces.clear();
+            found = int(clusters.size() - 1);
+        }
+        Cluster &c = clusters[found];
+        pc.cluster = found;
+        c.pieces.push_back(idx);
+        c.sum_a += pc.area;
+        for (int d = 0; d < 3; ++d) {
+            c.sum_an[d] += pc.area * pc.n[d];
+            c.sum_n[d] += pc.n[d];
+            c.sum_ac[d] += pc.area * pc.c[d];
+        }
+    }
+    cs.clusters += int64_t(clusters.size());
+
+    // Cutting planes: every cluster with area, through its area-weighted
+    // centroid, normal to its area-weighted normal.
+    struct Plane {
+        double n[3], off;
+        bool ok;
+    };
+    Plane planes[64];
+    const size_t ncl = clusters.size();
+    const bool do_cut = P.cut && ncl > 1;
+    if (do_cut) {
+        for (size_t q = 0; q < ncl && q < 64; ++q) {
+            const Cluster &c = clusters[q];
+            const double len = std::sqrt(dot3(c.sum_an, c.sum_an));
+            planes[q].ok = c.sum_a > 0 && len > 0;
+            if (!planes[q].ok) continue;
+            double ctr[3];
+            for (int d = 0; d < 3; ++d) {
+                planes[q].n[d] = c.sum_an[d] / len;
+                ctr[d] = c.sum_ac[d] / c.sum_a;
+            }
+            planes[q].off = dot3(planes[q].n, ctr);
+        }
+    }
+
+    auto &parts = S.parts;
+    auto &parts2 = S.parts2;
+    for (size_t ci = 0; ci < ncl; ++ci) {
+        const Cluster &cl = clusters[ci];
+        parts.clear();
+        for (int idx : cl.pieces) {
+            const Piece &pc = pieces[idx];
+            parts.push_back(Part{idx, 0, pc.area, {pc.c[0], pc.c[1], pc.c[2]}, pc.poly});
+        }
+        int n_cuts = 0;
+        if (do_cut) {
+            for (size_t sj = 0; sj < ncl && sj < 64; ++sj) {
+                if (sj == ci || !planes[sj].ok) continue;
+                const Plane &pl = planes[sj];
+                bool straddles = false;
+                for (const Part &pt : parts) {
+                    if (!(pt.area > 0)) continue;
+                    double mn, mx;
+                    signed_range(pt.poly, pl.n, pl.off, mn, mx);
+                    if (mx > P.cut_delta && mn < -P.cut_delta) {
+                        straddles = true;
+                        break;
+                    }
+                }
+                if (!straddles) continue;
+                if (n_cuts == kMaxCuts) {
+                    ++cs.cut_limit;
+                    continue;
+                }
+                const uint64_t bit = uint64_t(1) << n_cuts++;
+                parts2.clear();
+                for (const Part &pt : parts) {
+                    double mn = 0, mx = 0;
+                    if (pt.area > 0) signed_range(pt.poly, pl.n, pl.off, mn, mx);
+                    if (pt.area > 0 && mx > P.cut_delta && mn < -P.cut_delta) {
+                        const double *tn = pieces[pt.piece].tn;
+                        for (int s = 0; s < 2; ++s) {
+                            Part np_;
+                            np_.piece = pt.piece;
+                            np_.sig = pt.sig | (s == 0 ? bit : 0);
+                            clip_plane(pt.poly, np_.poly, pl.n, pl.off, s == 0 ? 1.0 : -1.0);
+                            if (np_.poly.n == 0) continue;
+                            np_.area = np_.poly.n >= 3 ? area_centroid(np_.poly, tn, np_.c) : 0.0;
+                            if (!(np_.area > 0)) {
+                                np_.area = 0;
+                                area_centroid(np_.poly, tn, np_.c);
+                            }
+                            if (np_.poly.overflow) ++cs.overflows;
+                            parts2.push_back(np_);
+                        }
+                    } else {
+                        parts2.push_back(pt);
+                        if (dot3(pl.n, pt.c) - pl.off >= 0) parts2.back().sig |= bit;
+                    }
+                }
+                parts.swap(parts2);
+            }
+        }
+        std::stable_sort(parts.begin(), parts.end(),
+                         [](const Part &x, const Part &y) { return x.sig < y.sig; });
+        size_t b = 0, n_rec = 0;
+        while (b < parts.size()) {
+            size_t e = b + 1;
+            while (e < parts.size() && parts[e].sig == parts[b].sig) ++e;
+            emit_records(ctx, cell, cl, pieces, parts, b, e, out, cs);
+            ++n_rec;
+            b = e;
+        }
+        if (n_rec > 1) {
+            ++cs.cut_clusters;
+            cs.cut_records += int64_t(n_rec - 1);
+        }
+    }
+}
+
+}  // namespace
+
+std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tris,
+                                               const int32_t *tri_object, int32_t n_objects,
+                                               const bool *two_sided, const float *albedo,
+                                               const float *emission, const VoxelizeParams &P,
+                                               int threads, const StopCheck &stop,
+                                               VoxelizeStats &st, VoxelizeProgress *progress) {
+    st = VoxelizeStats{};
+    st.triangles = n_tris;
+    if (!(P.pitch > 0) || !std::isfinite(P.pitch))
+        throw std::invalid_argument("voxelize: pitch must be finite and > 0");
+    for (int d = 0; d < 3; ++d) {
+        if (!std::isfinite(P.origin[d])) throw std::invalid_argument("voxelize: origin must be finite");
+        if (P.dims[d] < 1 || P.dims[d] >= (1 << 21))
+            throw std::invalid_argument("voxelize: dims must lie in [1, 2^21)");
+    }
+    if (n_tris < 0 || n_tris >= (int64_t(1) << 32))
+        throw std::invalid_argument("voxelize: too many triangles (at most 2^32 - 1)");
+    if (!(P.eps >= 0 && P.eps < 0.01)) throw std::invalid_argument("voxelize: eps must be in [0, 0.01)");
+    if (!(P.cos_cluster >= -1 && P.cos_cluster <= 1))
+        throw std::invalid_argument("voxelize: cos_cluster must be in [-1, 1]");
+    threads = resolve_threads(threads);
+    auto set_phase = [&](int ph, int64_t total) {
+        if (!progress) return;
+        progress->phase = ph;
+        progress->done = 0;
+        progress->total = total;
+    };
+
+    // ---- phase 1: (voxel, triangle) pairs ---------------------------------
+    auto t0 = Clock::now();
+    const int64_t tri_chunk = 2048;
+    const int64_t n_tchunks = (n_tris + tri_chunk - 1) / tri_chunk;
+    std::vector<std::vector<Pair>> chunk_pairs(n_tchunks);
+    std::vector<int64_t> chunk_skipped(n_tchunks, 0), chunk_overflow(n_tchunks, 0);
+    std::vector<std::string> chunk_error(n_tchunks);
+    set_phase(1, n_tris);
+    parallel_for(n_tchunks, threads, stop, [&](int64_t ch, int) {
+        const int64_t t_end = std::min(n_tris, (ch + 1) * tri_chunk);
+        auto &out = chunk_pairs[ch];
+        out.reserve(size_t(t_end - ch * tri_chunk) * 4);
+        for (int64_t t = ch * tri_chunk; t < t_end; ++t) {
+            const int32_t o = tri_object[t];
+            if (o < 0 || o >= n_objects)
+                throw std::invalid_argument("voxelize: tri_object[" + std::to_string(t) + "] = " +
+                                            std::to_string(o) + " is not in [0, " +
+                                            std::to_string(n_objects) + ")");
+            Tri T;
+            bool finite = true, inside = true;
+            for (int v = 0; v < 9; ++v) finite = finite && std::isfinite(tris[t * 9 + v]);
+            if (!finite)
+                throw std::invalid_argument("voxelize: triangle " + std::to_string(t) +
+                                            " has a non-finite vertex");
+            const bool ok = load_tri(tris, t, P, T);
+            for (int v = 0; v < 3; ++v)
+                for (int d = 0; d < 3; ++d)
+                    inside = inside && T.g[v][d] >= -1e-6 && T.g[v][d] <= P.dims[d] + 1e-6;
+            if (!inside)
+                throw std::invalid_argument("voxelize: triangle " + std::to_string(t) +
+                                            " lies outside the grid origin + pitch * [0, dims]");
+            if (!ok) {
+                ++chunk_skipped[ch];
+                continue;
+            }
+            triangle_cells(T, static_cast<uint32_t>(t), P, out, chunk_overflow[ch]);
+        }
+        if (progress) progress->done += t_end - ch * tri_chunk;
+    });
+    size_t n_pairs = 0, chunk_bytes = 0;
+    for (int64_t ch = 0; ch < n_tchunks; ++ch) {
+        n_pairs += chunk_pairs[ch].size();
+        chunk_bytes += chunk_pairs[ch].capacity() * sizeof(Pair);
+        st.skipped_degenerate += chunk_skipped[ch];
+        st.polygon_overflows += chunk_overflow[ch];
+    }
+    std::vector<Pair> pairs;
+    pairs.reserve(n_pairs);
+    st.peak_bytes = int64_t(chunk_bytes + n_pairs * sizeof(Pair));
+    for (auto &cp : chunk_pairs) {
+        pairs.insert(pairs.end(), cp.begin(), cp.end());
+        std::vector<Pair>().swap(cp);
+    }
+    st.pairs = int64_t(n_pairs);
+    st.seconds_pairs = seconds_since(t0);
+
+    // ---- phase 2: sort by voxel key (stable: ties keep triangle order) ----
+    t0 = Clock::now();
+    set_phase(2, 1);
+    const uint64_t max_key = uint64_t(P.dims[0]) * uint64_t(P.dims[1]) * uint64_t(P.dims[2]);
+    radix_sort(pairs, max_key, stop);
+    st.peak_bytes = std::max<int64_t>(st.peak_bytes, int64_t(2 * n_pairs * sizeof(Pair)));
+    std::vector<int64_t> starts;
+    for (size_t q = 0; q < n_pairs; ++q)
+        if (q == 0 || pairs[q].key != pairs[q - 1].key) starts.push_back(int64_t(q));
+    const int64_t n_cells = int64_t(starts.size());
+    starts.push_back(int64_t(n_pairs));
+    st.seconds_sort = seconds_since(t0);
+
+    // ---- phase 3: records per voxel ----------------------------------------
+    t0 = Clock::now();
+    const int64_t cell_chunk =
+        std::max<int64_t>(256, std::min<int64_t>(16384, n_cells / (int64_t(threads) * 16) + 1));
+    const int64_t n_cchunks = (n_cells + cell_chunk - 1) / cell_chunk;
+    std::vector<std::vector<VoxelRecord>> out(n_cchunks);
+    std::vector<ChunkStats> cstats(n_cchunks);
+    std::vector<Scratch> scratch(threads);
+    Context ctx{tris, tri_object, two_sided, albedo, emission, &P};
+    set_phase(3, n_cells);
+    parallel_for(n_cchunks, threads, stop, [&](int64_t ch, int th) {
+        const int64_t c_end = std::min(n_cells, (ch + 1) * cell_chunk);
+        auto &o = out[ch];
+        o.reserve(size_t(starts[c_end] - starts[ch * cell_chunk]) * 2 + 16);
+        for (int64_t c = ch * cell_chunk; c < c_end; ++c)
+            process_cell(ctx, pairs[starts[c]].key, pairs.data() + starts[c],
+                         starts[c + 1] - starts[c], scratch[th], o, cstats[ch]);
+        if (progress) progress->done += c_end - ch * cell_chunk;
+    });
+    size_t rec_bytes = 0;
+    for (int64_t ch = 0; ch < n_cchunks; ++ch) {
+        const ChunkStats &cs = cstats[ch];
+        st.cells += cs.cells;
+        st.records += cs.records;
+        st.back_records += cs.back;
+        st.two_sided_records += cs.two_sided;
+        st.touch_records += cs.touch;
+        st.clusters += cs.clusters;
+        st.cut_clusters += cs.cut_clusters;
+        st.cut_records += cs.cut_records;
+        st.cut_limit_hits += cs.cut_limit;
+        st.polygon_overflows += cs.overflows;
+        rec_bytes += out[ch].capacity() * sizeof(VoxelRecord);
+    }
+    st.peak_bytes = std::max<int64_t>(
+        st.peak_bytes, int64_t(n_pairs * sizeof(Pair) + starts.size() * sizeof(int64_t) + rec_bytes));
+    st.seconds_records = seconds_since(t0);
+    return out;
+}
+
+}  // namespace voxgi
