@@ -84,6 +84,39 @@ def test_furnace_sphere_analytic_radiosity(rho):
 
 
 @pytest.mark.parametrize("rho", [0.5, 0.9])
+def test_furnace_sphere_voxel_records_analytic_radiosity(rho):
+    # Real voxel records (supercover, clipped areas, black back records that
+    # must never be VPLs) with the analytic B on the front records.
+    scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=1.0, width=24, height=24)
+    vox = voxgi.voxelize(scene, resolution=32)
+    b = np.where(vox.back[:, None], 0.0, math.pi / (1 - rho)) * np.ones((1, 3))
+    out = voxgi.render(scene, Solution(vox=vox, radiosity=b.astype(np.float32)), progress=False,
+                       max_frames=32, tol=0.0)
+    err = np.abs(out.image * (1 - rho) - 1.0)
+    assert err.max() < 0.01, err.max()  # measured 0.4% (0.5) and 0.7% (0.9)
+
+
+def test_cap_sphere_voxel_records_gather_lookup():
+    # The cap sphere on real voxel records: the gather rays look up records
+    # (front side, right object) in the voxel grid. Mean error over the
+    # non-cap pixels within 1% (measured 0.02%; max 2.0%, noise).
+    rho, le = 0.6, 2.0
+    scene = voxgi.scenes.cap_sphere(albedo=rho, emission=le, cap_angle=70.0, subdivisions=4,
+                                    width=24, height=24)
+    scene.camera = scene.camera.replace(target=(0.0, -1.0, -0.5), fov=60.0)  # the rest only
+    vox = voxgi.voxelize(scene, resolution=32)
+    le_mean = float(np.sum(vox.area * vox.emission[:, 0]) / np.sum(vox.area[~vox.back]))
+    b = math.pi * (vox.emission.astype(np.float64) + rho * le_mean / (1 - rho))
+    b[vox.back] = 0.0
+    out = voxgi.render(scene, Solution(vox=vox, radiosity=b.astype(np.float32)), progress=False,
+                       max_frames=32, tol=0.0)
+    assert out.stats["gather_rays"] > 0
+    rel = out.image[..., 0] / (rho * le_mean / (1 - rho)) - 1.0
+    assert abs(rel.mean()) < 0.01, rel.mean()
+    assert np.abs(rel).max() < 0.05, np.abs(rel).max()
+
+
+@pytest.mark.parametrize("rho", [0.5, 0.9])
 def test_furnace_sphere_full_pipeline(rho):
     # The same furnace with the real voxelizer and solver: the target of the
     # issue, within 1% in every pixel.
