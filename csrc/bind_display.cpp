@@ -203,7 +203,7 @@ ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc"
         [](F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, F32 mat_albedo,
            F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, double nv_over_ta, double n_gather,
            F64 tri_v, I32 tri_object, U8 obj_two_sided, U8 obj_emitter, I64 rec_sorted_key,
-           I32 rec_order, F64 rec_centroid, F32 rec_normal, I32 rec_object, F32 rec_radiance,
+           I32 rec_order, I32 rec_cell_start, F64 rec_centroid, F32 rec_normal, I32 rec_object, F32 rec_radiance,
            U8 rec_mis, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count,
            F32 ray_dir, I32 prim, F32 out, int threads) {
             voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
@@ -281,6 +281,22 @@ ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc"
                 if (grid.dims[a] < 1) throw py::value_error("grid_dims must be >= 1");
             }
             grid.pitch = pitch;
+            // Optional dense table of each voxel key's first sorted record.
+            check_1d(rec_cell_start, -1, "rec_cell_start");
+            if (rec_cell_start.shape(0) > 0) {
+                const int64_t cells = grid.dims[0] * grid.dims[1] * grid.dims[2];
+                if (rec_cell_start.shape(0) != cells + 1)
+                    throw py::value_error("rec_cell_start must have dims product + 1 entries");
+                const int32_t *cs = rec_cell_start.data();
+                if (cs[0] != 0 || cs[cells] != N) throw py::value_error("rec_cell_start: bad bounds");
+                for (int64_t c = 0; c < cells; ++c)
+                    if (cs[c + 1] < cs[c]) throw py::value_error("rec_cell_start must be ascending");
+                grid.cell_start = cs;
+            } else {
+                const int64_t *sk = rec_sorted_key.data();
+                if (N > 0 && (sk[0] < 0 || sk[N - 1] >= grid.dims[0] * grid.dims[1] * grid.dims[2]))
+                    throw py::value_error("rec_sorted_key: key outside the grid");
+            }
             const int64_t *pc = ray_count.data();
             const float *pd = ray_dir.data();
             const int32_t *pp = prim.data();
@@ -296,7 +312,8 @@ ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc"
         "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(),
         "mat_glossy"_a.noconvert(), "nv_over_ta"_a, "n_gather"_a, "tri_v"_a.noconvert(),
         "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "obj_emitter"_a.noconvert(),
-        "rec_sorted_key"_a.noconvert(), "rec_order"_a.noconvert(), "rec_centroid"_a.noconvert(),
+        "rec_sorted_key"_a.noconvert(), "rec_order"_a.noconvert(),
+        "rec_cell_start"_a.noconvert(), "rec_centroid"_a.noconvert(),
         "rec_normal"_a.noconvert(), "rec_object"_a.noconvert(), "rec_radiance"_a.noconvert(),
         "rec_mis"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
         "grid_origin"_a.noconvert(), "pitch"_a, "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(),

@@ -226,25 +226,33 @@ int64_t lookup_record(const RecordGrid &g, const double y[3], const float n[3], 
     for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((y[a] - g.origin[a]) / g.pitch));
     const double p2 = g.pitch * g.pitch;
     int64_t best = -1;
-    double best_score = 0.0;
+    double best_score = 0.0, best_penalty = 0.0;
     auto scan = [&](int64_t i, int64_t j, int64_t k) {
         i -= g.lo[0], j -= g.lo[1], k -= g.lo[2];
         if (i < 0 || j < 0 || k < 0 || i >= g.dims[0] || j >= g.dims[1] || k >= g.dims[2]) return;
         const int64_t key = (i * g.dims[1] + j) * g.dims[2] + k;
-        const int64_t *first = std::lower_bound(g.sorted_key, g.sorted_key + g.count, key);
-        for (const int64_t *q = first; q != g.sorted_key + g.count && *q == key; ++q) {
-            const int64_t r = g.order[q - g.sorted_key];
+        int64_t q0, q1;
+        if (g.cell_start) {
+            q0 = g.cell_start[key], q1 = g.cell_start[key + 1];
+        } else {
+            q0 = std::lower_bound(g.sorted_key, g.sorted_key + g.count, key) - g.sorted_key;
+            q1 = std::upper_bound(g.sorted_key + q0, g.sorted_key + g.count, key) - g.sorted_key;
+        }
+        for (int64_t q = q0; q < q1; ++q) {
+            const int64_t r = g.order[q];
             const double *cr = g.centroid + 3 * r;
             const float *nr = g.normal + 3 * r;
             const double dx = y[0] - cr[0], dy = y[1] - cr[1], dz = y[2] - cr[2];
             // Nearest centroid, strongly preferring the same side and object.
-            const double score = dx * dx + dy * dy + dz * dz +
-                                 p2 * (4.0 * (1.0 - dot3(nr, n)) + (g.object[r] != obj ? 4.0 : 0.0));
-            if (best < 0 || score < best_score) best = r, best_score = score;
+            const double penalty = 4.0 * (1.0 - dot3(nr, n)) + (g.object[r] != obj ? 4.0 : 0.0);
+            const double score = dx * dx + dy * dy + dz * dz + p2 * penalty;
+            if (best < 0 || score < best_score) best = r, best_score = score, best_penalty = penalty;
         }
     };
+    // The record of this surface (same object and side) in the hit's own
+    // voxel stands for the hit point; only without one look at the neighbours.
     scan(c[0], c[1], c[2]);
-    if (best >= 0 && best_score < 0.5 * p2 * 4.0) return best;  // a good match in its own voxel
+    if (best >= 0 && best_penalty < 0.5) return best;
     for (int di = -1; di <= 1; ++di)
         for (int dj = -1; dj <= 1; ++dj)
             for (int dk = -1; dk <= 1; ++dk)

@@ -64,6 +64,8 @@ struct RecordGrid {
     int64_t count = 0;
     const int64_t *sorted_key = nullptr;  // (N,) linear voxel keys, ascending
     const int32_t *order = nullptr;       // (N,) record of each sorted key
+    const int32_t *cell_start = nullptr;  // (dims product + 1,) first sorted index of each key,
+                                          // or null: binary search in sorted_key
     const double *centroid = nullptr;     // (N, 3)
     const float *normal = nullptr;        // (N, 3)
     const int32_t *object = nullptr;      // (N,)

@@ -381,9 +381,18 @@ class _FrameShader:
         rel = ijk - lo
         key = (rel[:, 0] * dims[1] + rel[:, 1]) * dims[2] + rel[:, 2]
         order = np.argsort(key, kind="stable")
+        sorted_key = np.ascontiguousarray(key[order])
+        cells = int(np.prod(dims))
+        # A dense table of each voxel's first record (4 bytes a voxel of the
+        # bounding grid) replaces a binary search per gather hit, up to 64 MB.
+        if cells <= (1 << 24):
+            start = np.searchsorted(sorted_key, np.arange(cells + 1)).astype(np.int32)
+        else:
+            start = np.zeros(0, np.int32)
         return {
-            "rec_sorted_key": np.ascontiguousarray(key[order]),
+            "rec_sorted_key": sorted_key,
             "rec_order": order.astype(np.int32),
+            "rec_cell_start": start,
             "rec_centroid": sampler.pos,
             "rec_normal": sampler.normal,
             "rec_object": np.ascontiguousarray(vox.object_id, dtype=np.int32),
