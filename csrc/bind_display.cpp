@@ -30,12 +30,10 @@ voxgi::ShadeMaterials materials(const F32 &albedo, const F32 &rs, const F32 &nu,
     return s;
 }
 
-voxgi::ShadeMIS make_mis(double nv_over_ta, double n_gather) {
-    if (!(nv_over_ta >= 0.0) || !std::isfinite(nv_over_ta) || !(n_gather >= 0.0) ||
-        !std::isfinite(n_gather))
-        throw py::value_error("nv_over_ta and n_gather must be finite and >= 0");
+voxgi::ShadeMIS make_mis(double n_gather) {
+    if (!(n_gather >= 0.0) || !std::isfinite(n_gather))
+        throw py::value_error("n_gather must be finite and >= 0");
     voxgi::ShadeMIS mis;
-    mis.nv_over_ta = nv_over_ta;
     mis.n_gather = n_gather;
     return mis;
 }
@@ -70,7 +68,7 @@ void bind_display(py::module_ &m) {
         "vpl_prepare",
         [](F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, F32 mat_albedo,
            F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, F64 vpl_pos, F32 vpl_normal,
-           F32 vpl_weight, F32 vpl_area, U8 vpl_mis, double nv_over_ta, double n_gather,
+           F32 vpl_weight, F32 vpl_area, F32 vpl_pa, double n_gather,
            double eps, I64 ray_count, F32 ray_org, F32 ray_dir, F32 ray_len, F32 ray_contrib,
            int threads) {
             check_2d(hit_pos, -1, 3, "hit_pos");
@@ -84,14 +82,17 @@ void bind_display(py::module_ &m) {
             check_2d(vpl_normal, K, 3, "vpl_normal");
             check_2d(vpl_weight, K, 3, "vpl_weight");
             check_1d(vpl_area, K, "vpl_area");
-            check_1d(vpl_mis, K, "vpl_mis");
+            check_1d(vpl_pa, K, "vpl_pa");
             if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
-            voxgi::ShadeMIS mis = make_mis(nv_over_ta, n_gather);
+            voxgi::ShadeMIS mis = make_mis(n_gather);
             {
-                const uint8_t *vm = vpl_mis.data();
-                for (py::ssize_t k = 0; k < K; ++k)
-                    if (vm[k] && !(nv_over_ta > 0.0 && n_gather > 0.0))
-                        throw py::value_error("vpl_mis: MIS VPLs need nv_over_ta > 0 and n_gather > 0");
+                const float *vp = vpl_pa.data();
+                for (py::ssize_t k = 0; k < K; ++k) {
+                    if (!(vp[k] >= 0.f) || !std::isfinite(vp[k]))
+                        throw py::value_error("vpl_pa must be finite and >= 0");
+                    if (vp[k] > 0.f && !(n_gather > 0.0))
+                        throw py::value_error("vpl_pa: MIS VPLs need n_gather > 0");
+                }
             }
             voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
             {
@@ -128,7 +129,7 @@ void bind_display(py::module_ &m) {
             vpls.normal = vpl_normal.data();
             vpls.weight = vpl_weight.data();
             vpls.area = vpl_area.data();
-            vpls.mis = vpl_mis.data();
+            vpls.pa = vpl_pa.data();
             int64_t *pc = ray_count.mutable_data();
             float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data(),
                   *pl = ray_len.mutable_data(), *pr = ray_contrib.mutable_data();
@@ -145,8 +146,8 @@ void bind_display(py::module_ &m) {
         "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(),
         "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(),
         "mat_glossy"_a.noconvert(), "vpl_pos"_a.noconvert(), "vpl_normal"_a.noconvert(),
-        "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(), "vpl_mis"_a.noconvert(),
-        "nv_over_ta"_a, "n_gather"_a, "eps"_a, "ray_count"_a.noconvert(), "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(),
+        "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(), "vpl_pa"_a.noconvert(),
+        "n_gather"_a, "eps"_a, "ray_count"_a.noconvert(), "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(),
         "ray_len"_a.noconvert(), "ray_contrib"_a.noconvert(), "threads"_a = 0,
         R"doc(Pass 1 of a display frame: per (pixel, VPL) pair the unoccluded contribution
 and a shadow ray where it is non-zero.
@@ -156,8 +157,8 @@ Inputs are C-contiguous: hit_pos (P, 3) float64, hit_normal / hit_ng / hit_wo
 (-1: not shaded), per-material mat_albedo (M, 3), mat_rs (M, 3), mat_nu,
 mat_nv (M,) float32, mat_glossy (M,) uint8; vpl_pos (K, 3) float64,
 vpl_normal (K, 3), vpl_weight (K, 3) = (TA/n) B/pi, vpl_area (K,) float32,
-vpl_mis (K,) uint8: 1 for VPLs combined with gather rays (their weight is
-B/pi; nv_over_ta = n_v / TA of their set, n_gather rays per pixel).
+vpl_pa (K,) float32: n_v times the area pdf of VPLs combined with gather rays
+(their weight is B/pi; n_gather rays per pixel), 0 for the others.
 
 Outputs, written in place (buffers reused across frames, room for >= P*K
 rays): ray_count (P,) int64, ray_org (C, 3), ray_dir (C, 3), ray_len (C,),
@@ -201,16 +202,15 @@ ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc"
     m.def(
         "gather_shade",
         [](F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, F32 mat_albedo,
-           F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, double nv_over_ta, double n_gather,
-           F64 tri_v, I32 tri_object, U8 obj_two_sided, U8 obj_emitter, I64 rec_sorted_key,
+           F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided, U8 obj_emitter, I64 rec_sorted_key,
            I32 rec_order, I32 rec_cell_start, F64 rec_centroid, F32 rec_normal, I32 rec_object, F32 rec_radiance,
-           U8 rec_mis, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count,
+           F32 rec_pa, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count,
            F32 ray_dir, I32 prim, F32 out, int threads) {
             voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
             voxgi::ShadeHits hits = make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material,
                                               mats.count);
             const py::ssize_t P = hits.count;
-            voxgi::ShadeMIS mis = make_mis(nv_over_ta, n_gather);
+            voxgi::ShadeMIS mis = make_mis(n_gather);
             if (!(n_gather > 0.0)) throw py::value_error("n_gather must be > 0");
             if (tri_v.ndim() != 3 || tri_v.shape(1) != 3 || tri_v.shape(2) != 3)
                 throw py::value_error("tri_v must have shape (F, 3, 3)");
@@ -231,7 +231,7 @@ ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc"
             check_2d(rec_normal, N, 3, "rec_normal");
             check_1d(rec_object, N, "rec_object");
             check_2d(rec_radiance, N, 3, "rec_radiance");
-            check_1d(rec_mis, N, "rec_mis");
+            check_1d(rec_pa, N, "rec_pa");
             check_1d(grid_dims, 3, "grid_dims");
             check_1d(grid_lo, 3, "grid_lo");
             check_1d(grid_origin, 3, "grid_origin");
@@ -273,7 +273,7 @@ ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc"
             grid.normal = rec_normal.data();
             grid.object = rec_object.data();
             grid.radiance = rec_radiance.data();
-            grid.mis = rec_mis.data();
+            grid.pa = rec_pa.data();
             for (int a = 0; a < 3; ++a) {
                 grid.dims[a] = grid_dims.data()[a];
                 grid.lo[a] = grid_lo.data()[a];
@@ -310,12 +310,12 @@ ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc"
         "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(),
         "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(),
         "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(),
-        "mat_glossy"_a.noconvert(), "nv_over_ta"_a, "n_gather"_a, "tri_v"_a.noconvert(),
+        "mat_glossy"_a.noconvert(), "n_gather"_a, "tri_v"_a.noconvert(),
         "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "obj_emitter"_a.noconvert(),
         "rec_sorted_key"_a.noconvert(), "rec_order"_a.noconvert(),
         "rec_cell_start"_a.noconvert(), "rec_centroid"_a.noconvert(),
         "rec_normal"_a.noconvert(), "rec_object"_a.noconvert(), "rec_radiance"_a.noconvert(),
-        "rec_mis"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
+        "rec_pa"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
         "grid_origin"_a.noconvert(), "pitch"_a, "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(),
         "prim"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0,
         R"doc(Shade the gather rays (prim: first triangle hit, -1 none) with the radiance

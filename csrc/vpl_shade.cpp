@@ -111,9 +111,9 @@ int64_t vpl_prepare(const ShadeHits &hits, const ShadeMaterials &mats, const Sha
                     if (cos_x <= 0.f) continue;
                     const double cc = double(cos_x) * cos_y;
                     double g;
-                    if (vpls.mis && vpls.mis[k]) {
+                    if (vpls.pa && vpls.pa[k] > 0.f) {
                         // Balance heuristic with the gather rays (see ShadeMIS).
-                        g = cc / (r2 * mis.nv_over_ta + mis.n_gather * cc / kPi);
+                        g = cc / (r2 * vpls.pa[k] + mis.n_gather * cc / kPi);
                     } else {
                         // The VPL is a disc of area dA: on the axis of a disc the exact
                         // point-to-disc term is cos cos / (r² + dA/pi); bounded, and
@@ -312,7 +312,7 @@ void gather_shade(const ShadeHits &hits, const ShadeMaterials &mats, const Shade
                 if (cos_y <= 0.f) continue;
                 const double r2 = (y[0] - x[0]) * (y[0] - x[0]) + (y[1] - x[1]) * (y[1] - x[1]) +
                                   (y[2] - x[2]) * (y[2] - x[2]);
-                const double pa = grid.mis[rec] ? mis.nv_over_ta : 0.0;
+                const double pa = grid.pa[rec];
                 const double denom = pa * r2 / cos_y + mis.n_gather * cos_x / kPi;
                 if (!(denom > 0.0)) continue;
                 float f[3];

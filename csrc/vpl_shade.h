@@ -45,17 +45,18 @@ struct ShadeVPLs {
     const float *weight = nullptr;   // (K, 3) (TA_set / n_set) * B / pi: radiance times the estimator
                                      // weight; for an MIS VPL just its radiance B / pi
     const float *area = nullptr;     // (K,) area the record stands for (bounds the geometry term)
-    const uint8_t *mis = nullptr;    // (K,) 1: combined with gather rays (balance heuristic), or null
+    const float *pa = nullptr;       // (K,) n_v x the VPL's area pdf (per unit area) for VPLs
+                                     // combined with gather rays (balance heuristic), 0 for
+                                     // the others; or null: none
 };
 
-// Multiple importance sampling of the non-emitter set between VPLs (area
-// pdf n_v / TA per unit area, summed over the frame's n_v VPLs) and n_g
+// Multiple importance sampling of the non-emitter set between VPLs (n_v a
+// frame, area pdf p_a(y) per unit area, so n_v p_a(y) in all) and n_g
 // cosine-distributed gather rays per pixel (pdf n_g cos_x cos_y / (pi r²)
 // per unit area). Balance heuristic: every sample of either kind adds
-//     f L cos_x cos_y / (r² n_v/TA + n_g cos_x cos_y / pi),
+//     f L cos_x cos_y / (r² n_v p_a(y) + n_g cos_x cos_y / pi),
 // which is at most pi f L / n_g: no 1/r² spike at contact, and no bias.
 struct ShadeMIS {
-    double nv_over_ta = 0.0;  // n_v / TA of the MIS set
     double n_gather = 0.0;    // gather rays per pixel per frame
 };
 
@@ -70,7 +71,7 @@ struct RecordGrid {
     const float *normal = nullptr;        // (N, 3)
     const int32_t *object = nullptr;      // (N,)
     const float *radiance = nullptr;      // (N, 3) B / pi
-    const uint8_t *mis = nullptr;         // (N,) 1: record of the MIS (VPL) set
+    const float *pa = nullptr;            // (N,) n_v p_a of the record (0: not a MIS VPL)
     int64_t dims[3] = {0, 0, 0};          // key = (i * dims[1] + j) * dims[2] + k
     int64_t lo[3] = {0, 0, 0};            // ijk of key 0
     double origin[3] = {0.0, 0.0, 0.0};

@@ -34,14 +34,14 @@ def hits(pos, normal, wo=None, material=None):
                                       np.int32))
 
 
-def vpls(pos, normal, weight, area, mis=None, nv_over_ta=0.0, n_gather=0.0):
+def vpls(pos, normal, weight, area, pa=None, n_gather=0.0):
     k = len(np.array(area).reshape(-1))
     return dict(vpl_pos=np.array(pos, np.float64).reshape(-1, 3),
                 vpl_normal=np.array(normal, np.float32).reshape(-1, 3),
                 vpl_weight=np.array(weight, np.float32).reshape(-1, 3),
                 vpl_area=np.array(area, np.float32).reshape(-1),
-                vpl_mis=np.array(mis if mis is not None else np.zeros(k), np.uint8),
-                nv_over_ta=nv_over_ta, n_gather=n_gather)
+                vpl_pa=np.array(pa if pa is not None else np.zeros(k), np.float32),
+                n_gather=n_gather)
 
 
 def prepare(h, m, v, eps=1e-4, threads=0, cap=None):
@@ -89,19 +89,18 @@ def test_bounded_geometry_term_at_contact():
 
 
 def test_mis_weight_is_bounded_and_matches_formula():
-    # An MIS VPL adds f L cos_x cos_y / (r² n_v/TA + n_g cos_x cos_y / pi): at
-    # contact at most pi f L / n_g, far away (TA/n_v) f L G, the plain estimator.
+    # An MIS VPL adds f L cos_x cos_y / (r² n_v p + n_g cos_x cos_y / pi): at
+    # contact at most pi f L / n_g, far away f L G / (n_v p), the plain estimator.
     h = hits([0, 0, 0], [0, 0, 1])
     m = mats(albedo=[(1, 1, 1)])
     for r, a in ((1e-6, 1.0 / math.pi / 4), (10.0, 10.0 ** -2)):
-        v = vpls([0, 0, r], [0, 0, -1], [2.0, 2.0, 2.0], [0.02], mis=[1], nv_over_ta=4.0,
-                 n_gather=4.0)
+        v = vpls([0, 0, r], [0, 0, -1], [2.0, 2.0, 2.0], [0.02], pa=[4.0], n_gather=4.0)
         _, _, _, _, contrib = prepare(h, m, v, eps=0.0)
         expect = (1 / math.pi) * 2.0 / (r * r * 4.0 + 4.0 / math.pi)
         np.testing.assert_allclose(contrib[0], expect, rtol=1e-5)
         assert contrib[0, 0] <= math.pi * (1 / math.pi) * 2.0 / 4.0 * (1 + 1e-6)
     with pytest.raises(ValueError, match="MIS"):
-        prepare(h, m, vpls([0, 0, 1], [0, 0, -1], [1, 1, 1], [0.02], mis=[1]))
+        prepare(h, m, vpls([0, 0, 1], [0, 0, -1], [1, 1, 1], [0.02], pa=[1.0]))
 
 
 def test_back_facing_and_below_surface_cost_no_ray():

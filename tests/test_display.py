@@ -287,7 +287,7 @@ def test_vpl_sampler_probability_proportional_to_area():
     sol = triangle_solution(scene, lambda v: np.ones((len(v), 3)))
     v = sol.vox
     v.area = np.resize(np.array([1, 2, 3, 4], np.float32), len(v))
-    sampler = VPLSampler(sol, vpls_per_frame=16, seed=5)
+    sampler = VPLSampler(sol, vpls_per_frame=16, seed=5, pdf="area")
     assert sampler.counts == (0, 16)
     picks = np.concatenate([sampler.frame(f)["index"] for f in range(400)])
     obs = np.bincount(v.area[picks].astype(int) - 1, minlength=4)
@@ -295,10 +295,36 @@ def test_vpl_sampler_probability_proportional_to_area():
     chi2 = float(np.sum((obs - exp) ** 2 / exp))
     assert chi2 < 16.3  # p = 0.001 for 3 degrees of freedom
     # The same sequence every time (shared by all views): deterministic per seed.
-    again = VPLSampler(sol, vpls_per_frame=16, seed=5)
+    again = VPLSampler(sol, vpls_per_frame=16, seed=5, pdf="area")
     assert np.array_equal(again.frame(7)["index"], sampler.frame(7)["index"])
-    assert not np.array_equal(VPLSampler(sol, 16, seed=6).frame(7)["index"],
+    assert not np.array_equal(VPLSampler(sol, 16, seed=6, pdf="area").frame(7)["index"],
                               sampler.frame(7)["index"])
+    # Estimator weights: (1/n) / p(y) with p = 1/TA per unit area.
+    fr = sampler.frame(3)
+    np.testing.assert_allclose(fr["weight"][:, 0], v.area.sum() / 16 * 1.0 / math.pi, rtol=1e-6)
+
+
+def test_vpl_sampler_power_pdf():
+    # pdf="power": probability ∝ ΔA·B. The weight is (B/π)/(n p(y)) with the
+    # area density p(y) = B_y/Φ (grey B), so π·weight = Φ/n for every draw.
+    scene = voxgi.scenes.furnace_box(albedo=0.5, emission=0.0)
+    rng = np.random.default_rng(9)
+    sol = triangle_solution(scene, lambda v: rng.uniform(0.5, 4.0, (len(v), 1)) * np.ones((1, 3)))
+    s = VPLSampler(sol, 16, seed=2)
+    phi = float(np.sum(sol.vox.area * sol.radiosity[:, 0]))
+    picks = []
+    for f in range(300):
+        fr = s.frame(f)
+        i = fr["index"]
+        np.testing.assert_allclose(fr["weight"][:, 0] * math.pi, phi / 16, rtol=1e-5)
+        picks.append(i)
+    picks = np.concatenate(picks)
+    p = sol.vox.area * sol.radiosity[:, 0] / phi
+    obs = np.bincount(picks, minlength=len(p))
+    big = p * len(picks) > 20  # chi² over the records expected >= 20 times
+    exp = p[big] * len(picks)
+    chi2 = float(np.sum((obs[big] - exp) ** 2 / exp))
+    assert chi2 < big.sum() + 5 * math.sqrt(2 * big.sum())
 
 
 def test_vpl_split_by_power_and_override():

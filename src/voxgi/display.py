@@ -234,15 +234,26 @@ def _morton(ijk: np.ndarray) -> np.ndarray:
 class VPLSampler:
     """The fixed VPL sequence of a solution: two sets, emitters and the rest.
 
-    Records are drawn with probability proportional to their area (cumulative
-    table and binary search, with replacement) within each set, as in the
-    paper. Records with zero radiosity (black back records above all) can
-    send no light and are left out of the table; that changes no expectation.
+    As in the paper, records are drawn from a cumulative table by binary
+    search, with replacement, in two sets (emitters and non-emitters), each
+    set with its own count per frame. Records with zero radiosity (black back
+    records above all) can send no light and are left out of the table; that
+    changes no expectation.
+
+    ``pdf="power"`` (the default) draws a record with probability
+    proportional to its power ``ΔA · B`` (luminance) instead of its area
+    (``pdf="area"``, the paper's choice): the estimator weight is then
+    ``B / (π n p(y))`` with the area density ``p(y) = lum(B_y) / Σ ΔA lum(B)``,
+    so every VPL carries the same power. Measured on the Cornell box: with
+    area sampling, the few bright records on top of the tall block (B ≈ 11×
+    the mean) are drawn in one frame of three and then light the ceiling
+    alone, a heavy-tailed error that the between-frame spread underestimates.
+
     Each frame draws its ``n_d`` emitter and ``n_i`` other VPLs stratified
-    along the cumulative area table, whose records are in Morton (Z-curve)
-    order: every draw still has probability ∝ area, but a frame's VPLs are
-    spread over the surfaces instead of clumped. Frames are independent, so
-    the spread between frames estimates the error of their mean.
+    along the cumulative table, whose records are in Morton (Z-curve) order:
+    every draw still has its probability, but a frame's VPLs are spread over
+    the surfaces instead of clumped. Frames are independent, so the spread
+    between frames estimates the error of their mean.
 
     The split: ``n_d / K = Φ_d / (Φ_d + Φ_i)`` with Φ the power
     ``Σ ΔA · B`` (luminance) of each set, at least one VPL for a set with
@@ -256,10 +267,16 @@ class VPLSampler:
     vpls_per_frame : int
     seed : int
     emitter_share : float in [0, 1] or None
+    mis : bool
+        The non-emitter VPLs are combined with gather rays (their weight is
+        then ``B/π`` and ``pa`` carries ``n_i p(y)``).
+    pdf : {"power", "area"}
     """
 
     def __init__(self, sol, vpls_per_frame: int = 16, seed: int = 0,
-                 emitter_share: float | None = None, mis: bool = False):
+                 emitter_share: float | None = None, mis: bool = False, pdf: str = "power"):
+        if pdf not in ("power", "area"):
+            raise ValueError(f"pdf: expected 'power' or 'area', got {pdf!r}")
         vox = sol.vox
         n = len(vox)
         B = _validate.as_c_array(sol.radiosity, np.float64, (n, 3), "sol.radiosity")
@@ -272,14 +289,20 @@ class VPLSampler:
         self.skipped_records = int(n - useful.sum())
         order = np.argsort(_morton(np.asarray(vox.ijk)), kind="stable")
         lum = B @ np.array([0.2126, 0.7152, 0.0722])
+        self.pdf = pdf
         self.sets = []
         for sel in (useful & emit, useful & ~emit):
             idx = order[sel[order]]
-            cum = np.cumsum(area[idx])
+            w = area[idx] * lum[idx] if pdf == "power" else area[idx]
+            cum = np.cumsum(w)
             power = float(np.sum(area[idx] * lum[idx]))
-            self.sets.append((idx, cum, power))
+            # Density per unit area of each record of the set: p(y) = w_y / (ΔA_y W).
+            dens = np.zeros(n)
+            if len(idx):
+                dens[idx] = (lum[idx] if pdf == "power" else 1.0) / cum[-1]
+            self.sets.append((idx, cum, power, dens))
         self.K = int(vpls_per_frame)
-        (_, cum_d, pd), (_, cum_i, pi) = self.sets
+        (_, cum_d, pd, _), (_, cum_i, pi, dens_i) = self.sets
         has_d, has_i = len(cum_d) > 0 and pd > 0, len(cum_i) > 0 and pi > 0
         if emitter_share is None:
             share = pd / (pd + pi) if (pd + pi) > 0 else 0.0
@@ -296,9 +319,10 @@ class VPLSampler:
         self.counts = (nd, self.K - nd if has_i else 0)
         self.seed = int(seed)
         self.mis = bool(mis) and self.counts[1] > 0
-        #: n_v / TA of the non-emitter set (the VPL side of the MIS weights).
-        self.nv_over_ta = self.counts[1] / float(cum_i[-1]) if self.mis else 0.0
-        self.useful_other = useful & ~emit
+        #: (N,) float32 n_i p(y) of every record (0 outside the non-emitter set):
+        #: the VPL side of the MIS weights, for VPLs and gather hits alike.
+        self.record_pa = (self.counts[1] * dens_i).astype(np.float32) if self.mis else \
+            np.zeros(n, np.float32)
         self.pos = np.ascontiguousarray(vox.centroid, dtype=np.float64)
         self.normal = np.ascontiguousarray(vox.normal, dtype=np.float32)
         self.area32 = area.astype(np.float32)
@@ -312,23 +336,25 @@ class VPLSampler:
     def frame(self, f: int) -> dict:
         """The VPLs of frame ``f``: the same for every pixel and every view."""
         rng = np.random.default_rng([self.seed, int(f), 0x1B1])
-        idx_all, w_all, mis_all = [], [], []
-        for s, ((idx, cum, _), k) in enumerate(zip(self.sets, self.counts)):
+        idx_all, w_all, pa_all = [], [], []
+        for s, ((idx, cum, _, dens), k) in enumerate(zip(self.sets, self.counts)):
             if k == 0:
                 continue
-            ta = float(cum[-1])
-            u = (np.arange(k) + rng.random(k)) / k * ta  # stratified along the table
+            u = (np.arange(k) + rng.random(k)) / k * float(cum[-1])  # stratified along the table
             pick = idx[np.minimum(np.searchsorted(cum, u, side="right"), len(idx) - 1)]
             idx_all.append(pick)
-            mis = s == 1 and self.mis
-            # E ≈ (TA/n) Σ (B/π) G V: the estimator weight times the VPL's radiance;
-            # an MIS VPL carries B/π only (the kernel applies n_v/TA in its weight).
-            w_all.append(np.full(k, 1.0 if mis else ta / k))
-            mis_all.append(np.full(k, mis, np.uint8))
+            if s == 1 and self.mis:
+                # An MIS VPL carries B/π; the kernel divides by n_i p(y) + the gather pdf.
+                w_all.append(np.ones(k))
+                pa_all.append(self.record_pa[pick])
+            else:
+                # E ≈ (1/n) Σ (B/π) G V / p(y): the estimator weight times the radiance.
+                w_all.append(1.0 / (k * dens[pick]))
+                pa_all.append(np.zeros(k, np.float32))
         idx = np.concatenate(idx_all)
         w = np.concatenate(w_all)
         return {
-            "mis": np.concatenate(mis_all),
+            "pa": np.ascontiguousarray(np.concatenate(pa_all), dtype=np.float32),
             "index": idx,
             "pos": np.ascontiguousarray(self.pos[idx]),
             "normal": np.ascontiguousarray(self.normal[idx]),
@@ -397,7 +423,7 @@ class _FrameShader:
             "rec_normal": sampler.normal,
             "rec_object": np.ascontiguousarray(vox.object_id, dtype=np.int32),
             "rec_radiance": np.ascontiguousarray(sampler.B / math.pi, dtype=np.float32),
-            "rec_mis": sampler.useful_other.astype(np.uint8),
+            "rec_pa": sampler.record_pa,
             "grid_dims": dims.astype(np.int64), "grid_lo": lo.astype(np.int64),
             "grid_origin": np.asarray(vox.origin, dtype=np.float64).reshape(3),
             "pitch": float(vox.pitch),
@@ -474,8 +500,8 @@ class _FrameShader:
             n = _core.vpl_prepare(
                 h["pos"][a:b], h["normal"][a:b], h["ng"][a:b], h["wo"][a:b], h["material"][a:b],
                 self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv, self.mat_glossy,
-                vpl["pos"], vpl["normal"], vpl["weight"], vpl["area"], vpl["mis"],
-                self.sampler.nv_over_ta, float(self.gather), self.eps,
+                vpl["pos"], vpl["normal"], vpl["weight"], vpl["area"], vpl["pa"],
+                float(self.gather), self.eps,
                 count, org_buf, dir_buf, len_buf, con_buf, self.threads)
             org, dirs, length, contrib = org_buf[:n], dir_buf[:n], len_buf[:n], con_buf[:n]
             t1 = time.perf_counter()
@@ -507,7 +533,7 @@ class _FrameShader:
         self.gather_rays += n
         _core.gather_shade(hh["pos"], hh["normal"], hh["ng"], hh["wo"], hh["material"],
                            self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv,
-                           self.mat_glossy, self.sampler.nv_over_ta, float(self.gather),
+                           self.mat_glossy, float(self.gather),
                            **self._tri, **self._grid, ray_count=count, ray_dir=dir_buf[:n],
                            prim=prim, out=out[a:b], threads=self.threads)
         self.seconds["gather"] += time.perf_counter() - t0
@@ -547,6 +573,7 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
            tol: float | None = None, seed: int = 0, progress: bool = True,
            threads: int | None = None, client=None, *, camera: Camera | None = None,
            min_frames: int = 4, emitter_share: float | None = None, gather: int = 4,
+           vpl_pdf: str = "power",
            resolution: int | None = None, directions: int | None = None) -> RenderResult:
     r"""Render ``scene`` from its camera using the voxel solution ``sol``.
 
@@ -628,6 +655,9 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     gather : int
         Cosine-distributed gather rays per pixel and frame for the
         non-emitter light, MIS-combined with its VPLs (0: VPLs only).
+    vpl_pdf : {"power", "area"}
+        VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
+        paper); see :class:`VPLSampler`.
     resolution, directions : int, optional
         Passed to :func:`voxgi.voxelize` / :func:`voxgi.solve` when ``sol`` is None.
 
@@ -688,7 +718,7 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     t0 = time.perf_counter()
     tracer = _Tracer(scene, nthreads)
     gather = _validate.integer(gather, "gather", low=0, high=4096)
-    sampler = VPLSampler(sol, K, seed, emitter_share, mis=gather > 0)
+    sampler = VPLSampler(sol, K, seed, emitter_share, mis=gather > 0, pdf=vpl_pdf)
     diag = float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
     # Shadow-ray offsets: well above float32 rounding of the coordinates
     # (~1e-7 relative) and well below any feature of a sensible scene.
