@@ -1,4 +1,645 @@
-// propagate kernels (see propagate.h).
+// Discrete-line propagation kernels (see propagate.h and DESIGN-NOTES §3-§5).
 #include "propagate.h"
 
-namespace voxgi {}
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <mutex>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+
+namespace voxgi {
+
+namespace {
+
+constexpr float kTiny = 1e-6f;  // |n.d| below this: the record is parallel to d (neither F nor B)
+constexpr int kMaxHistory = 32;
+
+// Floor division for a positive divisor (numerators may be negative).
+inline int64_t floordiv(int64_t a, int64_t b) {
+    int64_t q = a / b;
+    return (a % b != 0 && a < 0) ? q - 1 : q;
+}
+
+// A record met on a line: its position (in some axis order or global), the
+// depth of its surface point along d, and n.d.
+struct Hit {
+    int32_t p;
+    float depth;
+    float c;
+};
+
+// Order records of one voxel along d: by depth, then B (c < 0) before F.
+inline void sort_group(Hit *g, int n) {
+    for (int i = 1; i < n; ++i) {
+        Hit h = g[i];
+        int j = i - 1;
+        while (j >= 0 && (g[j].depth > h.depth || (g[j].depth == h.depth && g[j].c > h.c))) {
+            g[j + 1] = g[j];
+            --j;
+        }
+        g[j + 1] = h;
+    }
+}
+
+inline float dot3(const float *a, const float *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+// The facing rule (DESIGN-NOTES §4): B at pb (normal nb) and F at pf (normal
+// nf) see each other when each lies strictly in front of the other's plane.
+inline bool facing(const float *pf, const float *nf, const float *pb, const float *nb, float eps) {
+    const float d0 = pb[0] - pf[0], d1 = pb[1] - pf[1], d2 = pb[2] - pf[2];
+    return (d0 * nf[0] + d1 * nf[1] + d2 * nf[2] > eps) && (-(d0 * nb[0] + d1 * nb[1] + d2 * nb[2]) > eps);
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------- LineFrame
+
+LineFrame::LineFrame(const int32_t v[3], const int32_t lo_[3], const int32_t hi_[3]) {
+    m = 0;
+    for (int i = 1; i < 3; ++i)
+        if (std::abs(v[i]) > std::abs(v[m])) m = i;
+    if (v[m] <= 0) throw std::invalid_argument("family vector must have a positive main component");
+    o1 = (m == 0) ? 1 : 0;
+    o2 = (m == 2) ? 1 : 2;
+    A = v[m];
+    B = std::abs(v[o1]);
+    C = std::abs(v[o2]);
+    pos1 = v[o1] >= 0;
+    pos2 = v[o2] >= 0;
+    for (int i = 0; i < 3; ++i) {
+        lo[i] = lo_[i];
+        hi[i] = hi_[i];
+    }
+    const int64_t Xr = int64_t(hi[m]) - lo[m];
+    XmA = ((Xr + A - 1) / A) * A;
+    const int64_t h = A / 2;
+    const int64_t maxu = A * (int64_t(hi[o1]) - lo[o1]) + B * XmA + h;
+    const int64_t maxw = A * (int64_t(hi[o2]) - lo[o2]) + C * XmA + h;
+    // (num * ceil(2^32/A)) >> 32 == num / A exactly while num * (ceil(2^32/A)*A - 2^32) < 2^32,
+    // which holds for num < 2^32 / A.
+    if (std::max(maxu, maxw) >= (int64_t(1) << 32) / A)
+        throw std::invalid_argument("scene too large for 32-bit line keys at this direction radius");
+    magic = ((uint64_t(1) << 32) + uint64_t(A) - 1) / uint64_t(A);
+    nu = maxu / A + 1;
+    nw = maxw / A + 1;
+    if (nu * nw >= (int64_t(1) << 32)) throw std::invalid_argument("too many lines for 32-bit keys");
+}
+
+// ---------------------------------------------------------------- LineSystem
+
+LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const float *point,
+                       float epsilon, int history)
+    : n_(n), eps_(epsilon), hist_(history), normal_(nullptr), point_(nullptr) {
+    if (n < 1) throw std::invalid_argument("no records");
+    if (n >= (int64_t(1) << 31) - 1) throw std::invalid_argument("too many records");
+    if (history < 1 || history > kMaxHistory)
+        throw std::invalid_argument("history must be in 1.." + std::to_string(kMaxHistory));
+    for (int a = 0; a < 3; ++a) {
+        lo_[a] = std::numeric_limits<int32_t>::max();
+        hi_[a] = std::numeric_limits<int32_t>::min();
+    }
+    for (int64_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) {
+            lo_[a] = std::min(lo_[a], ijk[3 * i + a]);
+            hi_[a] = std::max(hi_[a], ijk[3 * i + a]);
+        }
+    for (int a = 0; a < 3; ++a)
+        if (int64_t(hi_[a]) - lo_[a] >= (int64_t(1) << 24))
+            throw std::invalid_argument("voxel coordinates span more than 2^24");
+    own_normal_.assign(normal, normal + 3 * n);
+    own_point_.assign(point, point + 3 * n);
+    normal_ = own_normal_.data();
+    point_ = own_point_.data();
+
+    // One lexicographic order per main axis m, keys (x_m, x_o1, x_o2): LSD
+    // counting sort, three stable passes, O(n + extent).
+    std::vector<int32_t> tmp(n), cnt;
+    for (int m = 0; m < 3; ++m) {
+        const int o1 = (m == 0) ? 1 : 0, o2 = (m == 2) ? 1 : 2;
+        Axis &ax = ax_[m];
+        ax.order.resize(n);
+        std::iota(ax.order.begin(), ax.order.end(), 0);
+        for (int a : {o2, o1, m}) {
+            const int64_t ext = int64_t(hi_[a]) - lo_[a] + 1;
+            cnt.assign(ext + 1, 0);
+            for (int64_t i = 0; i < n; ++i) ++cnt[ijk[3 * int64_t(ax.order[i]) + a] - lo_[a] + 1];
+            for (int64_t k = 0; k < ext; ++k) cnt[k + 1] += cnt[k];
+            for (int64_t i = 0; i < n; ++i) {
+                const int32_t r = ax.order[i];
+                tmp[cnt[ijk[3 * int64_t(r) + a] - lo_[a]]++] = r;
+            }
+            ax.order.swap(tmp);
+        }
+        ax.X.resize(n);
+        ax.Y.resize(n);
+        ax.Z.resize(n);
+        ax.nrm.resize(3 * n);
+        ax.pt.resize(3 * n);
+        for (int64_t i = 0; i < n; ++i) {
+            const int64_t r = ax.order[i];
+            ax.X[i] = ijk[3 * r + m];
+            ax.Y[i] = ijk[3 * r + o1];
+            ax.Z[i] = ijk[3 * r + o2];
+            for (int c = 0; c < 3; ++c) {
+                ax.nrm[3 * i + c] = normal[3 * r + c];
+                ax.pt[3 * i + c] = point[3 * r + c];
+            }
+        }
+    }
+
+    // Voxel index from the (x, y, z) order (the occupancy bitset is built on
+    // the first shoot: gathering does not need it).
+    const Axis &a0 = ax_[0];
+    for (int64_t i = 0; i < n; ++i) {
+        const int64_t k = linear(a0.X[i], a0.Y[i], a0.Z[i]);
+        if (vkey_.empty() || vkey_.back() != k) {
+            vkey_.push_back(k);
+            vstart_.push_back(static_cast<int32_t>(i));
+        }
+    }
+    vstart_.push_back(static_cast<int32_t>(n));
+}
+
+void LineSystem::build_occupancy() const {
+    std::call_once(occ_once_, [this] {
+        const int64_t nx = int64_t(hi_[0]) - lo_[0] + 1, ny = int64_t(hi_[1]) - lo_[1] + 1,
+                      nz = int64_t(hi_[2]) - lo_[2] + 1;
+        // one bit per voxel of the bounding box: 2^34 bits = 2 GiB at most
+        if (nx * ny * nz > (int64_t(1) << 34))
+            throw std::invalid_argument("voxel box too large for the shooting bitset");
+        occ_.assign((nx * ny * nz + 63) / 64, 0);
+        for (int64_t k : vkey_) occ_[k >> 6] |= uint64_t(1) << (k & 63);
+    });
+}
+
+int64_t LineSystem::linear(int32_t x, int32_t y, int32_t z) const {
+    const int64_t ny = int64_t(hi_[1]) - lo_[1] + 1, nz = int64_t(hi_[2]) - lo_[2] + 1;
+    return ((int64_t(x) - lo_[0]) * ny + (int64_t(y) - lo_[1])) * nz + (int64_t(z) - lo_[2]);
+}
+
+void LineSystem::keys(const int32_t v[3], uint32_t *out) const {
+    LineFrame fr(v, lo_, hi_);
+    const Axis &ax = ax_[fr.m];
+    for (int64_t i = 0; i < n_; ++i)
+        out[ax.order[i]] = fr.key(ax.X[i] - fr.lo[fr.m], fr.yprime(ax.Y[i]), fr.zprime(ax.Z[i]));
+}
+
+void LineSystem::normalisation(const Family *fams, int64_t nf, double *S, int threads,
+                               const StopCheck &stop) const {
+    // Unit vectors once; each record sums |n.s| * weight over the families
+    // (one of +v, -v faces it).
+    std::vector<double> u(3 * nf);
+    for (int64_t f = 0; f < nf; ++f) {
+        const double l = std::sqrt(double(fams[f].v[0]) * fams[f].v[0] +
+                                   double(fams[f].v[1]) * fams[f].v[1] +
+                                   double(fams[f].v[2]) * fams[f].v[2]);
+        for (int c = 0; c < 3; ++c) u[3 * f + c] = fams[f].v[c] / l;
+    }
+    const int64_t chunk = 256;
+    const int64_t tasks = (n_ + chunk - 1) / chunk;
+    parallel_for(tasks, resolve_threads(threads), stop, [&](int64_t t, int) {
+        const int64_t b = t * chunk, e = std::min(n_, b + chunk);
+        for (int64_t i = b; i < e; ++i) {
+            const double n0 = normal_[3 * i], n1 = normal_[3 * i + 1], n2 = normal_[3 * i + 2];
+            double s = 0.0;
+            for (int64_t f = 0; f < nf; ++f)
+                s += std::abs(n0 * u[3 * f] + n1 * u[3 * f + 1] + n2 * u[3 * f + 2]) * fams[f].weight;
+            S[i] = s;
+        }
+    });
+}
+
+// ---------------------------------------------------------------- gathering
+
+namespace {
+
+struct LineState {
+    int32_t stamp;  // family pass that last wrote the entry
+    int32_t last;   // newest F record on the line (axis-order position), -1: none
+};
+
+struct GatherWork {
+    std::vector<LineState> table;
+    std::vector<int32_t> prevF, ans;
+    int32_t stamp = 0;
+    std::vector<uint32_t> key, cnt;
+    std::vector<int32_t> line;
+    std::vector<Hit> group;
+    std::vector<double> acc[3], vis[3];  // per axis order
+    bool used[3] = {false, false, false};
+};
+
+}  // namespace
+
+int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel, const float *val,
+                           double *out, double *vis, int threads, const StopCheck &stop,
+                           bool onepass) const {
+    threads = resolve_threads(threads);
+    threads = static_cast<int>(std::max<int64_t>(1, std::min<int64_t>(threads, nsel)));
+    // Values in each main axis's order (only the axes some family needs).
+    bool need[3] = {false, false, false};
+    std::vector<LineFrame> frames;
+    frames.reserve(nsel);
+    for (int64_t k = 0; k < nsel; ++k) {
+        frames.emplace_back(fams[sel[k]].v, lo_, hi_);
+        need[frames.back().m] = true;
+    }
+    std::vector<float> valax[3];
+    for (int m = 0; m < 3; ++m) {
+        if (!need[m]) continue;
+        valax[m].resize(3 * n_);
+        const int32_t *ord = ax_[m].order.data();
+        for (int64_t i = 0; i < n_; ++i)
+            for (int c = 0; c < 3; ++c) valax[m][3 * i + c] = val[3 * int64_t(ord[i]) + c];
+    }
+    std::vector<GatherWork> work(threads);
+    std::vector<int64_t> lines_walked(threads, 0);
+    const float eps = eps_;
+    const int K = hist_;
+
+    // size of the per-line table: the largest key range among the families
+    int64_t max_keys = 1;
+    for (const auto &fr : frames) max_keys = std::max<int64_t>(max_keys, fr.nu * fr.nw);
+
+    if (onepass) {
+    parallel_for(nsel, threads, stop, [&](int64_t k, int t) {
+        GatherWork &w = work[t];
+        const Family &F = fams[sel[k]];
+        const LineFrame &fr = frames[k];
+        const Axis &ax = ax_[fr.m];
+        const int m = fr.m;
+        if (!w.used[m]) {
+            w.acc[m].assign(3 * n_, 0.0);
+            if (vis) w.vis[m].assign(n_, 0.0);
+            w.used[m] = true;
+        }
+        if (w.table.empty()) {
+            w.table.assign(max_keys, LineState{0, -1});
+            w.prevF.assign(n_, -1);
+            w.ans.assign(n_, 0);
+        }
+        const int32_t cur = ++w.stamp;  // no clearing: entries of other families carry old stamps
+        LineState *table = w.table.data();
+        int32_t *prevF = w.prevF.data();
+        int32_t *ans = w.ans.data();
+        double *acc = w.acc[m].data();
+        double *vs = vis ? w.vis[m].data() : nullptr;
+        const float *vl = valax[m].data();
+        const float *nrm = ax.nrm.data();
+        const float *pt = ax.pt.data();
+        const int32_t *AX = ax.X.data(), *AY = ax.Y.data(), *AZ = ax.Z.data();
+        const double wgt = F.weight;
+        const float len = std::sqrt(float(F.v[0]) * F.v[0] + float(F.v[1]) * F.v[1] + float(F.v[2]) * F.v[2]);
+        const float dh[3] = {F.v[0] / len, F.v[1] / len, F.v[2] / len};
+        const int32_t xlo = fr.lo[m];
+        int64_t walked = 0;
+        // Records in x_m order: every line is visited in its own order along
+        // +v; its state (the newest F record, older ones chained through
+        // prevF) lives in a table indexed by the line key.
+        for (int64_t i = 0; i < n_;) {
+            int64_t ge = i + 1;
+            while (ge < n_ && AX[ge] == AX[i] && AY[ge] == AY[i] && AZ[ge] == AZ[i]) ++ge;
+            const uint32_t kk = fr.key(AX[i] - xlo, fr.yprime(AY[i]), fr.zprime(AZ[i]));
+            LineState &ls = table[kk];
+            int32_t lastF = ls.stamp == cur ? ls.last : -1;
+            if (ls.stamp == cur) ++walked;
+            const int gn = static_cast<int>(ge - i);
+            if (static_cast<int>(w.group.size()) < gn) w.group.resize(gn);
+            Hit *g = w.group.data();
+            for (int a = 0; a < gn; ++a) {
+                const int32_t p = static_cast<int32_t>(i + a);
+                g[a] = Hit{p, gn > 1 ? dot3(pt + 3 * int64_t(p), dh) : 0.0f, dot3(nrm + 3 * int64_t(p), dh)};
+            }
+            if (gn > 1) sort_group(g, gn);
+            for (int a = 0; a < gn; ++a) {
+                const int32_t p = g[a].p;
+                const float c = g[a].c;
+                if (c > kTiny) {
+                    prevF[p] = lastF;
+                    lastF = p;
+                } else if (c < -kTiny && lastF >= 0) {
+                    const float *pp = pt + 3 * int64_t(p), *np = nrm + 3 * int64_t(p);
+                    const double cb = -double(c) * wgt;
+                    bool got = false;
+                    int32_t f = lastF;
+                    for (int h = 0; h < K && f >= 0; ++h, f = prevF[f]) {
+                        const float *pf = pt + 3 * int64_t(f), *nf = nrm + 3 * int64_t(f);
+                        if (!facing(pf, nf, pp, np, eps)) continue;
+                        if (!got) {
+                            const float *vf = vl + 3 * int64_t(f);
+                            double *ap = acc + 3 * int64_t(p);
+                            ap[0] += vf[0] * cb;
+                            ap[1] += vf[1] * cb;
+                            ap[2] += vf[2] * cb;
+                            if (vs) vs[p] += cb;
+                            got = true;
+                        }
+                        if (ans[f] == cur) break;  // an answered facing F occludes the older ones
+                        const double cf = double(dot3(nf, dh)) * wgt;
+                        const float *vp = vl + 3 * int64_t(p);
+                        double *af = acc + 3 * int64_t(f);
+                        af[0] += vp[0] * cf;
+                        af[1] += vp[1] * cf;
+                        af[2] += vp[2] * cf;
+                        if (vs) vs[f] += cf;
+                        ans[f] = cur;
+                    }
+                }
+            }
+            ls.stamp = cur;
+            ls.last = lastF;
+            i = ge;
+        }
+        lines_walked[t] += walked;
+    });
+    } else {
+    parallel_for(nsel, threads, stop, [&](int64_t k, int t) {
+        GatherWork &w = work[t];
+        const Family &F = fams[sel[k]];
+        const LineFrame &fr = frames[k];
+        const Axis &ax = ax_[fr.m];
+        const int m = fr.m;
+        if (!w.used[m]) {
+            w.acc[m].assign(3 * n_, 0.0);
+            if (vis) w.vis[m].assign(n_, 0.0);
+            w.used[m] = true;
+        }
+        double *acc = w.acc[m].data();
+        double *vs = vis ? w.vis[m].data() : nullptr;
+        const float *vl = valax[m].data();
+        const float *nrm = ax.nrm.data();
+        const float *pt = ax.pt.data();
+        const double wgt = F.weight;
+        const float len = std::sqrt(float(F.v[0]) * F.v[0] + float(F.v[1]) * F.v[1] + float(F.v[2]) * F.v[2]);
+        const float dh[3] = {F.v[0] / len, F.v[1] / len, F.v[2] / len};
+
+        // 1. keys in the axis order (x_m ascending), 2. stable counting sort:
+        // each line's records come out ordered along +v.
+        const int64_t nkeys = fr.nu * fr.nw;
+        w.key.resize(n_);
+        w.cnt.assign(nkeys + 1, 0);
+        w.line.resize(n_);
+        uint32_t *key = w.key.data();
+        uint32_t *cnt = w.cnt.data();
+        const int32_t xlo = fr.lo[m];
+        for (int64_t i = 0; i < n_; ++i) {
+            const uint32_t kk = fr.key(ax.X[i] - xlo, fr.yprime(ax.Y[i]), fr.zprime(ax.Z[i]));
+            key[i] = kk;
+            ++cnt[kk + 1];
+        }
+        for (int64_t q = 0; q < nkeys; ++q) cnt[q + 1] += cnt[q];
+        // cnt[q] = start of line q; scatter advances it to the line's end
+        int32_t *line = w.line.data();
+        for (int64_t i = 0; i < n_; ++i) line[cnt[key[i]]++] = static_cast<int32_t>(i);
+
+        // 3. walk every line with >= 2 records
+        int32_t hp[kMaxHistory];
+        bool ha[kMaxHistory];
+        int64_t walked = 0;
+        int64_t start = 0;
+        for (int64_t q = 0; q < nkeys; ++q) {
+            const int64_t end = cnt[q];
+            const int64_t L = end - start;
+            if (L < 2) {
+                start = end;
+                continue;
+            }
+            ++walked;
+            int hn = 0;
+            int64_t j = start;
+            while (j < end) {
+                // the records of one voxel: same line and same x_m
+                const int32_t x0 = ax.X[line[j]];
+                int64_t ge = j + 1;
+                while (ge < end && ax.X[line[ge]] == x0) ++ge;
+                const int gn = static_cast<int>(ge - j);
+                if (static_cast<int>(w.group.size()) < gn) w.group.resize(gn);
+                Hit *g = w.group.data();
+                for (int a = 0; a < gn; ++a) {
+                    const int32_t p = line[j + a];
+                    g[a] = Hit{p, dot3(pt + 3 * int64_t(p), dh), dot3(nrm + 3 * int64_t(p), dh)};
+                }
+                if (gn > 1) sort_group(g, gn);
+                for (int a = 0; a < gn; ++a) {
+                    const int32_t p = g[a].p;
+                    const float c = g[a].c;
+                    if (c > kTiny) {  // F: sends along +v; remember it
+                        if (hn == K) {
+                            std::memmove(hp, hp + 1, sizeof(int32_t) * (K - 1));
+                            std::memmove(ha, ha + 1, sizeof(bool) * (K - 1));
+                            --hn;
+                        }
+                        hp[hn] = p;
+                        ha[hn] = false;
+                        ++hn;
+                    } else if (c < -kTiny) {  // B: receives from the nearest facing F
+                        const float *pp = pt + 3 * int64_t(p), *np = nrm + 3 * int64_t(p);
+                        const double cb = -double(c) * wgt;
+                        bool got = false;
+                        for (int h = hn - 1; h >= 0; --h) {
+                            const int32_t f = hp[h];
+                            const float *pf = pt + 3 * int64_t(f), *nf = nrm + 3 * int64_t(f);
+                            if (!facing(pf, nf, pp, np, eps)) continue;
+                            if (!got) {
+                                const float *vf = vl + 3 * int64_t(f);
+                                double *ap = acc + 3 * int64_t(p);
+                                ap[0] += vf[0] * cb;
+                                ap[1] += vf[1] * cb;
+                                ap[2] += vf[2] * cb;
+                                if (vs) vs[p] += cb;
+                                got = true;
+                            }
+                            // An answered facing F occludes the older ones.
+                            if (ha[h]) break;
+                            // F receives (along -v) from the first B that faces it.
+                            const double cf = double(dot3(nf, dh)) * wgt;
+                            const float *vp = vl + 3 * int64_t(p);
+                            double *af = acc + 3 * int64_t(f);
+                            af[0] += vp[0] * cf;
+                            af[1] += vp[1] * cf;
+                            af[2] += vp[2] * cf;
+                            if (vs) vs[f] += cf;
+                            ha[h] = true;
+                        }
+                    }
+                }
+                j = ge;
+            }
+            start = end;
+        }
+        lines_walked[t] += walked;
+    });
+    }
+
+    // Reduce in a fixed order (thread, then axis) into the global order.
+    std::fill(out, out + 3 * n_, 0.0);
+    if (vis) std::fill(vis, vis + n_, 0.0);
+    for (int t = 0; t < threads; ++t)
+        for (int m = 0; m < 3; ++m) {
+            if (!work[t].used[m]) continue;
+            const int32_t *ord = ax_[m].order.data();
+            const double *a = work[t].acc[m].data();
+            for (int64_t i = 0; i < n_; ++i) {
+                const int64_t r = ord[i];
+                out[3 * r] += a[3 * i];
+                out[3 * r + 1] += a[3 * i + 1];
+                out[3 * r + 2] += a[3 * i + 2];
+            }
+            if (vis) {
+                const double *v = work[t].vis[m].data();
+                for (int64_t i = 0; i < n_; ++i) vis[ord[i]] += v[i];
+            }
+        }
+    int64_t total = 0;
+    for (auto x : lines_walked) total += x;
+    return total;
+}
+
+// ---------------------------------------------------------------- shooting
+
+int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
+                          const float *val, double *hd, double *unfound, int threads,
+                          const StopCheck &stop, int64_t *steps_out) const {
+    threads = resolve_threads(threads);
+    build_occupancy();
+    for (int64_t k = 0; k < ne; ++k)
+        if (emit[k] < 0 || emit[k] >= n_) throw std::invalid_argument("emitter index out of range");
+    std::vector<LineFrame> frames;
+    frames.reserve(nf);
+    std::vector<float> dhat(3 * nf);
+    for (int64_t f = 0; f < nf; ++f) {
+        frames.emplace_back(fams[f].v, lo_, hi_);
+        const float len = std::sqrt(float(fams[f].v[0]) * fams[f].v[0] + float(fams[f].v[1]) * fams[f].v[1] +
+                                    float(fams[f].v[2]) * fams[f].v[2]);
+        for (int c = 0; c < 3; ++c) dhat[3 * f + c] = fams[f].v[c] / len;
+    }
+    // position of every record in the (x, y, z) order and its voxel slot
+    const Axis &a0 = ax_[0];
+    std::vector<int32_t> pos0(n_);
+    for (int64_t i = 0; i < n_; ++i) pos0[a0.order[i]] = static_cast<int32_t>(i);
+
+    const int64_t chunk = 4;
+    const int64_t tasks = (ne + chunk - 1) / chunk;
+    threads = static_cast<int>(std::max<int64_t>(1, std::min<int64_t>(threads, tasks)));
+    std::vector<std::vector<double>> acc(threads);
+    std::vector<int64_t> rays(threads, 0), steps(threads, 0);
+    const float eps = eps_;
+    const int K = hist_;
+    const float *P = point_, *N = normal_;
+
+    parallel_for(tasks, threads, stop, [&](int64_t task, int t) {
+        if (acc[t].empty()) acc[t].assign(3 * n_, 0.0);
+        double *H = acc[t].data();
+        std::vector<Hit> group;
+        int32_t hp[kMaxHistory];
+        for (int64_t k = task * chunk; k < std::min(ne, (task + 1) * chunk); ++k) {
+            const int32_t e = emit[k];
+            const float *pe = P + 3 * int64_t(e), *nE = N + 3 * int64_t(e);
+            const float *ve = val + 3 * int64_t(e);
+            double lost = 0.0;
+            // the emitter's voxel, in (x, y, z) order coordinates
+            const int32_t ex = a0.X[pos0[e]], ey = a0.Y[pos0[e]], ez = a0.Z[pos0[e]];
+            const int32_t eijk[3] = {ex, ey, ez};
+            for (int64_t f = 0; f < nf; ++f) {
+                const LineFrame &fr = frames[f];
+                const float *dv = dhat.data() + 3 * f;
+                const float cv = dot3(nE, dv);
+                if (std::abs(cv) <= kTiny) continue;
+                const int s = cv > 0 ? 1 : -1;  // march along +v or -v, whichever e faces
+                const float sd[3] = {s * dv[0], s * dv[1], s * dv[2]};
+                const double ce = std::abs(double(cv)) * fams[f].weight;
+                ++rays[t];
+                // the line through e's voxel: u, w fixed; y', z' follow from x'
+                const int m = fr.m, o1 = fr.o1, o2 = fr.o2;
+                const int64_t X0 = eijk[m] - fr.lo[m];
+                const int64_t Y0 = fr.yprime(eijk[o1]), Z0 = fr.zprime(eijk[o2]);
+                const int64_t h = fr.A / 2;
+                const int64_t u = (fr.A * Y0 + fr.B * (fr.XmA - X0) + h) / fr.A;
+                const int64_t w = (fr.A * Z0 + fr.C * (fr.XmA - X0) + h) / fr.A;
+                const int64_t Xr = int64_t(fr.hi[m]) - fr.lo[m];
+                const int64_t Yr = int64_t(fr.hi[o1]) - fr.lo[o1], Zr = int64_t(fr.hi[o2]) - fr.lo[o2];
+                int hn = 1;
+                hp[0] = e;
+                bool found = false, stopped = false;
+                bool first = true;
+                for (int64_t X = X0; X >= 0 && X <= Xr && !stopped; X += s, first = false) {
+                    ++steps[t];
+                    const int64_t Y = u - (fr.B * (fr.XmA - X) + h) / fr.A;
+                    const int64_t Z = w - (fr.C * (fr.XmA - X) + h) / fr.A;
+                    if (Y < 0 || Y > Yr || Z < 0 || Z > Zr) break;
+                    int32_t c3[3];
+                    c3[m] = static_cast<int32_t>(X + fr.lo[m]);
+                    c3[o1] = static_cast<int32_t>(fr.pos1 ? Y + fr.lo[o1] : fr.hi[o1] - Y);
+                    c3[o2] = static_cast<int32_t>(fr.pos2 ? Z + fr.lo[o2] : fr.hi[o2] - Z);
+                    const int64_t lin = linear(c3[0], c3[1], c3[2]);
+                    if (!((occ_[lin >> 6] >> (lin & 63)) & 1)) continue;
+                    const int64_t slot = std::lower_bound(vkey_.begin(), vkey_.end(), lin) - vkey_.begin();
+                    const int32_t b = vstart_[slot], en = vstart_[slot + 1];
+                    group.clear();
+                    for (int32_t i = b; i < en; ++i) {
+                        const int32_t r = a0.order[i];
+                        group.push_back(Hit{r, dot3(P + 3 * int64_t(r), sd), dot3(N + 3 * int64_t(r), sd)});
+                    }
+                    sort_group(group.data(), static_cast<int>(group.size()));
+                    size_t a = 0;
+                    if (first) {  // start just after e in its own voxel
+                        while (a < group.size() && group[a].p != e) ++a;
+                        ++a;
+                    }
+                    for (; a < group.size(); ++a) {
+                        const int32_t p = group[a].p;
+                        const float c = group[a].c;
+                        if (c > kTiny) {
+                            if (hn == K) {  // e would be forgotten: its light stops here
+                                stopped = true;
+                                break;
+                            }
+                            hp[hn++] = p;
+                        } else if (c < -kTiny) {
+                            const float *pp = P + 3 * int64_t(p), *np = N + 3 * int64_t(p);
+                            int nearest = -1;
+                            for (int hh = hn - 1; hh >= 0; --hh) {
+                                const int32_t fq = hp[hh];
+                                if (facing(P + 3 * int64_t(fq), N + 3 * int64_t(fq), pp, np, eps)) {
+                                    nearest = hh;
+                                    break;
+                                }
+                            }
+                            if (nearest == 0) {  // e is p's sender along this line
+                                found = true;
+                                const double cr = -double(c) * fams[f].weight;
+                                double *Hp = H + 3 * int64_t(p);
+                                Hp[0] += ve[0] * cr;
+                                Hp[1] += ve[1] * cr;
+                                Hp[2] += ve[2] * cr;
+                            } else if (nearest > 0) {  // someone nearer sends to p: e is shadowed
+                                if (facing(pe, nE, pp, np, eps)) found = true;  // e's light reached p's surface
+                                stopped = true;
+                                break;
+                            }
+                        }
+                    }
+                }
+                if (!found) lost += ce;
+            }
+            unfound[k] = lost;
+        }
+    });
+    std::fill(hd, hd + 3 * n_, 0.0);
+    for (int t = 0; t < threads; ++t) {
+        if (acc[t].empty()) continue;
+        for (int64_t i = 0; i < 3 * n_; ++i) hd[i] += acc[t][i];
+    }
+    int64_t total = 0, st = 0;
+    for (int t = 0; t < threads; ++t) {
+        total += rays[t];
+        st += steps[t];
+    }
+    if (steps_out) *steps_out = st;
+    return total;
+}
+
+}  // namespace voxgi

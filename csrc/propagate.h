@@ -1,4 +1,120 @@
-// propagate kernels.
+// Linear-complexity discrete-line propagation (Chatelier & Malgouyres 2006;
+// Piwowar & Malgouyres 2008): line keys in O(1), one lexicographic order of
+// the records per main axis, a stable counting sort per direction family,
+// and visibility along each line by the facing rule of DESIGN-NOTES §4.
+// No pybind11 here: plain pointers and sizes.
 #pragma once
 
-namespace voxgi {}
+#include <cstdint>
+#include <mutex>
+#include <vector>
+
+#include "common.h"
+
+namespace voxgi {
+
+// A direction family: the integer vector v and its opposite -v share one
+// partition of space into naive discrete lines. `v` is stored with its main
+// component (the largest |v_i|, lowest i on ties) positive.
+struct Family {
+    int32_t v[3];
+    double weight;  // solid angle of each of +v and -v, divided by pi
+};
+
+// The naive-line key of voxel `ijk` for family `v` (main component > 0),
+// relative to the box [lo, hi] (inclusive voxel bounds): two integers (u, w)
+// packed as u * nw + w with 0 <= key < nu * nw. Exposed for tests.
+struct LineFrame {
+    int m, o1, o2;       // main axis and the two others (increasing order)
+    int32_t A, B, C;     // |v| components along m, o1, o2 (A >= B, C >= 0)
+    bool pos1, pos2;     // sign of v along o1, o2 (true: >= 0)
+    int32_t lo[3], hi[3];
+    int64_t XmA;         // multiple of A >= hi[m] - lo[m]: keeps numerators >= 0
+    int64_t nu, nw;      // key ranges
+    uint64_t magic;      // ceil(2^32 / A): exact division for numerators < 2^32 / A
+    LineFrame(const int32_t v[3], const int32_t lo_[3], const int32_t hi_[3]);
+    inline int64_t yprime(int32_t y) const { return pos1 ? y - lo[o1] : hi[o1] - y; }
+    inline int64_t zprime(int32_t z) const { return pos2 ? z - lo[o2] : hi[o2] - z; }
+    inline uint32_t div(uint64_t num) const { return static_cast<uint32_t>((num * magic) >> 32); }
+    // key from main-axis-relative coordinates X' = x_m - lo[m], Y', Z'
+    inline uint32_t key(int64_t Xp, int64_t Yp, int64_t Zp) const {
+        const uint64_t h = static_cast<uint64_t>(A / 2);
+        const uint64_t u = div(static_cast<uint64_t>(A * Yp + B * (XmA - Xp)) + h);
+        const uint64_t w = div(static_cast<uint64_t>(A * Zp + C * (XmA - Xp)) + h);
+        return static_cast<uint32_t>(u * static_cast<uint64_t>(nw) + w);
+    }
+};
+
+// The records of a solve, prepared once: bounding box, one lexicographic
+// order per main axis (counting sort), the records' coordinates, normals and
+// surface points stored in each order (so that a family's pass streams
+// through memory), and a voxel -> records index for shooting.
+class LineSystem {
+public:
+    // ijk (n,3) voxel coordinates; normal (n,3) unit; point (n,3) a point of
+    // the surface in voxel units (voxel ijk spans [ijk, ijk+1]); epsilon the
+    // facing-rule margin in voxel units; history the number of F records
+    // remembered per line (1..32).
+    LineSystem(int64_t n, const int32_t *ijk, const float *normal, const float *point,
+               float epsilon, int history);
+
+    int64_t size() const { return n_; }
+
+    // Raw sum S(n) = sum over families, both signs, of max(0, n.s) * weight
+    // for every record (the hemisphere's cos-weighted solid angle / pi).
+    void normalisation(const Family *fams, int64_t nf, double *S, int threads,
+                       const StopCheck &stop) const;
+
+    // Gathering over the families `fams[sel[k]]` (k < nsel): for every pair
+    // of mutually visible records along a line, out[x] += val[partner] *
+    // cos_x * weight (RGB, double, not yet divided by S). vis (nullable):
+    // vis[x] += cos_x * weight for every direction in which x found a
+    // partner. out and vis are overwritten. Returns the number of lines
+    // walked (lines with >= 2 records); lines with one record are skipped.
+    // onepass: one pass in x_m order with a per-line state table (default);
+    // otherwise a stable counting sort by line key, then a walk of each line.
+    int64_t gather(const Family *fams, const int64_t *sel, int64_t nsel, const float *val,
+                   double *out, double *vis, int threads, const StopCheck &stop,
+                   bool onepass = true) const;
+
+    // Shooting from the emitter records `emit[0..ne)` along every direction
+    // +v and -v of every family (with n_e.s > 0): an integer march along the
+    // same naive line through the occupancy bitset to the records whose
+    // nearest facing sender is e. hd[r] += val[e] * cos_r * weight (RGB,
+    // double, overwritten). unfound[k] = sum of cos_e * weight over the rays
+    // of emitter k that met no receiver (sender side, overwritten). Returns
+    // the number of rays (emitter x direction with n_e.s > 0) and, in
+    // *steps, the voxels visited.
+    int64_t shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
+                  const float *val, double *hd, double *unfound, int threads,
+                  const StopCheck &stop, int64_t *steps) const;
+
+    // Key of every record for family v (tests: each key is one naive line).
+    void keys(const int32_t v[3], uint32_t *out) const;
+
+    const int32_t *lo() const { return lo_; }
+    const int32_t *hi() const { return hi_; }
+
+private:
+    struct Axis {
+        std::vector<int32_t> order;  // record index at each position
+        std::vector<int32_t> X, Y, Z;  // coordinates along m, o1, o2
+        std::vector<float> nrm, pt;    // (n,3) world-axis normal and point, in this order
+    };
+    int64_t n_;
+    float eps_;
+    int hist_;
+    int32_t lo_[3], hi_[3];
+    Axis ax_[3];
+    // shooting: occupancy bitset over the box and the records of each voxel
+    mutable std::vector<uint64_t> occ_;
+    mutable std::once_flag occ_once_;
+    void build_occupancy() const;
+    std::vector<int64_t> vkey_;    // sorted linear keys of occupied voxels (one per voxel)
+    std::vector<int32_t> vstart_;  // records of voxel k: ax_[0].order[vstart_[k] .. vstart_[k+1])
+    std::vector<float> own_normal_, own_point_;  // copies in the global record order
+    const float *normal_, *point_;
+    int64_t linear(int32_t x, int32_t y, int32_t z) const;
+};
+
+}  // namespace voxgi
