@@ -711,7 +711,7 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         seconds["voxelize"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         sol = solve(vox, **({} if directions is None else {"directions": directions}),
-                    threads=threads)
+                    threads=threads, progress=progress)
         seconds["solve"] = time.perf_counter() - t0
     _check_solution(scene, sol)
 
@@ -832,7 +832,7 @@ def run_cli(args) -> int:
     say(f"voxelize: {len(vox)} records (resolution {vox.resolution}) in {t_vox:.2f} s")
     t0 = time.perf_counter()
     sol = solve(vox, **({} if args.directions is None else {"directions": args.directions}),
-                threads=args.threads)
+                threads=args.threads, progress=not args.quiet)
     t_sol = time.perf_counter() - t0
     say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in {t_sol:.2f} s")
     res = render(scene, sol, max_frames=args.frames, seed=args.seed, progress=not args.quiet,
