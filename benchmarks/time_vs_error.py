@@ -247,7 +247,10 @@ def main(argv=None) -> int:
             diff_png(out.image, ref, args.out / f"cornell_diff_{size}.png",
                      f"{row['label']} ({row['seconds']:.1f} s, relMSE {row['rel_mse']:.2e})")
             voxgi.io.write_png(args.out / f"cornell_voxgi_{size}.png", out.image)
-            result["second_view"] = second_view(size, sol, {}, args.out)
+            import tempfile
+
+            with tempfile.TemporaryDirectory() as tmp:
+                result["second_view"] = second_view(size, sol, row["render"], Path(tmp))
             print(f"second view (saved solution, display only): "
                   f"{result['second_view']['seconds']:.2f} s", flush=True)
             if args.split:

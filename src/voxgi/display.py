@@ -593,7 +593,9 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
 
     summed over the two sets (emitters and the rest) with their own TA and
     n. So the pixel is ``Le + (ρ/π²)·Σ_sets (TA/n) Σ B G V``; the paper's
-    printed factor 1/(2π) is not this and fails the furnace. Check: inside a
+    printed factor 1/(2π) is not this and fails the furnace. (voxgi draws by
+    default with probability ∝ ΔA·B instead, ``vpl_pdf="power"``: the area
+    density is then p(y) = lum(B_y)/Σ ΔA lum(B) and TA/n becomes 1/(n p(y)).) Check: inside a
     sphere of radius R, ``cos θx cos θy / r² = 1/(4R²)`` for every pair and
     TA = 4πR², so each VPL gives exactly ``E = B``; with ``B = π Le/(1−ρ)``
     the pixel is ``Le + ρ Le/(1−ρ) = Le/(1−ρ)``, which the tests assert.
@@ -778,6 +780,7 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         "gather_per_frame": int(shader.gather),
         "vpls": int(frames * sum(sampler.counts)),
         "vpl_split": [int(c) for c in sampler.counts],
+        "vpl_pdf": sampler.pdf,
         "frames": int(frames),
         "est_rel_mse": est,
         "tol": tol,
