@@ -645,8 +645,11 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         Show a tqdm progress bar.
     threads : int or None
         Worker threads (None: all cores).
-    client : None
-        Reserved for distributed rendering; must be None.
+    client : dask.distributed.Client or None
+        Compute the frames on the client's workers (:mod:`voxgi.distributed`;
+        ``pip install "voxgi[dask]"``); the render loop, its accumulation and
+        stopping rule stay here, so the image equals the local one. Also
+        used by the solve when ``sol`` is None.
     camera : Camera, optional
         Overrides ``scene.camera``.
     min_frames : int
@@ -680,6 +683,8 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         No camera, a solution of another scene, bad numbers.
     TypeError
         Wrong argument types.
+    ImportError
+        ``client`` given without dask.distributed installed.
     """
     t_start = time.perf_counter()
     if not isinstance(scene, Scene):
@@ -690,8 +695,10 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         raise ValueError("render: the scene has no camera (set scene.camera or pass camera=)")
     if not isinstance(cam, Camera):
         raise TypeError(f"camera: expected voxgi.Camera, got {type(cam).__name__}")
-    if client is not None:
-        raise NotImplementedError("render: distributed display (client=) is not implemented")
+    if client is not None:  # fail early: the extra missing (ImportError) or not a Client
+        from .distributed import check_client
+
+        check_client(client)
     K = _validate.integer(vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16)
     max_frames = _validate.integer(max_frames, "max_frames", low=1, allow_none=True) or 256
     tol = _validate.real(tol, "tol", low=0.0, allow_none=True)
@@ -713,7 +720,7 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         seconds["voxelize"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         sol = solve(vox, **({} if directions is None else {"directions": directions}),
-                    threads=threads, progress=progress)
+                    threads=threads, progress=progress, client=client)
         seconds["solve"] = time.perf_counter() - t0
     _check_solution(scene, sol)
 
@@ -736,6 +743,11 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     if sampler.skipped_records:
         skipped.append(f"{sampler.skipped_records} records with zero radiosity or area "
                        "(back records) are never VPLs")
+
+    if client is not None:  # the same loop below, its frames computed on Dask workers
+        from .distributed import DistributedFrames
+
+        shader = DistributedFrames(client, shader, max_frames)
 
     H, W = cam.height, cam.width
     mean = np.zeros((H * W, 3))
@@ -765,6 +777,8 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     finally:
         bar.close()
         tracer.close()
+        if client is not None:
+            shader.close()
     image = mean.reshape(H, W, 3).astype(np.float32)
     stderr = None
     if frames >= 2:
