@@ -40,13 +40,15 @@ __all__ = ["DistributedFrames", "DistributedLineSystem", "estimate_worker_bytes"
 
 _EXTRA_HINT = 'pip install "voxgi[dask]"'
 
-# Bytes a worker holds per record (measured on the structures of
-# csrc/propagate.h; see docs/scaling.md): the scattered copy of ijk, normal
-# and point (36), the LineSystem's three axis orders (order, X, Y, Z, normal,
-# point and the packed point+normal line: 72 each, 216 in all), its
-# per-record copies and voxel tables (~40), and per call the values in
-# (12), the partial sums out (24) and the visibility sums (8).
-_BYTES_PER_RECORD = 36 + 216 + 40 + 12 + 24 + 8
+# Bytes a worker holds per record: the scattered copy of ijk, normal and
+# point (36) and what the worker's LineSystem and one call need, measured as
+# the growth of the resident set over building a LineSystem, one gather (with
+# visibility) and one shoot on the bunny room at resolution 112 (146,892
+# records): 214 B for the system (three axis orders of order, X, Y, Z,
+# normal, point and the packed 32-byte line: 216 B by csrc/propagate.h),
+# 302 B after the gather (values in, float64 sums and visibility out),
+# 337 B after the shoot. 340 rounds it up.
+_BYTES_PER_RECORD = 36 + 340
 
 
 def _require_distributed():
@@ -111,8 +113,10 @@ def estimate_worker_bytes(n_records: int, box=(0, 0, 0)) -> int:
     Returns
     -------
     int
-        ``N × 336`` bytes (scattered records, the worker's LineSystem, one
-        iteration's values and sums) plus the occupancy bitset, rounded up.
+        ``N × 376`` bytes (scattered records, the worker's LineSystem, one
+        call's values and sums; measured, see ``_BYTES_PER_RECORD``) plus the
+        occupancy bitset, rounded up. The worker process itself (Python,
+        numpy, Dask: ~100-150 MB) comes on top.
     """
     cells = int(np.prod(np.asarray(box, dtype=np.int64) + 1))
     return int(n_records) * _BYTES_PER_RECORD + cells // 8 + 1
@@ -220,15 +224,25 @@ class _Farm:
                       "bytes_sent": 0, "bytes_received": 0, "seconds_waiting": 0.0}
 
     def _check_memory(self, need: int, what: str) -> None:
-        """Refuse before any work when a worker's memory_limit is under ``need``."""
+        """Refuse before any work when a worker's memory_limit is under ``need``.
+
+        A worker stops taking tasks once its memory passes the ``pause``
+        fraction of its limit (Dask's ``distributed.worker.memory.pause``,
+        0.8 by default): that share of the limit is what counts.
+        """
+        import dask
+
+        pause = dask.config.get("distributed.worker.memory.pause", 0.8)
+        frac = float(pause) if isinstance(pause, (int, float)) and 0 < pause <= 1 else 1.0
         info = _workers(self.client)
         for addr in self.workers:
             limit = int(info[addr].get("memory_limit") or 0)  # 0: no limit set
-            if 0 < limit < need:
+            if 0 < limit * frac < need:
                 raise MemoryError(
-                    f"client: worker {addr} has memory_limit {limit / 2**20:.1f} MiB, but {what} "
-                    f"needs about {need / 2**20:.1f} MiB on every worker; give the workers more "
-                    "memory (memory_limit=...) or use a coarser resolution")
+                    f"client: worker {addr} has memory_limit {limit / 2**20:.1f} MiB (it pauses "
+                    f"at {frac:.0%} of it), but {what} needs about {need / 2**20:.1f} MiB on every "
+                    "worker; give the workers more memory (memory_limit=...) or use a coarser "
+                    "resolution")
         self.stats["bytes_per_worker_estimate"] = int(need)
 
     def _map(self, fn, chunks, *common, key_prefix: str):
