@@ -110,9 +110,9 @@ def main(argv=None) -> int:
     p.add_argument("--resolution", type=int, default=64)
     p.add_argument("--directions", type=int, default=22)
     p.add_argument("--shoot-directions", type=int, default=35)
-    p.add_argument("--max-bounces", type=int, default=8,
+    p.add_argument("--max-bounces", type=int, default=4,
                    help="fixed gathering iterations, so every run does the same work")
-    p.add_argument("--frames", type=int, default=16, help="frames of the render (tol=0)")
+    p.add_argument("--frames", type=int, default=8, help="frames of the render (tol=0)")
     p.add_argument("--width", type=int, default=512)
     p.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     p.add_argument("--out", default=str(RESULTS / "distributed.json"))
