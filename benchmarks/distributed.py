@@ -177,8 +177,9 @@ def main(argv=None) -> int:
     print("\ncost model (docs/scaling.md): c = s per record x family on one core; "
           "o = s per distributed gathering call")
     for w, c in cost.items():
-        print(f"  {w} worker(s): N {c['records']}, F {c['families']}, c {c['c_s_per_record_family']:.3e}"
-              f" s, o {c['o_s_per_call']:.3f} s, a full pass on one core "
+        print(f"  {w} worker(s): N {c['records']}, F {c['families']}, "
+              f"c {c['c_s_per_record_family']:.3e} s, o {c['o_s_per_call']:.3f} s, "
+              "a full pass on one core "
               f"{c['gather_pass_1core_s']:.2f} s, {c['bytes_per_call_per_worker'] / 1e6:.2f} MB "
               "per call and worker")
     meta["load_after"] = os.getloadavg()[0]
