@@ -15,7 +15,8 @@ Sections (all by default):
   scaled to 0.99 max): iterations to tol with and without extrapolation.
 - ``cornell``    energy balance on the Cornell box vs resolution (32, 64, 128).
 - ``later``      coarser directions after the second bounce (2009 paper):
-  time and error against the full set.
+  time and error against the full set (later_R = R: the same bounce-by-bounce
+  form without coarsening, to separate the two effects).
 - ``linear``     gathering time for N, 2N, 4N records (bunny room at three
   resolutions) and D, 2D directions, fixed iterations, 1 thread.
 - ``throughput`` bunny room at about 150k records, R = 22: gathering rays/s
@@ -133,13 +134,19 @@ def _cap_exact(vox, rho):
 
 
 def cap(args) -> None:
-    rows = []
     rho = 0.5
-    ress = (32, 64) if args.quick else (32, 64, 128)
+    ress = args.res or ((32, 64) if args.quick else (32, 64, 128))
+    radii = args.radii or (8, 16, 22)
+    # keep the rows of earlier runs (the big cases take long on a shared machine)
+    old = RESULTS / "propagation_cap.json"
+    rows = json.loads(old.read_text())["rows"] if old.exists() else []
+    done = {(r["res"], r["R"]) for r in rows}
     voxs = {res: voxgi.voxelize(voxgi.scenes.cap_sphere(albedo=rho, emission=1.0), resolution=res)
             for res in ress}
-    for R in (8, 16, 22):
+    for R in radii:
         for res in ress:
+            if (res, R) in done:
+                continue
             vox = voxs[res]
             t = time.perf_counter()
             sol = voxgi.solve(vox, directions=R, shoot_directions=R, progress=False, tol=1e-5)
@@ -149,6 +156,7 @@ def cap(args) -> None:
                          "mean_err": mean, "max_err": mx, "delta": sol.stats["lost_fraction"],
                          "seconds": dt})
             print(rows[-1], flush=True)
+            rows.sort(key=lambda r: (r["res"], r["R"]))
             _write("cap", rows, rho=rho, note="shoot_directions = directions = R")  # partial results
     _table(rows, ["res", "R", "records", "iters", "mean_err", "max_err", "delta", "seconds"])
 
@@ -212,7 +220,7 @@ def later(args) -> None:
     res = 48 if args.quick else 64
     vox = voxgi.voxelize(voxgi.scenes.cornell_box(width=32, height=32), resolution=res)
     ref = voxgi.solve(vox, directions=22, shoot_directions=22, progress=False, tol=1e-6)
-    for R, Rl in ((22, None), (22, 11), (22, 8), (16, None), (11, None)):
+    for R, Rl in ((22, None), (22, 22), (22, 11), (22, 8), (16, None), (11, None), (8, None)):
         t = time.perf_counter()
         sol = voxgi.solve(vox, directions=R, shoot_directions=22, later_directions=Rl,
                           later_after=2, progress=False, tol=1e-6)
@@ -337,6 +345,8 @@ def main() -> None:
     ap.add_argument("sections", nargs="*", default=[], help=", ".join(SECTIONS))
     ap.add_argument("--quick", action="store_true", help="smaller cases")
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--res", type=int, nargs="+", help="cap: resolutions")
+    ap.add_argument("--radii", type=int, nargs="+", help="cap: direction radii")
     args = ap.parse_args()
     bad = [s for s in args.sections if s not in SECTIONS and s not in EXTRA]
     if bad:

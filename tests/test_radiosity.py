@@ -94,6 +94,25 @@ def test_gauss_seidel_matches_jacobi(sphere32):
     assert g.bounces <= j.bounces
 
 
+def test_coarser_later_bounces(sphere32):
+    # Piwowar & Malgouyres 2009: bounces after the second with fewer
+    # directions. Bounce by bounce, so the answer stays near the fine one
+    # (measured on this cap sphere: 0.056% mean), whereas the coarse set
+    # everywhere is further off (0.21% mean); gathering rays drop 3.4x.
+    vox = voxelset(sphere32, albedo=0.7, emit_mask=_cap(sphere32))
+    kw = dict(shoot_directions=8, progress=False, tol=1e-6)
+    fine = voxgi.solve(vox, directions=8, **kw)
+    later = voxgi.solve(vox, directions=8, later_directions=3, **kw)
+    coarse = voxgi.solve(vox, directions=3, **kw)
+    front = ~vox.back
+    e_later = np.abs(later.radiosity[front] / fine.radiosity[front] - 1).mean()
+    e_coarse = np.abs(coarse.radiosity[front] / fine.radiosity[front] - 1).mean()
+    assert e_later < 0.5 * e_coarse
+    assert later.stats["gather_rays"] < fine.stats["gather_rays"]
+    with pytest.raises(ValueError, match="later_directions"):
+        voxgi.solve(vox, later_directions=4, method="gauss-seidel")
+
+
 def test_threads_do_not_change_the_answer(sphere32):
     vox = voxelset(sphere32, albedo=0.5, emit_mask=_cap(sphere32))
     kw = dict(directions=5, shoot_directions=5, progress=False, max_bounces=3)

@@ -857,7 +857,8 @@ def run_cli(args) -> int:
     s = res.stats
     sec = s["seconds"]
     say(f"display: {res.frames} frames, {s['vpls']} VPLs/pixel, {s['primary_rays']:.3g} primary "
-        f"+ {s['shadow_rays']:.3g} shadow rays in {sec['display']:.2f} s "
+        f"+ {s['shadow_rays']:.3g} shadow + {s['gather_rays']:.3g} gather rays in "
+        f"{sec['display']:.2f} s "
         f"(estimated relMSE of the noise {s['est_rel_mse']:.2e})")
     timings = {"voxelize": t_vox, "solve": t_sol, **{k: v for k, v in sec.items()
                                                       if k not in ("voxelize", "solve", "total")}}

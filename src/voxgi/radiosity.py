@@ -273,7 +273,8 @@ class _Extrapolator:
         self.prev = None
         self.lam_prev = None
         self.count += 1
-        return d * np.where(active, lam / (1 - lam), 0.0)
+        self.factor = np.where(active, lam / (1 - lam), 0.0)
+        return d * self.factor
 
 
 def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, tol: float = 1e-4,
@@ -324,8 +325,11 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
         Geometric-tail extrapolation once the updates shrink steadily
         (DESIGN-NOTES §5); ρ = 0.99 then converges in tens of iterations.
     later_directions : int or None
-        Radius for the iterations after the first ``later_after`` ones
-        (Piwowar & Malgouyres 2009: later bounces are smooth). None: same.
+        Radius for the bounces after the first ``later_after`` ones
+        (Piwowar & Malgouyres 2009: later bounces are smooth). The solver then
+        propagates each bounce's increment (ΔR_{k+1} = ρ M_k ΔR_k, Jacobi
+        only) and ends with the geometric-tail term once the ratio of
+        successive bounces is steady. None: every bounce with ``directions``.
     epsilon : float
         Facing-rule margin in voxels (DESIGN-NOTES §4).
     history : int
@@ -368,6 +372,8 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
     if not isinstance(method, str) or method.lower().replace("_", "-") not in ("jacobi", "gauss-seidel"):
         raise ValueError(f"method: expected 'jacobi' or 'gauss-seidel', got {method!r}")
     method = method.lower().replace("_", "-")
+    if later_directions is not None and method != "jacobi":
+        raise ValueError("later_directions: only with method='jacobi'")
     if client is not None:  # fail early: the extra missing (ImportError) or not a Client
         from .distributed import check_client
 
@@ -453,6 +459,11 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
         bar = tqdm(total=mb, desc="gather", unit="it", leave=False)
     lines_walked = 0
     it = 0
+    # coarser later bounces need the bounce-by-bounce (progressive) form: a
+    # fixed-point iteration would converge to the coarse operator's answer
+    progressive = lds is not None
+    dk = Rk.copy()
+    Hg_acc = np.zeros((n, 3))
     lam_bound = float(min(max(rho.max(), 0.5), 1 - 1e-6))
     vis_S = Sg
     try:
@@ -465,7 +476,20 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
             t = time.perf_counter()
             want_vis = vis is None and not use_later
             R_old = Rk
-            if method == "jacobi":
+            if progressive:
+                # propagate only the last bounce (its increment), with this
+                # bounce's directions: B = E + Σ_k ΔR_k, ΔR_{k+1} = ρ M_k ΔR_k
+                sums, v, nl = sysm.gather(ds_it.families, ds_it.weights,
+                                          np.ascontiguousarray(dk, dtype=np.float32), fams,
+                                          want_vis, nthreads)
+                lines_walked += nl
+                h_inc = sums / S_it[:, None]
+                Hg_acc += h_inc
+                dk = rho * h_inc
+                R_new = Rk + dk
+                if want_vis:
+                    vis = v
+            elif method == "jacobi":
                 sums, v, nl = sysm.gather(ds_it.families, ds_it.weights,
                                           np.ascontiguousarray(Rk, dtype=np.float32), blk[0],
                                           want_vis, nthreads)
@@ -510,10 +534,14 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
             # leave ~99 tol of error
             if res * lam_bound / (1 - lam_bound) < tol:
                 break
-            if extrap is not None:
+            if extrap is not None and (not progressive or use_later):
                 tail = extrap(d)
                 if tail is not None:
                     Rk = Rk + tail
+                    if progressive:
+                        # the ambient term stands for all the remaining bounces: done
+                        Hg_acc += h_inc * extrap.factor
+                        break
     finally:
         if bar is not None:
             bar.close()
@@ -522,6 +550,8 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
         warnings.warn(f"solve: not converged after {it} iterations (residual {residuals[-1]:.3g})",
                       RuntimeWarning, stacklevel=2)
 
+    if progressive:
+        Hg = Hg_acc
     B = E + Rk
     # --- diagnostics: lost fraction δ, energy balance (DESIGN-NOTES §5, §10)
     if vis is None:  # no gathering ran: one visibility pass for the statistics
