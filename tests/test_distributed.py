@@ -231,3 +231,14 @@ def test_render_equals_local(cornell_small, local_solution, client):
     assert out.frames == ref.frames  # the stopping rule saw the same sequence
     for k in ("primary_rays", "shadow_rays", "gather_rays", "vpls"):
         assert out.stats[k] == ref.stats[k], k
+
+
+def test_progress_bar_counts_finished_tasks(cornell_small, client, capsys):
+    """With progress=True the tasks of each distributed call feed a tqdm bar."""
+    _, vox = cornell_small
+    voxgi.solve(vox, directions=R, shoot_directions=RS, max_bounces=2, progress=True,
+                client=client)
+    err = capsys.readouterr().err
+    # one task per worker (2) per call: the bar reaches 2/2 for the gather calls
+    assert "gather tasks" in err
+    assert "2/2" in err
