@@ -232,6 +232,7 @@ def test_bad_input(sphere32):
 # ----------------------------------------------------------------- built-in scenes
 
 
+@pytest.mark.slow
 def test_cornell_box_energy_balance_converges():
     # Cornell box (open front): (emitted - absorbed - escaping) / emitted,
     # escaping counted on the sender side. Measured (R = 8, shooting 16):
