@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <deque>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -35,6 +36,7 @@ struct Poly {
     int n = 0;
     bool overflow = false;
     double v[kMaxV][3];
+    Poly() {}  // user-provided: no zeroing of v (hot path)
     void push(const double *p) {
         if (n == kMaxV) {
             overflow = true;
@@ -46,6 +48,13 @@ struct Poly {
         ++n;
     }
 };
+
+// A read-only view of polygon vertices (a Poly, or a run of a vertex pool).
+struct PolyView {
+    const double (*v)[3];
+    int n;
+};
+inline PolyView view(const Poly &P) { return PolyView{P.v, P.n}; }
 
 inline double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 inline void cross3(const double *a, const double *b, double *o) {
@@ -77,9 +86,9 @@ void clip_axis(const Poly &in, Poly &out, int axis, double c, double sgn) {
 }
 
 // Keep the part of `in` where sgn * (n·v - off) >= 0.
-void clip_plane(const Poly &in, Poly &out, const double *nrm, double off, double sgn) {
+void clip_plane(const PolyView &in, Poly &out, const double *nrm, double off, double sgn) {
     out.n = 0;
-    out.overflow = in.overflow;
+    out.overflow = false;
     const int n = in.n;
     for (int p = 0; p < n; ++p) {
         const double *a = in.v[p];
@@ -97,7 +106,7 @@ void clip_plane(const Poly &in, Poly &out, const double *nrm, double off, double
 
 // Area (along the unit normal n of the polygon's plane) and area-weighted
 // centroid; the mean of the vertices when the area is zero.
-double area_centroid(const Poly &P, const double *n, double *c) {
+double area_centroid(const PolyView &P, const double *n, double *c) {
     c[0] = c[1] = c[2] = 0;
     if (P.n == 0) return 0;
     double A = 0;
@@ -125,7 +134,7 @@ double area_centroid(const Poly &P, const double *n, double *c) {
 }
 
 // Closest point of the convex polygon P (plane normal n) to x; returns squared distance.
-double closest_on_poly(const Poly &P, const double *n, const double *x, double *out) {
+double closest_on_poly(const PolyView &P, const double *n, const double *x, double *out) {
     const double *v0 = P.v[0];
     const double h = (x[0] - v0[0]) * n[0] + (x[1] - v0[1]) * n[1] + (x[2] - v0[2]) * n[2];
     const double y[3] = {x[0] - h * n[0], x[1] - h * n[1], x[2] - h * n[2]};
@@ -201,7 +210,7 @@ inline int64_t iceil(double x) { return static_cast<int64_t>(std::ceil(x)); }
 void triangle_cells(const Tri &T, uint32_t tri, const VoxelizeParams &P, std::vector<Pair> &out,
                     int64_t &overflows) {
     const double eps = P.eps;
-    const int64_t D0 = P.dims[0], D1 = P.dims[1], D2 = P.dims[2];
+    const int64_t D1 = P.dims[1], D2 = P.dims[2];
     // Voxel i along an axis meets [lo - eps, hi + eps] iff i <= hi + eps and i + 1 >= lo - eps.
     int64_t lo[3], hi[3];
     for (int d = 0; d < 3; ++d) {
@@ -217,7 +226,6 @@ void triangle_cells(const Tri &T, uint32_t tri, const VoxelizeParams &P, std::ve
         emit(lo[0], lo[1], lo[2]);
         return;
     }
-    (void)D0;
     // Slabs along the two axes where the triangle is widest in projection;
     // the range along the dominant normal axis c is then short (1-2 voxels).
     int c = 0;
@@ -291,32 +299,35 @@ struct Piece {
     double n[3];     // normal aligned with its cluster (flipped for two-sided objects)
     double area;     // voxel units²
     double c[3];     // area-weighted centroid, or the touching point when area == 0
-    Poly poly;
+    int v_off, v_n;  // its polygon: vertices [v_off, v_off + v_n) of Scratch::verts
 };
 
 struct Cluster {
     int32_t obj;
+    int32_t count;
     double seed[3];
-    double sum_an[3] = {0, 0, 0};
-    double sum_n[3] = {0, 0, 0};
-    double sum_ac[3] = {0, 0, 0};
-    double sum_a = 0;
-    std::vector<int> pieces;
+    double sum_an[3];
+    double sum_n[3];
+    double sum_ac[3];
+    double sum_a;
 };
 
-struct Part {
+// A piece, or the part of a piece on one side of the cutting planes.
+struct PartRef {
+    PolyView poly;
     int piece;
     uint64_t sig;  // bit b set: on the positive side of the cluster's b-th cutting plane
     double area;
     double c[3];
-    Poly poly;
 };
 
 struct Scratch {
     std::vector<Piece> pieces;
+    std::vector<double> verts;  // piece polygons, 3 doubles per vertex
     std::vector<Cluster> clusters;
-    std::vector<Part> parts, parts2;
-    std::vector<int> order;
+    std::vector<int> order, cl_start, cl_items, next;
+    std::vector<PartRef> parts, parts2;
+    std::deque<Poly> pool;  // polygons of cut parts (stable addresses)
 };
 
 struct ChunkStats {
@@ -346,8 +357,12 @@ void clip_exact(const Tri &T, const int64_t *cell, Poly &out, Poly &tmp) {
             return;
     for (int v = 0; v < 3; ++v) out.push(T.g[v]);
     for (int d = 0; d < 3; ++d) {
-        clip_axis(out, tmp, d, double(cell[d]), 1.0);
-        clip_axis(tmp, out, d, double(cell[d] + 1), -1.0);
+        const double lo = double(cell[d]), hi = double(cell[d] + 1);
+        const double mn = std::min({T.g[0][d], T.g[1][d], T.g[2][d]});
+        const double mx = std::max({T.g[0][d], T.g[1][d], T.g[2][d]});
+        if (mn >= lo && mx <= hi) continue;  // inside this slab already: nothing to clip
+        clip_axis(out, tmp, d, lo, 1.0);
+        clip_axis(tmp, out, d, hi, -1.0);
         if (out.n == 0) return;
     }
 }
@@ -366,7 +381,7 @@ void clamp_to_cell(double *p, const int64_t *cell) {
     for (int d = 0; d < 3; ++d) p[d] = std::min(double(cell[d] + 1), std::max(double(cell[d]), p[d]));
 }
 
-void signed_range(const Poly &P, const double *n, double off, double &mn, double &mx) {
+void signed_range(const PolyView &P, const double *n, double off, double &mn, double &mx) {
     mn = std::numeric_limits<double>::infinity();
     mx = -mn;
     for (int i = 0; i < P.n; ++i) {
@@ -377,13 +392,13 @@ void signed_range(const Poly &P, const double *n, double off, double &mn, double
 }
 
 void emit_records(const Context &ctx, const int64_t *cell, const Cluster &cl,
-                  const std::vector<Piece> &pieces, const std::vector<Part> &parts, size_t begin,
-                  size_t end, std::vector<VoxelRecord> &out, ChunkStats &cs) {
+                  const std::vector<Piece> &pieces, const std::vector<PartRef> &parts,
+                  size_t begin, size_t end, std::vector<VoxelRecord> &out, ChunkStats &cs) {
     const VoxelizeParams &P = *ctx.P;
     double sa = 0, san[3] = {0, 0, 0}, sn[3] = {0, 0, 0}, sac[3] = {0, 0, 0};
     int n_pos = 0;
     for (size_t q = begin; q < end; ++q) {
-        const Part &pt = parts[q];
+        const PartRef &pt = parts[q];
         const Piece &pc = pieces[pt.piece];
         sa += pt.area;
         for (int d = 0; d < 3; ++d) {
@@ -407,9 +422,10 @@ void emit_records(const Context &ctx, const int64_t *cell, const Cluster &cl,
         if (n_pos > 1) {
             // The mean of several pieces may lie off a curved or folded
             // surface: snap it onto the nearest piece (the VPL must sit on it).
-            double best = std::numeric_limits<double>::infinity(), q[3], bq[3] = {cen[0], cen[1], cen[2]};
+            double best = std::numeric_limits<double>::infinity(), q[3],
+                   bq[3] = {cen[0], cen[1], cen[2]};
             for (size_t k = begin; k < end; ++k) {
-                const Part &pt = parts[k];
+                const PartRef &pt = parts[k];
                 if (!(pt.area > 0)) continue;
                 const double dd = closest_on_poly(pt.poly, pieces[pt.piece].tn, cen, q);
                 if (dd < best) {
@@ -426,7 +442,8 @@ void emit_records(const Context &ctx, const int64_t *cell, const Cluster &cl,
             for (int d = 0; d < 3; ++d) m[d] += parts[k].c[d] / double(end - begin);
         double best = std::numeric_limits<double>::infinity();
         for (size_t k = begin; k < end; ++k) {
-            const double dv[3] = {parts[k].c[0] - m[0], parts[k].c[1] - m[1], parts[k].c[2] - m[2]};
+            const double dv[3] = {parts[k].c[0] - m[0], parts[k].c[1] - m[1],
+                                  parts[k].c[2] - m[2]};
             const double dd = dot3(dv, dv);
             if (dd < best) {
                 best = dd;
@@ -469,49 +486,54 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
     const uint64_t D1 = P.dims[1], D2 = P.dims[2];
     const int64_t cell[3] = {int64_t(key / (D1 * D2)), int64_t((key / D2) % D1), int64_t(key % D2)};
     auto &pieces = S.pieces;
-    pieces.clear();
-    Poly tmp;
+    if (pieces.size() < size_t(np)) pieces.resize(size_t(np));
+    int n_pieces = 0;
+    Poly tmp, work;
+    auto &verts = S.verts;
+    verts.clear();
     for (int64_t q = 0; q < np; ++q) {
         Tri T;
         if (!load_tri(ctx.tris, pairs[q].tri, P, T)) continue;  // counted in phase 1
-        pieces.emplace_back();
-        Piece &pc = pieces.back();
+        Piece &pc = pieces[n_pieces++];
         pc.obj = ctx.tri_object[pairs[q].tri];
         pc.cluster = -1;
         std::memcpy(pc.tn, T.n, sizeof(T.n));
         std::memcpy(pc.n, T.n, sizeof(T.n));
-        clip_exact(T, cell, pc.poly, tmp);
-        pc.area = pc.poly.n >= 3 ? area_centroid(pc.poly, T.n, pc.c) : 0.0;
+        Poly &poly = work;
+        clip_exact(T, cell, poly, tmp);
+        pc.area = poly.n >= 3 ? area_centroid(view(poly), T.n, pc.c) : 0.0;
         if (!(pc.area > 0)) {
             // Touches the closed cube (within eps) without area inside it.
             pc.area = 0;
-            if (pc.poly.n == 0) clip_grown(T, cell, P.eps, pc.poly, tmp);
-            if (pc.poly.n == 0) clip_grown(T, cell, 4 * P.eps, pc.poly, tmp);
-            if (pc.poly.n == 0) {
-                pc.poly.push(T.g[0]);  // cannot happen short of round-off trouble
-                pc.poly.push(T.g[1]);
-                pc.poly.push(T.g[2]);
+            if (poly.n == 0) clip_grown(T, cell, P.eps, poly, tmp);
+            if (poly.n == 0) clip_grown(T, cell, 4 * P.eps, poly, tmp);
+            if (poly.n == 0) {
+                poly.push(T.g[0]);  // cannot happen short of round-off trouble
+                poly.push(T.g[1]);
+                poly.push(T.g[2]);
             }
-            area_centroid(pc.poly, T.n, pc.c);  // zero area: mean of the vertices
-            if (pc.poly.n >= 3) {
-                // A grown-cube polygon can have area; its vertex mean is still on the triangle.
-                pc.c[0] = pc.c[1] = pc.c[2] = 0;
-                for (int i = 0; i < pc.poly.n; ++i)
-                    for (int d = 0; d < 3; ++d) pc.c[d] += pc.poly.v[i][d] / pc.poly.n;
-            }
+            // The vertex mean of the (grown) piece: a point of the triangle.
+            pc.c[0] = pc.c[1] = pc.c[2] = 0;
+            for (int i = 0; i < poly.n; ++i)
+                for (int d = 0; d < 3; ++d) pc.c[d] += poly.v[i][d] / poly.n;
             clamp_to_cell(pc.c, cell);
         }
-        if (pc.poly.overflow) ++cs.overflows;
+        if (poly.overflow) ++cs.overflows;
+        pc.v_off = int(verts.size() / 3);
+        pc.v_n = poly.n;
+        verts.insert(verts.end(), &poly.v[0][0], &poly.v[0][0] + 3 * poly.n);
     }
-    if (pieces.empty()) return;
+    if (n_pieces == 0) return;
     ++cs.cells;
 
     // Clusters: per object (ascending), greedy by orientation in triangle order.
     auto &order = S.order;
-    order.resize(pieces.size());
-    for (size_t q = 0; q < pieces.size(); ++q) order[q] = int(q);
-    std::stable_sort(order.begin(), order.end(),
-                     [&](int x, int y) { return pieces[x].obj < pieces[y].obj; });
+    order.resize(size_t(n_pieces));
+    for (int q = 0; q < n_pieces; ++q) order[q] = q;
+    // Objects are usually in order already (triangles come object by object).
+    auto by_obj = [&](int x, int y) { return pieces[x].obj < pieces[y].obj; };
+    if (!std::is_sorted(order.begin(), order.end(), by_obj))
+        std::stable_sort(order.begin(), order.end(), by_obj);
     auto &clusters = S.clusters;
     clusters.clear();
     size_t obj_first = 0;
@@ -532,16 +554,15 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
             }
         }
         if (found < 0) {
-            clusters.emplace_back();
-            Cluster &c = clusters.back();
+            Cluster c{};
             c.obj = pc.obj;
             std::memcpy(c.seed, pc.tn, sizeof(c.seed));
-            c.pieces.clear();
+            clusters.push_back(c);
             found = int(clusters.size() - 1);
         }
         Cluster &c = clusters[found];
         pc.cluster = found;
-        c.pieces.push_back(idx);
+        ++c.count;
         c.sum_a += pc.area;
         for (int d = 0; d < 3; ++d) {
             c.sum_an[d] += pc.area * pc.n[d];
@@ -549,7 +570,19 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
             c.sum_ac[d] += pc.area * pc.c[d];
         }
     }
-    cs.clusters += int64_t(clusters.size());
+    const size_t ncl = clusters.size();
+    cs.clusters += int64_t(ncl);
+    // Pieces of each cluster, in the order they joined it.
+    auto &cl_start = S.cl_start;
+    auto &cl_items = S.cl_items;
+    cl_start.assign(ncl + 1, 0);
+    for (size_t q = 0; q < ncl; ++q) cl_start[q + 1] = cl_start[q] + clusters[q].count;
+    cl_items.resize(size_t(n_pieces));
+    {
+        auto &next = S.next;
+        next.assign(cl_start.begin(), cl_start.end() - 1);
+        for (int idx : order) cl_items[size_t(next[size_t(pieces[idx].cluster)]++)] = idx;
+    }
 
     // Cutting planes: every cluster with area, through its area-weighted
     // centroid, normal to its area-weighted normal.
@@ -558,7 +591,6 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
         bool ok;
     };
     Plane planes[64];
-    const size_t ncl = clusters.size();
     const bool do_cut = P.cut && ncl > 1;
     if (do_cut) {
         for (size_t q = 0; q < ncl && q < 64; ++q) {
@@ -577,20 +609,28 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
 
     auto &parts = S.parts;
     auto &parts2 = S.parts2;
+    auto &pool = S.pool;
+    pool.clear();
     for (size_t ci = 0; ci < ncl; ++ci) {
         const Cluster &cl = clusters[ci];
         parts.clear();
-        for (int idx : cl.pieces) {
-            const Piece &pc = pieces[idx];
-            parts.push_back(Part{idx, 0, pc.area, {pc.c[0], pc.c[1], pc.c[2]}, pc.poly});
+        for (int q = cl_start[ci]; q < cl_start[ci + 1]; ++q) {
+            const Piece &pc = pieces[cl_items[q]];
+            const PolyView pv{reinterpret_cast<const double(*)[3]>(verts.data() + 3 * size_t(pc.v_off)),
+                              pc.v_n};
+            parts.push_back(PartRef{pv, cl_items[q], 0, pc.area, {pc.c[0], pc.c[1], pc.c[2]}});
         }
         int n_cuts = 0;
         if (do_cut) {
             for (size_t sj = 0; sj < ncl && sj < 64; ++sj) {
                 if (sj == ci || !planes[sj].ok) continue;
                 const Plane &pl = planes[sj];
+                // A surface of the same orientation (as clustering judges it)
+                // is the same sheet continued, e.g. where two objects of one
+                // curved surface meet: nothing to separate.
+                if (ci < 64 && planes[ci].ok && dot3(pl.n, planes[ci].n) >= P.cos_cluster) continue;
                 bool straddles = false;
-                for (const Part &pt : parts) {
+                for (const PartRef &pt : parts) {
                     if (!(pt.area > 0)) continue;
                     double mn, mx;
                     signed_range(pt.poly, pl.n, pl.off, mn, mx);
@@ -606,23 +646,23 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
                 }
                 const uint64_t bit = uint64_t(1) << n_cuts++;
                 parts2.clear();
-                for (const Part &pt : parts) {
+                for (const PartRef &pt : parts) {
                     double mn = 0, mx = 0;
                     if (pt.area > 0) signed_range(pt.poly, pl.n, pl.off, mn, mx);
                     if (pt.area > 0 && mx > P.cut_delta && mn < -P.cut_delta) {
                         const double *tn = pieces[pt.piece].tn;
                         for (int s = 0; s < 2; ++s) {
-                            Part np_;
-                            np_.piece = pt.piece;
-                            np_.sig = pt.sig | (s == 0 ? bit : 0);
-                            clip_plane(pt.poly, np_.poly, pl.n, pl.off, s == 0 ? 1.0 : -1.0);
-                            if (np_.poly.n == 0) continue;
-                            np_.area = np_.poly.n >= 3 ? area_centroid(np_.poly, tn, np_.c) : 0.0;
+                            pool.emplace_back();
+                            Poly &poly = pool.back();
+                            clip_plane(pt.poly, poly, pl.n, pl.off, s == 0 ? 1.0 : -1.0);
+                            if (poly.n == 0) continue;
+                            PartRef np_{view(poly), pt.piece, pt.sig | (s == 0 ? bit : 0), 0.0, {0, 0, 0}};
+                            np_.area = poly.n >= 3 ? area_centroid(view(poly), tn, np_.c) : 0.0;
                             if (!(np_.area > 0)) {
                                 np_.area = 0;
-                                area_centroid(np_.poly, tn, np_.c);
+                                area_centroid(view(poly), tn, np_.c);
                             }
-                            if (np_.poly.overflow) ++cs.overflows;
+                            if (poly.overflow) ++cs.overflows;
                             parts2.push_back(np_);
                         }
                     } else {
@@ -633,8 +673,9 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
                 parts.swap(parts2);
             }
         }
-        std::stable_sort(parts.begin(), parts.end(),
-                         [](const Part &x, const Part &y) { return x.sig < y.sig; });
+        if (n_cuts > 0)
+            std::stable_sort(parts.begin(), parts.end(),
+                             [](const PartRef &x, const PartRef &y) { return x.sig < y.sig; });
         size_t b = 0, n_rec = 0;
         while (b < parts.size()) {
             size_t e = b + 1;
@@ -686,7 +727,6 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tri
     const int64_t n_tchunks = (n_tris + tri_chunk - 1) / tri_chunk;
     std::vector<std::vector<Pair>> chunk_pairs(n_tchunks);
     std::vector<int64_t> chunk_skipped(n_tchunks, 0), chunk_overflow(n_tchunks, 0);
-    std::vector<std::string> chunk_error(n_tchunks);
     set_phase(1, n_tris);
     parallel_for(n_tchunks, threads, stop, [&](int64_t ch, int) {
         const int64_t t_end = std::min(n_tris, (ch + 1) * tri_chunk);
@@ -762,7 +802,7 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tri
     parallel_for(n_cchunks, threads, stop, [&](int64_t ch, int th) {
         const int64_t c_end = std::min(n_cells, (ch + 1) * cell_chunk);
         auto &o = out[ch];
-        o.reserve(size_t(starts[c_end] - starts[ch * cell_chunk]) * 2 + 16);
+        o.reserve(size_t(c_end - ch * cell_chunk) * 2 + 16);  // front + reverse per voxel, usually
         for (int64_t c = ch * cell_chunk; c < c_end; ++c)
             process_cell(ctx, pairs[starts[c]].key, pairs.data() + starts[c],
                          starts[c + 1] - starts[c], scratch[th], o, cstats[ch]);

@@ -1,4 +1,346 @@
-// vpl_shade kernels (see vpl_shade.h).
+// VPL shading kernels (see vpl_shade.h and DESIGN-NOTES §6).
 #include "vpl_shade.h"
 
-namespace voxgi {}
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <vector>
+
+namespace voxgi {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr int64_t kChunk = 512;  // pixels per task
+
+inline float dot3(const float *a, const float *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+inline float pow5(float x) {
+    float x2 = x * x;
+    return x2 * x2 * x;
+}
+
+// Tangent frame (u, v) around n: u from n x (0,1,0), or n x (1,0,0) when n is
+// near +-y (DESIGN-NOTES §6; meshes carry no UVs in voxgi).
+inline void tangent_frame(const float n[3], float u[3], float v[3]) {
+    if (std::fabs(n[1]) < 0.99f) {  // n x (0, 1, 0)
+        u[0] = -n[2];
+        u[1] = 0.f;
+        u[2] = n[0];
+    } else {  // n x (1, 0, 0)
+        u[0] = 0.f;
+        u[1] = n[2];
+        u[2] = -n[1];
+    }
+    float l = std::sqrt(dot3(u, u));
+    u[0] /= l, u[1] /= l, u[2] /= l;
+    v[0] = n[1] * u[2] - n[2] * u[1];
+    v[1] = n[2] * u[0] - n[0] * u[2];
+    v[2] = n[0] * u[1] - n[1] * u[0];
+}
+
+}  // namespace
+
+void shade_brdf(const ShadeMaterials &mats, int32_t m, const float n[3], const float k1[3],
+                const float k2[3], float f[3]) {
+    const float *rd = mats.albedo + 3 * int64_t(m);
+    if (!mats.glossy || !mats.glossy[m]) {
+        for (int c = 0; c < 3; ++c) f[c] = rd[c] * float(1.0 / kPi);
+        return;
+    }
+    // Ashikhmin & Shirley 2000, eqs. (4) and (5): coupled diffuse + specular.
+    const float *rs = mats.rs + 3 * int64_t(m);
+    const float nu = mats.nu[m], nv = mats.nv[m];
+    const float nk1 = std::max(dot3(n, k1), 0.f), nk2 = std::max(dot3(n, k2), 1e-6f);
+    float h[3] = {k1[0] + k2[0], k1[1] + k2[1], k1[2] + k2[2]};
+    float hl = std::sqrt(dot3(h, h));
+    float spec_common = 0.f, hk = 1.f;
+    if (hl > 1e-12f) {
+        h[0] /= hl, h[1] /= hl, h[2] /= hl;
+        float u[3], v[3];
+        tangent_frame(n, u, v);
+        const float nh = std::max(dot3(n, h), 0.f);
+        const float hu = dot3(h, u), hv = dot3(h, v);
+        const float s2 = 1.f - nh * nh;  // sin² of the half vector's polar angle
+        // Exponent nu cos²phi + nv sin²phi; at h = n the azimuth is undefined
+        // but nh^e = 1 for any e.
+        const float e = s2 > 1e-12f ? (nu * hu * hu + nv * hv * hv) / s2 : 0.5f * (nu + nv);
+        hk = std::max(dot3(h, k1), 1e-6f);
+        spec_common = float(std::sqrt((double(nu) + 1.0) * (double(nv) + 1.0)) / (8.0 * kPi)) *
+                      std::pow(nh, e) / (hk * std::max(nk1, nk2));
+    }
+    const float one_m = 1.f - hk;
+    const float d1 = 1.f - pow5(1.f - 0.5f * nk1), d2 = 1.f - pow5(1.f - 0.5f * nk2);
+    for (int c = 0; c < 3; ++c) {
+        const float fres = rs[c] + (1.f - rs[c]) * pow5(one_m);
+        const float diff = float(28.0 / (23.0 * kPi)) * rd[c] * (1.f - rs[c]) * d1 * d2;
+        f[c] = diff + spec_common * fres;
+    }
+}
+
+int64_t vpl_prepare(const ShadeHits &hits, const ShadeMaterials &mats, const ShadeVPLs &vpls,
+                    const ShadeMIS &mis, double eps, int64_t *ray_count, float *ray_org, float *ray_dir,
+                    float *ray_len, float *ray_contrib, int threads, const StopCheck &stop) {
+    const int64_t P = hits.count, K = vpls.count;
+    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
+    std::vector<int64_t> chunk_rays(n_chunks, 0);
+    // Each chunk writes its rays compacted from slot chunk_start*K on; a
+    // serial pass then moves the chunks' blocks together.
+    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
+        const int64_t p0 = c * kChunk, p1 = std::min(P, p0 + kChunk);
+        int64_t w = p0 * K;
+        for (int64_t p = p0; p < p1; ++p) {
+            const int32_t m = hits.material[p];
+            int64_t cnt = 0;
+            if (m >= 0 && m < mats.count) {
+                const double *x = hits.pos + 3 * p;
+                const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
+                const double ox = x[0] + eps * ng[0], oy = x[1] + eps * ng[1], oz = x[2] + eps * ng[2];
+                for (int64_t k = 0; k < K; ++k) {
+                    const double *y = vpls.pos + 3 * k;
+                    const float *ny = vpls.normal + 3 * k;
+                    const double dx = y[0] - x[0], dy = y[1] - x[1], dz = y[2] - x[2];
+                    const double r2 = dx * dx + dy * dy + dz * dz;
+                    if (!(r2 > 0.0)) continue;
+                    const double r = std::sqrt(r2);
+                    const float wi[3] = {float(dx / r), float(dy / r), float(dz / r)};
+                    const float cos_y = -dot3(ny, wi);  // the VPL must face x
+                    if (cos_y <= 0.f) continue;
+                    if (dot3(ng, wi) <= 0.f) continue;  // below the geometric surface
+                    const float cos_x = dot3(n, wi);
+                    if (cos_x <= 0.f) continue;
+                    const double cc = double(cos_x) * cos_y;
+                    double g;
+                    if (vpls.pa && vpls.pa[k] > 0.f) {
+                        // Balance heuristic with the gather rays (see ShadeMIS).
+                        g = cc / (r2 * vpls.pa[k] + mis.n_gather * cc / kPi);
+                    } else {
+                        // The VPL is a disc of area dA: on the axis of a disc the exact
+                        // point-to-disc term is cos cos / (r² + dA/pi); bounded, and
+                        // the point formula far away (DESIGN-NOTES §6).
+                        g = cc / (r2 + double(vpls.area[k]) / kPi);
+                    }
+                    float f[3];
+                    shade_brdf(mats, m, n, wi, wo, f);
+                    const float *wk = vpls.weight + 3 * k;
+                    float cr[3];
+                    bool any = false;
+                    for (int ch = 0; ch < 3; ++ch) {
+                        cr[ch] = float(g * f[ch] * wk[ch]);
+                        any |= cr[ch] > 0.f;
+                    }
+                    if (!any) continue;
+                    // Shadow ray from x (offset along its geometric normal) to the
+                    // VPL's point offset along its normal, stopping eps short.
+                    const double tx = y[0] + eps * ny[0] - ox, ty = y[1] + eps * ny[1] - oy,
+                                 tz = y[2] + eps * ny[2] - oz;
+                    const double len = std::sqrt(tx * tx + ty * ty + tz * tz);
+                    float *ro = ray_org + 3 * w, *rd = ray_dir + 3 * w, *rc = ray_contrib + 3 * w;
+                    ro[0] = float(ox), ro[1] = float(oy), ro[2] = float(oz);
+                    if (len > 0.0) {
+                        rd[0] = float(tx / len), rd[1] = float(ty / len), rd[2] = float(tz / len);
+                    } else {
+                        rd[0] = wi[0], rd[1] = wi[1], rd[2] = wi[2];
+                    }
+                    ray_len[w] = float(std::max(len - eps, 0.0));
+                    rc[0] = cr[0], rc[1] = cr[1], rc[2] = cr[2];
+                    ++w;
+                    ++cnt;
+                }
+            }
+            ray_count[p] = cnt;
+        }
+        chunk_rays[c] = w - p0 * K;
+    });
+    // Serial compaction in increasing order: a chunk's destination ends where
+    // the next one's begins, never past the next chunk's source.
+    int64_t total = 0;
+    for (int64_t c = 0; c < n_chunks; ++c) {
+        const int64_t src = c * kChunk * K, n = chunk_rays[c];
+        if (src != total && n > 0) {
+            std::memmove(ray_org + 3 * total, ray_org + 3 * src, sizeof(float) * 3 * n);
+            std::memmove(ray_dir + 3 * total, ray_dir + 3 * src, sizeof(float) * 3 * n);
+            std::memmove(ray_len + total, ray_len + src, sizeof(float) * n);
+            std::memmove(ray_contrib + 3 * total, ray_contrib + 3 * src, sizeof(float) * 3 * n);
+        }
+        total += n;
+    }
+    return total;
+}
+
+namespace {
+
+inline uint64_t splitmix64(uint64_t x) {
+    x += 0x9E3779B97F4A7C15ull;
+    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+    x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+    return x ^ (x >> 31);
+}
+
+inline double to_unit(uint64_t x) { return double(x >> 11) * (1.0 / 9007199254740992.0); }
+
+}  // namespace
+
+int64_t gather_rays(const ShadeHits &hits, int n_gather, uint64_t seed, int64_t frame, double eps,
+                    int64_t *ray_count, float *ray_org, float *ray_dir, int threads,
+                    const StopCheck &stop) {
+    const int64_t P = hits.count;
+    std::vector<int64_t> offset(P + 1, 0);
+    for (int64_t p = 0; p < P; ++p) {
+        const int32_t m = hits.material[p];
+        ray_count[p] = m >= 0 ? n_gather : 0;
+        offset[p + 1] = offset[p] + ray_count[p];
+    }
+    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
+    const uint64_t base = splitmix64(seed ^ splitmix64(uint64_t(frame) + 0x6A09E667F3BCC909ull));
+    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
+        const int64_t p1 = std::min(P, (c + 1) * kChunk);
+        for (int64_t p = c * kChunk; p < p1; ++p) {
+            if (ray_count[p] == 0) continue;
+            const double *x = hits.pos + 3 * p;
+            const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
+            float u[3], v[3];
+            tangent_frame(n, u, v);
+            uint64_t h = splitmix64(base ^ uint64_t(p) * 0xD1B54A32D192ED03ull);
+            for (int k = 0; k < n_gather; ++k) {
+                h = splitmix64(h);
+                const double u1 = (k + to_unit(h)) / n_gather;  // stratified in cos²θ
+                h = splitmix64(h);
+                const double phi = 2.0 * kPi * to_unit(h);
+                const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
+                const double lx = r * std::cos(phi), ly = r * std::sin(phi);
+                const int64_t w = offset[p] + k;
+                float *ro = ray_org + 3 * w, *rd = ray_dir + 3 * w;
+                for (int a = 0; a < 3; ++a) {
+                    ro[a] = float(x[a] + eps * ng[a]);
+                    rd[a] = float(lx * u[a] + ly * v[a] + z * n[a]);
+                }
+            }
+        }
+    });
+    return offset[P];
+}
+
+int64_t lookup_record(const RecordGrid &g, const double y[3], const float n[3], int32_t obj) {
+    int64_t c[3];
+    for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((y[a] - g.origin[a]) / g.pitch));
+    const double p2 = g.pitch * g.pitch;
+    int64_t best = -1;
+    double best_score = 0.0, best_penalty = 0.0;
+    auto scan = [&](int64_t i, int64_t j, int64_t k) {
+        i -= g.lo[0], j -= g.lo[1], k -= g.lo[2];
+        if (i < 0 || j < 0 || k < 0 || i >= g.dims[0] || j >= g.dims[1] || k >= g.dims[2]) return;
+        const int64_t key = (i * g.dims[1] + j) * g.dims[2] + k;
+        int64_t q0, q1;
+        if (g.cell_start) {
+            q0 = g.cell_start[key], q1 = g.cell_start[key + 1];
+        } else {
+            q0 = std::lower_bound(g.sorted_key, g.sorted_key + g.count, key) - g.sorted_key;
+            q1 = std::upper_bound(g.sorted_key + q0, g.sorted_key + g.count, key) - g.sorted_key;
+        }
+        for (int64_t q = q0; q < q1; ++q) {
+            const int64_t r = g.order[q];
+            const double *cr = g.centroid + 3 * r;
+            const float *nr = g.normal + 3 * r;
+            const double dx = y[0] - cr[0], dy = y[1] - cr[1], dz = y[2] - cr[2];
+            // Nearest centroid, strongly preferring the same side and object.
+            const double penalty = 4.0 * (1.0 - dot3(nr, n)) + (g.object[r] != obj ? 4.0 : 0.0);
+            const double score = dx * dx + dy * dy + dz * dz + p2 * penalty;
+            if (best < 0 || score < best_score) best = r, best_score = score, best_penalty = penalty;
+        }
+    };
+    // The record of this surface (same object and side) in the hit's own
+    // voxel stands for the hit point; only without one look at the neighbours.
+    scan(c[0], c[1], c[2]);
+    if (best >= 0 && best_penalty < 0.5) return best;
+    for (int di = -1; di <= 1; ++di)
+        for (int dj = -1; dj <= 1; ++dj)
+            for (int dk = -1; dk <= 1; ++dk)
+                if (di || dj || dk) scan(c[0] + di, c[1] + dj, c[2] + dk);
+    return best;
+}
+
+void gather_shade(const ShadeHits &hits, const ShadeMaterials &mats, const ShadeMIS &mis,
+                  const ShadeTriangles &tris, const RecordGrid &grid, const int64_t *ray_count,
+                  const float *ray_dir, const int32_t *prim, float *out, int threads,
+                  const StopCheck &stop) {
+    const int64_t P = hits.count;
+    std::vector<int64_t> offset(P + 1, 0);
+    for (int64_t p = 0; p < P; ++p) offset[p + 1] = offset[p] + ray_count[p];
+    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
+    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
+        const int64_t p1 = std::min(P, (c + 1) * kChunk);
+        for (int64_t p = c * kChunk; p < p1; ++p) {
+            const int32_t m = hits.material[p];
+            if (m < 0 || offset[p + 1] == offset[p]) continue;
+            const double *x = hits.pos + 3 * p;
+            const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
+            double s[3] = {0.0, 0.0, 0.0};
+            for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
+                const int32_t t = prim[r];
+                if (t < 0 || t >= tris.count) continue;
+                const float *df = ray_dir + 3 * r;
+                const double d[3] = {df[0], df[1], df[2]};
+                const double dl = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+                const float wi[3] = {float(d[0] / dl), float(d[1] / dl), float(d[2] / dl)};
+                const float cos_x = dot3(n, wi);
+                if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) continue;
+                // Hit point: the ray against the hit triangle's plane, in double.
+                const double *v0 = tris.v + 9 * int64_t(t), *v1 = v0 + 3, *v2 = v0 + 6;
+                const double e1[3] = {v1[0] - v0[0], v1[1] - v0[1], v1[2] - v0[2]};
+                const double e2[3] = {v2[0] - v0[0], v2[1] - v0[1], v2[2] - v0[2]};
+                double nt[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                                e1[0] * e2[1] - e1[1] * e2[0]};
+                const double nl = std::sqrt(nt[0] * nt[0] + nt[1] * nt[1] + nt[2] * nt[2]);
+                if (!(nl > 0.0)) continue;
+                nt[0] /= nl, nt[1] /= nl, nt[2] /= nl;
+                const double o[3] = {x[0] + 0.0, x[1] + 0.0, x[2] + 0.0};
+                const double dn = (d[0] * nt[0] + d[1] * nt[1] + d[2] * nt[2]) / dl;
+                if (dn == 0.0) continue;
+                const double tt = ((v0[0] - o[0]) * nt[0] + (v0[1] - o[1]) * nt[1] +
+                                   (v0[2] - o[2]) * nt[2]) / dn;
+                const double y[3] = {o[0] + tt * wi[0], o[1] + tt * wi[1], o[2] + tt * wi[2]};
+                const bool front = dn < 0.0;
+                const int32_t obj = tris.object[t];
+                if (!front && !tris.two_sided[obj]) continue;  // black back of a one-sided surface
+                if (tris.emitter[obj]) continue;                 // emitters: their own VPL set
+                const float ns[3] = {float(front ? nt[0] : -nt[0]), float(front ? nt[1] : -nt[1]),
+                                     float(front ? nt[2] : -nt[2])};
+                const int64_t rec = lookup_record(grid, y, ns, obj);
+                if (rec < 0) continue;
+                const float cos_y = -dot3(ns, wi);
+                if (cos_y <= 0.f) continue;
+                const double r2 = (y[0] - x[0]) * (y[0] - x[0]) + (y[1] - x[1]) * (y[1] - x[1]) +
+                                  (y[2] - x[2]) * (y[2] - x[2]);
+                const double pa = grid.pa[rec];
+                const double denom = pa * r2 / cos_y + mis.n_gather * cos_x / kPi;
+                if (!(denom > 0.0)) continue;
+                float f[3];
+                shade_brdf(mats, m, n, wi, wo, f);
+                const float *L = grid.radiance + 3 * rec;
+                for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * cos_x / denom;
+            }
+            for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += float(s[ch]);
+        }
+    });
+}
+
+void vpl_accumulate(int64_t n_pixels, const int64_t *ray_count, const float *ray_contrib,
+                    const uint8_t *occluded, float *out, int threads, const StopCheck &stop) {
+    std::vector<int64_t> offset(n_pixels + 1, 0);
+    for (int64_t p = 0; p < n_pixels; ++p) offset[p + 1] = offset[p] + ray_count[p];
+    const int64_t n_chunks = (n_pixels + kChunk - 1) / kChunk;
+    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
+        const int64_t p1 = std::min(n_pixels, (c + 1) * kChunk);
+        for (int64_t p = c * kChunk; p < p1; ++p) {
+            double s[3] = {0.0, 0.0, 0.0};  // fixed order: the pixel's rays in VPL order
+            for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
+                if (occluded[r]) continue;
+                for (int ch = 0; ch < 3; ++ch) s[ch] += ray_contrib[3 * r + ch];
+            }
+            for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] = float(s[ch]);
+        }
+    });
+}
+
+}  // namespace voxgi

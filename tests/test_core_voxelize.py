@@ -53,7 +53,8 @@ def test_no_triangles_gives_empty_arrays():
     a["triangles"] = np.zeros((0, 3, 3))
     a["tri_object"] = np.zeros(0, np.int32)
     out = _core.voxelize(**a)
-    assert out["ijk"].shape == (0, 3) and out["area"].shape == (0,)
+    assert out["ijk"].shape == (0, 3)
+    assert out["area"].shape == (0,)
 
 
 @pytest.mark.parametrize(("name", "bad"), [
@@ -189,3 +190,47 @@ def test_triangle_on_a_grid_plane(x):
     i = round(x / 0.1)
     assert list(layers) == [v for v in (i - 1, i) if 0 <= v < 10]
     np.testing.assert_allclose(out["normal"][f], np.tile([1, 0, 0], (f.sum(), 1)), atol=1e-7)
+
+
+def _sat_overlap(tri, centres, half):
+    """Separating-axis triangle/closed-box test, (B,) bool (Akenine-Möller)."""
+    v = tri[None] - centres[:, None, :]
+    e = [tri[1] - tri[0], tri[2] - tri[1], tri[0] - tri[2]]
+    ok = np.ones(len(centres), bool)
+    for ax in [*np.eye(3), np.cross(e[0], e[1]),
+               *[np.cross(a, b) for a in np.eye(3) for b in e]]:
+        if not np.any(ax):
+            continue
+        r = half * np.abs(ax).sum()
+        p = v @ ax
+        ok &= ~((p.min(axis=1) > r) | (p.max(axis=1) < -r))
+    return ok
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_touching_cubes_are_included_exactly(seed):
+    # Vertices on a 1/4-voxel lattice with a power-of-two pitch: vertices,
+    # edges and faces lie exactly on voxel faces, edges and corners, and the
+    # SAT test with the closed cube is exact in floating point. Every cube
+    # that merely touches a triangle must be there (this is where rounding
+    # would open gaps between neighbouring triangles); no other cube may be.
+    rng = np.random.default_rng(seed)
+    pitch = 0.125
+    tris = rng.integers(0, 4 * 8 + 1, size=(8, 3, 3)) * (pitch / 4)
+    area2 = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    tris = np.ascontiguousarray(tris[area2 > 0])
+    a = args()
+    a.update(triangles=tris, tri_object=np.zeros(len(tris), np.int32), pitch=pitch,
+             dims=np.array([8, 8, 8], np.int32))
+    out = _core.voxelize(**a)
+    cells = np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    centres = (cells + 0.5) * pitch
+    closed = np.zeros(len(cells), bool)
+    for t in tris:
+        closed |= _sat_overlap(t, centres, 0.5 * pitch)
+    have = np.zeros((8, 8, 8), bool)
+    have[tuple(out["ijk"].T)] = True
+    np.testing.assert_array_equal(have.reshape(-1), closed)
+    want = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]),
+                                axis=1).sum()
+    assert out["area"][out["side"] == 0].sum(dtype=np.float64) == pytest.approx(want, rel=1e-6)

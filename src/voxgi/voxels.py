@@ -18,7 +18,8 @@ __all__ = ["VoxelSet", "estimate_memory", "voxelize"]
 class VoxelSet:
     """Sparse surface records of a voxelized scene.
 
-    One record per voxel, surface orientation (side) and material; see
+    One record per voxel, object, orientation cluster, side of the other
+    surfaces' planes in the voxel, and side of the surface; see
     :func:`voxelize`. All arrays have length ``N = len(vox)``.
 
     Attributes
@@ -29,9 +30,15 @@ class VoxelSet:
     normal : (N, 3) float32
         Unit normal, area-weighted over the record's pieces.
     area : (N,) float32
-        Surface area represented, scene units².
+        Surface area represented, scene units²: the exact area of the
+        record's triangles clipped to the voxel. The front records
+        (``side == 0``) sum to the scene's area; every reverse-side record
+        repeats its front record's area, so ``area.sum()`` is twice it. It
+        is 0 for a surface that only touches the voxel's closed cube (kept:
+        the voxel must still block lines, DESIGN-NOTES §2); see
+        ``stats["touch_records"]``.
     albedo, emission : (N, 3) float32
-        Area-weighted albedo and emitted radiance.
+        The object's albedo and emitted radiance (0 on black back records).
     centroid : (N, 3) float64
         A point on the surface inside the voxel (where a VPL sits).
     object_id : (N,) int32
@@ -130,20 +137,21 @@ def estimate_memory(triangles: np.ndarray, pitch: float) -> dict:
     at most two per pair (front and reverse side); a piece cut in two by a
     thin wall's planes (rare) can add a few more, not counted here.
     """
-    g = np.asarray(triangles, dtype=np.float64) / pitch
-    cr = np.cross(g[:, 1] - g[:, 0], g[:, 2] - g[:, 0])
-    # |cross| / 2 * ||n||_1 = ||cross||_1 / 2
-    an1 = 0.5 * np.abs(cr).sum(axis=1)
-    ext = (g.max(axis=1) - g.min(axis=1)).sum(axis=1)
+    t = np.asarray(triangles, dtype=np.float64)
+    a, b, c = t[:, 0], t[:, 1], t[:, 2]
+    # A ||n||_1 = ||cross||_1 / 2, in voxel units².
+    an1 = (0.5 / pitch**2) * np.abs(np.cross(b - a, c - a)).sum(axis=1)
+    # (Elementwise max/min of the corners: much faster than reducing axis 1.)
+    ext = (np.maximum(np.maximum(a, b), c) - np.minimum(np.minimum(a, b), c)).sum(axis=1) / pitch
     pairs = float(np.sum(2.0 * an1 + 4.0 * ext + 8.0))
     expected = float(np.sum(an1 + ext + 1.0))
     records = 2.0 * pairs
     nbytes = max(2 * _PAIR_BYTES * pairs,                                  # pairs + radix buffer
                  _PAIR_BYTES * pairs + _KERNEL_RECORD_BYTES * records,      # pairs + records
                  (_KERNEL_RECORD_BYTES + _ARRAY_RECORD_BYTES) * records)    # records -> numpy
-    nbytes += g.nbytes  # the concatenated triangles
-    return {"pairs": int(math.ceil(pairs)), "expected_pairs": int(math.ceil(expected)),
-            "records": int(math.ceil(records)), "bytes": int(math.ceil(nbytes))}
+    nbytes += t.nbytes  # the concatenated triangles
+    return {"pairs": math.ceil(pairs), "expected_pairs": math.ceil(expected),
+            "records": math.ceil(records), "bytes": math.ceil(nbytes)}
 
 
 def _available_memory() -> int:

@@ -1,0 +1,168 @@
+"""Export a voxgi :class:`~voxgi.Scene` to a Mitsuba 3 scene dictionary.
+
+Used by the benchmarks to render the *same* scene with a path tracer
+(DESIGN-NOTES §9, §10). Mitsuba is imported lazily and is never a runtime
+dependency of voxgi (it is in the optional ``bench`` extra).
+
+The translation keeps voxgi's conventions:
+
+- meshes as ``mi.Mesh`` objects built from the scene's float64 vertices
+  (Mitsuba stores float32), winding and hence normals unchanged;
+- a Lambertian ``diffuse`` BSDF, one-sided like voxgi's surfaces (Mitsuba's
+  BSDFs are black from behind), wrapped in ``twosided`` for two-sided objects;
+- an ``area`` emitter with the material's radiance, emitting on the front
+  side only (a two-sided emitter gets a second, reversed copy);
+- glossy materials are exported as their diffuse part only (Mitsuba has no
+  Ashikhmin–Shirley BSDF): the comparison is meant for diffuse scenes;
+- the camera as ``perspective`` (or ``thinlens`` with an aperture), vertical
+  field of view, ``look_at`` (Mitsuba's image x axis is ``forward x up``,
+  as voxgi's);
+- a ``box`` pixel filter (the default Gaussian blurs across pixels) and a
+  ``path`` integrator with ``max_depth = -1`` (no depth limit; Russian
+  roulette keeps it unbiased).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .scene import Camera, Scene
+
+__all__ = ["import_mitsuba", "render_mitsuba", "to_mitsuba"]
+
+
+def import_mitsuba(variant: str | None = None):
+    """Import Mitsuba 3 and set a variant.
+
+    Parameters
+    ----------
+    variant : str or None
+        ``None`` picks the fastest CPU variant that works here: ``llvm_ad_rgb``
+        (needs libLLVM >= 16; ``DRJIT_LIBLLVM_PATH`` is pointed at a
+        ``libLLVM-19.so`` when one is installed and the variable is unset),
+        else ``scalar_rgb``.
+
+    Returns
+    -------
+    module
+        The ``mitsuba`` module with the variant set.
+
+    Raises
+    ------
+    ImportError
+        When the ``mitsuba`` package is not installed (``pip install voxgi[bench]``).
+    """
+    try:
+        import mitsuba as mi
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError("Mitsuba 3 is needed for reference renders: pip install "
+                          "'voxgi[bench]' (or pip install mitsuba)") from exc
+    if variant is not None:
+        mi.set_variant(variant)
+        return mi
+    if "DRJIT_LIBLLVM_PATH" not in os.environ:
+        for cand in ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/lib/libLLVM.so"):
+            if Path(cand).exists():
+                os.environ["DRJIT_LIBLLVM_PATH"] = cand
+                break
+    for v in ("llvm_ad_rgb", "scalar_rgb"):
+        try:
+            mi.set_variant(v)
+            return mi
+        except (ImportError, AttributeError, RuntimeError):
+            continue
+    raise ImportError("no usable Mitsuba variant (tried llvm_ad_rgb, scalar_rgb)")
+
+
+def _mesh(mi, name: str, vertices: np.ndarray, faces: np.ndarray, bsdf, emitter=None):
+    props = mi.Properties()
+    props["bsdf"] = bsdf
+    if emitter is not None:
+        props["emitter"] = emitter
+    mesh = mi.Mesh(name, len(vertices), len(faces), props=props, has_vertex_normals=False,
+                   has_vertex_texcoords=False)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = np.ascontiguousarray(vertices, np.float32).ravel()
+    params["faces"] = np.ascontiguousarray(faces, np.uint32).ravel()
+    params.update()
+    return mesh
+
+
+def to_mitsuba(scene: Scene, *, spp: int = 64, camera: Camera | None = None,
+               max_depth: int = -1, sampler: str = "independent", seed: int = 0) -> dict:
+    """A Mitsuba 3 scene dictionary for ``scene`` (call ``mi.load_dict`` on it).
+
+    Parameters
+    ----------
+    scene : Scene
+        With a camera (or pass ``camera``).
+    spp : int
+        Samples per pixel of the sampler.
+    camera : Camera, optional
+        Overrides ``scene.camera``.
+    max_depth : int
+        Path length limit of the ``path`` integrator (-1: none).
+    sampler : str
+        Mitsuba sampler plugin name.
+    seed : int
+        Sampler seed.
+
+    Returns
+    -------
+    dict
+        ``{"type": "scene", "integrator": ..., "sensor": ..., "<object>": mesh, ...}``.
+        Mitsuba must already have a variant set (:func:`import_mitsuba`).
+    """
+    import mitsuba as mi
+
+    cam = camera if camera is not None else scene.camera
+    if cam is None:
+        raise ValueError("to_mitsuba: the scene has no camera")
+    sensor = {
+        "type": "thinlens" if cam.aperture > 0 else "perspective",
+        "fov": float(cam.fov),
+        "fov_axis": "y",
+        "near_clip": 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0))),
+        "to_world": mi.ScalarTransform4f().look_at(origin=list(cam.eye), target=list(cam.target),
+                                                   up=list(cam.up)),
+        "sampler": {"type": sampler, "sample_count": int(spp), "seed": int(seed)},
+        "film": {"type": "hdrfilm", "width": int(cam.width), "height": int(cam.height),
+                 "rfilter": {"type": "box"}, "pixel_format": "rgb",
+                 "component_format": "float32"},
+    }
+    if cam.aperture > 0:
+        sensor["aperture_radius"] = float(cam.aperture)
+        sensor["focus_distance"] = float(cam.focus)
+    d = {"type": "scene", "integrator": {"type": "path", "max_depth": int(max_depth)},
+         "sensor": sensor}
+    for i, o in enumerate(scene.objects):
+        m = o.material
+        bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(m.albedo)}}
+        if o.two_sided:
+            bsdf = {"type": "twosided", "bsdf": bsdf}
+        bsdf_obj = mi.load_dict(bsdf)
+        key = f"obj{i:03d}_{o.name}".replace(" ", "_")
+        emitter = None
+        if m.is_emitter:
+            emitter = mi.load_dict({"type": "area",
+                                    "radiance": {"type": "rgb", "value": list(m.emission)}})
+        d[key] = _mesh(mi, key, o.vertices, o.faces, bsdf_obj, emitter)
+        if m.is_emitter and o.two_sided:
+            back = mi.load_dict({"type": "area",
+                                 "radiance": {"type": "rgb", "value": list(m.emission)}})
+            d[key + "_back"] = _mesh(mi, key + "_back", o.vertices, o.faces[:, ::-1],
+                                     mi.load_dict(bsdf), back)
+    return d
+
+
+def render_mitsuba(scene: Scene, spp: int, *, camera: Camera | None = None, seed: int = 0,
+                   variant: str | None = None) -> np.ndarray:
+    """Render ``scene`` with Mitsuba's path tracer; returns (H, W, 3) float32
+    linear radiance, ``image[0, 0]`` top-left (as voxgi's images)."""
+    mi = import_mitsuba(variant)
+    sc = mi.load_dict(to_mitsuba(scene, spp=spp, camera=camera, seed=seed))
+    img = mi.render(sc, spp=int(spp), seed=int(seed))
+    return np.ascontiguousarray(np.array(img, dtype=np.float32)[..., :3])

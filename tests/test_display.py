@@ -1,0 +1,499 @@
+"""voxgi.render: the display's normalisation, anti-aliasing, depth of field,
+glossy, input checks.
+
+Most tests put an *analytic* radiosity on records made directly from the
+scene's triangles (one record per triangle: centroid, winding normal, area),
+so they check the display independently of the voxelizer and the solver.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import threading
+
+import numpy as np
+import pytest
+import trimesh
+
+import voxgi
+from voxgi.display import VPLSampler, camera_rays, frame_samples
+from voxgi.radiosity import Solution
+from voxgi.voxels import VoxelSet
+
+
+def triangle_solution(scene: voxgi.Scene, radiosity) -> Solution:
+    """A Solution with one record per triangle and radiosity ``radiosity(vox)``.
+
+    A test stand-in for voxelize + solve: the records are exact (on the
+    surface, true normal and area), so only the display is under test.
+    """
+    t = scene.triangles()
+    tri, obj = t["triangles"], t["object"]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = 0.5 * np.linalg.norm(n, axis=1)
+    n /= (2.0 * area)[:, None]
+    c = tri.mean(axis=1)
+    lo = scene.bounds[0]
+    # Voxel pitch >= every edge: each triangle's points lie in its centroid's
+    # voxel or a neighbour, where the gather rays' record lookup searches.
+    edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max()
+    pitch = float(max(np.ptp(scene.bounds, axis=0).max() / 64, edges))
+    vox = VoxelSet(ijk=np.floor((c - lo) / pitch).astype(np.int32), normal=n.astype(np.float32),
+                   area=area.astype(np.float32), albedo=t["albedo"][obj],
+                   emission=t["emission"][obj], centroid=c, object_id=obj,
+                   back=np.zeros(len(c), bool), pitch=pitch, origin=lo, resolution=64,
+                   scene_fingerprint=scene.fingerprint())
+    return Solution(vox=vox, radiosity=np.asarray(radiosity(vox), np.float32))
+
+
+def real_solution(scene, resolution=32, directions=8):
+    """voxelize + solve, or skip while those stages are not implemented."""
+    try:
+        vox = voxgi.voxelize(scene, resolution=resolution)
+        return voxgi.solve(vox, directions=directions)
+    except NotImplementedError as exc:
+        pytest.skip(f"pipeline stage not implemented yet: {exc}")
+
+
+# -- the normalisation: furnaces ----------------------------------------------------------
+@pytest.mark.parametrize("rho", [0.5, 0.9])
+def test_furnace_sphere_analytic_radiosity(rho):
+    # Every record of the closed furnace has B = pi Le / (1 - rho); the display
+    # must give L = Le + (rho/pi) E = Le / (1 - rho) in every pixel. Inside a
+    # closed enclosure the estimator is unbiased (∫ G dA = pi), so what is left
+    # is VPL noise, shared by all pixels: after 32 frames × 16 VPLs it is
+    # ~0.3% per pixel at rho 0.9 (measured; est_rel_mse ~1e-6), plus the
+    # bounded-G loss near contact (< 0.1% for these triangle areas).
+    le = 1.0
+    scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=le, width=32, height=32)
+    sol = triangle_solution(scene, lambda v: np.full((len(v), 3), math.pi * le / (1 - rho)))
+    out = voxgi.render(scene, sol, progress=False, max_frames=32, tol=0.0)
+    expect = le / (1 - rho)
+    err = np.abs(out.image / expect - 1.0)
+    assert out.image.shape == (32, 32, 3) and out.image.dtype == np.float32
+    assert err.max() < 0.01, err.max()
+    assert out.frames == 32
+    assert out.stats["vpl_split"] == [16, 0]  # all records emit: one set only
+    assert out.stderr is not None and out.stderr.shape == out.image.shape
+    # The estimated error must be of the size of the actual one (within 3x).
+    rms_rel = float(np.sqrt(np.mean((out.image / expect - 1.0) ** 2)))
+    est_rel = float(np.sqrt(np.mean(out.stderr ** 2)) / expect)
+    assert est_rel / 3 < rms_rel < 3 * est_rel + 1e-4
+
+
+@pytest.mark.parametrize("rho", [0.5, 0.9])
+def test_furnace_sphere_voxel_records_analytic_radiosity(rho):
+    # Real voxel records (supercover, clipped areas, black back records that
+    # must never be VPLs) with the analytic B on the front records.
+    scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=1.0, width=24, height=24)
+    vox = voxgi.voxelize(scene, resolution=32)
+    b = np.where(vox.back[:, None], 0.0, math.pi / (1 - rho)) * np.ones((1, 3))
+    out = voxgi.render(scene, Solution(vox=vox, radiosity=b.astype(np.float32)), progress=False,
+                       max_frames=32, tol=0.0)
+    err = np.abs(out.image * (1 - rho) - 1.0)
+    assert err.max() < 0.01, err.max()  # measured 0.4% (0.5) and 0.7% (0.9)
+
+
+def test_cap_sphere_voxel_records_gather_lookup():
+    # The cap sphere on real voxel records: the gather rays look up records
+    # (front side, right object) in the voxel grid. Mean error over the
+    # non-cap pixels within 1% (measured 0.02%; max 2.0%, noise).
+    rho, le = 0.6, 2.0
+    scene = voxgi.scenes.cap_sphere(albedo=rho, emission=le, cap_angle=70.0, subdivisions=4,
+                                    width=24, height=24)
+    scene.camera = scene.camera.replace(target=(0.0, -1.0, -0.5), fov=60.0)  # the rest only
+    vox = voxgi.voxelize(scene, resolution=32)
+    le_mean = float(np.sum(vox.area * vox.emission[:, 0]) / np.sum(vox.area[~vox.back]))
+    b = math.pi * (vox.emission.astype(np.float64) + rho * le_mean / (1 - rho))
+    b[vox.back] = 0.0
+    out = voxgi.render(scene, Solution(vox=vox, radiosity=b.astype(np.float32)), progress=False,
+                       max_frames=32, tol=0.0)
+    assert out.stats["gather_rays"] > 0
+    rel = out.image[..., 0] / (rho * le_mean / (1 - rho)) - 1.0
+    assert abs(rel.mean()) < 0.01, rel.mean()
+    assert np.abs(rel).max() < 0.05, np.abs(rel).max()
+
+
+def test_furnace_sphere_full_pipeline_coarse():
+    # The whole pipeline (voxelize, solve, display) at a coarse setting that
+    # runs in seconds: rho 0.5 at resolution 16, R 6 measured max 0.76%.
+    scene = voxgi.scenes.furnace_sphere(albedo=0.5, emission=1.0, width=24, height=24)
+    sol = real_solution(scene, resolution=16, directions=6)
+    out = voxgi.render(scene, sol, progress=False, max_frames=32, tol=0.0)
+    err = np.abs(out.image * 0.5 - 1.0)
+    assert err.max() < 0.01, err.max()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("rho", [0.5, 0.9])
+def test_furnace_sphere_full_pipeline(rho):
+    # The issue's target with the real voxelizer and solver: within 1% in
+    # every pixel. Measured at resolution 32, R 8: max 0.40% (rho 0.5) and
+    # 0.90% (rho 0.9; mean -0.43%, the solver's share, which falls with
+    # resolution: -1.35% at 16, -0.80% at 24).
+    scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=1.0, width=24, height=24)
+    sol = real_solution(scene, resolution=32, directions=8)
+    out = voxgi.render(scene, sol, progress=False, max_frames=32, tol=0.0)
+    err = np.abs(out.image * (1 - rho) - 1.0)
+    assert err.max() < 0.01, err.max()
+
+
+def test_cap_sphere_nonuniform_emission():
+    # Inside a sphere every pair has cos cos / (pi r²) = 1/A, so
+    # L(x) = Le(x) + rho Le_mean / (1 - rho) (DESIGN-NOTES §1): the cap
+    # pixels and the rest differ by exactly Le. This exercises both VPL sets
+    # (emitters and non-emitters) and their split.
+    rho, le = 0.6, 2.0
+    scene = voxgi.scenes.cap_sphere(albedo=rho, emission=le, cap_angle=70.0, subdivisions=4,
+                                    width=24, height=24)
+    scene.camera = scene.camera.replace(target=(0.0, 1.0, -0.5), fov=120.0)  # see cap and rest
+    t = scene.triangles()
+    a = 0.5 * np.linalg.norm(np.cross(t["triangles"][:, 1] - t["triangles"][:, 0],
+                                      t["triangles"][:, 2] - t["triangles"][:, 0]), axis=1)
+    le_mean = float(np.sum(a * t["emission"][t["object"], 0]) / a.sum())
+    sol = triangle_solution(
+        scene, lambda v: math.pi * (v.emission.astype(np.float64) + rho * le_mean / (1 - rho)))
+    out = voxgi.render(scene, sol, progress=False, max_frames=128, tol=0.0)
+    assert out.stats["vpl_split"][0] >= 1 and out.stats["vpl_split"][1] >= 1
+    # Which object each pixel sees (centre rays of the pinhole camera).
+    from voxgi.display import _Tracer
+
+    tr = _Tracer(scene, 1)
+    org, d = camera_rays(scene.camera)
+    prim = tr.intersect(org.astype(np.float32), d.astype(np.float32))
+    tr.close()
+    obj = tr.obj[prim].reshape(24, 24)
+    ref = np.where(obj == 0, le, 0.0) + rho * le_mean / (1 - rho)
+    rel = np.abs(out.image[..., 0] / ref - 1.0)
+    # Away from the cap's border (AA mixes the two values there): 2%. Measured:
+    # mean error < 0.1% on both parts; max 2.3% after 48 frames, 1.1% after
+    # 192 (the gather rays' per-pixel noise; pure VPLs, gather=0, give 0.7%
+    # here because inside a sphere every VPL contributes the same).
+    border = np.zeros_like(obj, bool)
+    border[:-1] |= obj[:-1] != obj[1:]
+    border[1:] |= obj[:-1] != obj[1:]
+    border[:, :-1] |= obj[:, :-1] != obj[:, 1:]
+    border[:, 1:] |= obj[:, :-1] != obj[:, 1:]
+    assert (obj == 0).sum() > 20 and (obj == 1).sum() > 20
+    assert rel[~border].max() < 0.02, rel[~border].max()
+
+
+# -- anti-aliasing and depth of field -----------------------------------------------------
+def _emitter_scene(quads_z: list[tuple[float, np.ndarray]], cam: voxgi.Camera) -> voxgi.Scene:
+    """Emissive black-albedo squares (centres (x, y) at depth z), nothing else."""
+    s = voxgi.Scene(cam)
+    for k, (z, centres, size) in enumerate(quads_z):
+        v, f = [], []
+        for i, (x, y) in enumerate(centres):
+            h = size / 2
+            v += [[x - h, y - h, z], [x + h, y - h, z], [x + h, y + h, z], [x - h, y + h, z]]
+            f += [[4 * i, 4 * i + 1, 4 * i + 2], [4 * i, 4 * i + 2, 4 * i + 3]]  # normal +z
+        s.add(trimesh.Trimesh(np.array(v, float), np.array(f), process=False),
+              voxgi.Material(albedo=0.0, emission=1.0), name=f"layer{k}")
+    return s
+
+
+def _emission_solution(scene):
+    return triangle_solution(scene, lambda v: math.pi * v.emission.astype(np.float64))
+
+
+def test_antialiased_edge_matches_supersampled():
+    # A tilted white square on black: the progressive frames (one shared
+    # sub-pixel offset each, Halton-stratified) must give the box-filtered
+    # pixel coverage, i.e. a 16x16 supersampled render averaged per pixel.
+    rot = trimesh.transformations.rotation_matrix(0.3, [0, 0, 1])
+    sq = np.array([[-0.5, -0.5, 0], [0.5, -0.5, 0], [0.5, 0.5, 0], [-0.5, 0.5, 0]])
+    v = (rot[:3, :3] @ sq.T).T
+    cam = voxgi.Camera(eye=(0, 0, 2), target=(0, 0, 0), fov=40.0, width=32, height=32)
+    s = voxgi.Scene(cam)
+    s.add(trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], process=False),
+          voxgi.Material(albedo=0.0, emission=1.0), name="square")
+    sol = _emission_solution(s)
+    aa = voxgi.render(s, sol, progress=False, max_frames=64, tol=0.0).image[..., 0]
+    one = voxgi.render(s, sol, progress=False, max_frames=1).image[..., 0]
+    big = voxgi.render(s, sol, progress=False, max_frames=1,
+                       camera=cam.replace(width=512, height=512)).image[..., 0]
+    ss = big.reshape(32, 16, 32, 16).mean(axis=(1, 3))
+    edge = (ss > 0.02) & (ss < 0.98)
+    assert edge.sum() > 40
+    # 64 stratified offsets estimate each pixel's coverage: measured max error
+    # 0.060 against a 32x32 supersampled render (0.042 with 128 frames), the
+    # 16x16 supersampling itself is off by up to ~1/32 at an edge.
+    assert np.abs(aa - ss).max() < 0.08
+    assert np.sqrt(np.mean((aa - ss) ** 2)) < 0.01  # measured 0.0059
+    # One sample per pixel is a stair-step: 0 or 1 at the edge pixels.
+    assert np.abs(one - ss)[edge].max() > 0.3
+    assert set(np.unique(one)) <= {0.0, 1.0}
+
+
+def _gradient_energy(img: np.ndarray) -> float:
+    gx, gy = np.diff(img, axis=1), np.diff(img, axis=0)
+    return float(np.sum(gx ** 2) + np.sum(gy ** 2))
+
+
+def test_depth_of_field_in_focus_sharp_out_of_focus_blurred():
+    # Two checkerboards of emitters, at distance 2 and 4 from the eye; the
+    # thin lens focused at 2 keeps the near one as sharp as a pinhole and
+    # blurs the far one (gradient energy), and the other way round.
+    cells = [(x, y) for x in np.arange(-3, 4) * 0.1 for y in np.arange(-3, 4) * 0.1
+             if (round(x * 10) + round(y * 10)) % 2 == 0]
+    near = [(x - 0.5, y) for x, y in cells]
+    far = [(2 * x + 1.0, 2 * y) for x, y in cells]
+    cam = voxgi.Camera(eye=(0, 0, 2), target=(0, 0, 0), fov=60.0, width=48, height=48)
+    s = _emitter_scene([(0.0, near, 0.1), (-2.0, far, 0.2)], cam)
+    sol = _emission_solution(s)
+    left, right = np.s_[:, :24], np.s_[:, 24:]
+
+    def energy(c):
+        img = voxgi.render(s, sol, progress=False, max_frames=64, tol=0.0, camera=c).image[..., 0]
+        return _gradient_energy(img[left]), _gradient_energy(img[right])
+
+    pin = energy(cam)
+    f_near = energy(cam.replace(aperture=0.1, focus_distance=2.0))
+    f_far = energy(cam.replace(aperture=0.1, focus_distance=4.0))
+    # In focus: as sharp as the pinhole (both see the box-filtered edges;
+    # measured ratio ~1.0). Out of focus: the 0.1 lens spreads a point over
+    # ~0.05 units on the other plane, about half a cell: energy falls a lot.
+    assert f_near[0] > 0.8 * pin[0]
+    assert f_far[1] > 0.8 * pin[1]
+    assert f_near[1] < 0.4 * pin[1]
+    assert f_far[0] < 0.4 * pin[0]
+
+
+def test_frame_samples_stratified_and_in_range():
+    offs = np.array([frame_samples(f, 3)[0] for f in range(64)])
+    lens = np.array([frame_samples(f, 3)[1] for f in range(64)])
+    assert np.all((offs >= 0) & (offs < 1))
+    assert np.all(np.hypot(lens[:, 0], lens[:, 1]) <= 1.0 + 1e-12)
+    # Stratified: a scrambled (0, 2)-sequence puts exactly one of its first 64
+    # points in each cell of an 8x8 grid, and of its first 16 in a 4x4 grid.
+    for n, k in ((64, 8), (16, 4)):
+        cells = np.floor(offs[:n] * k).astype(int)
+        assert np.array_equal(np.bincount(cells[:, 0] * k + cells[:, 1], minlength=k * k),
+                              np.ones(k * k, int))
+    # Also in 1D (0,1)-elementary intervals of 1/64 x 1.
+    assert len(np.unique(np.floor(offs[:, 0] * 64))) == 64
+
+
+def test_camera_rays_conventions():
+    cam = voxgi.Camera(eye=(0, 0, 0), target=(0, 0, -1), up=(0, 1, 0), fov=90.0, width=4,
+                       height=2)
+    org, d = camera_rays(cam)
+    d = d.reshape(2, 4, 3)
+    right, up, fwd = cam.frame()
+    assert np.allclose(np.linalg.norm(d, axis=2), 1.0)
+    assert d[0, 0] @ right < 0 and d[0, 0] @ up > 0       # top-left
+    assert d[1, 3] @ right > 0 and d[1, 3] @ up < 0       # bottom-right
+    # fov: the top edge of the image is 45° above the axis.
+    _, dtop = camera_rays(cam, offset=(0.5, 0.0))
+    t = dtop.reshape(2, 4, 3)[0, 1]
+    assert math.isclose(math.degrees(math.atan2(t @ up, t @ fwd)), 45.0, rel_tol=1e-9)
+
+
+# -- VPL sequence --------------------------------------------------------------------------
+def test_vpl_sampler_probability_proportional_to_area():
+    # Records with areas 1, 2, 3, 4 (no emitters): over many stratified
+    # frames each is drawn with frequency area / 10 (chi² test, 3 dof).
+    scene = voxgi.scenes.furnace_box(albedo=0.5, emission=0.0)
+    sol = triangle_solution(scene, lambda v: np.ones((len(v), 3)))
+    v = sol.vox
+    v.area = np.resize(np.array([1, 2, 3, 4], np.float32), len(v))
+    sampler = VPLSampler(sol, vpls_per_frame=16, seed=5, pdf="area")
+    assert sampler.counts == (0, 16)
+    picks = np.concatenate([sampler.frame(f)["index"] for f in range(400)])
+    obs = np.bincount(v.area[picks].astype(int) - 1, minlength=4)
+    exp = len(picks) * np.array([1, 2, 3, 4]) / 10 * (len(v) / 4 * 10) / v.area.sum()
+    chi2 = float(np.sum((obs - exp) ** 2 / exp))
+    assert chi2 < 16.3  # p = 0.001 for 3 degrees of freedom
+    # The same sequence every time (shared by all views): deterministic per seed.
+    again = VPLSampler(sol, vpls_per_frame=16, seed=5, pdf="area")
+    assert np.array_equal(again.frame(7)["index"], sampler.frame(7)["index"])
+    assert not np.array_equal(VPLSampler(sol, 16, seed=6, pdf="area").frame(7)["index"],
+                              sampler.frame(7)["index"])
+    # Estimator weights: (1/n) / p(y) with p = 1/TA per unit area.
+    fr = sampler.frame(3)
+    np.testing.assert_allclose(fr["weight"][:, 0], v.area.sum() / 16 * 1.0 / math.pi, rtol=1e-6)
+
+
+def test_vpl_sampler_power_pdf():
+    # pdf="power": probability ∝ ΔA·B. The weight is (B/π)/(n p(y)) with the
+    # area density p(y) = B_y/Φ (grey B), so π·weight = Φ/n for every draw.
+    scene = voxgi.scenes.furnace_box(albedo=0.5, emission=0.0)
+    rng = np.random.default_rng(9)
+    sol = triangle_solution(scene, lambda v: rng.uniform(0.5, 4.0, (len(v), 1)) * np.ones((1, 3)))
+    s = VPLSampler(sol, 16, seed=2)
+    phi = float(np.sum(sol.vox.area * sol.radiosity[:, 0]))
+    picks = []
+    for f in range(300):
+        fr = s.frame(f)
+        i = fr["index"]
+        np.testing.assert_allclose(fr["weight"][:, 0] * math.pi, phi / 16, rtol=1e-5)
+        picks.append(i)
+    picks = np.concatenate(picks)
+    p = sol.vox.area * sol.radiosity[:, 0] / phi
+    obs = np.bincount(picks, minlength=len(p))
+    big = p * len(picks) > 20  # chi² over the records expected >= 20 times
+    exp = p[big] * len(picks)
+    chi2 = float(np.sum((obs[big] - exp) ** 2 / exp))
+    assert chi2 < big.sum() + 5 * math.sqrt(2 * big.sum())
+
+
+def test_vpl_split_by_power_and_override():
+    rho, le = 0.6, 2.0
+    scene = voxgi.scenes.cap_sphere(albedo=rho, emission=le, cap_angle=40.0, subdivisions=3)
+    sol = triangle_solution(scene, lambda v: math.pi * (v.emission.astype(np.float64) + 1.0))
+    s = VPLSampler(sol, 16)
+    a, e = sol.vox.area.astype(float), sol.vox.is_emitter
+    pd = np.sum(a[e] * math.pi * (le + 1.0))
+    pi_ = np.sum(a[~e] * math.pi * 1.0)
+    assert s.counts[0] == int(np.clip(round(16 * pd / (pd + pi_)), 1, 15))
+    assert VPLSampler(sol, 16, emitter_share=0.75).counts == (12, 4)
+    assert VPLSampler(sol, 16, emitter_share=0.0).counts == (1, 15)  # each set keeps one
+
+
+# -- glossy ---------------------------------------------------------------------------------
+def test_glossy_highlight_and_skipped_when_absent():
+    # A floor under a small light, seen near the mirror direction of the
+    # light: the Ashikhmin–Shirley floor shows a highlight that the diffuse
+    # floor lacks; with no glossy material the stats say the term was skipped.
+    def scene(spec):
+        cam = voxgi.Camera(eye=(0, 1, 2), target=(0, 0, 0), fov=50.0, width=32, height=32)
+        s = voxgi.Scene(cam)
+        s.add(trimesh.Trimesh([[-2, 0, -2], [2, 0, -2], [2, 0, 2], [-2, 0, 2]],
+                              [[0, 2, 1], [0, 3, 2]], process=False),
+              voxgi.Material(albedo=0.5, specular=spec), name="floor")
+        y, h = 1.0, 0.1
+        s.add(trimesh.Trimesh([[-h, y, -2 - h], [h, y, -2 - h], [h, y, -2 + h], [-h, y, -2 + h]],
+                              [[0, 1, 2], [0, 2, 3]], process=False),
+              voxgi.Material(albedo=0.0, emission=50.0), name="light")
+        return s
+
+    base = scene(None)
+    glossy = scene(voxgi.AshikhminShirley(rs=0.5, nu=200.0, nv=200.0))
+    rb = voxgi.render(base, _emission_solution(base), progress=False, max_frames=8, tol=0.0)
+    rg = voxgi.render(glossy, _emission_solution(glossy), progress=False, max_frames=8, tol=0.0)
+    assert any(s.startswith("glossy") for s in rb.stats["skipped"])
+    assert not any(s.startswith("glossy") for s in rg.stats["skipped"])
+    assert rg.image.max() > 3 * rb.image.max()
+    assert np.all(np.isfinite(rg.image)) and rg.image.min() >= 0
+
+
+# -- bad input, edge cases ----------------------------------------------------------------
+@pytest.mark.parametrize("kw", [{"width": 0}, {"height": 0}, {"width": -3}, {"fov": 0.0},
+                                {"fov": 180.0}, {"fov": 200.0}, {"fov": -10.0}])
+def test_bad_camera_is_a_clear_error(kw):
+    cam = voxgi.Camera(width=8, height=8)
+    with pytest.raises(ValueError, match="Camera"):
+        cam.replace(**kw)
+
+
+def test_render_errors():
+    scene = voxgi.scenes.furnace_box(albedo=0.5, emission=1.0, width=8, height=8)
+    sol = triangle_solution(scene, lambda v: np.full((len(v), 3), 2 * math.pi))
+    other = voxgi.scenes.furnace_box(albedo=0.6, emission=1.0, width=8, height=8)
+    with pytest.raises(ValueError, match="another scene"):
+        voxgi.render(other, sol, progress=False)
+    nocam = voxgi.scenes.furnace_box(albedo=0.5, emission=1.0)
+    nocam.camera = None
+    with pytest.raises(ValueError, match="no camera"):
+        voxgi.render(nocam, sol, progress=False)
+    with pytest.raises(TypeError, match="sol"):
+        voxgi.render(scene, sol.radiosity, progress=False)
+    with pytest.raises(ValueError, match="vpls_per_frame"):
+        voxgi.render(scene, sol, vpls_per_frame=0, progress=False)
+    with pytest.raises(ValueError, match="max_frames"):
+        voxgi.render(scene, sol, max_frames=0, progress=False)
+    with pytest.raises(ValueError, match="tol"):
+        voxgi.render(scene, sol, tol=-1.0, progress=False)
+    with pytest.raises(TypeError, match="scene"):
+        voxgi.render("furnace-box", sol, progress=False)
+    bad = triangle_solution(scene, lambda v: np.full((len(v), 3), 2 * math.pi))
+    bad.radiosity = bad.radiosity[:-1]
+    with pytest.raises(ValueError, match="radiosity"):
+        voxgi.render(scene, bad, progress=False)
+
+
+def test_camera_seeing_nothing_gives_black():
+    scene = voxgi.scenes.furnace_sphere(albedo=0.5, emission=1.0, width=16, height=12)
+    sol = triangle_solution(scene, lambda v: np.full((len(v), 3), 2 * math.pi))
+    away = voxgi.Camera(eye=(0, 0, 5), target=(0, 0, 10), width=16, height=12)
+    out = voxgi.render(scene, sol, camera=away, progress=False, max_frames=3)
+    assert out.image.shape == (12, 16, 3)
+    assert np.all(out.image == 0.0)
+    assert out.stats["shadow_rays"] == 0
+
+
+def test_one_sided_back_is_black_and_inputs_untouched():
+    # Seen from outside, the inward-facing furnace sphere shows its black,
+    # non-emitting back; the solution's arrays are not modified by render.
+    scene = voxgi.scenes.furnace_sphere(albedo=0.5, emission=1.0, width=8, height=8)
+    scene.camera = voxgi.Camera(eye=(0, 0, 3), target=(0, 0, 0), fov=30.0, width=8, height=8)
+    sol = triangle_solution(scene, lambda v: np.full((len(v), 3), 2 * math.pi))
+    before = sol.radiosity.copy(), sol.vox.centroid.copy()
+    out = voxgi.render(scene, sol, progress=False, max_frames=2)
+    assert np.all(out.image == 0.0)
+    assert np.array_equal(before[0], sol.radiosity) and np.array_equal(before[1], sol.vox.centroid)
+
+
+def test_same_result_for_any_thread_count():
+    scene = voxgi.scenes.cap_sphere(albedo=0.5, emission=1.0, subdivisions=3, width=16, height=16)
+    sol = triangle_solution(scene, lambda v: math.pi * (v.emission.astype(np.float64) + 0.5))
+    a = voxgi.render(scene, sol, progress=False, max_frames=3, threads=1).image
+    b = voxgi.render(scene, sol, progress=False, max_frames=3, threads=2).image
+    assert np.array_equal(a, b)
+
+
+def test_tol_stops_early_and_reports():
+    scene = voxgi.scenes.furnace_sphere(albedo=0.5, emission=1.0, width=16, height=16)
+    sol = triangle_solution(scene, lambda v: np.full((len(v), 3), 2 * math.pi))
+    out = voxgi.render(scene, sol, progress=False, max_frames=200, tol=1e-4)
+    assert 4 <= out.frames < 200  # min_frames = 4; noise relMSE ~1e-5 per frame here
+    assert out.stats["est_rel_mse"] <= 1e-4
+    s = out.stats
+    assert s["primary_rays"] == 16 * 16 * out.frames
+    assert s["vpls"] == 16 * out.frames
+    assert 0 < s["shadow_rays"] <= 16 * 16 * 16 * out.frames
+    assert {"setup", "primary", "shade", "shadow", "total"} <= set(s["seconds"])
+
+
+def test_ctrl_c_returns_the_image_so_far():
+    scene = voxgi.scenes.furnace_sphere(albedo=0.5, emission=1.0, width=16, height=16)
+    sol = triangle_solution(scene, lambda v: np.full((len(v), 3), 2 * math.pi))
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        out = voxgi.render(scene, sol, progress=False, max_frames=1_000_000, tol=0.0)
+    finally:
+        timer.cancel()
+    assert out.stats["interrupted"]
+    assert 1 <= out.frames < 1_000_000
+    assert np.all(np.isfinite(out.image)) and out.image.mean() > 1.5
+
+
+def test_direct_light_matches_mitsuba_path_tracer():
+    # Direct light only (emitter records carry B = pi Le, all others B = 0),
+    # against Mitsuba 3's path tracer limited to one bounce (max_depth=2) on
+    # the Cornell box: an outside check of the display's normalisation,
+    # camera, pixel filter and the one-sided light. Skipped without mitsuba
+    # (an optional benchmark dependency). Measured relMSE 7.5e-5 at 32x32
+    # against 1024 spp for voxel resolutions 16 to 128; here, against 256 spp,
+    # 2.9e-4 (Mitsuba's noise).
+    pytest.importorskip("mitsuba")
+    from voxgi.mitsuba import import_mitsuba, to_mitsuba
+
+    scene = voxgi.scenes.cornell_box(width=32, height=32)
+    vox = voxgi.voxelize(scene, resolution=32)
+    b = (math.pi * vox.emission.astype(np.float64)).astype(np.float32)
+    out = voxgi.render(scene, Solution(vox=vox, radiosity=b), progress=False, max_frames=32,
+                       tol=0.0)
+    mi = import_mitsuba()
+    ref = np.array(mi.render(mi.load_dict(to_mitsuba(scene, spp=256, max_depth=2)), spp=256,
+                             seed=1), dtype=np.float32)[..., :3]
+    err = voxgi.metrics.rel_mse(out.image, ref)
+    assert err < 1e-3, err
+    # Mean radiance of the lit surfaces (the light itself left out: its edge
+    # pixels carry most of the antialiasing noise) within 1% (measured 0.4%).
+    lit = ref.max(axis=2) < 5.0
+    assert abs(out.image[lit].mean() / ref[lit].mean() - 1) < 0.01
