@@ -4,6 +4,8 @@
 #include <cmath>
 #include <memory>
 #include <string>
+#include <optional>
+#include <pybind11/stl.h>
 #include <vector>
 
 #include "propagate.h"
@@ -142,12 +144,21 @@ lines walked. Partial sums over disjoint subsets add up to the full gather.)doc"
         .def(
             "shoot",
             [](const voxgi::LineSystem &s, I32 emitters, I32 families, F64 weights, F32 values,
-               int threads) {
+               int threads, std::optional<F64> send_scale, std::optional<F64> recv_area) {
                 auto fams = to_families(families, weights);
                 const py::ssize_t n = s.size();
                 check_1d(emitters, -1, "emitters");
                 check_2d(values, n, 3, "values");
                 const py::ssize_t ne = emitters.shape(0);
+                if (send_scale.has_value() != recv_area.has_value())
+                    throw py::value_error("send_scale and recv_area go together");
+                const double *ss = nullptr, *ra = nullptr;
+                if (send_scale) {
+                    check_1d(*send_scale, n, "send_scale");
+                    check_1d(*recv_area, n, "recv_area");
+                    ss = send_scale->data();
+                    ra = recv_area->data();
+                }
                 F64 hd({n, py::ssize_t(3)});
                 F64 unfound(ne);
                 const int32_t *e = emitters.data();
@@ -158,18 +169,22 @@ lines walked. Partial sums over disjoint subsets add up to the full gather.)doc"
                 {
                     py::gil_scoped_release release;
                     rays = s.shoot(e, ne, fams.data(), static_cast<int64_t>(fams.size()), v, h, u,
-                                   threads, stop, &steps);
+                                   threads, stop, &steps, ss, ra);
                 }
                 return py::make_tuple(hd, unfound, rays, steps);
             },
             "emitters"_a.noconvert(), "families"_a.noconvert(), "weights"_a.noconvert(),
-            "values"_a.noconvert(), "threads"_a = 0,
+            "values"_a.noconvert(), "threads"_a = 0, "send_scale"_a.noconvert() = py::none(),
+            "recv_area"_a.noconvert() = py::none(),
             R"doc(Integer discrete rays from the emitter records along every direction they face.
 
 Returns (hd, unfound, rays, steps): hd (N, 3) float64, per receiver the sum of
 values[e] * cos_r * weight; unfound (E,) float64, per emitter the sum of
 cos_e * weight over its rays that met no receiver; rays the number of rays
-(emitter x direction); steps the voxels visited.)doc")
+(emitter x direction); steps the voxels visited. With send_scale (area / S)
+and recv_area (area), each ray's power val[e] * cos_e * weight * send_scale[e]
+is shared by its receivers in proportion to recv_area * cos_r and hd holds
+power (sender-side deposit).)doc")
         .def(
             "keys",
             [](const voxgi::LineSystem &s, I32 v) {

@@ -138,6 +138,7 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
         ax.Z.resize(n);
         ax.nrm.resize(3 * n);
         ax.pt.resize(3 * n);
+        ax.pn.assign(8 * n, 0.0f);
         for (int64_t i = 0; i < n; ++i) {
             const int64_t r = ax.order[i];
             ax.X[i] = ijk[3 * r + m];
@@ -146,6 +147,8 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
             for (int c = 0; c < 3; ++c) {
                 ax.nrm[3 * i + c] = normal[3 * r + c];
                 ax.pt[3 * i + c] = point[3 * r + c];
+                ax.pn[8 * i + c] = point[3 * r + c];
+                ax.pn[8 * i + 3 + c] = normal[3 * r + c];
             }
         }
     }
@@ -288,8 +291,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         double *acc = w.acc[m].data();
         double *vs = vis ? w.vis[m].data() : nullptr;
         const float *vl = valax[m].data();
-        const float *nrm = ax.nrm.data();
-        const float *pt = ax.pt.data();
+        const float *pn = ax.pn.data();  // point and normal, 8 floats per record
         const int32_t *AX = ax.X.data(), *AY = ax.Y.data(), *AZ = ax.Z.data();
         const double wgt = F.weight;
         const float len = std::sqrt(float(F.v[0]) * F.v[0] + float(F.v[1]) * F.v[1] + float(F.v[2]) * F.v[2]);
@@ -311,7 +313,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             Hit *g = w.group.data();
             for (int a = 0; a < gn; ++a) {
                 const int32_t p = static_cast<int32_t>(i + a);
-                g[a] = Hit{p, gn > 1 ? dot3(pt + 3 * int64_t(p), dh) : 0.0f, dot3(nrm + 3 * int64_t(p), dh)};
+                g[a] = Hit{p, gn > 1 ? dot3(pn + 8 * int64_t(p), dh) : 0.0f, dot3(pn + 3 + 8 * int64_t(p), dh)};
             }
             if (gn > 1) sort_group(g, gn);
             for (int a = 0; a < gn; ++a) {
@@ -321,12 +323,12 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                     prevF[p] = lastF;
                     lastF = p;
                 } else if (c < -kTiny && lastF >= 0) {
-                    const float *pp = pt + 3 * int64_t(p), *np = nrm + 3 * int64_t(p);
+                    const float *pp = pn + 8 * int64_t(p), *np = pn + 3 + 8 * int64_t(p);
                     const double cb = -double(c) * wgt;
                     bool got = false;
                     int32_t f = lastF;
                     for (int h = 0; h < K && f >= 0; ++h, f = prevF[f]) {
-                        const float *pf = pt + 3 * int64_t(f), *nf = nrm + 3 * int64_t(f);
+                        const float *pf = pn + 8 * int64_t(f), *nf = pn + 3 + 8 * int64_t(f);
                         if (!facing(pf, nf, pp, np, eps)) continue;
                         if (!got) {
                             const float *vf = vl + 3 * int64_t(f);
@@ -370,8 +372,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         double *acc = w.acc[m].data();
         double *vs = vis ? w.vis[m].data() : nullptr;
         const float *vl = valax[m].data();
-        const float *nrm = ax.nrm.data();
-        const float *pt = ax.pt.data();
+        const float *pn = ax.pn.data();  // point and normal, 8 floats per record
         const double wgt = F.weight;
         const float len = std::sqrt(float(F.v[0]) * F.v[0] + float(F.v[1]) * F.v[1] + float(F.v[2]) * F.v[2]);
         const float dh[3] = {F.v[0] / len, F.v[1] / len, F.v[2] / len};
@@ -420,7 +421,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 Hit *g = w.group.data();
                 for (int a = 0; a < gn; ++a) {
                     const int32_t p = line[j + a];
-                    g[a] = Hit{p, dot3(pt + 3 * int64_t(p), dh), dot3(nrm + 3 * int64_t(p), dh)};
+                    g[a] = Hit{p, dot3(pn + 8 * int64_t(p), dh), dot3(pn + 3 + 8 * int64_t(p), dh)};
                 }
                 if (gn > 1) sort_group(g, gn);
                 for (int a = 0; a < gn; ++a) {
@@ -436,12 +437,12 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                         ha[hn] = false;
                         ++hn;
                     } else if (c < -kTiny) {  // B: receives from the nearest facing F
-                        const float *pp = pt + 3 * int64_t(p), *np = nrm + 3 * int64_t(p);
+                        const float *pp = pn + 8 * int64_t(p), *np = pn + 3 + 8 * int64_t(p);
                         const double cb = -double(c) * wgt;
                         bool got = false;
                         for (int h = hn - 1; h >= 0; --h) {
                             const int32_t f = hp[h];
-                            const float *pf = pt + 3 * int64_t(f), *nf = nrm + 3 * int64_t(f);
+                            const float *pf = pn + 8 * int64_t(f), *nf = pn + 3 + 8 * int64_t(f);
                             if (!facing(pf, nf, pp, np, eps)) continue;
                             if (!got) {
                                 const float *vf = vl + 3 * int64_t(f);
@@ -502,7 +503,8 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
 
 int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
                           const float *val, double *hd, double *unfound, int threads,
-                          const StopCheck &stop, int64_t *steps_out) const {
+                          const StopCheck &stop, int64_t *steps_out, const double *send_scale,
+                          const double *recv_area) const {
     threads = resolve_threads(threads);
     build_occupancy();
     for (int64_t k = 0; k < ne; ++k)
@@ -533,7 +535,8 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
     parallel_for(tasks, threads, stop, [&](int64_t task, int t) {
         if (acc[t].empty()) acc[t].assign(3 * n_, 0.0);
         double *H = acc[t].data();
-        std::vector<Hit> group;
+        std::vector<Hit> group, recv(16);
+        size_t nrecv = 0;
         int32_t hp[kMaxHistory];
         for (int64_t k = task * chunk; k < std::min(ne, (task + 1) * chunk); ++k) {
             const int32_t e = emit[k];
@@ -565,15 +568,34 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                 hp[0] = e;
                 bool found = false, stopped = false;
                 bool first = true;
-                for (int64_t X = X0; X >= 0 && X <= Xr && !stopped; X += s, first = false) {
+                nrecv = 0;
+                // y' = u - floor((B (XmA - x') + h) / A), z' likewise, kept as
+                // quotient and remainder updated by +-B, +-C per step (B, C <= A):
+                // integer-only, no division in the loop.
+                int64_t numy = fr.B * (fr.XmA - X0) + h, numz = fr.C * (fr.XmA - X0) + h;
+                int64_t qy = numy / fr.A, ry = numy % fr.A, qz = numz / fr.A, rz = numz % fr.A;
+                for (int64_t X = X0; X >= 0 && X <= Xr && !stopped; first = false) {
                     ++steps[t];
-                    const int64_t Y = u - (fr.B * (fr.XmA - X) + h) / fr.A;
-                    const int64_t Z = w - (fr.C * (fr.XmA - X) + h) / fr.A;
+                    const int64_t Y = u - qy;
+                    const int64_t Z = w - qz;
                     if (Y < 0 || Y > Yr || Z < 0 || Z > Zr) break;
                     int32_t c3[3];
                     c3[m] = static_cast<int32_t>(X + fr.lo[m]);
                     c3[o1] = static_cast<int32_t>(fr.pos1 ? Y + fr.lo[o1] : fr.hi[o1] - Y);
                     c3[o2] = static_cast<int32_t>(fr.pos2 ? Z + fr.lo[o2] : fr.hi[o2] - Z);
+                    // next voxel of the line
+                    X += s;
+                    if (s > 0) {  // numerators fall by B, C
+                        ry -= fr.B;
+                        if (ry < 0) { ry += fr.A; --qy; }
+                        rz -= fr.C;
+                        if (rz < 0) { rz += fr.A; --qz; }
+                    } else {
+                        ry += fr.B;
+                        if (ry >= fr.A) { ry -= fr.A; ++qy; }
+                        rz += fr.C;
+                        if (rz >= fr.A) { rz -= fr.A; ++qz; }
+                    }
                     const int64_t lin = linear(c3[0], c3[1], c3[2]);
                     if (!((occ_[lin >> 6] >> (lin & 63)) & 1)) continue;
                     const int64_t slot = std::lower_bound(vkey_.begin(), vkey_.end(), lin) - vkey_.begin();
@@ -610,17 +632,46 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                             }
                             if (nearest == 0) {  // e is p's sender along this line
                                 found = true;
-                                const double cr = -double(c) * fams[f].weight;
-                                double *Hp = H + 3 * int64_t(p);
-                                Hp[0] += ve[0] * cr;
-                                Hp[1] += ve[1] * cr;
-                                Hp[2] += ve[2] * cr;
+                                if (nrecv == recv.size()) recv.resize(2 * nrecv + 4);
+                                recv[nrecv++] = Hit{p, 0.0f, -c};
                             } else if (nearest > 0) {  // someone nearer sends to p: e is shadowed
-                                if (facing(pe, nE, pp, np, eps)) found = true;  // e's light reached p's surface
+                                if (facing(pe, nE, pp, np, eps)) {
+                                    // e's light reached p's surface: counted as received; with
+                                    // the sender-side deposit p takes e's power
+                                    found = true;
+                                    if (send_scale) {
+                                        if (nrecv == recv.size()) recv.resize(2 * nrecv + 4);
+                                        recv[nrecv++] = Hit{p, 0.0f, -c};
+                                    }
+                                }
                                 stopped = true;
                                 break;
                             }
                         }
+                    }
+                }
+                if (send_scale == nullptr || recv_area == nullptr) {  // receiver side: irradiance val[e] cos_r weight
+                    for (size_t q = 0; q < nrecv; ++q) {
+                        const double cr = double(recv[q].c) * fams[f].weight;
+                        double *Hp = H + 3 * int64_t(recv[q].p);
+                        Hp[0] += ve[0] * cr;
+                        Hp[1] += ve[1] * cr;
+                        Hp[2] += ve[2] * cr;
+                    }
+                } else if (nrecv > 0) {  // sender side: the ray's power, split by area x cos
+                    double tot = 0.0;
+                    for (size_t q = 0; q < nrecv; ++q) tot += recv_area[recv[q].p] * recv[q].c;
+                    if (tot > 0) {
+                        const double pw = ce * send_scale[e] / tot;
+                        for (size_t q = 0; q < nrecv; ++q) {
+                            const double share = pw * recv_area[recv[q].p] * recv[q].c;
+                            double *Hp = H + 3 * int64_t(recv[q].p);
+                            Hp[0] += ve[0] * share;
+                            Hp[1] += ve[1] * share;
+                            Hp[2] += ve[2] * share;
+                        }
+                    } else {
+                        found = false;
                     }
                 }
                 if (!found) lost += ce;

@@ -85,9 +85,17 @@ public:
     // of emitter k that met no receiver (sender side, overwritten). Returns
     // the number of rays (emitter x direction with n_e.s > 0) and, in
     // *steps, the voxels visited.
+    // send_scale, recv_area (both non-null, (n,)): deposit on the sender
+    // side instead: a ray of e carries val[e] * cos_e * weight *
+    // send_scale[e] (send_scale = area / S: the ray's power) and the
+    // receivers of the ray share it in proportion to recv_area[r] * cos_r;
+    // hd then holds power (divide by the area for irradiance), and the
+    // direct light conserves energy exactly, at the price of per-record
+    // aliasing (which voxel catches a ray is not which surface is there).
     int64_t shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
                   const float *val, double *hd, double *unfound, int threads,
-                  const StopCheck &stop, int64_t *steps) const;
+                  const StopCheck &stop, int64_t *steps, const double *send_scale = nullptr,
+                  const double *recv_area = nullptr) const;
 
     // Key of every record for family v (tests: each key is one naive line).
     void keys(const int32_t v[3], uint32_t *out) const;
@@ -100,6 +108,7 @@ private:
         std::vector<int32_t> order;  // record index at each position
         std::vector<int32_t> X, Y, Z;  // coordinates along m, o1, o2
         std::vector<float> nrm, pt;    // (n,3) world-axis normal and point, in this order
+        std::vector<float> pn;         // (n,8) point then normal: one 32-byte line per record
     };
     int64_t n_;
     float eps_;
