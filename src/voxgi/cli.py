@@ -30,8 +30,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--directions", type=_at_least(1), default=None, help="gathering direction radius R")
     r.add_argument("--frames", "--spp", dest="frames", type=_at_least(1), default=None,
                    help="maximum progressive frames")
-    r.add_argument("--width", type=_at_least(1), default=None)
-    r.add_argument("--height", type=_at_least(1), default=None)
+    r.add_argument("--width", type=int, default=None)
+    r.add_argument("--height", type=int, default=None)
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--threads", type=_at_least(1), default=None)
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
