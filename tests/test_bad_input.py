@@ -598,3 +598,19 @@ def test_core_display_bad_arrays():
                  (cnt.astype(np.int32), contrib, occ)]:
         with pytest.raises((TypeError, ValueError)):
             _core.vpl_accumulate(*args)
+
+
+def test_core_gather_families_bad_indices():
+    ijk, normal, point = _ls_arrays()
+    from voxgi.directions import direction_set
+    ds = direction_set(2)
+    vals = np.ones((4, 3), np.float32)
+    ok = _core.gather_families(ijk, normal, point, ds.families, ds.weights, vals,
+                               np.array([0], np.int64))
+    assert np.all(np.isfinite(ok))
+    for fi in (np.array([len(ds.families)], np.int64), np.array([-3], np.int64)):
+        with pytest.raises((ValueError, IndexError)):
+            _core.gather_families(ijk, normal, point, ds.families, ds.weights, vals, fi)
+    with pytest.raises((ValueError, TypeError)):
+        _core.gather_families(ijk, normal, point, ds.families, ds.weights, vals[:1].copy(),
+                              np.array([0], np.int64))
