@@ -42,8 +42,8 @@ def as_c_array(value, dtype, shape: Sequence[int], what: str, *, finite: bool = 
 def rgb(value, what: str, *, low: float = 0.0, high: float | None = None,
         high_inclusive: bool = True) -> tuple[float, float, float]:
     """Colour argument: a scalar or 3 finite numbers within [low, high]."""
-    if isinstance(value, bool):
-        raise TypeError(f"{what}: expected a number or 3 numbers, got bool")
+    if isinstance(value, bool) or value is None or isinstance(value, (str, bytes)):
+        raise TypeError(f"{what}: expected a number or 3 numbers, got {value!r}")
     if isinstance(value, numbers.Real):
         vals = (float(value),) * 3
     else:

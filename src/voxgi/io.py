@@ -53,7 +53,11 @@ def read_exr(path) -> np.ndarray:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"EXR file not found: {path}")
-    with OpenEXR.File(str(path)) as f:
+    try:
+        f = OpenEXR.File(str(path))
+    except RuntimeError as exc:  # not an EXR, truncated, unreadable
+        raise ValueError(f"{path}: cannot be read as OpenEXR ({exc})") from None
+    with f:
         ch = f.channels()
         if "RGB" in ch:
             px = ch["RGB"].pixels
@@ -85,6 +89,10 @@ def read_exr_header(path) -> dict:
 def to_srgb8(image, exposure: float = 0.0) -> np.ndarray:
     """Tone-map linear radiance to 8-bit sRGB: scale by ``2**exposure``,
     clip to [0, 1], apply the sRGB transfer curve. NaN maps to 0."""
+    if isinstance(exposure, bool) or not isinstance(exposure, (int, float, np.number)):
+        raise TypeError(f"exposure: expected a number, got {exposure!r}")
+    if not np.isfinite(exposure):
+        raise ValueError(f"exposure: must be finite, got {exposure}")
     img = _check_image(image).astype(np.float64) * (2.0 ** float(exposure))
     img = np.clip(np.nan_to_num(img, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
     srgb = np.where(img <= 0.0031308, 12.92 * img, 1.055 * np.power(img, 1 / 2.4) - 0.055)

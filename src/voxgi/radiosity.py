@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import time
 import warnings
+import zipfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -118,7 +119,23 @@ class Solution:
         Solution
             With its :class:`VoxelSet`.
         """
-        with np.load(Path(path), allow_pickle=False) as z:
+        path = Path(path)
+        if not path.exists():
+            raise FileNotFoundError(f"solution file not found: {path}")
+        try:
+            sol = cls._load(path)
+        except (OSError, ValueError, KeyError, TypeError, json.JSONDecodeError, zipfile.BadZipFile) as exc:
+            raise ValueError(f"{path}: not a voxgi solution file ({type(exc).__name__}: {exc})") from None
+        n = len(sol.vox.ijk)
+        r = np.asarray(sol.radiosity)
+        if r.shape != (n, 3) or not np.issubdtype(r.dtype, np.floating) or not np.all(np.isfinite(r)):
+            raise ValueError(f"{path}: radiosity must be finite floats of shape ({n}, 3), got "
+                             f"{r.dtype} {r.shape}")
+        return sol
+
+    @classmethod
+    def _load(cls, path: Path) -> Solution:
+        with np.load(path, allow_pickle=False) as z:
             meta = json.loads(bytes(z["meta"]).decode())
             kw = {}
             for f in fields(VoxelSet):

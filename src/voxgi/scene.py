@@ -414,7 +414,13 @@ class Scene:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise ValueError(f"scene file {path}: malformed TOML: {exc}") from None
-        return cls.from_dict(data, base_dir=path.parent, source=str(path))
+        try:
+            return cls.from_dict(data, base_dir=path.parent, source=str(path))
+        except ValueError as exc:
+            line = _error_line(text, data, str(exc))
+            if line is None:
+                raise
+            raise ValueError(f"{exc} (line {line})") from None
 
     @classmethod
     def from_dict(cls, data: dict, base_dir=".", source: str = "<dict>") -> Scene:
@@ -529,6 +535,56 @@ class Scene:
             lines.append("")
         path.write_text("\n".join(lines), encoding="utf-8")
         return path
+
+
+def _error_line(text: str, data, msg: str) -> int | None:
+    """1-based line of the table and key that a :meth:`Scene.from_dict` error names.
+
+    The message names the table (``object #k``, ``[camera]``,
+    ``[materials.NAME]``) and usually a key; the line is the key's ``key =``
+    line within that table, else the table's header line.
+    """
+    import re
+
+    m = re.search(r"object #(\d+)", msg)
+    if m:
+        want, table = ("object", int(m.group(1))), None
+        objs = data.get("object") if isinstance(data, dict) else None
+        table = objs[want[1]] if isinstance(objs, list) and want[1] < len(objs) else None
+    elif (m := re.search(r"\[materials\.([^\]]+)\]", msg)):
+        want = ("materials", m.group(1))
+        mats = data.get("materials") if isinstance(data, dict) else None
+        table = mats.get(want[1]) if isinstance(mats, dict) else None
+    elif "[camera]" in msg:
+        want, table = ("camera",), data.get("camera") if isinstance(data, dict) else None
+    else:
+        want, table = (None,), data
+    # the key named in the message (longest first, so "focus_distance" beats "focus")
+    keys = sorted(table, key=len, reverse=True) if isinstance(table, dict) else []
+    key = next((k for k in keys if re.search(rf"(?<!\w){re.escape(str(k))}(?!\w)",
+                                             msg.split(": ", 1)[-1])), None)
+    section: tuple = (None,)
+    n_obj = -1
+    header = None
+    for i, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if re.match(r"^\[\[\s*object\s*\]\]", line):
+            n_obj += 1
+            section = ("object", n_obj)
+        elif (h := re.match(r"^\[\s*materials\.\s*[\"']?([^\]\"']+)[\"']?\s*\]", line)):
+            section = ("materials", h.group(1).strip())
+        elif re.match(r"^\[\s*camera\s*\]", line):
+            section = ("camera",)
+        elif line.startswith("["):
+            section = ("other",)
+        else:
+            if section == want and key is not None and re.match(
+                    rf"^[\"']?{re.escape(str(key))}[\"']?\s*=", line):
+                return i
+            continue
+        if section == want and header is None:
+            header = i
+    return header
 
 
 def _toml_list(v) -> str:
