@@ -1,6 +1,6 @@
 """voxgi with all its defaults on the Cornell box, against the Mitsuba references.
 
-One voxelize + solve with the library defaults (timed), then the display at
+One voxelize + solve with the defaults of voxgi.render(scene) (timed), then the display at
 256x256 and 512x512 from the same solution, each compared with
 ``results/cornell_ref_<size>.exr`` (relMSE), the difference images
 ``results/cornell_diff_defaults_<size>.png``, the solution saved and loaded
@@ -29,9 +29,9 @@ from time_vs_error import RESULTS, diff_png, git_commit, load_reference
 def main() -> int:
     scene = voxgi.scenes.cornell_box(width=256, height=256)
     t0 = time.perf_counter()
-    vox = voxgi.voxelize(scene)
+    vox = voxgi.voxelize(scene, resolution=voxgi.display.RENDER_RESOLUTION)
     t1 = time.perf_counter()
-    sol = voxgi.solve(vox, progress=False)
+    sol = voxgi.solve(vox, directions=voxgi.display.RENDER_DIRECTIONS, progress=False)
     t2 = time.perf_counter()
     res = {"records": len(vox), "resolution": vox.resolution, "voxelize": t1 - t0,
            "solve": t2 - t1, "solve_stats_seconds": sol.stats.get("seconds"),

@@ -20,7 +20,13 @@ import numpy as np
 from . import _core, _validate
 from .scene import Camera, Scene
 
-__all__ = ["RenderResult", "render", "run_cli"]
+__all__ = ["RENDER_DIRECTIONS", "RENDER_RESOLUTION", "RenderResult", "render", "run_cli"]
+
+#: Voxel resolution and gathering radius used by ``render(scene)`` without a
+#: solution and by ``voxgi render``: the fastest measured setting to relMSE
+#: 5e-3 against Mitsuba on the Cornell box (benchmarks/time_vs_error.py).
+RENDER_RESOLUTION = 96
+RENDER_DIRECTIONS = 8
 
 #: relMSE's epsilon (voxgi.metrics.rel_mse), used by the stopping rule too.
 _REL_EPS = 0.01
@@ -664,7 +670,12 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
         paper); see :class:`VPLSampler`.
     resolution, directions : int, optional
-        Passed to :func:`voxgi.voxelize` / :func:`voxgi.solve` when ``sol`` is None.
+        Passed to :func:`voxgi.voxelize` / :func:`voxgi.solve` when ``sol`` is
+        None; default :data:`RENDER_RESOLUTION` (96) and
+        :data:`RENDER_DIRECTIONS` (8), the fastest of the measured settings to
+        reach relMSE 5e-3 on the Cornell box (``benchmarks/time_vs_error.py``):
+        the display's gather rays make the picture far less sensitive to the
+        direction count than the voxel solution itself.
 
     Returns
     -------
@@ -716,10 +727,10 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         from .voxels import voxelize
 
         t0 = time.perf_counter()
-        vox = voxelize(scene, **({} if resolution is None else {"resolution": resolution}))
+        vox = voxelize(scene, resolution=RENDER_RESOLUTION if resolution is None else resolution)
         seconds["voxelize"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        sol = solve(vox, **({} if directions is None else {"directions": directions}),
+        sol = solve(vox, directions=RENDER_DIRECTIONS if directions is None else directions,
                     threads=threads, progress=progress, client=client)
         seconds["solve"] = time.perf_counter() - t0
     _check_solution(scene, sol)
@@ -844,12 +855,12 @@ def run_cli(args) -> int:
     say(f"scene {name}: {len(scene.objects)} objects, {scene.n_triangles} triangles, "
         f"{cam.width}x{cam.height} pixels")
     t0 = time.perf_counter()
-    vox = voxelize(scene, **({} if args.resolution is None else {"resolution": args.resolution}))
+    vox = voxelize(scene, resolution=args.resolution or RENDER_RESOLUTION)
     t_vox = time.perf_counter() - t0
     say(f"voxelize: {len(vox)} records (resolution {vox.resolution}) in {t_vox:.2f} s")
     t0 = time.perf_counter()
-    sol = solve(vox, **({} if args.directions is None else {"directions": args.directions}),
-                threads=args.threads, progress=not args.quiet)
+    sol = solve(vox, directions=args.directions or RENDER_DIRECTIONS, threads=args.threads,
+                progress=not args.quiet)
     t_sol = time.perf_counter() - t0
     say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in {t_sol:.2f} s")
     res = render(scene, sol, max_frames=args.frames, seed=args.seed, progress=not args.quiet,
