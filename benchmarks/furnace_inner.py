@@ -30,10 +30,19 @@ def run(kind, inner, rho, res, R, closed=None):
     for k, obj in enumerate(s.objects):
         m = f & (v.object_id == k)
         rows.append(
-            dict(scene=kind, inner=inner, rho=rho, object=obj.name, n=int(m.sum()),
-                 mean=float(e[m].mean()), max=float(np.abs(e[m]).max()),
-                 lost=sol.stats.get("lost_fraction"), back=sol.stats.get("back_fraction"),
-                 back_max=sol.stats.get("back_fraction_max"), seconds=dt)
+            dict(
+                scene=kind,
+                inner=inner,
+                rho=rho,
+                object=obj.name,
+                n=int(m.sum()),
+                mean=float(e[m].mean()),
+                max=float(np.abs(e[m]).max()),
+                lost=sol.stats.get("lost_fraction"),
+                back=sol.stats.get("back_fraction"),
+                back_max=sol.stats.get("back_fraction_max"),
+                seconds=dt,
+            )
         )
     return rows
 
@@ -49,17 +58,22 @@ def main():
     a = ap.parse_args()
     out = []
     print(f"res {a.res} R {a.R} closed={a.closed}")
-    print(f"{'scene':15s} {'inner':5s} {'rho':>5s} {'object':8s} {'mean err':>9s} {'max err':>8s} "
-          f"{'lost':>8s} {'back':>8s} {'back max':>8s} {'s':>5s}")
+    print(
+        f"{'scene':15s} {'inner':5s} {'rho':>5s} {'object':8s} {'mean err':>9s} {'max err':>8s} "
+        f"{'lost':>8s} {'back':>8s} {'back max':>8s} {'s':>5s}"
+    )
     for kind in a.scenes:
         for inner in (False, True):
             for rho in a.rho:
                 for r in run(kind, inner, rho, a.res, a.R, True if a.closed else None):
                     out.append(r)
                     fmt = lambda x: f"{x:8.2e}" if x is not None else f"{'-':>8s}"  # noqa: E731
-                    print(f"{r['scene']:15s} {str(r['inner']):5s} {r['rho']:5.2f} {r['object']:8s} "
-                          f"{r['mean']:+9.4%} {r['max']:8.3%} {fmt(r['lost'])} {fmt(r['back'])} "
-                          f"{fmt(r['back_max'])} {r['seconds']:5.1f}", flush=True)
+                    print(
+                        f"{r['scene']:15s} {r['inner']!s:5s} {r['rho']:5.2f} {r['object']:8s} "
+                        f"{r['mean']:+9.4%} {r['max']:8.3%} {fmt(r['lost'])} {fmt(r['back'])} "
+                        f"{fmt(r['back_max'])} {r['seconds']:5.1f}",
+                        flush=True,
+                    )
     with open(a.out, "w") as fh:
         json.dump(dict(res=a.res, R=a.R, closed=a.closed, rows=out), fh, indent=1)
 

@@ -470,7 +470,7 @@ def solve(
         "method": method,
         "threads": nthreads,
         "skipped": {},
-        "closed_back_records": int(len(twin_b)),
+        "closed_back_records": len(twin_b),
     }
     if len(emitters) == 0:
         warnings.warn(
