@@ -263,3 +263,28 @@ def test_furnace_box_with_inner_sphere(rho):
     err = np.abs(sol.radiance[front] * (1 - rho) - 1)
     assert err.mean() < 5e-3
     assert err.max() < 2e-2
+
+
+def test_furnace_box_closed_inner_sphere_rho09():
+    # Issue 3: a closed inner object (same Le, rho) must not lose light through
+    # naive lines that clip its band where only its near side lies on the
+    # line (they reach its black back records, its inside). Measured at res
+    # 32, R = 8, rho = 0.9: closed=None mean |err| 2.8%, max 5.7%, back_fraction
+    # 3.3e-3 (x ~9 at rho 0.9); closed=True mean 0.016%, max 0.35%. The bounds
+    # are the issue's acceptance (0.5% mean, 2% max), well above the measured.
+    rho = 0.9
+    vox = _voxelize_or_skip(voxgi.scenes.furnace_box(albedo=rho, emission=1.0, inner=True), 32)
+    front = ~vox.back
+    open_ = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-6)
+    assert open_.stats["back_fraction"] > 1e-3  # the loss is visible in the stats
+    assert open_.stats["closed_back_records"] == 0
+    sol = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-6, closed=True)
+    err = np.abs(sol.radiance[front] * (1 - rho) - 1)
+    assert err.mean() < 5e-3
+    assert err.max() < 2e-2
+    assert sol.stats["closed_back_records"] == int(vox.back.sum())
+    assert sol.stats["back_fraction"] == 0.0  # every back record stands in for its twin
+    assert np.all(sol.radiosity[~front] == 0)  # back records themselves stay black
+    # closed=[ids] picks objects: only the inner sphere (object 1)
+    part = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-6, closed=[1])
+    assert part.stats["closed_back_records"] == int((vox.back & (vox.object_id == 1)).sum())

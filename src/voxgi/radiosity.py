@@ -336,6 +336,7 @@ def solve(
     history: int = 16,
     gs_blocks: int = 8,
     max_iterations: int = 10000,
+    closed=None,
 ) -> Solution:
     """Solve the discrete radiosity equation on the records of ``vox``.
 
@@ -393,12 +394,25 @@ def solve(
         Blocks of families for ``method="gauss-seidel"``.
     max_iterations : int
         Bound on the iterations when ``max_bounces`` is None.
+    closed : bool or sequence of int, optional
+        Objects (ids into ``vox.object_id``; True: all) whose meshes are
+        closed. A naive line that clips a closed object's band in a voxel
+        holding only its near side reaches a black back record: in reality
+        it either hit the object's surface or missed it, never its inside
+        (measured: the furnace sphere with a closed inner box lost 2.6% at
+        rho = 0.9, 22% at 0.99). For these objects a back record sends its
+        front twin's radiosity and emission instead of black (it stays black
+        itself). None (default): every back record is black, as for an open
+        one-sided surface whose back can be seen.
     Returns
     -------
     Solution
         ``radiosity`` (N, 3) float32; ``stats`` with ``rays``, ``shoot_rays``,
         ``gather_rays``, ``seconds`` (phase -> s), ``directions``,
-        ``S_spread``, ``lost_fraction`` (δ), ``energy`` (emitted, absorbed,
+        ``S_spread``, ``lost_fraction`` (δ), ``back_fraction`` (area-weighted
+        mean share of the front records' cos-weighted hemisphere that ends on
+        black back records: in a closed scene, light lost through occluders)
+        and ``back_fraction_max``, ``energy`` (emitted, absorbed,
         escaping power per channel; escaping counted on the sender side) and
         ``skipped``.
 
@@ -441,7 +455,39 @@ def solve(
     area = a["area"]
     rho = a["albedo"].astype(np.float64)
     E = np.pi * a["emission"].astype(np.float64)  # emitted radiosity
+    # back records of closed objects and their front twins (the voxelizer
+    # writes each back record right after its front record; checked here)
+    twin_b = twin_f = np.zeros(0, np.int64)
+    if closed is not None and closed is not False:
+        obj = _validate.as_c_array(vox.object_id, np.int32, (n,), "vox.object_id")
+        if closed is True:
+            sel_obj = np.ones(len(a["back"]), bool)
+        else:
+            ids = _validate.as_c_array(np.atleast_1d(closed), np.int32, (-1,), "closed")
+            sel_obj = np.isin(obj, ids)
+        b = np.flatnonzero(a["back"] & sel_obj)
+        b = b[b > 0]
+        f_ = b - 1
+        ok = (
+            ~a["back"][f_]
+            & np.all(a["ijk"][f_] == a["ijk"][b], axis=1)
+            & (obj[f_] == obj[b])
+            & (np.einsum("ij,ij->i", a["normal"][f_], a["normal"][b]) < -0.99)
+        )
+        twin_b, twin_f = b[ok], f_[ok]
+
+    def _send(x):
+        # what records send along the lines: back records of closed objects
+        # send their front twin's value
+        if len(twin_b) == 0:
+            return np.ascontiguousarray(x, dtype=np.float32)
+        y = np.array(x, dtype=np.float32, copy=True)
+        y[twin_b] = y[twin_f]
+        return y
+
+    E_send = _send(E)
     emitters = np.flatnonzero(np.any(a["emission"] > 0, axis=1)).astype(np.int32)
+    emitters_send = np.flatnonzero(np.any(E_send > 0, axis=1)).astype(np.int32)
     seconds: dict[str, float] = {}
     stats: dict = {
         "records": n,
@@ -449,6 +495,7 @@ def solve(
         "method": method,
         "threads": nthreads,
         "skipped": {},
+        "closed_back_records": len(twin_b),
     }
     if len(emitters) == 0:
         warnings.warn(
@@ -515,12 +562,14 @@ def solve(
     # receiver-side deposit: the exact transpose of gathering (see the
     # kernel's `send_scale` for the sender-side alternative and its aliasing)
     hd_raw, unfound, shoot_rays, steps = sysm.shoot(
-        emitters, sds.families, sds.weights, np.ascontiguousarray(E, dtype=np.float32), nthreads
+        emitters_send, sds.families, sds.weights, E_send, nthreads
     )
     Hd = hd_raw / Ss[:, None]
     seconds["shoot"] = time.perf_counter() - t
     # sender side: the share of each emitter's rays that met nobody
-    shoot_escape = (E[emitters] * (area[emitters] * unfound / Ss[emitters])[:, None]).sum(axis=0)
+    # (stand-in back emitters have E = 0: they add nothing to the escape)
+    es = emitters_send
+    shoot_escape = (E[es] * (area[es] * unfound / Ss[es])[:, None]).sum(axis=0)
     stats["shoot_steps"] = int(steps)
 
     # --- gathering of the reflected radiosity R = B - E
@@ -566,7 +615,7 @@ def solve(
                 sums, v, nl = sysm.gather(
                     ds_it.families,
                     ds_it.weights,
-                    np.ascontiguousarray(dk, dtype=np.float32),
+                    _send(dk),
                     fams,
                     want_vis,
                     nthreads,
@@ -582,7 +631,7 @@ def solve(
                 sums, v, nl = sysm.gather(
                     ds_it.families,
                     ds_it.weights,
-                    np.ascontiguousarray(Rk, dtype=np.float32),
+                    _send(Rk),
                     blk[0],
                     want_vis,
                     nthreads,
@@ -602,7 +651,7 @@ def solve(
                     sums, v, nl = sysm.gather(
                         ds_it.families,
                         ds_it.weights,
-                        np.ascontiguousarray(cur, dtype=np.float32),
+                        _send(cur),
                         sel,
                         want_vis,
                         nthreads,
@@ -666,6 +715,24 @@ def solve(
     front = ~a["back"]
     wa = area * front
     delta = float(1 - np.sum(wa * found) / np.sum(wa)) if np.sum(wa) > 0 else 0.0
+    # Share of the front records' cos-weighted hemisphere that ends on black
+    # back records (no albedo, no emission). In a closed scene no front
+    # record should see one: this is light lost through occluders (a line
+    # passing a closed object's near side), which lost_fraction does not see.
+    dark = a["back"] & ~np.any(rho > 0, axis=1) & ~np.any(E > 0, axis=1)
+    dark[twin_b] = False  # stand-ins for their front twins: not a loss
+    back_fraction = back_fraction_max = 0.0
+    if np.any(dark) and np.sum(wa) > 0:
+        t = time.perf_counter()
+        ind = np.zeros((n, 3), np.float32)
+        ind[dark] = 1.0
+        gb, _, _ = sysm.gather(gds.families, gds.weights, ind, all_fams, False, nthreads)
+        seconds["back_fraction"] = time.perf_counter() - t
+        share = gb[:, 0] / vis_S
+        back_fraction = float(np.sum(wa * share) / np.sum(wa))
+        back_fraction_max = float(np.max(np.where(front, share, 0.0)))
+    else:
+        stats["skipped"]["back_fraction"] = "no black back records"
     H_tot = Hd + Hg
     emitted = (E * area[:, None]).sum(axis=0)
     absorbed = ((1 - rho) * H_tot * area[:, None]).sum(axis=0)
@@ -684,6 +751,8 @@ def solve(
         lines_walked=int(lines_walked),
         lost_fraction=delta,
         lost_fraction_max=float(np.max(np.where(front, 1 - found, 0.0))),
+        back_fraction=back_fraction,
+        back_fraction_max=back_fraction_max,
         energy={
             "emitted": emitted.tolist(),
             "absorbed": absorbed.tolist(),
