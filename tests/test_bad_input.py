@@ -614,3 +614,11 @@ def test_core_gather_families_bad_indices():
     with pytest.raises((ValueError, TypeError)):
         _core.gather_families(ijk, normal, point, ds.families, ds.weights, vals[:1].copy(),
                               np.array([0], np.int64))
+
+
+def test_render_memory_limit_refused_before_allocating(small):
+    """A 32768 x 32768 image (~1 TB of buffers) is refused up front, with the estimate."""
+    s, _, sol = small
+    cam = s.camera.replace(width=1 << 15, height=1 << 15)
+    with pytest.raises(ValueError, match=r"needs about [\d,]+ bytes"):
+        voxgi.render(s, sol, camera=cam, progress=False)
