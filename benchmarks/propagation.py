@@ -15,7 +15,8 @@ Sections (all by default):
   scaled to 0.99 max): iterations to tol with and without extrapolation.
 - ``cornell``    energy balance on the Cornell box vs resolution (32, 64, 128).
 - ``later``      coarser directions after the second bounce (2009 paper):
-  time and error against the full set.
+  time and error against the full set (later_R = R: the same bounce-by-bounce
+  form without coarsening, to separate the two effects).
 - ``linear``     gathering time for N, 2N, 4N records (bunny room at three
   resolutions) and D, 2D directions, fixed iterations, 1 thread.
 - ``throughput`` bunny room at about 150k records, R = 22: gathering rays/s
@@ -50,8 +51,13 @@ RESULTS = Path(__file__).resolve().parent / "results"
 
 def _meta(threads=None) -> dict:
     try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, cwd=Path(__file__).parent, check=False).stdout.strip()
+        commit = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            cwd=Path(__file__).parent,
+            check=False,
+        ).stdout.strip()
     except OSError:
         commit = ""
     cpu = ""
@@ -62,9 +68,16 @@ def _meta(threads=None) -> dict:
                 break
     except OSError:
         pass
-    return {"voxgi": voxgi.__version__, "commit": commit, "cpu": cpu,
-            "cores": os.cpu_count(), "load": os.getloadavg(), "python": platform.python_version(),
-            "threads": threads, "time": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    return {
+        "voxgi": voxgi.__version__,
+        "commit": commit,
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "load": os.getloadavg(),
+        "python": platform.python_version(),
+        "threads": threads,
+        "time": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
 
 
 def _write(name: str, rows, **extra) -> None:
@@ -75,9 +88,9 @@ def _write(name: str, rows, **extra) -> None:
 
 def _table(rows, cols) -> None:
     w = [max(len(c), *(len(_fmt(r.get(c))) for r in rows)) for c in cols]
-    print("  ".join(c.rjust(x) for c, x in zip(cols, w)))
+    print("  ".join(c.rjust(x) for c, x in zip(cols, w, strict=True)))
     for r in rows:
-        print("  ".join(_fmt(r.get(c)).rjust(x) for c, x in zip(cols, w)))
+        print("  ".join(_fmt(r.get(c)).rjust(x) for c, x in zip(cols, w, strict=True)))
 
 
 def _fmt(v) -> str:
@@ -99,10 +112,12 @@ def furnace(args) -> None:
     rows = []
     res = 32 if args.quick else 48
     R = 8
-    scenes = [("sphere", lambda r: voxgi.scenes.furnace_sphere(albedo=r, emission=1.0)),
-              ("sphere+box", lambda r: voxgi.scenes.furnace_sphere(albedo=r, emission=1.0, inner=True)),
-              ("box", lambda r: voxgi.scenes.furnace_box(albedo=r, emission=1.0)),
-              ("box+sphere", lambda r: voxgi.scenes.furnace_box(albedo=r, emission=1.0, inner=True))]
+    scenes = [
+        ("sphere", lambda r: voxgi.scenes.furnace_sphere(albedo=r, emission=1.0)),
+        ("sphere+box", lambda r: voxgi.scenes.furnace_sphere(albedo=r, emission=1.0, inner=True)),
+        ("box", lambda r: voxgi.scenes.furnace_box(albedo=r, emission=1.0)),
+        ("box+sphere", lambda r: voxgi.scenes.furnace_box(albedo=r, emission=1.0, inner=True)),
+    ]
     for name, make in scenes:
         for rho in (0.3, 0.5, 0.9, 0.99):
             vox = voxgi.voxelize(make(rho), resolution=res)
@@ -111,16 +126,40 @@ def furnace(args) -> None:
             dt = time.perf_counter() - t
             mean, mx = _front_err(sol, 1.0 / (1 - rho))
             # slivers: records holding under 5% of a voxel face (edges of the inner object)
-            big = ~vox.back & (vox.area >= 0.05 * vox.pitch ** 2)
+            big = ~vox.back & (vox.area >= 0.05 * vox.pitch**2)
             mx_big = float(np.abs(sol.radiance[big] * (1 - rho) - 1).max())
-            rows.append({"scene": name, "rho": rho, "res": res, "R": R, "records": len(vox),
-                         "iters": sol.bounces, "mean_err": mean, "max_err": mx,
-                         "max_err_area>=0.05": mx_big,
-                         "delta": sol.stats["lost_fraction"], "seconds": dt,
-                         "pass": bool(mean < 0.005 and mx < 0.02)})
+            rows.append(
+                {
+                    "scene": name,
+                    "rho": rho,
+                    "res": res,
+                    "R": R,
+                    "records": len(vox),
+                    "iters": sol.bounces,
+                    "mean_err": mean,
+                    "max_err": mx,
+                    "max_err_area>=0.05": mx_big,
+                    "delta": sol.stats["lost_fraction"],
+                    "seconds": dt,
+                    "pass": bool(mean < 0.005 and mx < 0.02),
+                }
+            )
             print(rows[-1], flush=True)
-    _table(rows, ["scene", "rho", "records", "iters", "mean_err", "max_err", "max_err_area>=0.05",
-                  "delta", "seconds", "pass"])
+    _table(
+        rows,
+        [
+            "scene",
+            "rho",
+            "records",
+            "iters",
+            "mean_err",
+            "max_err",
+            "max_err_area>=0.05",
+            "delta",
+            "seconds",
+            "pass",
+        ],
+    )
     _write("furnace", rows)
 
 
@@ -133,23 +172,43 @@ def _cap_exact(vox, rho):
 
 
 def cap(args) -> None:
-    rows = []
     rho = 0.5
-    ress = (32, 64) if args.quick else (32, 64, 128)
-    voxs = {res: voxgi.voxelize(voxgi.scenes.cap_sphere(albedo=rho, emission=1.0), resolution=res)
-            for res in ress}
-    for R in (8, 16, 22):
+    ress = args.res or ((32, 64) if args.quick else (32, 64, 128))
+    radii = args.radii or (8, 16, 22)
+    # keep the rows of earlier runs (the big cases take long on a shared machine)
+    old = RESULTS / "propagation_cap.json"
+    rows = json.loads(old.read_text())["rows"] if old.exists() else []
+    done = {(r["res"], r["R"]) for r in rows}
+    voxs = {
+        res: voxgi.voxelize(voxgi.scenes.cap_sphere(albedo=rho, emission=1.0), resolution=res)
+        for res in ress
+    }
+    for R in radii:
         for res in ress:
+            if (res, R) in done:
+                continue
             vox = voxs[res]
             t = time.perf_counter()
             sol = voxgi.solve(vox, directions=R, shoot_directions=R, progress=False, tol=1e-5)
             dt = time.perf_counter() - t
             mean, mx = _front_err(sol, _cap_exact(vox, rho))
-            rows.append({"res": res, "R": R, "records": len(vox), "iters": sol.bounces,
-                         "mean_err": mean, "max_err": mx, "delta": sol.stats["lost_fraction"],
-                         "seconds": dt})
+            rows.append(
+                {
+                    "res": res,
+                    "R": R,
+                    "records": len(vox),
+                    "iters": sol.bounces,
+                    "mean_err": mean,
+                    "max_err": mx,
+                    "delta": sol.stats["lost_fraction"],
+                    "seconds": dt,
+                }
+            )
             print(rows[-1], flush=True)
-            _write("cap", rows, rho=rho, note="shoot_directions = directions = R")  # partial results
+            rows.sort(key=lambda r: (r["res"], r["R"]))
+            _write(
+                "cap", rows, rho=rho, note="shoot_directions = directions = R"
+            )  # partial results
     _table(rows, ["res", "R", "records", "iters", "mean_err", "max_err", "delta", "seconds"])
 
 
@@ -161,24 +220,54 @@ def accel(args) -> None:
     alb = cb.albedo * np.float32(0.99 / cb.albedo.max())
     cases.append(("cornell(0.99 max)", dataclasses.replace(cb, albedo=alb)))
     for name, vox in cases:
-        ref = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-8,
-                          max_iterations=2000)
+        ref = voxgi.solve(
+            vox, directions=8, shoot_directions=8, progress=False, tol=1e-8, max_iterations=2000
+        )
         for acc in (True, False):
             t = time.perf_counter()
-            sol = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-4,
-                              accelerate=acc, max_iterations=300)
+            sol = voxgi.solve(
+                vox,
+                directions=8,
+                shoot_directions=8,
+                progress=False,
+                tol=1e-4,
+                accelerate=acc,
+                max_iterations=300,
+            )
             dt = time.perf_counter() - t
             front = ~vox.back & (ref.radiosity.max(axis=1) > 0)
             err = np.abs(sol.radiosity[front] / ref.radiosity[front] - 1)
-            rows.append({"scene": name, "extrapolate": acc, "iters": sol.bounces,
-                         "ref_iters": ref.bounces, "mean_err_vs_converged": float(err.mean()),
-                         "max_err_vs_converged": float(err.max()), "seconds": dt,
-                         "extrapolations": sol.stats["extrapolations"]})
+            rows.append(
+                {
+                    "scene": name,
+                    "extrapolate": acc,
+                    "iters": sol.bounces,
+                    "ref_iters": ref.bounces,
+                    "mean_err_vs_converged": float(err.mean()),
+                    "max_err_vs_converged": float(err.max()),
+                    "seconds": dt,
+                    "extrapolations": sol.stats["extrapolations"],
+                }
+            )
             print(rows[-1], flush=True)
-    _table(rows, ["scene", "extrapolate", "iters", "ref_iters", "mean_err_vs_converged",
-                  "max_err_vs_converged", "seconds"])
-    _write("accel", rows, note="tol 1e-4 (error estimate), at most 300 iterations; reference: "
-           "tol 1e-8 with extrapolation")
+    _table(
+        rows,
+        [
+            "scene",
+            "extrapolate",
+            "iters",
+            "ref_iters",
+            "mean_err_vs_converged",
+            "max_err_vs_converged",
+            "seconds",
+        ],
+    )
+    _write(
+        "accel",
+        rows,
+        note="tol 1e-4 (error estimate), at most 300 iterations; reference: "
+        "tol 1e-8 with extrapolation",
+    )
 
 
 def cornell(args) -> None:
@@ -188,23 +277,51 @@ def cornell(args) -> None:
     for res in ress:
         vox = voxgi.voxelize(scene, resolution=res)
         for R, Rs in ((8, 16), (16, 35)):
-            if res == 128 and R == 16:  # 217k records x 1669 families x ~14 iterations: too long here
+            if (
+                res == 128 and R == 16
+            ):  # 217k records x 1669 families x ~14 iterations: too long here
                 continue
             t = time.perf_counter()
             sol = voxgi.solve(vox, directions=R, shoot_directions=Rs, progress=False, tol=1e-5)
             dt = time.perf_counter() - t
             e = sol.stats["energy"]
             em = np.array(e["emitted"])
-            rows.append({"res": res, "R": R, "Rs": Rs, "records": len(vox), "iters": sol.bounces,
-                         "imbalance_r": e["imbalance"][0], "imbalance_g": e["imbalance"][1],
-                         "absorbed/emitted": float(e["absorbed"][0] / em[0]),
-                         "escaping/emitted": float(e["escaping"][0] / em[0]),
-                         "seconds": dt})
+            rows.append(
+                {
+                    "res": res,
+                    "R": R,
+                    "Rs": Rs,
+                    "records": len(vox),
+                    "iters": sol.bounces,
+                    "imbalance_r": e["imbalance"][0],
+                    "imbalance_g": e["imbalance"][1],
+                    "absorbed/emitted": float(e["absorbed"][0] / em[0]),
+                    "escaping/emitted": float(e["escaping"][0] / em[0]),
+                    "seconds": dt,
+                }
+            )
             print(rows[-1], flush=True)
-    _table(rows, ["res", "R", "Rs", "records", "iters", "imbalance_r", "imbalance_g",
-                  "absorbed/emitted", "escaping/emitted", "seconds"])
-    _write("cornell", rows, note="imbalance = (emitted - absorbed - escaping) / emitted; "
-           "escaping counted on the sender side")
+    _table(
+        rows,
+        [
+            "res",
+            "R",
+            "Rs",
+            "records",
+            "iters",
+            "imbalance_r",
+            "imbalance_g",
+            "absorbed/emitted",
+            "escaping/emitted",
+            "seconds",
+        ],
+    )
+    _write(
+        "cornell",
+        rows,
+        note="imbalance = (emitted - absorbed - escaping) / emitted; "
+        "escaping counted on the sender side",
+    )
 
 
 def later(args) -> None:
@@ -212,18 +329,35 @@ def later(args) -> None:
     res = 48 if args.quick else 64
     vox = voxgi.voxelize(voxgi.scenes.cornell_box(width=32, height=32), resolution=res)
     ref = voxgi.solve(vox, directions=22, shoot_directions=22, progress=False, tol=1e-6)
-    for R, Rl in ((22, None), (22, 11), (22, 8), (16, None), (11, None)):
+    for R, Rl in ((22, None), (22, 22), (22, 11), (22, 8), (16, None), (11, None), (8, None)):
         t = time.perf_counter()
-        sol = voxgi.solve(vox, directions=R, shoot_directions=22, later_directions=Rl,
-                          later_after=2, progress=False, tol=1e-6)
+        sol = voxgi.solve(
+            vox,
+            directions=R,
+            shoot_directions=22,
+            later_directions=Rl,
+            later_after=2,
+            progress=False,
+            tol=1e-6,
+        )
         dt = time.perf_counter() - t
         front = ~vox.back & (ref.radiosity.max(axis=1) > 0)
         err = np.abs(sol.radiosity[front] / ref.radiosity[front] - 1)
-        rows.append({"R": R, "later_R": Rl, "iters": sol.bounces, "gather_s": sol.stats["seconds"]["gather"],
-                     "mean_err_vs_R22": float(err.mean()), "p99_err_vs_R22": float(np.quantile(err, 0.99)),
-                     "seconds": dt})
+        rows.append(
+            {
+                "R": R,
+                "later_R": Rl,
+                "iters": sol.bounces,
+                "gather_s": sol.stats["seconds"]["gather"],
+                "mean_err_vs_R22": float(err.mean()),
+                "p99_err_vs_R22": float(np.quantile(err, 0.99)),
+                "seconds": dt,
+            }
+        )
         print(rows[-1], flush=True)
-    _table(rows, ["R", "later_R", "iters", "gather_s", "mean_err_vs_R22", "p99_err_vs_R22", "seconds"])
+    _table(
+        rows, ["R", "later_R", "iters", "gather_s", "mean_err_vs_R22", "p99_err_vs_R22", "seconds"]
+    )
     _write("later", rows, res=res, note="Cornell box; reference R = 22 everywhere, tol 1e-6")
 
 
@@ -250,12 +384,21 @@ def _gather_time(vox, R, threads, iters=2, repeats=1):
 def linear(args) -> None:
     rows = []
     base = 48 if args.quick else 64
-    for res, R in ((base, 11), (int(round(base * 2 ** 0.5)), 11), (2 * base, 11), (base, 16)):
+    for res, R in ((base, 11), (int(round(base * 2**0.5)), 11), (2 * base, 11), (base, 16)):
         vox = _bunny(res)
         dt, rays = _gather_time(vox, R, 1)
-        rows.append({"res": res, "records": len(vox), "R": R,
-                     "families": len(direction_set(R).families), "iters": 2, "seconds": dt,
-                     "ns_per_ray": 1e9 * dt / rays, "Mrays_s": rays / dt / 1e6})
+        rows.append(
+            {
+                "res": res,
+                "records": len(vox),
+                "R": R,
+                "families": len(direction_set(R).families),
+                "iters": 2,
+                "seconds": dt,
+                "ns_per_ray": 1e9 * dt / rays,
+                "Mrays_s": rays / dt / 1e6,
+            }
+        )
         print(rows[-1], flush=True)
     _table(rows, ["res", "records", "R", "families", "iters", "seconds", "ns_per_ray", "Mrays_s"])
     _write("linear", rows, note="gathering only, 1 thread; ray = record x family x iteration")
@@ -275,9 +418,17 @@ def throughput(args) -> None:
             s.gather(ds.families, ds.weights, vals, fam, False, th, algo)
             dt = time.perf_counter() - t
             rays = len(vox) * len(fam)
-            rows.append({"records": len(vox), "R": 22, "threads": th, "algorithm": algo,
-                         "seconds": dt, "Mrays_s": rays / dt / 1e6,
-                         "Mrays_s_per_thread": rays / dt / 1e6 / th})
+            rows.append(
+                {
+                    "records": len(vox),
+                    "R": 22,
+                    "threads": th,
+                    "algorithm": algo,
+                    "seconds": dt,
+                    "Mrays_s": rays / dt / 1e6,
+                    "Mrays_s_per_thread": rays / dt / 1e6 / th,
+                }
+            )
             print(rows[-1], flush=True)
     _table(rows, ["records", "threads", "algorithm", "seconds", "Mrays_s", "Mrays_s_per_thread"])
     _write("throughput", rows, res=res, note="one gathering iteration over all 2991 families")
@@ -289,19 +440,49 @@ def paper(args) -> None:
     vox = _bunny(res)
     for th in args.threads:
         t = time.perf_counter()
-        sol = voxgi.solve(vox, directions=22, shoot_directions=35, max_bounces=4, threads=th,
-                          progress=False, accelerate=False)
+        sol = voxgi.solve(
+            vox,
+            directions=22,
+            shoot_directions=35,
+            max_bounces=4,
+            threads=th,
+            progress=False,
+            accelerate=False,
+        )
         dt = time.perf_counter() - t
         sec = sol.stats["seconds"]
-        rows.append({"records": len(vox), "emitters": sol.stats["emitters"], "threads": th,
-                     "shoot_s": sec["shoot"], "gather_s": sec["gather"], "total_s": dt,
-                     "shoot_rays": sol.stats["shoot_rays"], "gather_rays": sol.stats["gather_rays"],
-                     "shoot_Mrays_s": sol.stats["shoot_rays"] / sec["shoot"] / 1e6,
-                     "gather_Mrays_s": sol.stats["gather_rays"] / sec["gather"] / 1e6,
-                     "paper_shoot_s": 93, "paper_propagate_s": 404})
+        rows.append(
+            {
+                "records": len(vox),
+                "emitters": sol.stats["emitters"],
+                "threads": th,
+                "shoot_s": sec["shoot"],
+                "gather_s": sec["gather"],
+                "total_s": dt,
+                "shoot_rays": sol.stats["shoot_rays"],
+                "gather_rays": sol.stats["gather_rays"],
+                "shoot_Mrays_s": sol.stats["shoot_rays"] / sec["shoot"] / 1e6,
+                "gather_Mrays_s": sol.stats["gather_rays"] / sec["gather"] / 1e6,
+                "paper_shoot_s": 93,
+                "paper_propagate_s": 404,
+            }
+        )
         print(rows[-1], flush=True)
-    _table(rows, ["records", "emitters", "threads", "shoot_s", "gather_s", "total_s", "shoot_rays",
-                  "gather_rays", "paper_shoot_s", "paper_propagate_s"])
+    _table(
+        rows,
+        [
+            "records",
+            "emitters",
+            "threads",
+            "shoot_s",
+            "gather_s",
+            "total_s",
+            "shoot_rays",
+            "gather_rays",
+            "paper_shoot_s",
+            "paper_propagate_s",
+        ],
+    )
     _write("paper", rows, res=res)
 
 
@@ -327,8 +508,16 @@ def dump(args) -> None:
     print(f"wrote {path} ({len(vox)} records, {len(emit)} emitters)")
 
 
-SECTIONS = {"furnace": furnace, "cap": cap, "accel": accel, "cornell": cornell, "later": later,
-            "linear": linear, "throughput": throughput, "paper": paper}
+SECTIONS = {
+    "furnace": furnace,
+    "cap": cap,
+    "accel": accel,
+    "cornell": cornell,
+    "later": later,
+    "linear": linear,
+    "throughput": throughput,
+    "paper": paper,
+}
 EXTRA = {"dump": dump}  # not run by default
 
 
@@ -337,6 +526,8 @@ def main() -> None:
     ap.add_argument("sections", nargs="*", default=[], help=", ".join(SECTIONS))
     ap.add_argument("--quick", action="store_true", help="smaller cases")
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--res", type=int, nargs="+", help="cap: resolutions")
+    ap.add_argument("--radii", type=int, nargs="+", help="cap: direction radii")
     args = ap.parse_args()
     bad = [s for s in args.sections if s not in SECTIONS and s not in EXTRA]
     if bad:

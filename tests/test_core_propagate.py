@@ -16,8 +16,14 @@ from voxgi.directions import direction_set
 # ----------------------------------------------------------------- records
 
 
-def sphere_records(res: int, radius: float | None = None, *, back: bool = True,
-                   centre=None, samples_per_voxel: int = 200) -> dict:
+def sphere_records(
+    res: int,
+    radius: float | None = None,
+    *,
+    back: bool = True,
+    centre=None,
+    samples_per_voxel: int = 200,
+) -> dict:
     """Supercover records of a sphere seen from inside, in voxel units.
 
     Every voxel whose closed cube meets the sphere gets a record (normal
@@ -26,7 +32,9 @@ def sphere_records(res: int, radius: float | None = None, *, back: bool = True,
     one-sided surface. Areas: a Fibonacci lattice of points on the sphere
     binned into voxels (deterministic).
     """
-    c = np.asarray(centre if centre is not None else [res / 2 + 0.13, res / 2 - 0.21, res / 2 + 0.07])
+    c = np.asarray(
+        centre if centre is not None else [res / 2 + 0.13, res / 2 - 0.21, res / 2 + 0.07]
+    )
     rs = 0.45 * res if radius is None else radius
     i = np.arange(res)
     g = np.stack(np.meshgrid(i, i, i, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -40,7 +48,7 @@ def sphere_records(res: int, radius: float | None = None, *, back: bool = True,
     m = int(samples_per_voxel * area_total)
     k = np.arange(m) + 0.5
     zc = 1 - 2 * k / m
-    phi = np.pi * (1 + 5 ** 0.5) * k
+    phi = np.pi * (1 + 5**0.5) * k
     rxy = np.sqrt(1 - zc * zc)
     pts = c + rs * np.stack([rxy * np.cos(phi), rxy * np.sin(phi), zc], axis=1)
     cell = np.floor(pts).astype(np.int64)
@@ -51,20 +59,33 @@ def sphere_records(res: int, radius: float | None = None, *, back: bool = True,
     assert ok.mean() > 0.999  # the supercover holds (nearly) every sample
     cnt = np.bincount(slot[ok], minlength=len(ijk)).astype(np.float64)
     area = cnt * area_total / m
-    cen = np.stack([np.bincount(slot[ok], weights=pts[ok, a], minlength=len(ijk)) for a in range(3)], 1)
+    cen = np.stack(
+        [np.bincount(slot[ok], weights=pts[ok, a], minlength=len(ijk)) for a in range(3)], 1
+    )
     centre_v = ijk + 0.5
     proj = c + rs * (centre_v - c) / np.linalg.norm(centre_v - c, axis=1, keepdims=True)
     cen = np.where(cnt[:, None] > 0, cen / np.maximum(cnt, 1)[:, None], proj)
     normal = c - cen
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    rec = {"ijk": ijk, "normal": normal.astype(np.float32), "point": cen.astype(np.float32),
-           "area": area, "back": np.zeros(len(ijk), bool), "centre": c, "radius": rs}
+    rec = {
+        "ijk": ijk,
+        "normal": normal.astype(np.float32),
+        "point": cen.astype(np.float32),
+        "area": area,
+        "back": np.zeros(len(ijk), bool),
+        "centre": c,
+        "radius": rs,
+    }
     if back:
-        rec = {"ijk": np.concatenate([ijk, ijk]), "normal": np.concatenate([rec["normal"], -rec["normal"]]),
-               "point": np.concatenate([rec["point"], rec["point"]]),
-               "area": np.concatenate([area, area]),
-               "back": np.concatenate([np.zeros(len(ijk), bool), np.ones(len(ijk), bool)]),
-               "centre": c, "radius": rs}
+        rec = {
+            "ijk": np.concatenate([ijk, ijk]),
+            "normal": np.concatenate([rec["normal"], -rec["normal"]]),
+            "point": np.concatenate([rec["point"], rec["point"]]),
+            "area": np.concatenate([area, area]),
+            "back": np.concatenate([np.zeros(len(ijk), bool), np.ones(len(ijk), bool)]),
+            "centre": c,
+            "radius": rs,
+        }
     return rec
 
 
@@ -105,13 +126,18 @@ def box_records(lo, hi, *, inward: bool = True, back: bool = False) -> dict:
 
 
 def merge(*recs) -> dict:
-    return {k: np.concatenate([r[k] for r in recs]) for k in ("ijk", "normal", "point", "area", "back")}
+    return {
+        k: np.concatenate([r[k] for r in recs]) for k in ("ijk", "normal", "point", "area", "back")
+    }
 
 
 def system(rec, **kw) -> _core.LineSystem:
-    return _core.LineSystem(np.ascontiguousarray(rec["ijk"], np.int32),
-                            np.ascontiguousarray(rec["normal"], np.float32),
-                            np.ascontiguousarray(rec["point"], np.float32), **kw)
+    return _core.LineSystem(
+        np.ascontiguousarray(rec["ijk"], np.int32),
+        np.ascontiguousarray(rec["normal"], np.float32),
+        np.ascontiguousarray(rec["point"], np.float32),
+        **kw,
+    )
 
 
 def gathered_share(rec, radius, **kw):
@@ -137,11 +163,19 @@ def voxelset(rec, *, albedo=0.5, emission=1.0, pitch=0.1, emit_mask=None):
     alb[back] = 0
     em[back] = 0
     origin = np.array([-1.0, 0.5, 2.0])
-    return VoxelSet(ijk=rec["ijk"].astype(np.int32), normal=rec["normal"].astype(np.float32),
-                    area=(rec["area"] * pitch * pitch).astype(np.float32), albedo=alb, emission=em,
-                    centroid=origin + rec["point"].astype(np.float64) * pitch,
-                    object_id=np.zeros(n, np.int32), back=back.copy(), pitch=pitch, origin=origin,
-                    resolution=int(rec["ijk"].max()) + 1)
+    return VoxelSet(
+        ijk=rec["ijk"].astype(np.int32),
+        normal=rec["normal"].astype(np.float32),
+        area=(rec["area"] * pitch * pitch).astype(np.float32),
+        albedo=alb,
+        emission=em,
+        centroid=origin + rec["point"].astype(np.float64) * pitch,
+        object_id=np.zeros(n, np.int32),
+        back=back.copy(),
+        pitch=pitch,
+        origin=origin,
+        resolution=int(rec["ijk"].max()) + 1,
+    )
 
 
 def all_families(radius):
@@ -157,15 +191,18 @@ def _grid(n):
     return np.stack(np.meshgrid(i, i, i, indexing="ij"), -1).reshape(-1, 3).astype(np.int32) - 3
 
 
-@pytest.mark.parametrize("v", [(5, 3, 2), (7, -7, 1), (4, 0, -3), (-2, 6, 5), (1, 1, -8), (9, 9, 9),
-                               (0, 0, 3)])
+@pytest.mark.parametrize(
+    "v", [(5, 3, 2), (7, -7, 1), (4, 0, -3), (-2, 6, 5), (1, 1, -8), (9, 9, 9), (0, 0, 3)]
+)
 def test_line_keys_are_naive_lines(v):
     v = np.array(v, np.int32)
     m = int(np.argmax(np.abs(v)))
     if v[m] < 0:
         v = -v
     g = _grid(13)
-    s = _core.LineSystem(g, np.tile(np.float32([0, 0, 1]), (len(g), 1)), (g + 0.5).astype(np.float32))
+    s = _core.LineSystem(
+        g, np.tile(np.float32([0, 0, 1]), (len(g), 1)), (g + 0.5).astype(np.float32)
+    )
     k = s.keys(v)
     o = [a for a in range(3) if a != m]
     order = np.lexsort((g[:, m], k))
@@ -194,7 +231,9 @@ def test_line_keys_are_naive_lines(v):
 def test_multiples_give_the_same_lines(p):
     # DESIGN-NOTES §3: k·p partitions space into the same lines as p
     g = _grid(11)
-    s = _core.LineSystem(g, np.tile(np.float32([0, 0, 1]), (len(g), 1)), (g + 0.5).astype(np.float32))
+    s = _core.LineSystem(
+        g, np.tile(np.float32([0, 0, 1]), (len(g), 1)), (g + 0.5).astype(np.float32)
+    )
     base = s.keys(np.array(p, np.int32))
     for k in (2, 3, 5):
         other = s.keys(np.array(p, np.int32) * k)
@@ -211,7 +250,7 @@ def test_closed_box_gathers_the_whole_hemisphere():
     # rule, depth order and a history of 16 every record finds a partner in
     # every direction (measured: 1.000000 mean and min, with back records)
     rec = box_records([1.3, 1.4, 1.6], [20.7, 15.2, 18.4], back=True)
-    share, vis, S = gathered_share(rec, 6, epsilon=0.02, history=16)
+    share, vis, _ = gathered_share(rec, 6, epsilon=0.02, history=16)
     front = ~rec["back"]
     assert np.allclose(share[front], 1.0, atol=1e-9)
     # back records face the outside, where there is nothing
@@ -224,7 +263,7 @@ def test_sphere_from_inside_loses_little():
     # grazing directions (res 48: 0.99940; res 64: 0.99964); back records
     # must gather nothing
     rec = sphere_records(32)
-    share, vis, S = gathered_share(rec, 8, epsilon=0.02, history=16)
+    share, vis, _ = gathered_share(rec, 8, epsilon=0.02, history=16)
     front = ~rec["back"]
     assert share[front].mean() > 0.998
     assert share[front].min() > 0.975
@@ -249,7 +288,7 @@ def test_thin_two_sided_wall_does_not_leak():
     E[emit] = 1.0
     ds, fams = all_families(6)
     s = system(rec, epsilon=0.02, history=16)
-    hd, unfound, rays, _ = s.shoot(np.flatnonzero(emit).astype(np.int32), ds.families, ds.weights, E)
+    hd, _, _, _ = s.shoot(np.flatnonzero(emit).astype(np.int32), ds.families, ds.weights, E)
     assert hd[left & ~rec["back"]].sum() > 0
     assert np.all(hd[right] == 0)
     g, _, _ = s.gather(ds.families, ds.weights, E, fams)
@@ -274,8 +313,7 @@ def test_shooting_is_the_transpose_of_gathering(sphere24):
     E = np.zeros((n, 3), np.float32)
     E[emit] = np.float32([1.0, 2.0, 0.5])
     ds, fams = all_families(5)
-    hd, unfound, rays, steps = s.shoot(np.flatnonzero(emit).astype(np.int32), ds.families,
-                                       ds.weights, E)
+    hd, _, rays, _ = s.shoot(np.flatnonzero(emit).astype(np.int32), ds.families, ds.weights, E)
     g, _, _ = s.gather(ds.families, ds.weights, E, fams)
     assert np.allclose(hd, g, rtol=1e-12, atol=1e-15)
     # one ray per emitter and direction it faces
@@ -297,10 +335,28 @@ def test_threads_partial_sums_and_algorithms_agree(sphere24):
     srt, _, _ = s.gather(ds.families, ds.weights, vals, fams, False, 1, "sort")
     assert np.allclose(one, srt, rtol=1e-12, atol=0)
     # disjoint subsets add up to the full pass (the Dask work unit)
-    a = _core.gather_families(rec["ijk"], rec["normal"], rec["point"], ds.families, ds.weights,
-                              vals, np.ascontiguousarray(fams[::2]), epsilon=0.02, history=16)
-    b = _core.gather_families(rec["ijk"], rec["normal"], rec["point"], ds.families, ds.weights,
-                              vals, np.ascontiguousarray(fams[1::2]), epsilon=0.02, history=16)
+    a = _core.gather_families(
+        rec["ijk"],
+        rec["normal"],
+        rec["point"],
+        ds.families,
+        ds.weights,
+        vals,
+        np.ascontiguousarray(fams[::2]),
+        epsilon=0.02,
+        history=16,
+    )
+    b = _core.gather_families(
+        rec["ijk"],
+        rec["normal"],
+        rec["point"],
+        ds.families,
+        ds.weights,
+        vals,
+        np.ascontiguousarray(fams[1::2]),
+        epsilon=0.02,
+        history=16,
+    )
     assert np.allclose(a + b, one, rtol=1e-12, atol=1e-15)
 
 

@@ -56,8 +56,9 @@ def test_raw_hemisphere_sums(rng, radius, spread):
     S = ds.raw_sums(n)
     assert np.all(np.abs(S - 1) < spread)
     # the kernel's normalisation agrees with numpy's
-    s = _core.LineSystem(np.zeros((len(n), 3), np.int32),
-                         n.astype(np.float32), np.zeros((len(n), 3), np.float32))
+    s = _core.LineSystem(
+        np.zeros((len(n), 3), np.int32), n.astype(np.float32), np.zeros((len(n), 3), np.float32)
+    )
     Sk = s.normalisation(ds.families, ds.weights)
     assert np.allclose(Sk, ds.raw_sums(n.astype(np.float32)), rtol=1e-6, atol=0)
 

@@ -10,11 +10,10 @@ import warnings
 
 import numpy as np
 import pytest
+from test_core_propagate import sphere_records, voxelset
 
 import voxgi
 from voxgi.radiosity import gather_partial, line_system
-
-from test_core_propagate import sphere_records, voxelset  # noqa: I001 (tests dir on sys.path)
 
 
 def _voxelize_or_skip(scene, resolution):
@@ -78,8 +77,15 @@ def test_cap_sphere_and_acceleration(sphere32):
     # rim + 99 δ); without extrapolation 200 iterations leave 15% error
     assert err.mean() < 0.05
     assert err.max() < 0.08
-    plain = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-5,
-                        accelerate=False, max_bounces=25)
+    plain = voxgi.solve(
+        vox,
+        directions=8,
+        shoot_directions=8,
+        progress=False,
+        tol=1e-5,
+        accelerate=False,
+        max_bounces=25,
+    )
     err_plain = np.abs(plain.radiance / _cap_exact(vox, rho) - 1)[front]
     assert err_plain.mean() > 5 * err.mean()
 
@@ -92,6 +98,25 @@ def test_gauss_seidel_matches_jacobi(sphere32):
     # both solve the same linear system; tol 1e-7 leaves ~1e-6 of difference
     assert np.allclose(g.radiosity, j.radiosity, rtol=1e-5, atol=1e-6)
     assert g.bounces <= j.bounces
+
+
+def test_coarser_later_bounces(sphere32):
+    # Piwowar & Malgouyres 2009: bounces after the second with fewer
+    # directions. Bounce by bounce, so the answer stays near the fine one
+    # (measured on this cap sphere: 0.056% mean), whereas the coarse set
+    # everywhere is further off (0.21% mean); gathering rays drop 3.4x.
+    vox = voxelset(sphere32, albedo=0.7, emit_mask=_cap(sphere32))
+    kw = dict(shoot_directions=8, progress=False, tol=1e-6)
+    fine = voxgi.solve(vox, directions=8, **kw)
+    later = voxgi.solve(vox, directions=8, later_directions=3, **kw)
+    coarse = voxgi.solve(vox, directions=3, **kw)
+    front = ~vox.back
+    e_later = np.abs(later.radiosity[front] / fine.radiosity[front] - 1).mean()
+    e_coarse = np.abs(coarse.radiosity[front] / fine.radiosity[front] - 1).mean()
+    assert e_later < 0.5 * e_coarse
+    assert later.stats["gather_rays"] < fine.stats["gather_rays"]
+    with pytest.raises(ValueError, match="later_directions"):
+        voxgi.solve(vox, later_directions=4, method="gauss-seidel")
 
 
 def test_threads_do_not_change_the_answer(sphere32):
@@ -108,8 +133,9 @@ def test_gather_partial_adds_up(sphere32):
     B = rng.random((len(vox), 3)).astype(np.float32)
     s = line_system(vox)
     full = gather_partial(vox, B, np.arange(381), 8, system=s)
-    parts = sum(gather_partial(vox, B, idx, 8, system=s)
-                for idx in np.array_split(rng.permutation(381), 3))
+    parts = sum(
+        gather_partial(vox, B, idx, 8, system=s) for idx in np.array_split(rng.permutation(381), 3)
+    )
     assert np.allclose(parts, full, rtol=1e-12, atol=1e-14)
 
 
@@ -125,8 +151,12 @@ def test_open_box_energy_balance():
     rec = box_records([1.3, 1.4, 1.6], [20.7, 18.2, 19.4], back=True)
     keep = ~((np.abs(rec["normal"][:, 2]) > 0.5) & (rec["point"][:, 2] < 1.7))  # open at z = lo
     rec = {k: v[keep] for k, v in rec.items()}
-    lamp = (~rec["back"]) & (rec["normal"][:, 1] < -0.5) & (np.abs(rec["point"][:, 0] - 11) < 3) & (
-        np.abs(rec["point"][:, 2] - 10) < 3)
+    lamp = (
+        (~rec["back"])
+        & (rec["normal"][:, 1] < -0.5)
+        & (np.abs(rec["point"][:, 0] - 11) < 3)
+        & (np.abs(rec["point"][:, 2] - 10) < 3)
+    )
     vox = voxelset(rec, albedo=0.7, emit_mask=lamp, emission=5.0)
     sol = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-7)
     e = sol.stats["energy"]
@@ -138,7 +168,8 @@ def test_no_emitter_warns_and_returns_zero(sphere32):
     vox = voxelset(sphere32, albedo=0.5, emission=0.0)
     with pytest.warns(RuntimeWarning, match="no emitter"):
         sol = voxgi.solve(vox, progress=False)
-    assert sol.radiosity.shape == (len(vox), 3) and not sol.radiosity.any()
+    assert sol.radiosity.shape == (len(vox), 3)
+    assert not sol.radiosity.any()
     assert sol.stats["rays"] == 0
 
 
@@ -147,7 +178,8 @@ def test_direct_only_and_black_scene(sphere32):
     vox = voxelset(sphere32, albedo=0.0)
     sol = voxgi.solve(vox, directions=4, shoot_directions=4, progress=False)
     assert np.array_equal(sol.radiosity, np.float32(np.pi) * vox.emission)
-    assert sol.bounces == 0 and "gathering" in sol.stats["skipped"]
+    assert sol.bounces == 0
+    assert "gathering" in sol.stats["skipped"]
 
 
 def test_save_load_roundtrip(tmp_path, sphere32):
@@ -156,8 +188,10 @@ def test_save_load_roundtrip(tmp_path, sphere32):
     p = sol.save(tmp_path / "sol")
     back = voxgi.Solution.load(p)
     assert np.array_equal(back.radiosity, sol.radiosity)
-    assert np.array_equal(back.vox.ijk, vox.ijk) and np.array_equal(back.vox.back, vox.back)
-    assert back.vox.pitch == vox.pitch and back.bounces == sol.bounces
+    assert np.array_equal(back.vox.ijk, vox.ijk)
+    assert np.array_equal(back.vox.back, vox.back)
+    assert back.vox.pitch == vox.pitch
+    assert back.bounces == sol.bounces
     assert back.residuals == sol.residuals
     assert back.stats["gather_rays"] == sol.stats["gather_rays"]
 
@@ -174,12 +208,13 @@ def test_bad_input(sphere32):
         voxgi.solve(vox, tol=0)
     with pytest.raises(ValueError, match="method"):
         voxgi.solve(vox, method="sor")
-    with pytest.raises(NotImplementedError):
+    # not a Client: TypeError (ImportError naming the extra where Dask is absent)
+    with pytest.raises((TypeError, ImportError), match="client"):
         voxgi.solve(vox, client=object())
     import dataclasses
 
     bad = dataclasses.replace(vox, area=vox.area[:-1])
-    with pytest.raises(ValueError, match="vox.area"):
+    with pytest.raises(ValueError, match=r"vox\.area"):
         voxgi.solve(bad)
     bad = dataclasses.replace(vox, albedo=np.full_like(vox.albedo, 1.5))
     with pytest.raises(ValueError, match="albedo"):
@@ -198,16 +233,19 @@ def test_bad_input(sphere32):
 # ----------------------------------------------------------------- built-in scenes
 
 
+@pytest.mark.slow
 def test_cornell_box_energy_balance_converges():
     # Cornell box (open front): (emitted - absorbed - escaping) / emitted,
     # escaping counted on the sender side. Measured (R = 8, shooting 16):
-    # -0.37 at res 32, -0.15 at 64, -0.079 at 128: about -5/res, from the
+    # -0.37 at res 32, -0.15 at 64, -0.079 at 128 (benchmarks/propagation.py
+    # cornell); here (R = 6, shooting 12) -0.37 at 24, -0.19 at 48. From the
     # thin light quad whose one-voxel band looks bigger edge-on than the
     # light is (the walls see it at grazing angles). Not 1e-3: see the
-    # closing note. The test holds the trend: halving the pitch halves it.
+    # closing note. The test holds the trend (res 24 -> 48): halving the
+    # pitch halves it.
     scene = voxgi.scenes.cornell_box(width=32, height=32)
     imb = []
-    for res in (32, 64):
+    for res in (24, 48):
         vox = _voxelize_or_skip(scene, res)
         sol = voxgi.solve(vox, directions=6, shoot_directions=12, progress=False, tol=1e-4)
         e = sol.stats["energy"]

@@ -133,10 +133,14 @@ def _cached(radius: int) -> DirectionSet:
     g = np.gcd.reduce(np.abs(v), axis=1)
     for arr in (v, omega, fam, w):
         arr.setflags(write=False)
-    return DirectionSet(radius=radius, vectors=v, solid_angle=omega,
-                        families=np.ascontiguousarray(fam, dtype=np.int32),
-                        weights=np.ascontiguousarray(w, dtype=np.float64),
-                        non_primitive=int(np.count_nonzero(g > 1)))
+    return DirectionSet(
+        radius=radius,
+        vectors=v,
+        solid_angle=omega,
+        families=np.ascontiguousarray(fam, dtype=np.int32),
+        weights=np.ascontiguousarray(w, dtype=np.float64),
+        non_primitive=int(np.count_nonzero(g > 1)),
+    )
 
 
 def direction_set(radius: int) -> DirectionSet:

@@ -20,7 +20,13 @@ import numpy as np
 from . import _core, _validate
 from .scene import Camera, Scene
 
-__all__ = ["RenderResult", "render", "run_cli"]
+__all__ = ["RENDER_DIRECTIONS", "RENDER_RESOLUTION", "RenderResult", "render", "run_cli"]
+
+#: Voxel resolution and gathering radius used by ``render(scene)`` without a
+#: solution and by ``voxgi render``: the fastest measured setting to relMSE
+#: 5e-3 against Mitsuba on the Cornell box (benchmarks/time_vs_error.py).
+RENDER_RESOLUTION = 96
+RENDER_DIRECTIONS = 8
 
 #: relMSE's epsilon (voxgi.metrics.rel_mse), used by the stopping rule too.
 _REL_EPS = 0.01
@@ -645,8 +651,11 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         Show a tqdm progress bar.
     threads : int or None
         Worker threads (None: all cores).
-    client : None
-        Reserved for distributed rendering; must be None.
+    client : dask.distributed.Client or None
+        Compute the frames on the client's workers (:mod:`voxgi.distributed`;
+        ``pip install "voxgi[dask]"``); the render loop, its accumulation and
+        stopping rule stay here, so the image equals the local one. Also
+        used by the solve when ``sol`` is None.
     camera : Camera, optional
         Overrides ``scene.camera``.
     min_frames : int
@@ -661,7 +670,12 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
         paper); see :class:`VPLSampler`.
     resolution, directions : int, optional
-        Passed to :func:`voxgi.voxelize` / :func:`voxgi.solve` when ``sol`` is None.
+        Passed to :func:`voxgi.voxelize` / :func:`voxgi.solve` when ``sol`` is
+        None; default :data:`RENDER_RESOLUTION` (96) and
+        :data:`RENDER_DIRECTIONS` (8), the fastest of the measured settings to
+        reach relMSE 5e-3 on the Cornell box (``benchmarks/time_vs_error.py``):
+        the display's gather rays make the picture far less sensitive to the
+        direction count than the voxel solution itself.
 
     Returns
     -------
@@ -680,6 +694,8 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         No camera, a solution of another scene, bad numbers.
     TypeError
         Wrong argument types.
+    ImportError
+        ``client`` given without dask.distributed installed.
     """
     t_start = time.perf_counter()
     if not isinstance(scene, Scene):
@@ -690,8 +706,10 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         raise ValueError("render: the scene has no camera (set scene.camera or pass camera=)")
     if not isinstance(cam, Camera):
         raise TypeError(f"camera: expected voxgi.Camera, got {type(cam).__name__}")
-    if client is not None:
-        raise NotImplementedError("render: distributed display (client=) is not implemented")
+    if client is not None:  # fail early: the extra missing (ImportError) or not a Client
+        from .distributed import check_client
+
+        check_client(client)
     K = _validate.integer(vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16)
     max_frames = _validate.integer(max_frames, "max_frames", low=1, allow_none=True) or 256
     tol = _validate.real(tol, "tol", low=0.0, allow_none=True)
@@ -720,11 +738,11 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         from .voxels import voxelize
 
         t0 = time.perf_counter()
-        vox = voxelize(scene, **({} if resolution is None else {"resolution": resolution}))
+        vox = voxelize(scene, resolution=RENDER_RESOLUTION if resolution is None else resolution)
         seconds["voxelize"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        sol = solve(vox, **({} if directions is None else {"directions": directions}),
-                    threads=threads, progress=progress)
+        sol = solve(vox, directions=RENDER_DIRECTIONS if directions is None else directions,
+                    threads=threads, progress=progress, client=client)
         seconds["solve"] = time.perf_counter() - t0
     _check_solution(scene, sol)
 
@@ -747,6 +765,11 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     if sampler.skipped_records:
         skipped.append(f"{sampler.skipped_records} records with zero radiosity or area "
                        "(back records) are never VPLs")
+
+    if client is not None:  # the same loop below, its frames computed on Dask workers
+        from .distributed import DistributedFrames
+
+        shader = DistributedFrames(client, shader, max_frames)
 
     H, W = cam.height, cam.width
     mean = np.zeros((H * W, 3))
@@ -776,6 +799,8 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     finally:
         bar.close()
         tracer.close()
+        if client is not None:
+            shader.close()
     image = mean.reshape(H, W, 3).astype(np.float32)
     stderr = None
     if frames >= 2:
@@ -841,12 +866,12 @@ def run_cli(args) -> int:
     say(f"scene {name}: {len(scene.objects)} objects, {scene.n_triangles} triangles, "
         f"{cam.width}x{cam.height} pixels")
     t0 = time.perf_counter()
-    vox = voxelize(scene, **({} if args.resolution is None else {"resolution": args.resolution}))
+    vox = voxelize(scene, resolution=args.resolution or RENDER_RESOLUTION)
     t_vox = time.perf_counter() - t0
     say(f"voxelize: {len(vox)} records (resolution {vox.resolution}) in {t_vox:.2f} s")
     t0 = time.perf_counter()
-    sol = solve(vox, **({} if args.directions is None else {"directions": args.directions}),
-                threads=args.threads, progress=not args.quiet)
+    sol = solve(vox, directions=args.directions or RENDER_DIRECTIONS, threads=args.threads,
+                progress=not args.quiet)
     t_sol = time.perf_counter() - t0
     say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in {t_sol:.2f} s")
     res = render(scene, sol, max_frames=args.frames, seed=args.seed, progress=not args.quiet,
@@ -854,7 +879,8 @@ def run_cli(args) -> int:
     s = res.stats
     sec = s["seconds"]
     say(f"display: {res.frames} frames, {s['vpls']} VPLs/pixel, {s['primary_rays']:.3g} primary "
-        f"+ {s['shadow_rays']:.3g} shadow rays in {sec['display']:.2f} s "
+        f"+ {s['shadow_rays']:.3g} shadow + {s['gather_rays']:.3g} gather rays in "
+        f"{sec['display']:.2f} s "
         f"(estimated relMSE of the noise {s['est_rel_mse']:.2e})")
     timings = {"voxelize": t_vox, "solve": t_sol, **{k: v for k, v in sec.items()
                                                       if k not in ("voxelize", "solve", "total")}}

@@ -24,7 +24,6 @@ is one emitter record and one direction it faces.
 from __future__ import annotations
 
 import json
-import math
 import time
 import warnings
 import zipfile
@@ -87,8 +86,12 @@ class Solution:
         if path.suffix != ".npz":
             path = path.with_name(path.name + ".npz")
         arrays = {}
-        meta = {"bounces": int(self.bounces), "residuals": [float(r) for r in self.residuals],
-                "stats": self.stats, "vox_stats": self.vox.stats}
+        meta = {
+            "bounces": int(self.bounces),
+            "residuals": [float(r) for r in self.residuals],
+            "stats": self.stats,
+            "vox_stats": self.vox.stats,
+        }
         for f in fields(VoxelSet):
             v = getattr(self.vox, f.name)
             if isinstance(v, np.ndarray):
@@ -96,7 +99,9 @@ class Solution:
             elif f.name not in ("stats",):
                 meta["vox_" + f.name] = v
         arrays["radiosity"] = self.radiosity
-        arrays["meta"] = np.frombuffer(json.dumps(meta, default=_json_default).encode(), dtype=np.uint8)
+        arrays["meta"] = np.frombuffer(
+            json.dumps(meta, default=_json_default).encode(), dtype=np.uint8
+        )
         np.savez_compressed(path, **arrays)
         return path
 
@@ -142,8 +147,13 @@ class Solution:
             kw["pitch"] = float(kw["pitch"])
             kw["resolution"] = int(kw["resolution"])
             vox = VoxelSet(**kw)
-            return cls(vox=vox, radiosity=z["radiosity"], bounces=meta["bounces"],
-                       residuals=meta["residuals"], stats=meta["stats"])
+            return cls(
+                vox=vox,
+                radiosity=z["radiosity"],
+                bounces=meta["bounces"],
+                residuals=meta["residuals"],
+                stats=meta["stats"],
+            )
 
 
 def _json_default(o):
@@ -165,12 +175,14 @@ def _check_vox(vox) -> dict:
     n = len(ijk)
     if n == 0:
         raise ValueError("vox: no records")
-    out = {"ijk": ijk,
-           "normal": _validate.as_c_array(vox.normal, np.float32, (n, 3), "vox.normal"),
-           "area": _validate.as_c_array(vox.area, np.float64, (n,), "vox.area"),
-           "albedo": _validate.as_c_array(vox.albedo, np.float32, (n, 3), "vox.albedo"),
-           "emission": _validate.as_c_array(vox.emission, np.float32, (n, 3), "vox.emission"),
-           "centroid": _validate.as_c_array(vox.centroid, np.float64, (n, 3), "vox.centroid")}
+    out = {
+        "ijk": ijk,
+        "normal": _validate.as_c_array(vox.normal, np.float32, (n, 3), "vox.normal"),
+        "area": _validate.as_c_array(vox.area, np.float64, (n,), "vox.area"),
+        "albedo": _validate.as_c_array(vox.albedo, np.float32, (n, 3), "vox.albedo"),
+        "emission": _validate.as_c_array(vox.emission, np.float32, (n, 3), "vox.emission"),
+        "centroid": _validate.as_c_array(vox.centroid, np.float64, (n, 3), "vox.centroid"),
+    }
     pitch = _validate.real(vox.pitch, "vox.pitch", low=0.0, low_open=True)
     origin = _validate.vec3(vox.origin, "vox.origin")
     if np.any(out["area"] < 0):
@@ -186,8 +198,11 @@ def _check_vox(vox) -> dict:
         bad = int(np.argmax(np.abs(ln - 1)))
         raise ValueError(f"vox.normal: record {bad} is not a unit vector (|n| = {ln[bad]:.4g})")
     back = getattr(vox, "back", None)
-    out["back"] = (np.zeros(n, bool) if back is None
-                   else _validate.as_c_array(back, np.bool_, (n,), "vox.back"))
+    out["back"] = (
+        np.zeros(n, bool)
+        if back is None
+        else _validate.as_c_array(back, np.bool_, (n,), "vox.back")
+    )
     # surface points in voxel units (voxel ijk spans [ijk, ijk + 1]); float32
     # keeps 1e-3 voxel accuracy up to 16k voxels, far under the facing margin
     out["point"] = np.ascontiguousarray((out["centroid"] - origin) / pitch, dtype=np.float32)
@@ -208,13 +223,22 @@ def line_system(vox: VoxelSet, *, epsilon: float = 0.02, history: int = 16) -> _
         F records remembered per line (1..32).
     """
     a = _check_vox(vox)
-    return _core.LineSystem(a["ijk"], a["normal"], a["point"], epsilon=float(epsilon),
-                            history=int(history))
+    return _core.LineSystem(
+        a["ijk"], a["normal"], a["point"], epsilon=float(epsilon), history=int(history)
+    )
 
 
-def gather_partial(vox: VoxelSet, radiosity, family_indices, directions: int = 22, *,
-                   threads: int | None = None, epsilon: float = 0.02, history: int = 16,
-                   system: _core.LineSystem | None = None) -> np.ndarray:
+def gather_partial(
+    vox: VoxelSet,
+    radiosity,
+    family_indices,
+    directions: int = 22,
+    *,
+    threads: int | None = None,
+    epsilon: float = 0.02,
+    history: int = 16,
+    system: _core.LineSystem | None = None,
+) -> np.ndarray:
     """One Jacobi gathering pass over a subset of the direction families.
 
     The unit of work a distributed solver hands to a worker: partial sums
@@ -290,14 +314,29 @@ class _Extrapolator:
         self.prev = None
         self.lam_prev = None
         self.count += 1
-        return d * np.where(active, lam / (1 - lam), 0.0)
+        self.factor = np.where(active, lam / (1 - lam), 0.0)
+        return d * self.factor
 
 
-def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, tol: float = 1e-4,
-          threads: int | None = None, client=None, *, shoot_directions: int = 35,
-          method: str = "jacobi", progress: bool = True, accelerate: bool = True,
-          later_directions: int | None = None, later_after: int = 2, epsilon: float = 0.02,
-          history: int = 16, gs_blocks: int = 8, max_iterations: int = 10000) -> Solution:
+def solve(
+    vox: VoxelSet,
+    directions: int = 22,
+    max_bounces: int | None = None,
+    tol: float = 1e-4,
+    threads: int | None = None,
+    client=None,
+    *,
+    shoot_directions: int = 35,
+    method: str = "jacobi",
+    progress: bool = True,
+    accelerate: bool = True,
+    later_directions: int | None = None,
+    later_after: int = 2,
+    epsilon: float = 0.02,
+    history: int = 16,
+    gs_blocks: int = 8,
+    max_iterations: int = 10000,
+) -> Solution:
     """Solve the discrete radiosity equation on the records of ``vox``.
 
     Shooting from the emitter records first (direct light, radius
@@ -324,7 +363,11 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
         Threads (None: all hardware threads). Results do not depend on it
         beyond float rounding.
     client : dask.distributed.Client or None
-        Not supported yet (NotImplementedError).
+        Run the shooting and every gathering pass on the client's workers
+        (:mod:`voxgi.distributed`; ``pip install "voxgi[dask]"``): the records
+        are sent once, the direction families split over the workers and the
+        partial sums added in a fixed order, so the result equals the local
+        one to float rounding.
     shoot_directions : int
         Radius of the shooting direction sphere (35: 15194 directions).
     method : {"jacobi", "gauss-seidel"}
@@ -337,8 +380,11 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
         Geometric-tail extrapolation once the updates shrink steadily
         (DESIGN-NOTES §5); ρ = 0.99 then converges in tens of iterations.
     later_directions : int or None
-        Radius for the iterations after the first ``later_after`` ones
-        (Piwowar & Malgouyres 2009: later bounces are smooth). None: same.
+        Radius for the bounces after the first ``later_after`` ones
+        (Piwowar & Malgouyres 2009: later bounces are smooth). The solver then
+        propagates each bounce's increment (ΔR_{k+1} = ρ M_k ΔR_k, Jacobi
+        only) and ends with the geometric-tail term once the ratio of
+        successive bounces is steady. None: every bounce with ``directions``.
     epsilon : float
         Facing-rule margin in voxels (DESIGN-NOTES §4).
     history : int
@@ -360,8 +406,10 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
     ------
     TypeError, ValueError
         On a malformed VoxelSet or bad arguments.
-    NotImplementedError
-        If ``client`` is given.
+    ImportError
+        If ``client`` is given and dask.distributed is not installed.
+    MemoryError
+        If a worker's memory_limit cannot hold the records (checked first).
     """
     t_all = time.perf_counter()
     a = _check_vox(vox)
@@ -376,11 +424,18 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
     eps = _validate.real(epsilon, "epsilon", low=0.0)
     hist = _validate.integer(history, "history", low=1, high=32)
     gsb = _validate.integer(gs_blocks, "gs_blocks", low=1)
-    if not isinstance(method, str) or method.lower().replace("_", "-") not in ("jacobi", "gauss-seidel"):
+    if not isinstance(method, str) or method.lower().replace("_", "-") not in (
+        "jacobi",
+        "gauss-seidel",
+    ):
         raise ValueError(f"method: expected 'jacobi' or 'gauss-seidel', got {method!r}")
     method = method.lower().replace("_", "-")
-    if client is not None:
-        raise NotImplementedError("solve(client=...): distributed solving is not implemented yet")
+    if later_directions is not None and method != "jacobi":
+        raise ValueError("later_directions: only with method='jacobi'")
+    if client is not None:  # fail early: the extra missing (ImportError) or not a Client
+        from .distributed import check_client
+
+        check_client(client)
 
     n = len(a["ijk"])
     area = a["area"]
@@ -388,17 +443,35 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
     E = np.pi * a["emission"].astype(np.float64)  # emitted radiosity
     emitters = np.flatnonzero(np.any(a["emission"] > 0, axis=1)).astype(np.int32)
     seconds: dict[str, float] = {}
-    stats: dict = {"records": n, "emitters": int(len(emitters)), "method": method,
-                   "threads": nthreads, "skipped": {}}
+    stats: dict = {
+        "records": n,
+        "emitters": len(emitters),
+        "method": method,
+        "threads": nthreads,
+        "skipped": {},
+    }
     if len(emitters) == 0:
-        warnings.warn("solve: the scene has no emitter; the solution is zero", RuntimeWarning,
-                      stacklevel=2)
-        stats.update(rays=0, shoot_rays=0, gather_rays=0, seconds={"total": 0.0},
-                     skipped={"all": "no emitter"})
+        warnings.warn(
+            "solve: the scene has no emitter; the solution is zero", RuntimeWarning, stacklevel=2
+        )
+        stats.update(
+            rays=0,
+            shoot_rays=0,
+            gather_rays=0,
+            seconds={"total": 0.0},
+            skipped={"all": "no emitter"},
+        )
         return Solution(vox=vox, radiosity=np.zeros((n, 3), np.float32), stats=stats)
 
     t = time.perf_counter()
-    sysm = _core.LineSystem(a["ijk"], a["normal"], a["point"], epsilon=float(eps), history=hist)
+    if client is None:
+        sysm = _core.LineSystem(a["ijk"], a["normal"], a["point"], epsilon=float(eps), history=hist)
+    else:  # the same loop below, its gather/shoot calls split over Dask workers
+        from .distributed import DistributedLineSystem
+
+        sysm = DistributedLineSystem(client, a["ijk"], a["normal"], a["point"],
+                                     epsilon=float(eps), history=hist, progress=progress)
+        stats["distributed"] = sysm.stats
     gds = direction_set(R)
     sds = direction_set(Rs)
     lds = direction_set(Rl) if Rl is not None else None
@@ -410,24 +483,40 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
     Ss = Sg if Rs == R else sysm.normalisation(sds.families, sds.weights, nthreads)
     Sl = None
     if lds is not None:
-        Sl = Sg if Rl == R else (Ss if Rl == Rs else
-                                 sysm.normalisation(lds.families, lds.weights, nthreads))
+        Sl = (
+            Sg
+            if Rl == R
+            else (Ss if Rl == Rs else sysm.normalisation(lds.families, lds.weights, nthreads))
+        )
     seconds["normalisation"] = time.perf_counter() - t
-    stats["directions"] = {"gather": {"radius": R, "count": len(gds), "families": len(gds.families),
-                                      "non_primitive": gds.non_primitive},
-                           "shoot": {"radius": Rs, "count": len(sds), "families": len(sds.families),
-                                     "non_primitive": sds.non_primitive}}
+    stats["directions"] = {
+        "gather": {
+            "radius": R,
+            "count": len(gds),
+            "families": len(gds.families),
+            "non_primitive": gds.non_primitive,
+        },
+        "shoot": {
+            "radius": Rs,
+            "count": len(sds),
+            "families": len(sds.families),
+            "non_primitive": sds.non_primitive,
+        },
+    }
     if lds is not None:
         stats["directions"]["later"] = {"radius": Rl, "count": len(lds), "after": la}
-    stats["S_spread"] = {"gather": [float(Sg.min()), float(Sg.max())],
-                         "shoot": [float(Ss.min()), float(Ss.max())]}
+    stats["S_spread"] = {
+        "gather": [float(Sg.min()), float(Sg.max())],
+        "shoot": [float(Ss.min()), float(Ss.max())],
+    }
 
     # --- shooting: direct irradiance H_d from the emitters
     t = time.perf_counter()
     # receiver-side deposit: the exact transpose of gathering (see the
     # kernel's `send_scale` for the sender-side alternative and its aliasing)
     hd_raw, unfound, shoot_rays, steps = sysm.shoot(
-        emitters, sds.families, sds.weights, np.ascontiguousarray(E, dtype=np.float32), nthreads)
+        emitters, sds.families, sds.weights, np.ascontiguousarray(E, dtype=np.float32), nthreads
+    )
     Hd = hd_raw / Ss[:, None]
     seconds["shoot"] = time.perf_counter() - t
     # sender side: the share of each emitter's rays that met nobody
@@ -455,6 +544,11 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
         bar = tqdm(total=mb, desc="gather", unit="it", leave=False)
     lines_walked = 0
     it = 0
+    # coarser later bounces need the bounce-by-bounce (progressive) form: a
+    # fixed-point iteration would converge to the coarse operator's answer
+    progressive = lds is not None
+    dk = Rk.copy()
+    Hg_acc = np.zeros((n, 3))
     lam_bound = float(min(max(rho.max(), 0.5), 1 - 1e-6))
     vis_S = Sg
     try:
@@ -462,15 +556,37 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
             use_later = lds is not None and it >= la
             ds_it, S_it = (lds, Sl) if use_later else (gds, Sg)
             fams = np.arange(len(ds_it.families), dtype=np.int64)
-            blk = (np.array_split(fams, min(gsb, len(fams))) if method == "gauss-seidel"
-                   else [fams])
+            blk = np.array_split(fams, min(gsb, len(fams))) if method == "gauss-seidel" else [fams]
             t = time.perf_counter()
             want_vis = vis is None and not use_later
             R_old = Rk
-            if method == "jacobi":
-                sums, v, nl = sysm.gather(ds_it.families, ds_it.weights,
-                                          np.ascontiguousarray(Rk, dtype=np.float32), blk[0],
-                                          want_vis, nthreads)
+            if progressive:
+                # propagate only the last bounce (its increment), with this
+                # bounce's directions: B = E + Σ_k ΔR_k, ΔR_{k+1} = ρ M_k ΔR_k
+                sums, v, nl = sysm.gather(
+                    ds_it.families,
+                    ds_it.weights,
+                    np.ascontiguousarray(dk, dtype=np.float32),
+                    fams,
+                    want_vis,
+                    nthreads,
+                )
+                lines_walked += nl
+                h_inc = sums / S_it[:, None]
+                Hg_acc += h_inc
+                dk = rho * h_inc
+                R_new = Rk + dk
+                if want_vis:
+                    vis = v
+            elif method == "jacobi":
+                sums, v, nl = sysm.gather(
+                    ds_it.families,
+                    ds_it.weights,
+                    np.ascontiguousarray(Rk, dtype=np.float32),
+                    blk[0],
+                    want_vis,
+                    nthreads,
+                )
                 lines_walked += nl
                 Hg = sums / S_it[:, None]
                 R_new = rho * (Hd + Hg)
@@ -483,9 +599,14 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
                 cur = Rk.copy()
                 vacc = np.zeros(n) if want_vis else None
                 for bi, sel in enumerate(blk):
-                    sums, v, nl = sysm.gather(ds_it.families, ds_it.weights,
-                                              np.ascontiguousarray(cur, dtype=np.float32), sel,
-                                              want_vis, nthreads)
+                    sums, v, nl = sysm.gather(
+                        ds_it.families,
+                        ds_it.weights,
+                        np.ascontiguousarray(cur, dtype=np.float32),
+                        sel,
+                        want_vis,
+                        nthreads,
+                    )
                     lines_walked += nl
                     parts[bi] = sums
                     if want_vis:
@@ -512,24 +633,34 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
             # leave ~99 tol of error
             if res * lam_bound / (1 - lam_bound) < tol:
                 break
-            if extrap is not None:
+            if extrap is not None and (not progressive or use_later):
                 tail = extrap(d)
                 if tail is not None:
                     Rk = Rk + tail
+                    if progressive:
+                        # the ambient term stands for all the remaining bounces: done
+                        Hg_acc += h_inc * extrap.factor
+                        break
     finally:
         if bar is not None:
             bar.close()
     seconds["gather"] = t_gather
     if limit > 0 and it == limit and (not residuals or residuals[-1] >= tol) and mb is None:
-        warnings.warn(f"solve: not converged after {it} iterations (residual {residuals[-1]:.3g})",
-                      RuntimeWarning, stacklevel=2)
+        warnings.warn(
+            f"solve: not converged after {it} iterations (residual {residuals[-1]:.3g})",
+            RuntimeWarning,
+            stacklevel=2,
+        )
 
+    if progressive:
+        Hg = Hg_acc
     B = E + Rk
     # --- diagnostics: lost fraction δ, energy balance (DESIGN-NOTES §5, §10)
     if vis is None:  # no gathering ran: one visibility pass for the statistics
         t = time.perf_counter()
-        _, vis, _ = sysm.gather(gds.families, gds.weights, np.zeros((n, 3), np.float32),
-                                all_fams, True, nthreads)
+        _, vis, _ = sysm.gather(
+            gds.families, gds.weights, np.zeros((n, 3), np.float32), all_fams, True, nthreads
+        )
         seconds["visibility"] = time.perf_counter() - t
     found = vis / vis_S
     front = ~a["back"]
@@ -545,16 +676,27 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
 
     seconds["total"] = time.perf_counter() - t_all
     stats.update(
-        rays=int(shoot_rays + gather_rays), shoot_rays=int(shoot_rays), gather_rays=int(gather_rays),
-        seconds=seconds, bounces=it, lines_walked=int(lines_walked),
-        lost_fraction=delta, lost_fraction_max=float(np.max(np.where(front, 1 - found, 0.0))),
-        energy={"emitted": emitted.tolist(), "absorbed": absorbed.tolist(),
-                "escaping": escaping.tolist(), "escaping_shoot": shoot_escape.tolist(),
-                "imbalance": imbalance.tolist()},
+        rays=int(shoot_rays + gather_rays),
+        shoot_rays=int(shoot_rays),
+        gather_rays=int(gather_rays),
+        seconds=seconds,
+        bounces=it,
+        lines_walked=int(lines_walked),
+        lost_fraction=delta,
+        lost_fraction_max=float(np.max(np.where(front, 1 - found, 0.0))),
+        energy={
+            "emitted": emitted.tolist(),
+            "absorbed": absorbed.tolist(),
+            "escaping": escaping.tolist(),
+            "escaping_shoot": shoot_escape.tolist(),
+            "imbalance": imbalance.tolist(),
+        },
         extrapolations=extrap.count if extrap is not None else 0,
-        epsilon=eps, history=hist,
+        epsilon=eps,
+        history=hist,
     )
     if it and lds is not None:
         stats["skipped"]["finer_directions_after"] = la
-    return Solution(vox=vox, radiosity=B.astype(np.float32), bounces=it, residuals=residuals,
-                    stats=stats)
+    return Solution(
+        vox=vox, radiosity=B.astype(np.float32), bounces=it, residuals=residuals, stats=stats
+    )

@@ -1,0 +1,483 @@
+"""Solve and render on a Dask cluster (``pip install "voxgi[dask]"``).
+
+Nothing here has a loop of its own over iterations or frames: :func:`voxgi.solve`
+and :func:`voxgi.render` run their usual loops and are handed, in place of
+their local engine, an object with the same methods that farms the work out.
+
+Solve (DESIGN-NOTES §8): :class:`DistributedLineSystem` stands in for
+:class:`voxgi._core.LineSystem`. The records (ijk, normal, surface point:
+36 bytes each) are scattered once to every worker (``broadcast=True``: a
+killed worker is survived, because another one still holds a copy, and
+scattered data has no lineage from which Dask could rebuild it); each worker
+builds its LineSystem once and caches it, keyed by a hash of the records.
+Within a Jacobi iteration the direction families are independent: every
+call to ``gather``/``shoot``/``normalisation`` splits the families into one
+contiguous chunk per worker, each task returns its partial sums, and the
+sums are added here in chunk order, so the result does not depend on which
+worker ran what, nor (beyond float64 rounding of the additions) on the
+number of workers. Per iteration a worker receives the values being
+propagated (N × 3 float32) and returns N × 3 float64 partial sums.
+
+Render: :class:`DistributedFrames` stands in for the display's per-frame
+shader. Frames are independent (each has its own VPL subset, sub-pixel
+offset and gather-ray seed), so whole frames are the tasks: the scene and
+the VPL sampler go to every worker once, each worker builds its Embree scene
+once, frames are computed ahead on the workers and handed back to the
+render loop in frame order. The accumulation and the stopping rule stay in
+:func:`voxgi.render`, so with the same seed the image is the local one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+import time
+from collections import OrderedDict
+
+import numpy as np
+
+__all__ = ["DistributedFrames", "DistributedLineSystem", "estimate_worker_bytes"]
+
+_EXTRA_HINT = 'pip install "voxgi[dask]"'
+
+# Bytes a worker holds per record: the scattered copy of ijk, normal and
+# point (36) and what the worker's LineSystem and one call need, measured as
+# the growth of the resident set over building a LineSystem, one gather (with
+# visibility) and one shoot on the bunny room at resolution 112 (146,892
+# records): 214 B for the system (three axis orders of order, X, Y, Z,
+# normal, point and the packed 32-byte line: 216 B by csrc/propagate.h),
+# 302 B after the gather (values in, float64 sums and visibility out),
+# 337 B after the shoot. 340 rounds it up.
+_BYTES_PER_RECORD = 36 + 340
+
+
+def _require_distributed():
+    """Import dask.distributed or raise an ImportError that names the extra."""
+    try:
+        import distributed
+    except ImportError as exc:
+        raise ImportError(
+            "client=: distributed solving and rendering need Dask's distributed scheduler, "
+            f"which is not installed; install the extra with: {_EXTRA_HINT}") from exc
+    return distributed
+
+
+def check_client(client):
+    """Return ``client`` if it is a ``dask.distributed.Client``.
+
+    Raises
+    ------
+    ImportError
+        If dask.distributed is not installed (the message names the extra).
+    TypeError
+        If ``client`` is not a Client.
+    ValueError
+        If the client's cluster has no worker.
+    """
+    distributed = _require_distributed()
+    if not isinstance(client, distributed.Client):
+        raise TypeError(f"client: expected a dask.distributed.Client or None, got "
+                        f"{type(client).__name__}")
+    return client
+
+
+def _workers(client) -> dict:
+    info = client.scheduler_info(n_workers=-1) if _takes_n_workers(client) else \
+        client.scheduler_info()
+    workers = info.get("workers", {})
+    if not workers:
+        raise ValueError("client: the cluster has no worker (start some, or wait for them)")
+    return workers
+
+
+def _takes_n_workers(client) -> bool:
+    import inspect
+
+    try:
+        return "n_workers" in inspect.signature(client.scheduler_info).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def estimate_worker_bytes(n_records: int, box=(0, 0, 0)) -> int:
+    """Bytes one worker needs for the records of a distributed solve.
+
+    Parameters
+    ----------
+    n_records : int
+        Records N.
+    box : (3,) int
+        Extent of the records' voxel box (the shooting occupancy bitset
+        takes one bit per voxel of it).
+
+    Returns
+    -------
+    int
+        ``N × 376`` bytes (scattered records, the worker's LineSystem, one
+        call's values and sums; measured, see ``_BYTES_PER_RECORD``) plus the
+        occupancy bitset, rounded up. The worker process itself (Python,
+        numpy, Dask: ~100-150 MB) comes on top.
+    """
+    cells = int(np.prod(np.asarray(box, dtype=np.int64) + 1))
+    return int(n_records) * _BYTES_PER_RECORD + cells // 8 + 1
+
+
+def _token(*arrays) -> str:
+    """A hash of the records: the key of a worker's cached LineSystem."""
+    h = hashlib.blake2b(digest_size=16)
+    for a in arrays:
+        h.update(str(a.shape).encode())
+        h.update(str(a.dtype).encode())
+        h.update(np.ascontiguousarray(a).view(np.uint8).data)
+    return h.hexdigest()
+
+
+# ----------------------------------------------------------------------------- worker side
+
+# Per worker process: LineSystems (and frame shaders) already built, by key.
+# Only the latest few are kept, so a long study does not pile them up.
+_CACHE: OrderedDict = OrderedDict()
+_CACHE_LOCK = threading.Lock()
+_CACHE_SIZE = 2
+_FRAME_LOCK = threading.Lock()  # a shader reuses its buffers: one frame at a time
+
+
+def _cached(key, build):
+    with _CACHE_LOCK:
+        if key in _CACHE:
+            _CACHE.move_to_end(key)
+            return _CACHE[key]
+        obj = build()
+        _CACHE[key] = obj
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+        return obj
+
+
+def _worker_threads() -> int:
+    """The worker's thread slots: the cores Dask gave this worker."""
+    try:
+        from distributed import get_worker
+
+        w = get_worker()
+        n = getattr(w, "nthreads", None) or getattr(getattr(w, "state", None), "nthreads", 1)
+        return max(1, int(n))
+    except (ImportError, ValueError):
+        return 1
+
+
+def _system(records, key):
+    from . import _core
+
+    return _cached(("lines", key), lambda: _core.LineSystem(
+        records["ijk"], records["normal"], records["point"], epsilon=records["epsilon"],
+        history=records["history"]))
+
+
+def _task_gather(records, key, families, weights, values, want_vis):
+    s = _system(records, key)
+    idx = np.arange(len(families), dtype=np.int64)
+    return s.gather(families, weights, values, idx, want_vis, _worker_threads())
+
+
+def _task_shoot(records, key, emitters, families, weights, values):
+    s = _system(records, key)
+    return s.shoot(emitters, families, weights, values, _worker_threads())
+
+
+def _task_normalisation(records, key, families, weights):
+    return _system(records, key).normalisation(families, weights, _worker_threads())
+
+
+def _task_frame(payload, key, f, seed):
+    from .display import _FrameShader, _Tracer
+
+    def build():
+        p = payload
+        tracer = _Tracer(p["scene"], _worker_threads())
+        return _FrameShader(p["scene"], p["camera"], tracer, p["sampler"], p["eps"],
+                            _worker_threads(), p["gather"], p["seed"])
+
+    shader = _cached(("frame", key), build)
+    with _FRAME_LOCK:
+        before = (shader.primary_rays, shader.shadow_rays, shader.gather_rays,
+                  dict(shader.seconds))
+        x = shader.frame(f, seed)
+        counts = (shader.primary_rays - before[0], shader.shadow_rays - before[1],
+                  shader.gather_rays - before[2])
+        secs = {k: v - before[3].get(k, 0.0) for k, v in shader.seconds.items()}
+    return x, counts, secs
+
+
+# ----------------------------------------------------------------------------- client side
+
+
+class _Farm:
+    """What both backends share: the client, the workers, ordered collection."""
+
+    def __init__(self, client, progress: bool, desc: str):
+        self.client = check_client(client)
+        self.workers = sorted(_workers(client))
+        self.progress = bool(progress)
+        self.desc = desc
+        self.stats = {"workers": len(self.workers), "tasks": 0, "bytes_scattered": 0,
+                      "bytes_sent": 0, "bytes_received": 0, "seconds_waiting": 0.0}
+
+    def _check_memory(self, need: int, what: str) -> None:
+        """Refuse before any work when a worker's memory_limit is under ``need``.
+
+        A worker stops taking tasks once its memory passes the ``pause``
+        fraction of its limit (Dask's ``distributed.worker.memory.pause``,
+        0.8 by default): that share of the limit is what counts.
+        """
+        import dask
+
+        pause = dask.config.get("distributed.worker.memory.pause", 0.8)
+        frac = float(pause) if isinstance(pause, (int, float)) and 0 < pause <= 1 else 1.0
+        info = _workers(self.client)
+        for addr in self.workers:
+            limit = int(info[addr].get("memory_limit") or 0)  # 0: no limit set
+            if 0 < limit * frac < need:
+                raise MemoryError(
+                    f"client: worker {addr} has memory_limit {limit / 2**20:.1f} MiB (it pauses "
+                    f"at {frac:.0%} of it), but {what} needs about {need / 2**20:.1f} MiB on every "
+                    "worker; give the workers more memory (memory_limit=...) or use a coarser "
+                    "resolution")
+        self.stats["bytes_per_worker_estimate"] = int(need)
+
+    def _map(self, fn, chunks, *common, key_prefix: str):
+        """Run ``fn(*common, *chunk)`` for every chunk, one worker each (loosely:
+        another may take over if it dies); return the results in chunk order."""
+        from distributed import as_completed
+
+        futs = []
+        for i, chunk in enumerate(chunks):
+            w = self.workers[i % len(self.workers)]
+            futs.append(self.client.submit(fn, *common, *chunk, workers=[w],
+                                           allow_other_workers=True, pure=False,
+                                           key=f"{key_prefix}-{i}-{_uid()}"))
+        self.stats["tasks"] += len(futs)
+        out = [None] * len(futs)
+        where = {f.key: i for i, f in enumerate(futs)}
+        bar = None
+        if self.progress and len(futs) > 1:
+            from tqdm.auto import tqdm
+
+            bar = tqdm(total=len(futs), desc=self.desc, unit="task", leave=False)
+        t = time.perf_counter()
+        try:
+            for fut in as_completed(futs):
+                out[where[fut.key]] = fut.result()
+                if bar is not None:
+                    bar.update(1)
+        finally:
+            if bar is not None:
+                bar.close()
+            self.stats["seconds_waiting"] += time.perf_counter() - t
+        return out
+
+
+_UID = [0]
+_UID_LOCK = threading.Lock()
+
+
+def _uid() -> str:
+    with _UID_LOCK:
+        _UID[0] += 1
+        return f"{_UID[0]:x}-{time.monotonic_ns():x}"
+
+
+class DistributedLineSystem(_Farm):
+    """A :class:`voxgi._core.LineSystem` whose work runs on Dask workers.
+
+    Same ``size``, ``normalisation``, ``gather`` and ``shoot`` as the local
+    one (``threads`` is ignored: each task uses its worker's thread slots),
+    so :func:`voxgi.solve` runs its loop unchanged on it.
+
+    Parameters
+    ----------
+    client : dask.distributed.Client
+    ijk : (N, 3) int32
+    normal : (N, 3) float32
+    point : (N, 3) float32
+        As for LineSystem (surface points in voxel units).
+    epsilon : float
+    history : int
+    progress : bool
+        A tqdm bar over each call's tasks.
+
+    Raises
+    ------
+    ImportError
+        dask.distributed is not installed.
+    TypeError
+        ``client`` is not a Client.
+    MemoryError
+        A worker's memory_limit is under :func:`estimate_worker_bytes`.
+    """
+
+    def __init__(self, client, ijk, normal, point, *, epsilon: float = 0.05, history: int = 8,
+                 progress: bool = False):
+        super().__init__(client, progress, "gather tasks")
+        ijk = np.ascontiguousarray(ijk, dtype=np.int32)
+        normal = np.ascontiguousarray(normal, dtype=np.float32)
+        point = np.ascontiguousarray(point, dtype=np.float32)
+        self.size = len(ijk)
+        box = ijk.max(axis=0) - ijk.min(axis=0) if len(ijk) else np.zeros(3)
+        self._check_memory(estimate_worker_bytes(self.size, box),
+                           f"a solve of {self.size} records")
+        self.key = _token(ijk, normal, point, np.float32([epsilon, history]))
+        records = {"ijk": ijk, "normal": normal, "point": point, "epsilon": float(epsilon),
+                   "history": int(history)}
+        t = time.perf_counter()
+        # once, to every worker: a killed worker's tasks find a copy elsewhere
+        # (in a list: a dict itself would be scattered value by value)
+        self._records = client.scatter([records], broadcast=True, hash=False)[0]
+        self.stats["seconds_scatter"] = time.perf_counter() - t
+        self.stats["bytes_scattered"] = int(ijk.nbytes + normal.nbytes + point.nbytes)
+
+    def _chunks(self, n: int):
+        return [c for c in np.array_split(np.arange(n), len(self.workers)) if len(c)]
+
+    def _values(self, values):
+        v = np.ascontiguousarray(values, dtype=np.float32)
+        if v.shape != (self.size, 3):
+            raise ValueError(f"values: expected shape ({self.size}, 3), got {v.shape}")
+        # once per call to every worker, not once per task
+        fut = self.client.scatter(v, broadcast=True, hash=False)
+        self.stats["bytes_sent"] += v.nbytes * len(self.workers)
+        return fut
+
+    def normalisation(self, families, weights, threads: int = 0) -> np.ndarray:
+        """Raw S(n) per record, (N,) float64 (see LineSystem.normalisation)."""
+        chunks = [(families[c], weights[c]) for c in self._chunks(len(families))]
+        parts = self._map(_task_normalisation, chunks, self._records, self.key,
+                          key_prefix="voxgi-normalisation")
+        out = np.zeros(self.size)
+        for p in parts:  # fixed order: chunk order
+            out += p
+        return out
+
+    def gather(self, families, weights, values, family_indices, want_vis=False, threads=0):
+        """Jacobi gathering over ``families[family_indices]``: (sums, vis, lines)."""
+        sel = np.asarray(family_indices, dtype=np.int64)
+        fams = np.ascontiguousarray(families[sel])
+        wts = np.ascontiguousarray(weights[sel])
+        vfut = self._values(values)
+        chunks = [(fams[c], wts[c], vfut, bool(want_vis)) for c in self._chunks(len(sel))]
+        parts = self._map(_task_gather, chunks, self._records, self.key,
+                          key_prefix="voxgi-gather")
+        sums = np.zeros((self.size, 3))
+        vis = np.zeros(self.size) if want_vis else None
+        lines = 0
+        for s, v, nl in parts:  # fixed order: chunk order
+            sums += s
+            if want_vis:
+                vis += v
+            lines += int(nl)
+        self.stats["bytes_received"] += sum(p[0].nbytes for p in parts)
+        return sums, vis, lines
+
+    def shoot(self, emitters, families, weights, values, threads=0):
+        """Shooting from ``emitters`` split by direction families: (hd, unfound, rays, steps)."""
+        em = np.ascontiguousarray(emitters, dtype=np.int32)
+        vfut = self._values(values)
+        chunks = [(np.ascontiguousarray(families[c]), np.ascontiguousarray(weights[c]), vfut)
+                  for c in self._chunks(len(families))]
+        parts = self._map(_task_shoot, chunks, self._records, self.key, em,
+                          key_prefix="voxgi-shoot")
+        hd = np.zeros((self.size, 3))
+        unfound = np.zeros(len(em))
+        rays = steps = 0
+        for h, u, r, st in parts:  # fixed order: chunk order
+            hd += h
+            unfound += u
+            rays += int(r)
+            steps += int(st)
+        self.stats["bytes_received"] += sum(p[0].nbytes for p in parts)
+        return hd, unfound, rays, steps
+
+    def close(self) -> None:
+        """Release the scattered records (the workers' caches keep at most two systems)."""
+        self._records.release()
+
+
+class DistributedFrames(_Farm):
+    """Stands in for the display's frame shader: whole frames on the workers.
+
+    ``frame(f, seed)`` returns frame ``f`` as the local shader would; frames
+    ``f + 1 …`` are already being computed (up to two per worker thread
+    slot in flight), so the render loop's stopping rule, applied in frame
+    order, sees exactly the local sequence of frames.
+
+    Parameters
+    ----------
+    client : dask.distributed.Client
+    shader : voxgi.display._FrameShader
+        The local shader, whose scene, camera, VPL sampler and settings are
+        sent once to every worker.
+    max_frames : int
+        Frames the render may ask for (none is submitted past it).
+    """
+
+    def __init__(self, client, shader, max_frames: int, progress: bool = False):
+        super().__init__(client, False, "frames")
+        self.local = shader
+        s = shader.sampler
+        n = len(s.vox)
+        cam = shader.cam
+        # the sampler's arrays (~100 B a record), the scene's triangles, and
+        # one frame (H·W·3 float32) plus the shader's hit buffers (~100 B a pixel)
+        need = n * 100 + shader.tracer.tris.nbytes * 3 + cam.width * cam.height * 112
+        self._check_memory(need, f"a {cam.width}x{cam.height} render of {n} records")
+        payload = {"scene": shader.scene, "camera": cam, "sampler": s, "eps": shader.eps,
+                   "gather": shader.gather, "seed": shader.seed}
+        self.key = "frames-" + _uid()
+        t = time.perf_counter()
+        self._payload = client.scatter([payload], broadcast=True, hash=False)[0]
+        self.stats["seconds_scatter"] = time.perf_counter() - t
+        slots = sum(int(v.get("nthreads", 1)) for v in _workers(client).values())
+        self.ahead = max(2, 2 * slots)
+        self.max_frames = int(max_frames)
+        self._futs: dict = {}
+        self._next = 0
+        self.primary_rays = self.shadow_rays = self.gather_rays = 0
+        self.seconds = {k: 0.0 for k in shader.seconds}
+
+    def __getattr__(self, name):
+        # settings the render reads (gather, mat_glossy, ...) are the local shader's
+        return getattr(self.__dict__["local"], name)
+
+    def _submit_upto(self, last: int, seed: int) -> None:
+        while self._next <= min(last, self.max_frames - 1):
+            f = self._next
+            w = self.workers[f % len(self.workers)]
+            self._futs[f] = self.client.submit(_task_frame, self._payload, self.key, f, seed,
+                                               workers=[w], allow_other_workers=True, pure=False,
+                                               key=f"voxgi-frame-{f}-{_uid()}")
+            self.stats["tasks"] += 1
+            self._next += 1
+
+    def frame(self, f: int, seed: int) -> np.ndarray:
+        """(H*W, 3) float32 radiance of frame ``f`` (computed on a worker)."""
+        self._submit_upto(f + self.ahead, seed)
+        if f not in self._futs:  # asked out of order: compute it alone
+            self._futs[f] = self.client.submit(_task_frame, self._payload, self.key, f, seed,
+                                               pure=False, key=f"voxgi-frame-{f}-{_uid()}")
+        t = time.perf_counter()
+        x, counts, secs = self._futs.pop(f).result()
+        self.stats["seconds_waiting"] += time.perf_counter() - t
+        self.stats["bytes_received"] += x.nbytes
+        self.primary_rays += counts[0]
+        self.shadow_rays += counts[1]
+        self.gather_rays += counts[2]
+        for k, v in secs.items():  # summed over workers: compute seconds, not wall
+            self.seconds[k] = self.seconds.get(k, 0.0) + v
+        return x
+
+    def close(self) -> None:
+        """Cancel the frames computed ahead that the render did not need."""
+        if self._futs:
+            self.client.cancel(list(self._futs.values()))
+            self._futs.clear()
+        self._payload.release()
