@@ -614,3 +614,34 @@ def test_core_gather_families_bad_indices():
     with pytest.raises((ValueError, TypeError)):
         _core.gather_families(ijk, normal, point, ds.families, ds.weights, vals[:1].copy(),
                               np.array([0], np.int64))
+
+
+def test_render_memory_limit_refused_before_allocating(small):
+    """A 32768 x 32768 image (~1 TB of buffers) is refused up front, with the estimate."""
+    s, _, sol = small
+    cam = s.camera.replace(width=1 << 15, height=1 << 15)
+    with pytest.raises(ValueError, match=r"needs about [\d,]+ bytes"):
+        voxgi.render(s, sol, camera=cam, progress=False)
+
+
+def test_read_exr_header_bad(tmp_path):
+    from voxgi import io
+    with pytest.raises(FileNotFoundError):
+        io.read_exr_header(tmp_path / "missing.exr")
+    (tmp_path / "junk.exr").write_bytes(b"not an exr")
+    with pytest.raises(ValueError, match="junk.exr"):
+        io.read_exr_header(tmp_path / "junk.exr")
+
+
+@pytest.mark.parametrize(("call", "word"), [
+    (lambda: voxgi.scenes.furnace_box(albedo=1.5), "albedo"),
+    (lambda: voxgi.scenes.furnace_sphere(emission=-1.0), "emission"),
+    (lambda: voxgi.scenes.furnace_sphere(subdivisions=-1), "subdivisions"),
+    (lambda: voxgi.scenes.furnace_sphere(radius=NAN), "radius"),
+    (lambda: voxgi.scenes.cornell_box(width=0), "width"),
+    (lambda: voxgi.scenes.labyrinth(cells=0), "cells"),
+    (lambda: voxgi.scenes.get("nope"), "nope"),
+])
+def test_builtin_scenes_bad(call, word):
+    with pytest.raises((ValueError, TypeError), match=word):
+        call()

@@ -719,6 +719,17 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     emitter_share = _validate.real(emitter_share, "emitter_share", low=0.0, high=1.0,
                                    allow_none=True)
     nthreads = _validate.threads(threads)
+    # Refuse an image that cannot fit before allocating anything: measured
+    # with tracemalloc, a render holds ~950 bytes per pixel (running mean and
+    # variance, hit records, frame buffers) plus ~30 MB of tile buffers.
+    from .voxels import _available_memory
+
+    need = 1000 * cam.width * cam.height + (32 << 20)
+    budget = _available_memory() // 2
+    if need > budget:
+        raise ValueError(f"render: a {cam.width}x{cam.height} image needs about {need:,} bytes "
+                         f"(~1000 bytes per pixel), over the budget of {budget:,} bytes (half "
+                         "the available memory); lower Camera.width/height")
     seconds: dict[str, float] = {}
     skipped: list[str] = []
 

@@ -74,7 +74,14 @@ def read_exr_header(path) -> dict:
     """The ``voxgi_*`` attributes of an EXR written by :func:`write_exr`."""
     import OpenEXR
 
-    with OpenEXR.File(str(path)) as f:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"EXR file not found: {path}")
+    try:
+        f = OpenEXR.File(str(path))
+    except RuntimeError as exc:  # not an EXR, truncated, unreadable
+        raise ValueError(f"{path}: cannot be read as OpenEXR ({exc})") from None
+    with f:
         h = dict(f.header())  # the File's header dict is emptied on close
     out = {}
     for k, v in h.items():
