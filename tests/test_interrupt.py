@@ -9,6 +9,7 @@ render catches it and returns the frames done so far.
 
 from __future__ import annotations
 
+import gc
 import os
 import signal
 import threading
@@ -27,6 +28,12 @@ class _CtrlC:
 
     def __enter__(self):
         self.sent = None
+        # A finalizer run by the garbage collector while the signal lands (a
+        # Dask or tqdm object left by an earlier test) would swallow the
+        # KeyboardInterrupt as an "unraisable" exception: collect first and
+        # keep the collector off while the signal is pending.
+        gc.collect()
+        gc.disable()
 
         def fire():
             self.sent = time.perf_counter()
@@ -37,6 +44,7 @@ class _CtrlC:
         return self
 
     def __exit__(self, *exc):
+        gc.enable()
         self.timer.cancel()
         self.timer.join()
         self.returned = time.perf_counter()

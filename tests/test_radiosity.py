@@ -275,7 +275,9 @@ def test_furnace_box_closed_inner_sphere_rho09():
     rho = 0.9
     vox = _voxelize_or_skip(voxgi.scenes.furnace_box(albedo=rho, emission=1.0, inner=True), 32)
     front = ~vox.back
-    open_ = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-6)
+    assert vox.stats["closed_objects"] == [0, 1]  # both meshes found watertight
+    open_ = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-6,
+                        closed=False)
     assert open_.stats["back_fraction"] > 1e-3  # the loss is visible in the stats
     assert open_.stats["closed_back_records"] == 0
     sol = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-6, closed=True)
@@ -283,6 +285,9 @@ def test_furnace_box_closed_inner_sphere_rho09():
     assert err.mean() < 5e-3
     assert err.max() < 2e-2
     assert sol.stats["closed_back_records"] == int(vox.back.sum())
+    # the default (closed=None) takes the watertight objects found by voxelize
+    auto = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-6)
+    np.testing.assert_array_equal(auto.radiosity, sol.radiosity)
     assert sol.stats["back_fraction"] == 0.0  # every back record stands in for its twin
     assert np.all(sol.radiosity[~front] == 0)  # back records themselves stay black
     # closed=[ids] picks objects: only the inner sphere (object 1)

@@ -395,15 +395,17 @@ def solve(
     max_iterations : int
         Bound on the iterations when ``max_bounces`` is None.
     closed : bool or sequence of int, optional
-        Objects (ids into ``vox.object_id``; True: all) whose meshes are
-        closed. A naive line that clips a closed object's band in a voxel
+        Objects (ids into ``vox.object_id``; True: all; False: none) whose
+        meshes are closed. None (default): the objects :func:`voxgi.voxelize`
+        found watertight and consistently wound
+        (``vox.stats["closed_objects"]``). A naive line that clips a closed object's band in a voxel
         holding only its near side reaches a black back record: in reality
         it either hit the object's surface or missed it, never its inside
         (measured: the furnace sphere with a closed inner box lost 2.6% at
         rho = 0.9, 22% at 0.99). For these objects a back record sends its
         front twin's radiosity and emission instead of black (it stays black
-        itself). None (default): every back record is black, as for an open
-        one-sided surface whose back can be seen.
+        itself). The back of an open one-sided surface (a lamp quad) stays
+        black either way: its back can be seen.
     Returns
     -------
     Solution
@@ -458,7 +460,9 @@ def solve(
     # back records of closed objects and their front twins (the voxelizer
     # writes each back record right after its front record; checked here)
     twin_b = twin_f = np.zeros(0, np.int64)
-    if closed is not None and closed is not False:
+    if closed is None:
+        closed = list(getattr(vox, "stats", {}).get("closed_objects", [])) or False
+    if closed is not False:
         obj = _validate.as_c_array(vox.object_id, np.int32, (n,), "vox.object_id")
         if closed is True:
             sel_obj = np.ones(len(a["back"]), bool)

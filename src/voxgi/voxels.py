@@ -195,6 +195,12 @@ def _progress_bar(enabled: bool):
     return update, close
 
 
+def _is_closed(obj) -> bool:
+    """True when an object's mesh is watertight with consistent winding."""
+    m = obj.to_trimesh()
+    return bool(m.is_watertight and m.is_winding_consistent)
+
+
 def voxelize(scene, resolution: int = 128, *, max_memory: int | None = None,
              threads: int | None = None, progress: bool = False, cut: bool = True) -> VoxelSet:
     """Convert the surfaces of a scene into oriented surface voxel records.
@@ -342,6 +348,9 @@ def voxelize(scene, resolution: int = 128, *, max_memory: int | None = None,
         "expected_pairs": est["expected_pairs"],
         "threads": int(st["threads"]),
         "cut": bool(cut),
+        # Objects whose mesh is closed (watertight, consistently wound): their
+        # inside can never be seen, which voxgi.solve uses (closed=None).
+        "closed_objects": [i for i, o in enumerate(scene.objects) if _is_closed(o)],
         "seconds": seconds,
         "phase_seconds": {"pairs": st["seconds_pairs"], "sort": st["seconds_sort"],
                           "records": st["seconds_records"]},
