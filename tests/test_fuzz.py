@@ -115,7 +115,8 @@ def test_fuzz_scene_files(fuzz_dir):
                 except OK_ERRORS:
                     return
                 count["voxelized"] += 1
-                assert np.all(np.isfinite(vox.area)) and np.all(np.isfinite(vox.normal))
+                assert np.all(np.isfinite(vox.area))
+                assert np.all(np.isfinite(vox.normal))
 
     run()
     print(f"fuzz scene files: {count['n']} examples, {count['loaded']} loaded, "

@@ -65,8 +65,10 @@ def test_high_albedo_sphere_converges_and_balances():
     s = voxgi.scenes.furnace_sphere(albedo=rho, emission=1.0, subdivisions=3)
     vox = voxgi.voxelize(s, resolution=12, progress=False)
     sol = voxgi.solve(vox, **FAST)
-    assert np.all(np.isfinite(sol.radiosity)) and sol.radiosity.max() < 1e6
-    assert sol.bounces < 10000 and sol.residuals[-1] < 1e-4
+    assert np.all(np.isfinite(sol.radiosity))
+    assert sol.radiosity.max() < 1e6
+    assert sol.bounces < 10000
+    assert sol.residuals[-1] < 1e-4
     e = sol.stats["energy"]
     imbalance = abs(e["imbalance"][0]) / e["emitted"][0]
     front = ~vox.back
@@ -81,8 +83,9 @@ def test_high_albedo_sphere_converges_and_balances():
 
 # ------------------------------------------------------------ scale invariance
 def _scaled(scene, k):
-    out = voxgi.Scene(camera=scene.camera.replace(
-        eye=tuple(k * np.asarray(scene.camera.eye)), target=tuple(k * np.asarray(scene.camera.target))))
+    cam = scene.camera
+    out = voxgi.Scene(camera=cam.replace(eye=tuple(k * np.asarray(cam.eye)),
+                                         target=tuple(k * np.asarray(cam.target))))
     for o in scene.objects:
         out.add(trimesh.Trimesh(o.vertices * k, o.faces, process=False), o.material, name=o.name,
                 two_sided=o.two_sided)
@@ -139,7 +142,8 @@ def test_emission_twelve_orders_of_magnitude():
         vox = voxgi.voxelize(s, resolution=10, progress=False)
         sol = voxgi.solve(vox, **FAST)
         img = voxgi.render(s, sol, max_frames=2, tol=0.0, progress=False).image
-        assert np.all(np.isfinite(sol.radiosity)) and np.all(np.isfinite(img))
+        assert np.all(np.isfinite(sol.radiosity))
+        assert np.all(np.isfinite(img))
         if ref is None:
             ref = (sol.radiosity / le, img / le, sol.bounces)
             continue
@@ -147,7 +151,8 @@ def test_emission_twelve_orders_of_magnitude():
         dimg = float(np.abs(img / le - ref[1]).max() / ref[1].max())
         print(f"Le={le:g} vs 1e-6: solution rel dev {drad:.2e}, image rel dev {dimg:.2e}, "
               f"iterations {sol.bounces} vs {ref[2]}")
-        assert drad < 1e-5 and dimg < 1e-5
+        assert drad < 1e-5
+        assert dimg < 1e-5
 
 
 def test_emitters_twelve_orders_apart_in_one_scene():
@@ -193,7 +198,8 @@ def test_two_planes_one_voxel_apart_no_leak():
         lit[o.name] = float(sol.radiosity[m].max())
     print(f"thin walls (gap = 1 voxel): max radiosity {lit}")
     assert lit["wall_near"] > 0.1
-    assert lit["wall_far"] == 0.0 and lit["receiver"] == 0.0
+    assert lit["wall_far"] == 0.0
+    assert lit["receiver"] == 0.0
     # the display traces real rays: no light there either
     s.camera = voxgi.Camera(eye=(0.5, 0.2, 0.1), target=(1, 0, 0), width=8, height=8, fov=40)
     img = voxgi.render(s, sol, max_frames=2, tol=0.0, progress=False).image
@@ -250,7 +256,8 @@ def test_many_orientations_share_voxels():
           f"(area-weighted), worst {r[urchin].min():.3f}")
     assert counts.max() >= 8
     assert wall_err < 0.02
-    assert 0.6 < r[urchin].min() and r[urchin].max() <= 1 + 1e-3
+    assert 0.6 < r[urchin].min()
+    assert r[urchin].max() <= 1 + 1e-3
 
 
 # ------------------------------------------------------------ bad triangles
@@ -291,7 +298,8 @@ def test_degenerate_duplicate_nonmanifold_triangles():
     print(f"degenerate+duplicate+non-manifold: {len(vox)} records, max rel error {err:.2e}, "
           f"area-weighted {mean_err:.2e}")
     assert np.all(np.isfinite(sol.radiosity))
-    assert err < 0.06 and mean_err < 5e-3
+    assert err < 0.06
+    assert mean_err < 5e-3
 
 
 # ------------------------------------------------------------ camera inside an object

@@ -26,16 +26,19 @@ def as_c_array(value, dtype, shape: Sequence[int], what: str, *, finite: bool = 
         np.issubdtype(arr.dtype, np.number) or np.issubdtype(arr.dtype, np.bool_)
     ):
         raise TypeError(f"{what}: expected a numeric array, got dtype {arr.dtype}")
-    if arr.ndim != len(shape) or any(s != -1 and s != a for s, a in zip(shape, arr.shape)):
+    # (zip is strict: the ndim test before it guarantees equal lengths)
+    if arr.ndim != len(shape) or any(
+            s not in (-1, a) for s, a in zip(shape, arr.shape, strict=True)):
         want = "(" + ", ".join("N" if s == -1 else str(s) for s in shape) + ")"
         raise ValueError(f"{what}: expected shape {want}, got {arr.shape}")
     if np.issubdtype(np.dtype(dtype), np.integer) and not np.issubdtype(arr.dtype, np.integer):
-        if arr.size and not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
+        if (arr.size and not np.all(np.isfinite(arr))) or np.any(arr != np.round(arr)):
             raise ValueError(f"{what}: expected integers")
     out = np.ascontiguousarray(arr, dtype=dtype)
     if finite and np.issubdtype(out.dtype, np.floating) and not np.all(np.isfinite(out)):
         bad = np.argwhere(~np.isfinite(out))[0]
-        raise ValueError(f"{what}: non-finite value {arr[tuple(bad)]} at index {tuple(int(i) for i in bad)}")
+        where = tuple(int(i) for i in bad)
+        raise ValueError(f"{what}: non-finite value {arr[tuple(bad)]} at index {where}")
     return out
 
 
