@@ -20,10 +20,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from time_vs_error import RESULTS, diff_png, git_commit, load_reference
+
 import voxgi
 from voxgi.metrics import rel_mse
-
-from time_vs_error import RESULTS, diff_png, git_commit, load_reference
 
 
 def main() -> int:

@@ -11,10 +11,16 @@ from it on an NVIDIA H100 (22 s each); ``reference.py`` renders the same on
 the CPU (256x256 at 4096 spp agreed with it to relMSE 8.2e-5, that
 render's own noise).
 """
-import json, os, sys, time
+import json
+import os
+import sys
+import time
+
 import numpy as np
+
 sys.path.insert(0, "/tmp/site")
 import mitsuba as mi
+
 variant = sys.argv[1] if len(sys.argv) > 1 else "cuda_ad_rgb"
 mi.set_variant(variant)
 d = json.load(open(os.path.join(os.path.dirname(__file__), "cornell.json")))
