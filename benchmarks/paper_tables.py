@@ -56,12 +56,12 @@ PAPER = {
 }
 
 
-def _resolution_for(scene, target: int, quick: bool) -> tuple[int, voxgi.VoxelSet]:
+def _resolution_for(scene, target: int) -> tuple[int, voxgi.VoxelSet]:
     """Resolution whose front records come closest to ``target`` (records ~ res²)."""
     res = 48
     for _ in range(3):
         vox = voxgi.voxelize(scene, res)
-        n = int((~vox.back).sum()) if not quick else int((~vox.back).sum())
+        n = int((~vox.back).sum())
         new = int(round(res * np.sqrt(target / max(n, 1))))
         if abs(new - res) <= 1:
             break
@@ -77,8 +77,8 @@ def run_scene(key: str, args) -> dict:
     scene = voxgi.scenes.get(scene_name, width=w, height=h)
     target = vox_p // 8 if args.quick else vox_p
     t0 = time.perf_counter()
-    res, vox = _resolution_for(scene, target, args.quick)
-    t_vox = voxgi.voxelize(scene, res).stats["seconds"]
+    res, vox = _resolution_for(scene, target)
+    t_vox = vox.stats["seconds"]
     if args.quick:
         sr, lr = min(sr, 8), min(lr, 6)
     bounces = lpl - 1  # light path length = reflections + 1; the first is the shooting
