@@ -163,6 +163,12 @@ def furnace(args) -> None:
     _write("furnace", rows)
 
 
+def _err_vs(sol, ref, vox) -> np.ndarray:
+    """Relative error of ``sol`` against a reference solution on the lit front records."""
+    front = ~vox.back & (ref.radiosity.max(axis=1) > 0)
+    return np.abs(sol.radiosity[front] / ref.radiosity[front] - 1)
+
+
 def _cap_exact(vox, rho):
     front = ~vox.back
     Le = vox.emission.astype(np.float64)
@@ -235,8 +241,7 @@ def accel(args) -> None:
                 max_iterations=300,
             )
             dt = time.perf_counter() - t
-            front = ~vox.back & (ref.radiosity.max(axis=1) > 0)
-            err = np.abs(sol.radiosity[front] / ref.radiosity[front] - 1)
+            err = _err_vs(sol, ref, vox)
             rows.append(
                 {
                     "scene": name,
@@ -341,8 +346,7 @@ def later(args) -> None:
             tol=1e-6,
         )
         dt = time.perf_counter() - t
-        front = ~vox.back & (ref.radiosity.max(axis=1) > 0)
-        err = np.abs(sol.radiosity[front] / ref.radiosity[front] - 1)
+        err = _err_vs(sol, ref, vox)
         rows.append(
             {
                 "R": R,

@@ -46,18 +46,22 @@ def write_exr(path, image, metadata: dict | None = None) -> Path:
     return path
 
 
-def read_exr(path) -> np.ndarray:
-    """Read an OpenEXR file's RGB channels as (H, W, 3) float32."""
+def _open_exr(path: Path):
+    """Open an EXR for reading: FileNotFoundError if absent, ValueError if unreadable."""
     import OpenEXR
 
-    path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"EXR file not found: {path}")
     try:
-        f = OpenEXR.File(str(path))
+        return OpenEXR.File(str(path))
     except RuntimeError as exc:  # not an EXR, truncated, unreadable
         raise ValueError(f"{path}: cannot be read as OpenEXR ({exc})") from None
-    with f:
+
+
+def read_exr(path) -> np.ndarray:
+    """Read an OpenEXR file's RGB channels as (H, W, 3) float32."""
+    path = Path(path)
+    with _open_exr(path) as f:
         ch = f.channels()
         if "RGB" in ch:
             px = ch["RGB"].pixels
@@ -72,16 +76,8 @@ def read_exr(path) -> np.ndarray:
 
 def read_exr_header(path) -> dict:
     """The ``voxgi_*`` attributes of an EXR written by :func:`write_exr`."""
-    import OpenEXR
-
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"EXR file not found: {path}")
-    try:
-        f = OpenEXR.File(str(path))
-    except RuntimeError as exc:  # not an EXR, truncated, unreadable
-        raise ValueError(f"{path}: cannot be read as OpenEXR ({exc})") from None
-    with f:
+    with _open_exr(path) as f:
         h = dict(f.header())  # the File's header dict is emptied on close
     out = {}
     for k, v in h.items():
