@@ -144,7 +144,8 @@ lines walked. Partial sums over disjoint subsets add up to the full gather.)doc"
         .def(
             "shoot",
             [](const voxgi::LineSystem &s, I32 emitters, I32 families, F64 weights, F32 values,
-               int threads, std::optional<F64> send_scale, std::optional<F64> recv_area) {
+               int threads, std::optional<F64> send_scale, std::optional<F64> recv_area,
+               std::optional<F64> coverage) {
                 auto fams = to_families(families, weights);
                 const py::ssize_t n = s.size();
                 check_1d(emitters, -1, "emitters");
@@ -159,6 +160,12 @@ lines walked. Partial sums over disjoint subsets add up to the full gather.)doc"
                     ss = send_scale->data();
                     ra = recv_area->data();
                 }
+                const double *cov = nullptr;
+                if (coverage) {
+                    if (ss) throw py::value_error("coverage: only with the receiver-side deposit");
+                    check_1d(*coverage, n, "coverage");
+                    cov = coverage->data();
+                }
                 F64 hd({n, py::ssize_t(3)});
                 F64 unfound(ne);
                 const int32_t *e = emitters.data();
@@ -169,13 +176,13 @@ lines walked. Partial sums over disjoint subsets add up to the full gather.)doc"
                 {
                     py::gil_scoped_release release;
                     rays = s.shoot(e, ne, fams.data(), static_cast<int64_t>(fams.size()), v, h, u,
-                                   threads, stop, &steps, ss, ra);
+                                   threads, stop, &steps, ss, ra, cov);
                 }
                 return py::make_tuple(hd, unfound, rays, steps);
             },
             "emitters"_a.noconvert(), "families"_a.noconvert(), "weights"_a.noconvert(),
             "values"_a.noconvert(), "threads"_a = 0, "send_scale"_a.noconvert() = py::none(),
-            "recv_area"_a.noconvert() = py::none(),
+            "recv_area"_a.noconvert() = py::none(), "coverage"_a.noconvert() = py::none(),
             R"doc(Integer discrete rays from the emitter records along every direction they face.
 
 Returns (hd, unfound, rays, steps): hd (N, 3) float64, per receiver the sum of
@@ -184,7 +191,10 @@ cos_e * weight over its rays that met no receiver; rays the number of rays
 (emitter x direction); steps the voxels visited. With send_scale (area / S)
 and recv_area (area), each ray's power val[e] * cos_e * weight * send_scale[e]
 is shared by its receivers in proportion to recv_area * cos_r and hd holds
-power (sender-side deposit).)doc")
+power (sender-side deposit). With coverage (the records' areas in voxel
+units), each receiver-side deposit is scaled by the share of the line that e
+covers, coverage[e] |n_e.d| / |d_m|, and records of e's own sheet do not
+occlude it; a negative coverage[e] keeps the whole line for e.)doc")
         .def(
             "keys",
             [](const voxgi::LineSystem &s, I32 v) {

@@ -504,7 +504,8 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
 int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
                           const float *val, double *hd, double *unfound, int threads,
                           const StopCheck &stop, int64_t *steps_out, const double *send_scale,
-                          const double *recv_area) const {
+                          const double *recv_area, const double *coverage) const {
+    if (coverage && send_scale) throw std::invalid_argument("coverage is for the receiver-side deposit");
     threads = resolve_threads(threads);
     build_occupancy();
     for (int64_t k = 0; k < ne; ++k)
@@ -554,6 +555,10 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                 const int s = cv > 0 ? 1 : -1;  // march along +v or -v, whichever e faces
                 const float sd[3] = {s * dv[0], s * dv[1], s * dv[2]};
                 const double ce = std::abs(double(cv)) * fams[f].weight;
+                // the share of the line's cross-section that e covers (1: all of it)
+                const bool partial = coverage && coverage[e] >= 0;
+                const double alpha =
+                    partial ? coverage[e] * std::abs(double(cv)) / std::abs(double(dv[fr.m])) : 1.0;
                 ++rays[t];
                 // the line through e's voxel: u, w fixed; y', z' follow from x'
                 const int m = fr.m, o1 = fr.o1, o2 = fr.o2;
@@ -615,6 +620,12 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                         const int32_t p = group[a].p;
                         const float c = group[a].c;
                         if (c > kTiny) {
+                            if (partial) {  // e's own sheet (or behind it) does not occlude e
+                                const float *pq = P + 3 * int64_t(p);
+                                const float off = (pq[0] - pe[0]) * nE[0] + (pq[1] - pe[1]) * nE[1] +
+                                                  (pq[2] - pe[2]) * nE[2];
+                                if (off <= eps) continue;
+                            }
                             if (hn == K) {  // e would be forgotten: its light stops here
                                 stopped = true;
                                 break;
@@ -652,7 +663,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                 }
                 if (send_scale == nullptr || recv_area == nullptr) {  // receiver side: irradiance val[e] cos_r weight
                     for (size_t q = 0; q < nrecv; ++q) {
-                        const double cr = double(recv[q].c) * fams[f].weight;
+                        const double cr = double(recv[q].c) * fams[f].weight * alpha;
                         double *Hp = H + 3 * int64_t(recv[q].p);
                         Hp[0] += ve[0] * cr;
                         Hp[1] += ve[1] * cr;

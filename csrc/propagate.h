@@ -92,10 +92,21 @@ public:
     // hd then holds power (divide by the area for irradiance), and the
     // direct light conserves energy exactly, at the price of per-record
     // aliasing (which voxel catches a ray is not which surface is there).
+    // coverage (nullable, (n,), receiver-side mode only): the record's
+    // surface area in voxel units. A ray of e then stands for the share
+    // alpha = coverage[e] |n_e.d| / |d_m| of its line's cross-section (|d_m|
+    // in voxel units: one naive line per |d_m| of area across d) instead of
+    // all of it, and F records that are not in front of e's plane (by more
+    // than epsilon: e's own sheet, e.g. the rest of a flat lamp seen edge-on)
+    // do not occlude it: each of them sends its own share. A thin emitter
+    // seen edge-on then sends what its area projects, not a whole line per
+    // voxel of its band. Meant for flat emitters: on a curved sheet the
+    // neighbours in front of e's plane would still occlude e's share. A
+    // negative coverage[e] keeps the whole-line rule for e.
     int64_t shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
                   const float *val, double *hd, double *unfound, int threads,
                   const StopCheck &stop, int64_t *steps, const double *send_scale = nullptr,
-                  const double *recv_area = nullptr) const;
+                  const double *recv_area = nullptr, const double *coverage = nullptr) const;
 
     // Key of every record for family v (tests: each key is one naive line).
     void keys(const int32_t v[3], uint32_t *out) const;

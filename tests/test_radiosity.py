@@ -16,11 +16,8 @@ import voxgi
 from voxgi.radiosity import gather_partial, line_system
 
 
-def _voxelize_or_skip(scene, resolution):
-    try:
-        return voxgi.voxelize(scene, resolution=resolution)
-    except NotImplementedError:
-        pytest.skip("voxgi.voxelize is not available on this branch yet")
+def _voxelize(scene, resolution):
+    return voxgi.voxelize(scene, resolution=resolution)
 
 
 @pytest.fixture(scope="module")
@@ -233,31 +230,74 @@ def test_bad_input(sphere32):
 # ----------------------------------------------------------------- built-in scenes
 
 
+def _closed_lamp_box(blocks: bool) -> voxgi.Scene:
+    # the Cornell box closed at the front (a fourth wall), with or without its
+    # blocks: nothing escapes, so every emitted watt must be absorbed
+    import trimesh
+
+    from voxgi.scenes import _mesh
+
+    cb = voxgi.scenes.cornell_box(width=32, height=32)
+    s = voxgi.Scene(cb.camera)
+    for o in cb.objects:
+        if blocks or "block" not in o.name:
+            s.add(trimesh.Trimesh(o.vertices, o.faces, process=False), o.material, name=o.name)
+    front = [[[0, 0, 0], [552.8, 0, 0], [556.0, 548.8, 0], [0, 548.8, 0]]]
+    s.add(_mesh(front, inside=np.array([278.0, 274.4, 279.6])), voxgi.Material(albedo=0.5),
+          name="front")
+    return s
+
+
+def _direct_imbalance(vox, **kw):
+    # all albedos 0: the balance is the shooting's alone
+    import dataclasses
+
+    v0 = dataclasses.replace(vox, albedo=np.zeros_like(vox.albedo))
+    sol = voxgi.solve(v0, directions=8, shoot_directions=16, progress=False, **kw)
+    return sol.stats["energy"]["imbalance"][0], sol
+
+
+def test_flat_lamp_in_closed_box_conserves_energy():
+    # A flat lamp (the Cornell light quad) in a closed box of black walls:
+    # absorbed = emitted. Measured at res 32: imbalance -0.0003 with the
+    # partial-coverage shooting, -0.52 with the paper's whole-line rule (the
+    # lamp's one-voxel band seen edge-on by the walls sends as if it were a
+    # voxel thick); at res 64: 0.0014 and -0.23.
+    vox = _voxelize(_closed_lamp_box(blocks=False), 32)
+    imb, sol = _direct_imbalance(vox)
+    assert sol.stats["flat_emitter_objects"] == [int(vox.object_id[vox.is_emitter][0])]
+    assert abs(imb) < 2e-3
+    imb_line, _ = _direct_imbalance(vox, shoot_coverage=False)
+    assert imb_line < -0.3
+
+
 @pytest.mark.slow
 def test_cornell_box_energy_balance_converges():
     # Cornell box (open front): (emitted - absorbed - escaping) / emitted,
-    # escaping counted on the sender side. Measured (R = 8, shooting 16):
-    # -0.37 at res 32, -0.15 at 64, -0.079 at 128 (benchmarks/propagation.py
-    # cornell); here (R = 6, shooting 12) -0.37 at 24, -0.19 at 48. From the
-    # thin light quad whose one-voxel band looks bigger edge-on than the
-    # light is (the walls see it at grazing angles). Not 1e-3: see the
-    # closing note. The test holds the trend (res 24 -> 48): halving the
-    # pitch halves it.
+    # escaping counted on the sender side. Measured (R = 8, shooting 16,
+    # benchmarks/propagation.py cornell): +0.033 at res 32, +0.025 at 64 with
+    # the partial-coverage shooting (-0.37, -0.15 with the whole-line rule).
+    # What is left is light that grazes the blocks' edges: the edge records
+    # take the share of the line their area covers and the blocks' far side
+    # stops the rest (closed box, albedo 0: 0.035 / 0.020 with the blocks,
+    # -0.0003 / 0.0014 without). Not 1e-3: see the closing note. The test
+    # holds the sign and the trend (here, R 6 and 12: 0.046 at res 24, 0.022 at
+    # 48): it falls with the pitch.
     scene = voxgi.scenes.cornell_box(width=32, height=32)
     imb = []
     for res in (24, 48):
-        vox = _voxelize_or_skip(scene, res)
+        vox = _voxelize(scene, res)
         sol = voxgi.solve(vox, directions=6, shoot_directions=12, progress=False, tol=1e-4)
         e = sol.stats["energy"]
         assert np.all(np.array(e["escaping"]) > 0)
-        imb.append(abs(e["imbalance"][0]))
-    assert imb[1] < 0.6 * imb[0]
-    assert imb[1] < 0.25
+        imb.append(e["imbalance"][0])
+    assert 0 < imb[1] < 0.6 * imb[0]
+    assert imb[1] < 0.05
 
 
 @pytest.mark.parametrize("rho", [0.5])
 def test_furnace_box_with_inner_sphere(rho):
-    vox = _voxelize_or_skip(voxgi.scenes.furnace_box(albedo=rho, emission=1.0, inner=True), 32)
+    vox = _voxelize(voxgi.scenes.furnace_box(albedo=rho, emission=1.0, inner=True), 32)
     sol = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-6)
     front = ~vox.back
     err = np.abs(sol.radiance[front] * (1 - rho) - 1)
@@ -273,7 +313,7 @@ def test_furnace_box_closed_inner_sphere_rho09():
     # 3.3e-3 (x ~9 at rho 0.9); closed=True mean 0.016%, max 0.35%. The bounds
     # are the issue's acceptance (0.5% mean, 2% max), well above the measured.
     rho = 0.9
-    vox = _voxelize_or_skip(voxgi.scenes.furnace_box(albedo=rho, emission=1.0, inner=True), 32)
+    vox = _voxelize(voxgi.scenes.furnace_box(albedo=rho, emission=1.0, inner=True), 32)
     front = ~vox.back
     assert vox.stats["closed_objects"] == [0, 1]  # both meshes found watertight
     open_ = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False, tol=1e-6,

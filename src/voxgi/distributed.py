@@ -180,9 +180,9 @@ def _task_gather(records, key, families, weights, values, want_vis):
     return s.gather(families, weights, values, idx, want_vis, _worker_threads())
 
 
-def _task_shoot(records, key, emitters, families, weights, values):
+def _task_shoot(records, key, emitters, coverage, families, weights, values):
     s = _system(records, key)
-    return s.shoot(emitters, families, weights, values, _worker_threads())
+    return s.shoot(emitters, families, weights, values, _worker_threads(), coverage=coverage)
 
 
 def _task_normalisation(records, key, families, weights):
@@ -378,13 +378,14 @@ class DistributedLineSystem(_Farm):
         self.stats["bytes_received"] += sum(p[0].nbytes for p in parts)
         return sums, vis, lines
 
-    def shoot(self, emitters, families, weights, values, threads=0):
+    def shoot(self, emitters, families, weights, values, threads=0, coverage=None):
         """Shooting from ``emitters`` split by direction families: (hd, unfound, rays, steps)."""
         em = np.ascontiguousarray(emitters, dtype=np.int32)
+        cov = None if coverage is None else np.ascontiguousarray(coverage, dtype=np.float64)
         vfut = self._values(values)
         chunks = [(np.ascontiguousarray(families[c]), np.ascontiguousarray(weights[c]), vfut)
                   for c in self._chunks(len(families))]
-        parts = self._map(_task_shoot, chunks, self._records, self.key, em,
+        parts = self._map(_task_shoot, chunks, self._records, self.key, em, cov,
                           key_prefix="voxgi-shoot")
         hd = np.zeros((self.size, 3))
         unfound = np.zeros(len(em))

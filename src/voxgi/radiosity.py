@@ -156,6 +156,31 @@ class Solution:
             )
 
 
+def _flat_emitter_coverage(a: dict, vox: VoxelSet, emitters: np.ndarray) -> tuple[np.ndarray, list]:
+    """Per record: its area in voxel units if it is a front record of a flat
+    emitting object (every front record of the object has one normal and
+    lies in one plane, to 1e-3 voxel), else -1 (whole-line rule). Returns
+    that and the ids of the flat objects."""
+    n = len(a["ijk"])
+    cov = np.full(n, -1.0)
+    obj = getattr(vox, "object_id", None)
+    if obj is None or len(emitters) == 0:
+        return cov, []
+    obj = np.asarray(obj)
+    flat = []
+    for o in np.unique(obj[emitters]):
+        idx = np.flatnonzero((obj == o) & ~a["back"])
+        if len(idx) == 0:
+            continue
+        nrm = a["normal"][idx].astype(np.float64)
+        pts = a["point"][idx].astype(np.float64)
+        n0 = nrm[0]
+        if np.all(nrm @ n0 > 1 - 1e-6) and np.all(np.abs((pts - pts[0]) @ n0) < 1e-3):
+            cov[idx] = a["area"][idx] / a["pitch"] ** 2
+            flat.append(int(o))
+    return cov, flat
+
+
 def _json_default(o):
     if isinstance(o, np.generic):
         return o.item()
@@ -337,6 +362,7 @@ def solve(
     gs_blocks: int = 8,
     max_iterations: int = 10000,
     closed=None,
+    shoot_coverage: bool = True,
 ) -> Solution:
     """Solve the discrete radiosity equation on the records of ``vox``.
 
@@ -406,6 +432,16 @@ def solve(
         front twin's radiosity and emission instead of black (it stays black
         itself). The back of an open one-sided surface (a lamp quad) stays
         black either way: its back can be seen.
+    shoot_coverage : bool
+        Direct light from flat emitters (lamp quads, discs: every record of
+        the object in one plane with one normal) by partial coverage
+        (default): a shooting ray of emitter record e stands for the share
+        ``ΔA_e |n_e·d| / |d_m|`` (voxel units) of its discrete line's
+        cross-section, and the rest of e's own plane does not occlude it.
+        Curved or closed emitters, and False, keep the paper's rule (each
+        ray covers its whole line): a thin lamp seen edge-on then sends as
+        if it were a voxel thick (measured on the Cornell box: 37% too much
+        power at resolution 32, 15% at 64).
     Returns
     -------
     Solution
@@ -565,8 +601,12 @@ def solve(
     t = time.perf_counter()
     # receiver-side deposit: the exact transpose of gathering (see the
     # kernel's `send_scale` for the sender-side alternative and its aliasing)
+    cov = None
+    if shoot_coverage:
+        cov, flat = _flat_emitter_coverage(a, vox, emitters_send)
+        stats["flat_emitter_objects"] = flat
     hd_raw, unfound, shoot_rays, steps = sysm.shoot(
-        emitters_send, sds.families, sds.weights, E_send, nthreads
+        emitters_send, sds.families, sds.weights, E_send, nthreads, coverage=cov
     )
     Hd = hd_raw / Ss[:, None]
     seconds["shoot"] = time.perf_counter() - t
