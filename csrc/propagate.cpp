@@ -9,6 +9,7 @@
 #include <numeric>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
 
 namespace voxgi {
 
@@ -201,18 +202,51 @@ void LineSystem::normalisation(const Family *fams, int64_t nf, double *S, int th
                                    double(fams[f].v[2]) * fams[f].v[2]);
         for (int c = 0; c < 3; ++c) u[3 * f + c] = fams[f].v[c] / l;
     }
+    // S depends on the normal only, and flat walls give many records one
+    // normal: sum once per distinct normal (bit-exact equality), then copy.
+    std::vector<int64_t> first;  // index of the first record of each distinct normal
+    std::vector<int64_t> which(n_);
+    {
+        struct Key {
+            uint32_t a, b, c;
+            bool operator==(const Key &o) const { return a == o.a && b == o.b && c == o.c; }
+        };
+        struct Hash {
+            size_t operator()(const Key &k) const {
+                uint64_t h = k.a * 0x9E3779B97F4A7C15ull;
+                h ^= (k.b + 0x7F4A7C15ull) * 0xC2B2AE3D27D4EB4Full;
+                h ^= (k.c + 0x165667B1ull) * 0x94D049BB133111EBull;
+                return static_cast<size_t>(h ^ (h >> 31));
+            }
+        };
+        std::unordered_map<Key, int64_t, Hash> seen;
+        seen.reserve(1024);
+        for (int64_t i = 0; i < n_; ++i) {
+            Key k;
+            std::memcpy(&k.a, normal_ + 3 * i, 4);
+            std::memcpy(&k.b, normal_ + 3 * i + 1, 4);
+            std::memcpy(&k.c, normal_ + 3 * i + 2, 4);
+            auto it = seen.emplace(k, static_cast<int64_t>(first.size()));
+            if (it.second) first.push_back(i);
+            which[i] = it.first->second;
+        }
+    }
+    const int64_t nu = static_cast<int64_t>(first.size());
+    std::vector<double> Su(nu);
     const int64_t chunk = 256;
-    const int64_t tasks = (n_ + chunk - 1) / chunk;
+    const int64_t tasks = (nu + chunk - 1) / chunk;
     parallel_for(tasks, resolve_threads(threads), stop, [&](int64_t t, int) {
-        const int64_t b = t * chunk, e = std::min(n_, b + chunk);
-        for (int64_t i = b; i < e; ++i) {
+        const int64_t b = t * chunk, e = std::min(nu, b + chunk);
+        for (int64_t j = b; j < e; ++j) {
+            const int64_t i = first[j];
             const double n0 = normal_[3 * i], n1 = normal_[3 * i + 1], n2 = normal_[3 * i + 2];
             double s = 0.0;
             for (int64_t f = 0; f < nf; ++f)
                 s += std::abs(n0 * u[3 * f] + n1 * u[3 * f + 1] + n2 * u[3 * f + 2]) * fams[f].weight;
-            S[i] = s;
+            Su[j] = s;
         }
     });
+    for (int64_t i = 0; i < n_; ++i) S[i] = Su[which[i]];
 }
 
 // ---------------------------------------------------------------- gathering

@@ -55,7 +55,9 @@ def test_raw_hemisphere_sums(rng, radius, spread):
     n = np.concatenate([n, np.eye(3), -np.eye(3)])
     S = ds.raw_sums(n)
     assert np.all(np.abs(S - 1) < spread)
-    # the kernel's normalisation agrees with numpy's
+    # the kernel's normalisation agrees with numpy's, also where records
+    # share a normal (the kernel sums once per distinct normal)
+    n = np.concatenate([n, n[::7], np.eye(3)])
     s = _core.LineSystem(
         np.zeros((len(n), 3), np.int32), n.astype(np.float32), np.zeros((len(n), 3), np.float32)
     )
