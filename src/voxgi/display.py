@@ -20,13 +20,22 @@ import numpy as np
 from . import _core, _validate
 from .scene import Camera, Scene
 
-__all__ = ["RENDER_DIRECTIONS", "RENDER_RESOLUTION", "RenderResult", "render", "run_cli"]
+__all__ = ["RENDER_DIRECTIONS", "RENDER_RESOLUTION", "RENDER_SOLVE_TOL", "RenderResult", "render",
+           "run_cli"]
 
 #: Voxel resolution and gathering radius used by ``render(scene)`` without a
-#: solution and by ``voxgi render``: the fastest measured setting to relMSE
-#: 5e-3 against Mitsuba on the Cornell box (benchmarks/time_vs_error.py).
-RENDER_RESOLUTION = 96
+#: solution and by ``voxgi render``. Measured on the Cornell box at 256x256
+#: against Mitsuba (benchmarks/time_vs_error.py, display run to an estimated
+#: noise relMSE of 3e-4): relMSE 5.5e-4 at resolution 48, 3.5e-4 at 64,
+#: 3.3e-4 at 80 and 96 (R 8), 3.8e-4 at 64 with R 6. At the default display
+#: tolerance the noise (~1e-3) dominates from 64 on.
+RENDER_RESOLUTION = 64
 RENDER_DIRECTIONS = 8
+#: The solve's ``tol`` in that pipeline: the display stops at relMSE 1e-3,
+#: and a solve to 1e-3 instead of 1e-4 changes the Cornell box's radiosity by
+#: 8e-5 (relative, area-weighted) and its picture's error not at all
+#: (3.49e-4 against 3.46e-4) with 10 bounces instead of 13.
+RENDER_SOLVE_TOL = 1e-3
 
 #: relMSE's epsilon (voxgi.metrics.rel_mse), used by the stopping rule too.
 _REL_EPS = 0.01
@@ -671,11 +680,11 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         paper); see :class:`VPLSampler`.
     resolution, directions : int, optional
         Passed to :func:`voxgi.voxelize` / :func:`voxgi.solve` when ``sol`` is
-        None; default :data:`RENDER_RESOLUTION` (96) and
-        :data:`RENDER_DIRECTIONS` (8), the fastest of the measured settings to
-        reach relMSE 5e-3 on the Cornell box (``benchmarks/time_vs_error.py``):
-        the display's gather rays make the picture far less sensitive to the
-        direction count than the voxel solution itself.
+        None; default :data:`RENDER_RESOLUTION` (64) and
+        :data:`RENDER_DIRECTIONS` (8), solved to :data:`RENDER_SOLVE_TOL`
+        without the solve's diagnostic passes: past resolution 64 the
+        display's noise, not the voxels, sets the Cornell box's error
+        (``benchmarks/time_vs_error.py``).
 
     Returns
     -------
@@ -742,7 +751,8 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         seconds["voxelize"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         sol = solve(vox, directions=RENDER_DIRECTIONS if directions is None else directions,
-                    threads=threads, progress=progress, client=client)
+                    tol=RENDER_SOLVE_TOL, threads=threads, progress=progress, client=client,
+                    diagnostics=False)
         seconds["solve"] = time.perf_counter() - t0
     _check_solution(scene, sol)
 
@@ -870,8 +880,8 @@ def run_cli(args) -> int:
     t_vox = time.perf_counter() - t0
     say(f"voxelize: {len(vox)} records (resolution {vox.resolution}) in {t_vox:.2f} s")
     t0 = time.perf_counter()
-    sol = solve(vox, directions=args.directions or RENDER_DIRECTIONS, threads=args.threads,
-                progress=not args.quiet)
+    sol = solve(vox, directions=args.directions or RENDER_DIRECTIONS, tol=RENDER_SOLVE_TOL,
+                threads=args.threads, progress=not args.quiet, diagnostics=False)
     t_sol = time.perf_counter() - t0
     say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in {t_sol:.2f} s")
     res = render(scene, sol, max_frames=args.frames, seed=args.seed, progress=not args.quiet,
