@@ -9,16 +9,13 @@ import voxgi
 from voxgi import cli
 
 
-def _run_or_skip(argv):
-    try:
-        return cli.main(argv)
-    except NotImplementedError as exc:
-        pytest.skip(f"pipeline stage not implemented yet: {exc}")
+def _run(argv):
+    return cli.main(argv)
 
 
 def test_render_builtin_scene_writes_exr_png_and_metadata(tmp_path, capsys):
     out = tmp_path / "f.exr"
-    rc = _run_or_skip(["render", "furnace-sphere", "-o", str(out), "--resolution", "16",
+    rc = _run(["render", "furnace-sphere", "-o", str(out), "--resolution", "16",
                        "--directions", "6", "--frames", "6", "--width", "12", "--height", "10",
                        "-q"])
     assert rc == 0
@@ -38,7 +35,7 @@ def test_render_builtin_scene_writes_exr_png_and_metadata(tmp_path, capsys):
 
 def test_default_output_name(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    _run_or_skip(["render", "furnace-box", "--resolution", "12", "--directions", "4",
+    _run(["render", "furnace-box", "--resolution", "12", "--directions", "4",
                   "--frames", "2", "--width", "8", "--height", "8", "-q"])
     assert (tmp_path / "furnace-box.exr").exists() and (tmp_path / "furnace-box.png").exists()
 

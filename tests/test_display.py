@@ -49,12 +49,9 @@ def triangle_solution(scene: voxgi.Scene, radiosity) -> Solution:
 
 
 def real_solution(scene, resolution=32, directions=8):
-    """voxelize + solve, or skip while those stages are not implemented."""
-    try:
-        vox = voxgi.voxelize(scene, resolution=resolution)
-        return voxgi.solve(vox, directions=directions)
-    except NotImplementedError as exc:
-        pytest.skip(f"pipeline stage not implemented yet: {exc}")
+    """voxelize + solve."""
+    vox = voxgi.voxelize(scene, resolution=resolution)
+    return voxgi.solve(vox, directions=directions)
 
 
 # -- the normalisation: furnaces ----------------------------------------------------------
@@ -497,3 +494,41 @@ def test_direct_light_matches_mitsuba_path_tracer():
     # pixels carry most of the antialiasing noise) within 1% (measured 0.4%).
     lit = ref.max(axis=2) < 5.0
     assert abs(out.image[lit].mean() / ref[lit].mean() - 1) < 0.01
+
+
+def test_shading_normals_approach_the_smooth_surface():
+    # A coarse icosphere (80 faces) lit by a lamp, rendered flat and with
+    # per-vertex shading normals (the true sphere's), against a fine one
+    # (5120 faces, flat): the shading normals must bring the coarse sphere's
+    # shading near the fine one's. Measured (64x64, 24 frames; seeds 3, 5, 9
+    # and 96 frames agree to 1%): relMSE against the fine sphere 3.4e-2 flat,
+    # 7.6e-3 with shading normals (what is left: the facets lie inside the
+    # sphere, and the silhouette).
+    from scipy.ndimage import binary_erosion
+
+    def scene(sub, smooth):
+        s = voxgi.Scene(voxgi.Camera(eye=(0, 0, 3.2), target=(0, 0, 0), up=(0, 1, 0), fov=45,
+                                     width=64, height=64))
+        ico = trimesh.creation.icosphere(subdivisions=sub)
+        v, f = np.array(ico.vertices), np.array(ico.faces)
+        vn = v / np.linalg.norm(v, axis=1, keepdims=True) if smooth else None
+        s.add(trimesh.Trimesh(v, f, vertex_normals=vn, process=False),
+              voxgi.Material(albedo=0.6), name="sphere")
+        lamp = trimesh.Trimesh([[-0.5, 2.0, 0.5], [0.5, 2.0, 0.5], [0.5, 2.0, 1.5],
+                                [-0.5, 2.0, 1.5]], [[0, 1, 2], [0, 2, 3]], process=False)
+        s.add(lamp, voxgi.Material(albedo=0.0, emission=5.0), name="lamp")
+        return s
+
+    def image(sc):
+        sol = triangle_solution(sc, lambda vox: np.pi * vox.emission)
+        return voxgi.render(sc, sol, max_frames=24, tol=0.0, seed=3, progress=False).image
+
+    lo_flat, lo_smooth, hi = (scene(1, False), scene(1, True), scene(4, False))
+    assert lo_smooth.objects[0].vertex_normals is not None
+    assert lo_flat.objects[0].vertex_normals is None
+    ref = image(hi)
+    lit = binary_erosion(ref[..., 0] > 0.02, iterations=3)
+    assert lit.sum() > 200
+    err = {k: float(np.mean(((image(s) - ref)[lit]) ** 2 / (ref[lit] ** 2 + 0.01)))
+           for k, s in (("flat", lo_flat), ("smooth", lo_smooth))}
+    assert err["smooth"] < 0.35 * err["flat"]
