@@ -44,6 +44,16 @@ std::vector<voxgi::Family> to_families(const I32 &families, const F64 &weights) 
     return out;
 }
 
+using Bool = py::array_t<bool, py::array::c_style>;
+
+// The optional per-record stand-in flags: (n,) bool, or nullptr.
+const uint8_t *stand_in_ptr(const std::optional<Bool> &a, py::ssize_t n) {
+    if (!a) return nullptr;
+    check_1d(*a, n, "stand_in");
+    static_assert(sizeof(bool) == 1, "bool must be one byte");
+    return reinterpret_cast<const uint8_t *>(a->data());
+}
+
 voxgi::LineSystem *make_system(const I32 &ijk, const F32 &normal, const F32 &point, float epsilon,
                                int history) {
     check_2d(ijk, -1, 3, "ijk");
@@ -104,7 +114,7 @@ history : int
         .def(
             "gather",
             [](const voxgi::LineSystem &s, I32 families, F64 weights, F32 values, I64 family_indices,
-               bool want_vis, int threads, const std::string &algorithm) {
+               bool want_vis, int threads, const std::string &algorithm, std::optional<Bool> stand_in) {
                 if (algorithm != "onepass" && algorithm != "sort")
                     throw py::value_error("algorithm must be 'onepass' or 'sort'");
                 auto fams = to_families(families, weights);
@@ -122,30 +132,34 @@ history : int
                 const float *v = values.data();
                 double *o = out.mutable_data();
                 double *vp = want_vis ? vis.mutable_data() : nullptr;
+                const uint8_t *sb = stand_in_ptr(stand_in, n);
                 auto stop = voxgi::py_helpers::make_stop_check();
                 int64_t lines;
                 {
                     py::gil_scoped_release release;
                     lines = s.gather(fams.data(), sel, ns, v, o, vp, threads, stop,
-                                     algorithm == "onepass");
+                                     algorithm == "onepass", sb);
                 }
                 return py::make_tuple(out, want_vis ? py::object(vis) : py::object(py::none()), lines);
             },
             "families"_a.noconvert(), "weights"_a.noconvert(), "values"_a.noconvert(),
             "family_indices"_a.noconvert(), "want_vis"_a = false, "threads"_a = 0,
-            "algorithm"_a = "onepass",
+            "algorithm"_a = "onepass", "stand_in"_a.noconvert() = py::none(),
             R"doc(Jacobi gathering over a subset of direction families.
 
 Returns (sums, vis, lines): sums (N, 3) float64, for every record the sum over
 the selected families and both signs of values[partner] * cos * weight (not
 divided by S); vis (N,) float64 the sum of cos * weight over the directions in
 which the record found a partner (None unless want_vis); lines the number of
-lines walked. Partial sums over disjoint subsets add up to the full gather.)doc")
+lines walked. Partial sums over disjoint subsets add up to the full gather.
+stand_in (N,) bool, optional: the back records of closed objects (they send
+their front twin's value); two of them never pair along a line, and a
+stand-in F is not occluded/answered by a stand-in B.)doc")
         .def(
             "shoot",
             [](const voxgi::LineSystem &s, I32 emitters, I32 families, F64 weights, F32 values,
                int threads, std::optional<F64> send_scale, std::optional<F64> recv_area,
-               std::optional<F64> coverage) {
+               std::optional<F64> coverage, std::optional<Bool> stand_in) {
                 auto fams = to_families(families, weights);
                 const py::ssize_t n = s.size();
                 check_1d(emitters, -1, "emitters");
@@ -171,18 +185,20 @@ lines walked. Partial sums over disjoint subsets add up to the full gather.)doc"
                 const int32_t *e = emitters.data();
                 const float *v = values.data();
                 double *h = hd.mutable_data(), *u = unfound.mutable_data();
+                const uint8_t *sb = stand_in_ptr(stand_in, n);
                 auto stop = voxgi::py_helpers::make_stop_check();
                 int64_t rays, steps = 0;
                 {
                     py::gil_scoped_release release;
                     rays = s.shoot(e, ne, fams.data(), static_cast<int64_t>(fams.size()), v, h, u,
-                                   threads, stop, &steps, ss, ra, cov);
+                                   threads, stop, &steps, ss, ra, cov, sb);
                 }
                 return py::make_tuple(hd, unfound, rays, steps);
             },
             "emitters"_a.noconvert(), "families"_a.noconvert(), "weights"_a.noconvert(),
             "values"_a.noconvert(), "threads"_a = 0, "send_scale"_a.noconvert() = py::none(),
             "recv_area"_a.noconvert() = py::none(), "coverage"_a.noconvert() = py::none(),
+            "stand_in"_a.noconvert() = py::none(),
             R"doc(Integer discrete rays from the emitter records along every direction they face.
 
 Returns (hd, unfound, rays, steps): hd (N, 3) float64, per receiver the sum of
@@ -194,7 +210,9 @@ is shared by its receivers in proportion to recv_area * cos_r and hd holds
 power (sender-side deposit). With coverage (the records' areas in voxel
 units), each receiver-side deposit is scaled by the share of the line that e
 covers, coverage[e] |n_e.d| / |d_m|, and records of e's own sheet do not
-occlude it; a negative coverage[e] keeps the whole line for e.)doc")
+occlude it; a negative coverage[e] keeps the whole line for e. With stand_in
+(N,) bool (see gather), a stand-in receiver takes the nearest facing F that is
+not a stand-in as its sender.)doc")
         .def(
             "keys",
             [](const voxgi::LineSystem &s, I32 v) {
@@ -213,7 +231,7 @@ occlude it; a negative coverage[e] keeps the whole line for e.)doc")
     m.def(
         "gather_families",
         [](I32 ijk, F32 normal, F32 point, I32 families, F64 weights, F32 values, I64 family_indices,
-           float epsilon, int history, int threads) {
+           float epsilon, int history, int threads, std::optional<Bool> stand_in) {
             std::unique_ptr<voxgi::LineSystem> s(make_system(ijk, normal, point, epsilon, history));
             auto fams = to_families(families, weights);
             const py::ssize_t n = s->size();
@@ -227,16 +245,17 @@ occlude it; a negative coverage[e] keeps the whole line for e.)doc")
             F64 out({n, py::ssize_t(3)});
             const float *v = values.data();
             double *o = out.mutable_data();
+            const uint8_t *sb = stand_in_ptr(stand_in, n);
             auto stop = voxgi::py_helpers::make_stop_check();
             {
                 py::gil_scoped_release release;
-                s->gather(fams.data(), sel, ns, v, o, nullptr, threads, stop);
+                s->gather(fams.data(), sel, ns, v, o, nullptr, threads, stop, true, sb);
             }
             return out;
         },
         "ijk"_a.noconvert(), "normal"_a.noconvert(), "point"_a.noconvert(), "families"_a.noconvert(),
         "weights"_a.noconvert(), "values"_a.noconvert(), "family_indices"_a.noconvert(),
-        "epsilon"_a = 0.05f, "history"_a = 8, "threads"_a = 0,
+        "epsilon"_a = 0.05f, "history"_a = 8, "threads"_a = 0, "stand_in"_a.noconvert() = py::none(),
         R"doc(One Jacobi gathering pass over a subset of direction families (for a Dask worker).
 
 Builds the line system from the records, gathers values over

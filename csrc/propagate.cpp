@@ -273,7 +273,7 @@ struct GatherWork {
 
 int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel, const float *val,
                            double *out, double *vis, int threads, const StopCheck &stop,
-                           bool onepass) const {
+                           bool onepass, const uint8_t *stand_in) const {
     threads = resolve_threads(threads);
     threads = static_cast<int>(std::max<int64_t>(1, std::min<int64_t>(threads, nsel)));
     // Values in each main axis's order (only the axes some family needs).
@@ -292,6 +292,15 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         for (int64_t i = 0; i < n_; ++i)
             for (int c = 0; c < 3; ++c) valax[m][3 * i + c] = val[3 * int64_t(ord[i]) + c];
     }
+    // stand-in flags in each needed axis order (empty: no stand-ins)
+    std::vector<uint8_t> sbax[3];
+    if (stand_in)
+        for (int m = 0; m < 3; ++m) {
+            if (!need[m]) continue;
+            sbax[m].resize(n_);
+            const int32_t *ord = ax_[m].order.data();
+            for (int64_t i = 0; i < n_; ++i) sbax[m][i] = stand_in[ord[i]] ? 1 : 0;
+        }
     std::vector<GatherWork> work(threads);
     std::vector<int64_t> lines_walked(threads, 0);
     const float eps = eps_;
@@ -325,6 +334,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         double *acc = w.acc[m].data();
         double *vs = vis ? w.vis[m].data() : nullptr;
         const float *vl = valax[m].data();
+        const uint8_t *sb = stand_in ? sbax[m].data() : nullptr;
         const float *pn = ax.pn.data();  // point and normal, 8 floats per record
         const int32_t *AX = ax.X.data(), *AY = ax.Y.data(), *AZ = ax.Z.data();
         const double wgt = F.weight;
@@ -360,8 +370,10 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                     const float *pp = pn + 8 * int64_t(p), *np = pn + 3 + 8 * int64_t(p);
                     const double cb = -double(c) * wgt;
                     bool got = false;
+                    const bool sp = sb && sb[p];  // two stand-ins never pair
                     int32_t f = lastF;
                     for (int h = 0; h < K && f >= 0; ++h, f = prevF[f]) {
+                        if (sp && sb[f]) continue;
                         const float *pf = pn + 8 * int64_t(f), *nf = pn + 3 + 8 * int64_t(f);
                         if (!facing(pf, nf, pp, np, eps)) continue;
                         if (!got) {
@@ -406,6 +418,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         double *acc = w.acc[m].data();
         double *vs = vis ? w.vis[m].data() : nullptr;
         const float *vl = valax[m].data();
+        const uint8_t *sb = stand_in ? sbax[m].data() : nullptr;
         const float *pn = ax.pn.data();  // point and normal, 8 floats per record
         const double wgt = F.weight;
         const float len = std::sqrt(float(F.v[0]) * F.v[0] + float(F.v[1]) * F.v[1] + float(F.v[2]) * F.v[2]);
@@ -474,8 +487,10 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                         const float *pp = pn + 8 * int64_t(p), *np = pn + 3 + 8 * int64_t(p);
                         const double cb = -double(c) * wgt;
                         bool got = false;
+                        const bool sp = sb && sb[p];  // two stand-ins never pair
                         for (int h = hn - 1; h >= 0; --h) {
                             const int32_t f = hp[h];
+                            if (sp && sb[f]) continue;
                             const float *pf = pn + 8 * int64_t(f), *nf = pn + 3 + 8 * int64_t(f);
                             if (!facing(pf, nf, pp, np, eps)) continue;
                             if (!got) {
@@ -538,7 +553,8 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
 int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
                           const float *val, double *hd, double *unfound, int threads,
                           const StopCheck &stop, int64_t *steps_out, const double *send_scale,
-                          const double *recv_area, const double *coverage) const {
+                          const double *recv_area, const double *coverage,
+                          const uint8_t *stand_in) const {
     if (coverage && send_scale) throw std::invalid_argument("coverage is for the receiver-side deposit");
     threads = resolve_threads(threads);
     build_occupancy();
@@ -668,8 +684,10 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                         } else if (c < -kTiny) {
                             const float *pp = P + 3 * int64_t(p), *np = N + 3 * int64_t(p);
                             int nearest = -1;
+                            const bool sp = stand_in && stand_in[p];  // two stand-ins never pair
                             for (int hh = hn - 1; hh >= 0; --hh) {
                                 const int32_t fq = hp[hh];
+                                if (sp && stand_in[fq]) continue;
                                 if (facing(P + 3 * int64_t(fq), N + 3 * int64_t(fq), pp, np, eps)) {
                                     nearest = hh;
                                     break;

@@ -73,9 +73,15 @@ public:
     // walked (lines with >= 2 records); lines with one record are skipped.
     // onepass: one pass in x_m order with a per-line state table (default);
     // otherwise a stable counting sort by line key, then a walk of each line.
+    // stand_in (nullable, (n,), global order): nonzero for the back records
+    // of closed objects, which send their front twin's value and only stand
+    // in for it where a line clips the object's band. Two stand-ins never
+    // pair: a stand-in B looks past the stand-in F records of its line
+    // (neither receives from the other, the F is not marked answered, so it
+    // does not occlude the older F records from the receivers further on).
     int64_t gather(const Family *fams, const int64_t *sel, int64_t nsel, const float *val,
                    double *out, double *vis, int threads, const StopCheck &stop,
-                   bool onepass = true) const;
+                   bool onepass = true, const uint8_t *stand_in = nullptr) const;
 
     // Shooting from the emitter records `emit[0..ne)` along every direction
     // +v and -v of every family (with n_e.s > 0): an integer march along the
@@ -103,10 +109,14 @@ public:
     // voxel of its band. Meant for flat emitters: on a curved sheet the
     // neighbours in front of e's plane would still occlude e's share. A
     // negative coverage[e] keeps the whole-line rule for e.
+    // stand_in (nullable, (n,)): as for gather; a stand-in receiver's
+    // sender is the nearest facing F that is not a stand-in (so a stand-in
+    // emitter deposits nothing on a stand-in receiver).
     int64_t shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
                   const float *val, double *hd, double *unfound, int threads,
                   const StopCheck &stop, int64_t *steps, const double *send_scale = nullptr,
-                  const double *recv_area = nullptr, const double *coverage = nullptr) const;
+                  const double *recv_area = nullptr, const double *coverage = nullptr,
+                  const uint8_t *stand_in = nullptr) const;
 
     // Key of every record for family v (tests: each key is one naive line).
     void keys(const int32_t v[3], uint32_t *out) const;

@@ -176,6 +176,18 @@ def test_shoot_and_gather_partial_sums_add_up(cornell_small, client3):
     np.testing.assert_allclose(g1, g0, rtol=1e-12, atol=1e-12 * np.abs(g0).max())
     np.testing.assert_allclose(vis1, vis0, rtol=1e-12, atol=1e-12)
     assert l1 == l0
+    # the stand-in flags (solve's closed-object back records) reach the
+    # workers' kernels: here every back record, which changes the sums
+    sb = np.ascontiguousarray(a["back"])
+    g2, _, _ = local.gather(ds.families, ds.weights, v, sel, False, 1, stand_in=sb)
+    g3, _, _ = dist.gather(ds.families, ds.weights, v, sel, False, stand_in=sb)
+    assert np.abs(g2 - g0).max() > 1e-3 * np.abs(g0).max()
+    np.testing.assert_allclose(g3, g2, rtol=1e-12, atol=1e-12 * np.abs(g2).max())
+    h2, u2, _, _ = local.shoot(em, ds.families, ds.weights, vals, 1, stand_in=sb)
+    h3, u3, _, _ = dist.shoot(em, ds.families, ds.weights, vals, stand_in=sb)
+    assert np.abs(h2 - h0).max() > 1e-3 * np.abs(h0).max()
+    np.testing.assert_allclose(h3, h2, rtol=1e-12, atol=1e-12 * np.abs(h2).max())
+    np.testing.assert_allclose(u3, u2, rtol=1e-12, atol=1e-12)
     dist.close()
 
 

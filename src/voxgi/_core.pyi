@@ -27,7 +27,7 @@ class LineSystem:
     """
     def __init__(self, ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing.NDArray[numpy.float32], point: numpy.typing.NDArray[numpy.float32], epsilon: typing.SupportsFloat | typing.SupportsIndex = 0.05000000074505806, history: typing.SupportsInt | typing.SupportsIndex = 8) -> None:
         ...
-    def gather(self, families: numpy.typing.NDArray[numpy.int32], weights: numpy.typing.NDArray[numpy.float64], values: numpy.typing.NDArray[numpy.float32], family_indices: numpy.typing.NDArray[numpy.int64], want_vis: bool = False, threads: typing.SupportsInt | typing.SupportsIndex = 0, algorithm: str = 'onepass') -> tuple[numpy.typing.NDArray[numpy.float64], typing.Any, int]:
+    def gather(self, families: numpy.typing.NDArray[numpy.int32], weights: numpy.typing.NDArray[numpy.float64], values: numpy.typing.NDArray[numpy.float32], family_indices: numpy.typing.NDArray[numpy.int64], want_vis: bool = False, threads: typing.SupportsInt | typing.SupportsIndex = 0, algorithm: str = 'onepass', stand_in: numpy.typing.NDArray[numpy.bool_] | None = None) -> tuple[numpy.typing.NDArray[numpy.float64], typing.Any, int]:
         """
         Jacobi gathering over a subset of direction families.
         
@@ -36,6 +36,9 @@ class LineSystem:
         divided by S); vis (N,) float64 the sum of cos * weight over the directions in
         which the record found a partner (None unless want_vis); lines the number of
         lines walked. Partial sums over disjoint subsets add up to the full gather.
+        stand_in (N,) bool, optional: the back records of closed objects (they send
+        their front twin's value); two of them never pair along a line, and a
+        stand-in F is not occluded/answered by a stand-in B.
         """
     def keys(self, v: numpy.typing.NDArray[numpy.int32]) -> numpy.typing.NDArray[numpy.uint32]:
         """
@@ -45,7 +48,7 @@ class LineSystem:
         """
         Raw S(n) = sum over both signs of every family of max(0, n.s) * weight, (N,) float64.
         """
-    def shoot(self, emitters: numpy.typing.NDArray[numpy.int32], families: numpy.typing.NDArray[numpy.int32], weights: numpy.typing.NDArray[numpy.float64], values: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, send_scale: numpy.typing.NDArray[numpy.float64] | None = None, recv_area: numpy.typing.NDArray[numpy.float64] | None = None) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64], int, int]:
+    def shoot(self, emitters: numpy.typing.NDArray[numpy.int32], families: numpy.typing.NDArray[numpy.int32], weights: numpy.typing.NDArray[numpy.float64], values: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, send_scale: numpy.typing.NDArray[numpy.float64] | None = None, recv_area: numpy.typing.NDArray[numpy.float64] | None = None, coverage: numpy.typing.NDArray[numpy.float64] | None = None, stand_in: numpy.typing.NDArray[numpy.bool_] | None = None) -> tuple[numpy.typing.NDArray[numpy.float64], numpy.typing.NDArray[numpy.float64], int, int]:
         """
         Integer discrete rays from the emitter records along every direction they face.
         
@@ -55,7 +58,12 @@ class LineSystem:
         (emitter x direction); steps the voxels visited. With send_scale (area / S)
         and recv_area (area), each ray's power val[e] * cos_e * weight * send_scale[e]
         is shared by its receivers in proportion to recv_area * cos_r and hd holds
-        power (sender-side deposit).
+        power (sender-side deposit). With coverage (the records' areas in voxel
+        units), each receiver-side deposit is scaled by the share of the line that e
+        covers, coverage[e] |n_e.d| / |d_m|, and records of e's own sheet do not
+        occlude it; a negative coverage[e] keeps the whole line for e. With stand_in
+        (N,) bool (see gather), a stand-in receiver takes the nearest facing F that is
+        not a stand-in as its sender.
         """
     @property
     def hi(self) -> tuple[int, int, int]:
@@ -66,7 +74,7 @@ class LineSystem:
     @property
     def size(self) -> int:
         ...
-def gather_families(ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing.NDArray[numpy.float32], point: numpy.typing.NDArray[numpy.float32], families: numpy.typing.NDArray[numpy.int32], weights: numpy.typing.NDArray[numpy.float64], values: numpy.typing.NDArray[numpy.float32], family_indices: numpy.typing.NDArray[numpy.int64], epsilon: typing.SupportsFloat | typing.SupportsIndex = 0.05000000074505806, history: typing.SupportsInt | typing.SupportsIndex = 8, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> numpy.typing.NDArray[numpy.float64]:
+def gather_families(ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing.NDArray[numpy.float32], point: numpy.typing.NDArray[numpy.float32], families: numpy.typing.NDArray[numpy.int32], weights: numpy.typing.NDArray[numpy.float64], values: numpy.typing.NDArray[numpy.float32], family_indices: numpy.typing.NDArray[numpy.int64], epsilon: typing.SupportsFloat | typing.SupportsIndex = 0.05000000074505806, history: typing.SupportsInt | typing.SupportsIndex = 8, threads: typing.SupportsInt | typing.SupportsIndex = 0, stand_in: numpy.typing.NDArray[numpy.bool_] | None = None) -> numpy.typing.NDArray[numpy.float64]:
     """
     One Jacobi gathering pass over a subset of direction families (for a Dask worker).
     

@@ -174,15 +174,17 @@ def _system(records, key):
         history=records["history"]))
 
 
-def _task_gather(records, key, families, weights, values, want_vis):
+def _task_gather(records, key, families, weights, values, want_vis, stand_in=None):
     s = _system(records, key)
     idx = np.arange(len(families), dtype=np.int64)
-    return s.gather(families, weights, values, idx, want_vis, _worker_threads())
+    return s.gather(families, weights, values, idx, want_vis, _worker_threads(),
+                    stand_in=stand_in)
 
 
-def _task_shoot(records, key, emitters, coverage, families, weights, values):
+def _task_shoot(records, key, emitters, coverage, families, weights, values, stand_in=None):
     s = _system(records, key)
-    return s.shoot(emitters, families, weights, values, _worker_threads(), coverage=coverage)
+    return s.shoot(emitters, families, weights, values, _worker_threads(), coverage=coverage,
+                   stand_in=stand_in)
 
 
 def _task_normalisation(records, key, families, weights):
@@ -335,6 +337,7 @@ class DistributedLineSystem(_Farm):
         self._records = client.scatter([records], broadcast=True, hash=False)[0]
         self.stats["seconds_scatter"] = time.perf_counter() - t
         self.stats["bytes_scattered"] = int(ijk.nbytes + normal.nbytes + point.nbytes)
+        self._stand_in_cache = None  # (token, future) of the last stand-in flags sent
 
     def _chunks(self, n: int):
         return [c for c in np.array_split(np.arange(n), len(self.workers)) if len(c)]
@@ -358,13 +361,29 @@ class DistributedLineSystem(_Farm):
             out += p
         return out
 
-    def gather(self, families, weights, values, family_indices, want_vis=False, threads=0):
+    def _stand_in(self, stand_in):
+        """The stand-in flags, (N,) bool or None, scattered once per distinct array."""
+        if stand_in is None:
+            return None
+        sb = np.ascontiguousarray(stand_in, dtype=np.bool_)
+        if sb.shape != (self.size,):
+            raise ValueError(f"stand_in: expected shape ({self.size},), got {sb.shape}")
+        tok = _token(sb)
+        if self._stand_in_cache is None or self._stand_in_cache[0] != tok:
+            fut = self.client.scatter(sb, broadcast=True, hash=False)
+            self.stats["bytes_sent"] += sb.nbytes * len(self.workers)
+            self._stand_in_cache = (tok, fut)
+        return self._stand_in_cache[1]
+
+    def gather(self, families, weights, values, family_indices, want_vis=False, threads=0,
+               stand_in=None):
         """Jacobi gathering over ``families[family_indices]``: (sums, vis, lines)."""
         sel = np.asarray(family_indices, dtype=np.int64)
         fams = np.ascontiguousarray(families[sel])
         wts = np.ascontiguousarray(weights[sel])
         vfut = self._values(values)
-        chunks = [(fams[c], wts[c], vfut, bool(want_vis)) for c in self._chunks(len(sel))]
+        sfut = self._stand_in(stand_in)
+        chunks = [(fams[c], wts[c], vfut, bool(want_vis), sfut) for c in self._chunks(len(sel))]
         parts = self._map(_task_gather, chunks, self._records, self.key,
                           key_prefix="voxgi-gather")
         sums = np.zeros((self.size, 3))
@@ -378,12 +397,14 @@ class DistributedLineSystem(_Farm):
         self.stats["bytes_received"] += sum(p[0].nbytes for p in parts)
         return sums, vis, lines
 
-    def shoot(self, emitters, families, weights, values, threads=0, coverage=None):
+    def shoot(self, emitters, families, weights, values, threads=0, coverage=None,
+              stand_in=None):
         """Shooting from ``emitters`` split by direction families: (hd, unfound, rays, steps)."""
         em = np.ascontiguousarray(emitters, dtype=np.int32)
         cov = None if coverage is None else np.ascontiguousarray(coverage, dtype=np.float64)
         vfut = self._values(values)
-        chunks = [(np.ascontiguousarray(families[c]), np.ascontiguousarray(weights[c]), vfut)
+        sfut = self._stand_in(stand_in)
+        chunks = [(np.ascontiguousarray(families[c]), np.ascontiguousarray(weights[c]), vfut, sfut)
                   for c in self._chunks(len(families))]
         parts = self._map(_task_shoot, chunks, self._records, self.key, em, cov,
                           key_prefix="voxgi-shoot")
@@ -401,6 +422,9 @@ class DistributedLineSystem(_Farm):
     def close(self) -> None:
         """Release the scattered records (the workers' caches keep at most two systems)."""
         self._records.release()
+        if self._stand_in_cache is not None:
+            self._stand_in_cache[1].release()
+            self._stand_in_cache = None
 
 
 class DistributedFrames(_Farm):

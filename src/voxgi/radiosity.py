@@ -521,6 +521,13 @@ def solve(
             & (np.einsum("ij,ij->i", a["normal"][f_], a["normal"][b]) < -0.99)
         )
         twin_b, twin_f = b[ok], f_[ok]
+    # the kernels' stand-in flags: two such back records never pair along a
+    # line (their exchange is the inside of a closed object, which no front
+    # record sees, and it would occlude the front records' own exchanges)
+    stand_in = None
+    if len(twin_b):
+        stand_in = np.zeros(n, np.bool_)
+        stand_in[twin_b] = True
 
     def _send(x):
         # what records send along the lines: back records of closed objects
@@ -612,7 +619,8 @@ def solve(
         cov, flat = _flat_emitter_coverage(a, vox, emitters_send)
         stats["flat_emitter_objects"] = flat
     hd_raw, unfound, shoot_rays, steps = sysm.shoot(
-        emitters_send, sds.families, sds.weights, E_send, nthreads, coverage=cov
+        emitters_send, sds.families, sds.weights, E_send, nthreads, coverage=cov,
+        stand_in=stand_in,
     )
     Hd = hd_raw / Ss[:, None]
     seconds["shoot"] = time.perf_counter() - t
@@ -669,6 +677,7 @@ def solve(
                     fams,
                     want_vis,
                     nthreads,
+                    stand_in=stand_in,
                 )
                 lines_walked += nl
                 h_inc = sums / S_it[:, None]
@@ -685,6 +694,7 @@ def solve(
                     blk[0],
                     want_vis,
                     nthreads,
+                    stand_in=stand_in,
                 )
                 lines_walked += nl
                 Hg = sums / S_it[:, None]
@@ -705,6 +715,7 @@ def solve(
                         sel,
                         want_vis,
                         nthreads,
+                        stand_in=stand_in,
                     )
                     lines_walked += nl
                     parts[bi] = sums
@@ -758,7 +769,8 @@ def solve(
     if vis is None:  # no gathering ran: one visibility pass for the statistics
         t = time.perf_counter()
         _, vis, _ = sysm.gather(
-            gds.families, gds.weights, np.zeros((n, 3), np.float32), all_fams, True, nthreads
+            gds.families, gds.weights, np.zeros((n, 3), np.float32), all_fams, True, nthreads,
+            stand_in=stand_in,
         )
         seconds["visibility"] = time.perf_counter() - t
     found = vis / vis_S
@@ -778,7 +790,8 @@ def solve(
         t = time.perf_counter()
         ind = np.zeros((n, 3), np.float32)
         ind[dark] = 1.0
-        gb, _, _ = sysm.gather(gds.families, gds.weights, ind, all_fams, False, nthreads)
+        gb, _, _ = sysm.gather(gds.families, gds.weights, ind, all_fams, False, nthreads,
+                               stand_in=stand_in)
         seconds["back_fraction"] = time.perf_counter() - t
         share = gb[:, 0] / vis_S
         back_fraction = float(np.sum(wa * share) / np.sum(wa))
