@@ -4,7 +4,7 @@ Uniform furnaces (every surface Le = 1, albedo rho): the exact radiance is
 Le / (1 - rho) everywhere. Prints the mean and max relative error of the
 front records of each object, and the solve's loss statistics, for
 furnace_sphere / furnace_box, inner False/True, rho 0.5/0.9/0.99.
-Writes benchmarks/furnace_inner.json. Usage:
+Writes benchmarks/results/furnace_inner.json. Usage:
 
     python benchmarks/furnace_inner.py [--res 48] [--R 8] [--rho 0.5 0.9 0.99]
 """
@@ -12,6 +12,7 @@ Writes benchmarks/furnace_inner.json. Usage:
 import argparse
 import json
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -54,7 +55,7 @@ def main():
     ap.add_argument("--rho", type=float, nargs="+", default=[0.5, 0.9, 0.99])
     ap.add_argument("--scenes", nargs="+", default=["furnace_sphere", "furnace_box"])
     ap.add_argument("--closed", action="store_true", help="solve(closed=True)")
-    ap.add_argument("--out", default="benchmarks/furnace_inner.json")
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "furnace_inner.json"))
     a = ap.parse_args()
     out = []
     print(f"res {a.res} R {a.R} closed={a.closed}")
