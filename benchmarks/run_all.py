@@ -12,8 +12,13 @@ Steps (each a script that also runs on its own; results in benchmarks/results/):
                          cost, throughput, the paper's work unit;
 3. ``paper_tables.py``   the paper's Tables 1, 2 and 4 on the look-alike scenes;
 4. ``reference.py`` + ``time_vs_error.py``   time against error versus Mitsuba 3
-                         (skipped, and said so, when the ``mitsuba`` package is
-                         absent: ``pip install "voxgi[bench]"``);
+                         on the Cornell box, then (full size only) on the
+                         ``shadow`` and ``geometric`` look-alikes against their
+                         committed references (``results/<scene>_ref_256.exr``;
+                         not re-rendered: ``reference.py --scene <scene>`` takes
+                         15-30 minutes each on 2 cores); skipped, and said so,
+                         when the ``mitsuba`` package is absent
+                         (``pip install "voxgi[bench]"``);
 5. the linear-cost log-log plot ``results/linear_cost.png`` from step 2.
 
 Never collected by pytest (``testpaths = ["tests"]``).
@@ -91,6 +96,10 @@ def main() -> None:
         spp = ["1024"] if args.quick else ["4096"]
         ok["reference"] = run(["benchmarks/reference.py", "--size", *sizes, "--spp", *spp])
         ok["time_vs_error"] = run(["benchmarks/time_vs_error.py", "--size", *sizes, "--split"])
+        if not args.quick:
+            for scene in ("shadow", "geometric"):
+                ok[f"time_vs_error_{scene}"] = run(["benchmarks/time_vs_error.py", "--scene",
+                                                    scene, "--size", "256", "--high"])
     linear_plot()
     print("\nsummary:", ", ".join(f"{k}: {'ok' if v else 'FAILED'}" for k, v in ok.items()))
     sys.exit(0 if all(ok.values()) else 1)

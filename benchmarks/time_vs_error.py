@@ -1,6 +1,8 @@
-"""Time against error on the Cornell box: voxgi's whole pipeline vs Mitsuba 3.
+"""Time against error on a built-in scene: voxgi's whole pipeline vs Mitsuba 3.
 
-For each image size, in one run on this machine:
+``--scene`` picks the scene (default ``cornell-box``; any name of
+``voxgi.scenes.names()``, e.g. ``shadow``, ``geometric``). For each image
+size, in one run on this machine:
 
 - voxgi at several settings: voxelize + solve + display, timed together
   (wall clock, everything included);
@@ -9,19 +11,27 @@ For each image size, in one run on this machine:
   timed per render after a warm-up render (JIT compilation and scene
   loading excluded);
 - relMSE (``voxgi.metrics.rel_mse``) of each against the reference of
-  ``benchmarks/reference.py`` (run that first);
-- the time of a second view with the saved solution (display only);
+  ``benchmarks/reference.py --scene <scene>`` (run that first);
+- the time of a second view with the saved solution (display only; for the
+  Cornell box a fixed camera, for the other scenes the scene's camera turned
+  25 degrees round the vertical through its target);
 - optionally (``--split``) voxgi's error split into voxel discretisation
   (near noise-free renders at rising voxel resolution) and display noise
   (the defaults' render against the noise-free one at the same resolution).
 
 Writes ``benchmarks/results/time_vs_error_<size>.json``, a PNG plot
 ``time_vs_error_<size>.png``, and ``cornell_diff_<size>.png`` (voxgi
-defaults, reference, relative difference). Prints a table.
+``--main`` setting, reference, relative difference) for the Cornell box;
+for another scene ``time_vs_error_<tag>_<size>.{json,png}`` and
+``<tag>_diff_<size>.png`` (``<tag>``: the scene name with ``_`` for ``-``,
+as ``reference.py`` names the reference). Prints a table and the time each
+renderer takes to reach relMSE 5e-3 and 1e-3.
 
 Usage::
 
     python benchmarks/time_vs_error.py --size 256 512 --split
+    python benchmarks/time_vs_error.py --scene shadow --size 256
+    python benchmarks/time_vs_error.py --scene geometric --size 256
 """
 
 from __future__ import annotations
@@ -29,6 +39,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import platform
 import subprocess
 import time
@@ -53,7 +64,28 @@ VOXGI_SETTINGS = [
 #: voxelize + solve + render with every default (resolution 128, R 22, tol 1e-3):
 #: run with --defaults (it takes minutes with the current solver).
 DEFAULTS = ("defaults", None, None, {})
+#: one finer voxelization, run with --high (minutes on 2 cores).
+HIGH = ("res128 R8 tol1e-3", 128, 8, {})
 MITSUBA_SPP = [4, 16, 64, 256, 1024]
+CORNELL = "cornell-box"
+
+
+def scene_tag(name: str) -> str:
+    """File-name stem of a scene's results (as ``reference.py``): ``cornell``
+    for the Cornell box, else the name with ``_`` for ``-``."""
+    key = name.replace("_", "-").lower()
+    return "cornell" if key == CORNELL else key.replace("-", "_")
+
+
+def make_scene(name: str, size: int) -> voxgi.Scene:
+    return voxgi.scenes.get(name, width=size, height=size)
+
+
+def output_stem(name: str, size: int) -> str:
+    """``time_vs_error_<size>`` for the Cornell box (unchanged), else
+    ``time_vs_error_<tag>_<size>``."""
+    tag = scene_tag(name)
+    return f"time_vs_error_{size}" if tag == "cornell" else f"time_vs_error_{tag}_{size}"
 
 
 def git_commit() -> str:
@@ -64,20 +96,22 @@ def git_commit() -> str:
         return "unknown"
 
 
-def load_reference(size: int) -> np.ndarray:
-    path = RESULTS / f"cornell_ref_{size}.exr"
+def load_reference(size: int, name: str = CORNELL) -> np.ndarray:
+    path = RESULTS / f"{scene_tag(name)}_ref_{size}.exr"
     if not path.exists():
-        raise SystemExit(f"{path} missing: run python benchmarks/reference.py --size {size}")
+        raise SystemExit(f"{path} missing: run python benchmarks/reference.py --scene {name} "
+                         f"--size {size}")
     meta = voxgi.io.read_exr_header(path)
-    fp = voxgi.scenes.cornell_box().fingerprint()
+    fp = voxgi.scenes.get(name).fingerprint()
     if meta.get("scene_fingerprint") not in (None, fp):
-        raise SystemExit(f"{path} was rendered from another Cornell box (fingerprint "
+        raise SystemExit(f"{path} was rendered from another {name} scene (fingerprint "
                          f"{meta.get('scene_fingerprint')} != {fp}): rerun reference.py")
     return voxgi.io.read_exr(path)
 
 
-def run_voxgi(size: int, resolution, directions, render_kw: dict, seed: int = 0):
-    scene = voxgi.scenes.cornell_box(width=size, height=size)
+def run_voxgi(size: int, resolution, directions, render_kw: dict, seed: int = 0,
+              name: str = CORNELL):
+    scene = make_scene(name, size)
     t0 = time.perf_counter()
     vox = voxgi.voxelize(scene, **({} if resolution is None else {"resolution": resolution}))
     t1 = time.perf_counter()
@@ -90,15 +124,30 @@ def run_voxgi(size: int, resolution, directions, render_kw: dict, seed: int = 0)
     return out, sol, t3 - t0, phases
 
 
-def second_view(size: int, sol, render_kw: dict, tmp: Path) -> dict:
+def second_camera(scene: voxgi.Scene, name: str):
+    """The second view: a fixed camera in the Cornell box; elsewhere the
+    scene's camera turned 25 degrees round the vertical through its target."""
+    if scene_tag(name) == "cornell":
+        return scene.camera.replace(eye=(0.12, 0.40, -0.55), target=(0.30, 0.22, 0.30))
+    eye = np.asarray(scene.camera.eye, float)
+    target = np.asarray(scene.camera.target, float)
+    a = math.radians(25.0)
+    d = eye - target
+    rot = np.array([d[0] * math.cos(a) + d[2] * math.sin(a), d[1],
+                    -d[0] * math.sin(a) + d[2] * math.cos(a)])
+    return scene.camera.replace(eye=tuple(target + rot), target=tuple(target))
+
+
+def second_view(size: int, sol, render_kw: dict, tmp: Path, name: str = CORNELL,
+                out_dir: Path = RESULTS) -> dict:
     """Time a new camera on a saved and reloaded solution (display only)."""
-    scene = voxgi.scenes.cornell_box(width=size, height=size)
-    cam = scene.camera.replace(eye=(0.12, 0.40, -0.55), target=(0.30, 0.22, 0.30))
-    info = {}
+    scene = make_scene(name, size)
+    cam = second_camera(scene, name)
+    info = {"eye": list(map(float, cam.eye)), "target": list(map(float, cam.target))}
     try:
         t0 = time.perf_counter()
-        sol.save(tmp / "cornell_solution.npz")
-        sol2 = voxgi.Solution.load(tmp / "cornell_solution.npz")
+        sol.save(tmp / "solution.npz")
+        sol2 = voxgi.Solution.load(tmp / "solution.npz")
         info["save_load_seconds"] = time.perf_counter() - t0
     except NotImplementedError:
         sol2 = sol
@@ -108,15 +157,15 @@ def second_view(size: int, sol, render_kw: dict, tmp: Path) -> dict:
     info["seconds"] = time.perf_counter() - t0
     info["frames"] = out.frames
     info["display_phases"] = out.stats["seconds"]
-    voxgi.io.write_png(RESULTS / f"cornell_second_view_{size}.png", out.image)
+    voxgi.io.write_png(out_dir / f"{scene_tag(name)}_second_view_{size}.png", out.image)
     return info
 
 
-def run_mitsuba(size: int, spps, variant=None) -> list[dict]:
+def run_mitsuba(size: int, spps, variant=None, name: str = CORNELL) -> list[dict]:
     from voxgi.mitsuba import import_mitsuba, to_mitsuba
 
     mi = import_mitsuba(variant)
-    scene = voxgi.scenes.cornell_box(width=size, height=size)
+    scene = make_scene(name, size)
     sc = mi.load_dict(to_mitsuba(scene, spp=max(spps)))
     np.array(mi.render(sc, spp=1, seed=999))  # warm-up: JIT compilation
     rows = []
@@ -164,7 +213,8 @@ def diff_png(img: np.ndarray, ref: np.ndarray, path: Path, title: str) -> None:
     plt.close(fig)
 
 
-def plot(size: int, vrows: list[dict], mrows: list[dict], path: Path) -> None:
+def plot(size: int, vrows: list[dict], mrows: list[dict], path: Path,
+         title: str = "Cornell box") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -183,7 +233,7 @@ def plot(size: int, vrows: list[dict], mrows: list[dict], path: Path) -> None:
     ax.axhline(1e-3, color="grey", lw=0.8, ls=":")
     ax.set_xlabel("seconds (wall clock, this machine)")
     ax.set_ylabel("relMSE vs reference")
-    ax.set_title(f"Cornell box {size}x{size}")
+    ax.set_title(f"{title} {size}x{size}")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -191,12 +241,12 @@ def plot(size: int, vrows: list[dict], mrows: list[dict], path: Path) -> None:
 
 
 def split_error(size: int, default_img: np.ndarray, ref: np.ndarray, resolutions,
-                frames: int, directions=None) -> list[dict]:
+                frames: int, directions=None, name: str = CORNELL) -> list[dict]:
     """Near noise-free voxgi renders at rising resolution: the discretisation error."""
     rows = []
     for res in resolutions:
         out, _, secs, _ = run_voxgi(size, res, directions, {"max_frames": frames, "tol": 0.0},
-                                    seed=7)
+                                    seed=7, name=name)
         rows.append({"resolution": res, "frames": frames, "seconds": secs,
                      "rel_mse_vs_ref": rel_mse(out.image, ref),
                      "est_noise_rel_mse": out.stats["est_rel_mse"], "image": out.image})
@@ -205,24 +255,33 @@ def split_error(size: int, default_img: np.ndarray, ref: np.ndarray, resolutions
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scene", default=CORNELL,
+                    help="built-in scene name (voxgi.scenes.names()); default cornell-box")
     ap.add_argument("--size", type=int, nargs="+", default=[256])
     ap.add_argument("--spp", type=int, nargs="+", default=MITSUBA_SPP)
     ap.add_argument("--variant", default=None)
     ap.add_argument("--split", action="store_true", help="also split voxgi's error")
     ap.add_argument("--defaults", action="store_true",
                     help="also run voxgi with all its defaults (slow with the current solver)")
+    ap.add_argument("--high", action="store_true",
+                    help="also run voxgi at resolution 128, R 8, tol 1e-3")
     ap.add_argument("--main", default="res64 R8 tol1e-3",
                     help="setting used for the difference image, second view and split")
     ap.add_argument("--split-frames", type=int, default=128)
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
+    name, tag = args.scene, scene_tag(args.scene)
+    title = "Cornell box" if tag == "cornell" else f"{name} (voxgi.scenes)"
     for size in args.size:
-        ref = load_reference(size)
+        ref = load_reference(size, name)
+        load_start = os.getloadavg()
         vrows = []
         default = None
-        for label, res, dirs, kw in VOXGI_SETTINGS + ([DEFAULTS] if args.defaults else []):
-            out, sol, secs, phases = run_voxgi(size, res, dirs, kw)
+        settings = (VOXGI_SETTINGS + ([HIGH] if args.high else [])
+                    + ([DEFAULTS] if args.defaults else []))
+        for label, res, dirs, kw in settings:
+            out, sol, secs, phases = run_voxgi(size, res, dirs, kw, name=name)
             row = {"label": label, "resolution": sol.vox.resolution, "records": len(sol.vox),
                    "directions": dirs, "render": kw, "frames": out.frames, "seconds": secs,
                    "phases": phases, "rel_mse": rel_mse(out.image, ref),
@@ -234,29 +293,34 @@ def main(argv=None) -> int:
                   f"{phases['solve']:.2f} display {phases['display']:.2f})", flush=True)
             if label == args.main:
                 default = (out, sol, row)
-        mrows = run_mitsuba(size, args.spp, args.variant)
+        mrows = run_mitsuba(size, args.spp, args.variant, name=name)
         for r in mrows:
             r["rel_mse"] = rel_mse(r.pop("image"), ref)
             print(f"mitsuba {r['spp']:>16d} spp: {r['seconds']:7.2f} s  relMSE {r['rel_mse']:.2e}",
                   flush=True)
-        result = {"size": size, "voxgi": vrows, "mitsuba": mrows, "commit": git_commit(),
+        result = {"scene": name, "size": size, "voxgi": vrows, "mitsuba": mrows,
+                  "commit": git_commit(),
                   "voxgi_version": voxgi.__version__, "cpu": platform.processor(),
-                  "threads": voxgi._core.hardware_threads()}
+                  "threads": voxgi._core.hardware_threads(),
+                  # 1/5/15-minute load averages before the voxgi runs and after
+                  # Mitsuba's: tells a quiet run from a contended one.
+                  "loadavg": {"start": load_start, "after_mitsuba": os.getloadavg()}}
         if default is not None:
             out, sol, row = default
-            diff_png(out.image, ref, args.out / f"cornell_diff_{size}.png",
+            diff_png(out.image, ref, args.out / f"{tag}_diff_{size}.png",
                      f"{row['label']} ({row['seconds']:.1f} s, relMSE {row['rel_mse']:.2e})")
-            voxgi.io.write_png(args.out / f"cornell_voxgi_{size}.png", out.image)
+            voxgi.io.write_png(args.out / f"{tag}_voxgi_{size}.png", out.image)
             import tempfile
 
             with tempfile.TemporaryDirectory() as tmp:
-                result["second_view"] = second_view(size, sol, row["render"], Path(tmp))
+                result["second_view"] = second_view(size, sol, row["render"], Path(tmp),
+                                                    name=name, out_dir=args.out)
             print(f"second view (saved solution, display only): "
                   f"{result['second_view']['seconds']:.2f} s", flush=True)
             if args.split:
                 rows = split_error(size, out.image, ref,
                                    sorted({32, 48, sol.vox.resolution, 96}), args.split_frames,
-                                   directions=row["directions"])
+                                   directions=row["directions"], name=name)
                 same = [r for r in rows if r["resolution"] == sol.vox.resolution][-1]
                 noise = rel_mse(out.image, same["image"])
                 for r in rows:
@@ -281,9 +345,9 @@ def main(argv=None) -> int:
         for r in mrows:
             print(f"| Mitsuba {r['variant']} | {r['spp']} spp | {r['seconds']:.2f} | "
                   f"{r['rel_mse']:.2e} |")
-        (args.out / f"time_vs_error_{size}.json").write_text(json.dumps(result, indent=2,
-                                                                        default=float))
-        plot(size, vrows, mrows, args.out / f"time_vs_error_{size}.png")
+        stem = output_stem(name, size)
+        (args.out / f"{stem}.json").write_text(json.dumps(result, indent=2, default=float))
+        plot(size, vrows, mrows, args.out / f"{stem}.png", title=title)
     return 0
 
 
