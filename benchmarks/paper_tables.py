@@ -147,6 +147,9 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="small sizes (a smoke run)")
     ap.add_argument("--threads", type=int, default=None, help="threads (default: all)")
     ap.add_argument("--scenes", nargs="+", default=list(PAPER), choices=list(PAPER))
+    ap.add_argument("--out", type=Path, default=None,
+                    help="JSON file (default results/paper_tables.json, or "
+                         "paper_tables_quick.json with --quick)")
     args = ap.parse_args()
     rows = []
     for key in args.scenes:
@@ -159,8 +162,9 @@ def main() -> None:
            "threads": threads, "cpu": platform.processor() or platform.machine(),
            "load_avg": os.getloadavg(), "rows": rows}
     name = "paper_tables_quick.json" if args.quick else "paper_tables.json"
-    (RESULTS / name).write_text(json.dumps(rec, indent=1, default=float))
-    print(f"\nwrote {RESULTS / name}")
+    out = args.out or RESULTS / name
+    out.write_text(json.dumps(rec, indent=1, default=float))
+    print(f"\nwrote {out}")
 
 
 if __name__ == "__main__":
