@@ -282,21 +282,8 @@ def cornell(args) -> None:
     # (the default) and with the paper's whole-line rule.
     import dataclasses
 
-    import trimesh
-
-    from voxgi.scenes import _mesh
-
     def closed(blocks: bool) -> voxgi.Scene:
-        cb = voxgi.scenes.cornell_box(width=32, height=32)
-        s = voxgi.Scene(cb.camera)
-        for o in cb.objects:
-            if blocks or "block" not in o.name:
-                s.add(trimesh.Trimesh(o.vertices, o.faces, process=False), o.material,
-                      name=o.name)
-        s.add(_mesh([[[0, 0, 0], [552.8, 0, 0], [556.0, 548.8, 0], [0, 548.8, 0]]],
-                    inside=np.array([278.0, 274.4, 279.6])), voxgi.Material(albedo=0.5),
-              name="front")
-        return s
+        return voxgi.scenes.cornell_box(width=32, height=32, blocks=blocks, closed=True)
 
     rows = []
     cases = [("open", voxgi.scenes.cornell_box(width=32, height=32), False),

@@ -230,24 +230,6 @@ def test_bad_input(sphere32):
 # ----------------------------------------------------------------- built-in scenes
 
 
-def _closed_lamp_box(blocks: bool) -> voxgi.Scene:
-    # the Cornell box closed at the front (a fourth wall), with or without its
-    # blocks: nothing escapes, so every emitted watt must be absorbed
-    import trimesh
-
-    from voxgi.scenes import _mesh
-
-    cb = voxgi.scenes.cornell_box(width=32, height=32)
-    s = voxgi.Scene(cb.camera)
-    for o in cb.objects:
-        if blocks or "block" not in o.name:
-            s.add(trimesh.Trimesh(o.vertices, o.faces, process=False), o.material, name=o.name)
-    front = [[[0, 0, 0], [552.8, 0, 0], [556.0, 548.8, 0], [0, 548.8, 0]]]
-    s.add(_mesh(front, inside=np.array([278.0, 274.4, 279.6])), voxgi.Material(albedo=0.5),
-          name="front")
-    return s
-
-
 def _direct_imbalance(vox, **kw):
     # all albedos 0: the balance is the shooting's alone
     import dataclasses
@@ -263,7 +245,8 @@ def test_flat_lamp_in_closed_box_conserves_energy():
     # partial-coverage shooting, -0.52 with the paper's whole-line rule (the
     # lamp's one-voxel band seen edge-on by the walls sends as if it were a
     # voxel thick); at res 64: 0.0014 and -0.23.
-    vox = _voxelize(_closed_lamp_box(blocks=False), 32)
+    scene = voxgi.scenes.cornell_box(width=32, height=32, blocks=False, closed=True)
+    vox = _voxelize(scene, 32)
     imb, sol = _direct_imbalance(vox)
     assert sol.stats["flat_emitter_objects"] == [int(vox.object_id[vox.is_emitter][0])]
     assert abs(imb) < 2e-3

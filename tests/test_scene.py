@@ -163,6 +163,18 @@ def test_cornell_box_dimensions(cornell):
             assert np.all(np.einsum("ij,ij->i", n, t.mean(axis=1) - t.mean(axis=(0, 1))) > 0)
 
 
+def test_cornell_box_closed_without_blocks():
+    s = voxgi.scenes.cornell_box(width=32, height=32, blocks=False, closed=True)
+    names = [o.name for o in s.objects]
+    assert "short_block" not in names and "tall_block" not in names
+    front = s.objects[names.index("front")]
+    t = front.vertices[front.faces]
+    assert np.allclose(t[..., 2], 0.0)
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    assert np.all(n[:, 2] > 0)  # faces into the room (+z)
+    assert front.area() == pytest.approx(0.5544 * 0.5488, rel=1e-2)
+
+
 @pytest.mark.parametrize("make", [voxgi.scenes.furnace_sphere, voxgi.scenes.furnace_box])
 def test_furnace_normals_point_inward(make):
     s = make(inner=True)

@@ -49,7 +49,8 @@ def _mesh(quads, **kw) -> trimesh.Trimesh:
     return trimesh.Trimesh(v, f, process=False)
 
 
-def cornell_box(width: int = 512, height: int = 512, light_offset: float = 0.01) -> Scene:
+def cornell_box(width: int = 512, height: int = 512, light_offset: float = 0.01, *,
+                blocks: bool = True, closed: bool = False) -> Scene:
     """The Cornell box with its published dimensions, in metres.
 
     Geometry from the Cornell Program of Computer Graphics' measured data
@@ -64,6 +65,12 @@ def cornell_box(width: int = 512, height: int = 512, light_offset: float = 0.01)
         Image size of the camera.
     light_offset : float
         How far (metres) the one-sided light quad hangs under the ceiling.
+    blocks : bool
+        Include the two blocks (default).
+    closed : bool
+        Close the box with a white fourth wall at z = 0 (object ``front``):
+        nothing escapes, so every emitted watt must be absorbed (energy
+        studies; the camera then sees the wall's black back).
 
     Returns
     -------
@@ -100,8 +107,12 @@ def cornell_box(width: int = 512, height: int = 512, light_offset: float = 0.01)
         [[314, 0, 456], [314, 330, 456], [265, 330, 296], [265, 0, 296]],
         [[265, 0, 296], [265, 330, 296], [423, 330, 247], [423, 0, 247]],
     ]
-    s.add(_mesh(short, outside=np.array([186.0, 82.5, 169.0])), white, name="short_block")
-    s.add(_mesh(tall, outside=np.array([368.5, 165.0, 351.25])), white, name="tall_block")
+    if blocks:
+        s.add(_mesh(short, outside=np.array([186.0, 82.5, 169.0])), white, name="short_block")
+        s.add(_mesh(tall, outside=np.array([368.5, 165.0, 351.25])), white, name="tall_block")
+    if closed:
+        s.add(_mesh([[[0, 0, 0], [552.8, 0, 0], [556.0, 548.8, 0], [0, 548.8, 0]]],
+                    inside=centre), white, name="front")
     y = 548.8 - light_offset * 1e3
     light = [[[343.0, y, 227.0], [343.0, y, 332.0], [213.0, y, 332.0], [213.0, y, 227.0]]]
     s.add(_mesh(light, inside=np.array([278.0, 0.0, 279.5])),
