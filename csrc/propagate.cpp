@@ -258,6 +258,21 @@ struct LineState {
     int32_t last;   // newest F record on the line (axis-order position), -1: none
 };
 
+// Everything the one-pass walk touches for one record, in one 64-byte cache
+// line: where a B record meets its partner F (a record far back along the
+// line, i.e. a random place in memory), the facing test, the value sent and
+// the value received all hit this one line instead of four arrays. Each
+// thread owns a copy per main axis (acc and link are written).
+struct alignas(64) GatherRec {
+    float pt[3];     // surface point (voxel units)
+    float nrm[3];    // unit normal
+    float val[3];    // value sent (RGB)
+    uint32_t link;   // bits 0-30: previous F on the line + 1 (0: none); bit 31: answered
+    double acc[3];   // gathered (RGB), summed over this thread's families
+};
+static_assert(sizeof(GatherRec) == 64, "GatherRec must fill one cache line");
+constexpr uint32_t kAnswered = 0x80000000u;
+
 struct GatherWork {
     std::vector<LineState> table;
     std::vector<int32_t> prevF, ans;
@@ -265,9 +280,52 @@ struct GatherWork {
     std::vector<uint32_t> key, cnt;
     std::vector<int32_t> line;
     std::vector<Hit> group;
-    std::vector<double> acc[3], vis[3];  // per axis order
+    std::vector<double> acc[3], vis[3];  // per axis order (the counting-sort walk)
+    std::vector<GatherRec> rec[3];       // per axis order (the one-pass walk)
     bool used[3] = {false, false, false};
 };
+
+// One record of the one-pass walk (records of a line arrive in order along
+// +v). An F record (c > 0) joins the line's history; a B record (c < 0)
+// receives from the newest F that faces it and answers every facing F back
+// to the first one already answered (which occludes the older ones).
+inline void process_onepass_record(GatherRec *rec, int32_t p, float c, int32_t &lastF, int K, float eps,
+                                   double wgt, const float *dh, const uint8_t *sb, double *vs) {
+    GatherRec &rp = rec[p];
+    if (c > kTiny) {
+        rp.link = static_cast<uint32_t>(lastF + 1);  // not answered yet
+        lastF = p;
+        return;
+    }
+    if (!(c < -kTiny) || lastF < 0) return;
+    const double cb = -double(c) * wgt;
+    bool got = false;
+    const bool sp = sb && sb[p];  // two stand-ins never pair
+    int32_t f = lastF;
+    for (int h = 0; h < K && f >= 0; ++h) {
+        GatherRec &rf = rec[f];
+        const int32_t older = static_cast<int32_t>(rf.link & ~kAnswered) - 1;
+        if ((sp && sb[f]) || !facing(rf.pt, rf.nrm, rp.pt, rp.nrm, eps)) {
+            f = older;
+            continue;
+        }
+        if (!got) {
+            rp.acc[0] += rf.val[0] * cb;
+            rp.acc[1] += rf.val[1] * cb;
+            rp.acc[2] += rf.val[2] * cb;
+            if (vs) vs[p] += cb;
+            got = true;
+        }
+        if (rf.link & kAnswered) break;  // an answered facing F occludes the older ones
+        const double cf = double(dot3(rf.nrm, dh)) * wgt;
+        rf.acc[0] += rp.val[0] * cf;
+        rf.acc[1] += rp.val[1] * cf;
+        rf.acc[2] += rp.val[2] * cf;
+        if (vs) vs[f] += cf;
+        rf.link |= kAnswered;
+        f = older;
+    }
+}
 
 }  // namespace
 
@@ -311,31 +369,42 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
     for (const auto &fr : frames) max_keys = std::max<int64_t>(max_keys, fr.nu * fr.nw);
 
     if (onepass) {
-    parallel_for(nsel, threads, stop, [&](int64_t k, int t) {
+    // Families grouped by main axis: a thread then works on one axis's
+    // records at a time (its cache holds one GatherRec array, not three).
+    std::vector<int64_t> by_axis(nsel);
+    std::iota(by_axis.begin(), by_axis.end(), int64_t(0));
+    std::stable_sort(by_axis.begin(), by_axis.end(),
+                     [&](int64_t a, int64_t b) { return frames[a].m < frames[b].m; });
+    parallel_for(nsel, threads, stop, [&](int64_t kk_, int t) {
+        const int64_t k = by_axis[kk_];
         GatherWork &w = work[t];
         const Family &F = fams[sel[k]];
         const LineFrame &fr = frames[k];
         const Axis &ax = ax_[fr.m];
         const int m = fr.m;
         if (!w.used[m]) {
-            w.acc[m].assign(3 * n_, 0.0);
+            w.rec[m].resize(n_);
+            const float *pn0 = ax.pn.data();
+            const float *vl0 = valax[m].data();
+            for (int64_t i = 0; i < n_; ++i) {
+                GatherRec &r = w.rec[m][i];
+                for (int c = 0; c < 3; ++c) {
+                    r.pt[c] = pn0[8 * i + c];
+                    r.nrm[c] = pn0[8 * i + 3 + c];
+                    r.val[c] = vl0[3 * i + c];
+                    r.acc[c] = 0.0;
+                }
+                r.link = 0;
+            }
             if (vis) w.vis[m].assign(n_, 0.0);
             w.used[m] = true;
         }
-        if (w.table.empty()) {
-            w.table.assign(max_keys, LineState{0, -1});
-            w.prevF.assign(n_, -1);
-            w.ans.assign(n_, 0);
-        }
+        if (w.table.empty()) w.table.assign(max_keys, LineState{0, -1});
         const int32_t cur = ++w.stamp;  // no clearing: entries of other families carry old stamps
         LineState *table = w.table.data();
-        int32_t *prevF = w.prevF.data();
-        int32_t *ans = w.ans.data();
-        double *acc = w.acc[m].data();
+        GatherRec *rec = w.rec[m].data();
         double *vs = vis ? w.vis[m].data() : nullptr;
-        const float *vl = valax[m].data();
         const uint8_t *sb = stand_in ? sbax[m].data() : nullptr;
-        const float *pn = ax.pn.data();  // point and normal, 8 floats per record
         const int32_t *AX = ax.X.data(), *AY = ax.Y.data(), *AZ = ax.Z.data();
         const double wgt = F.weight;
         const float len = std::sqrt(float(F.v[0]) * F.v[0] + float(F.v[1]) * F.v[1] + float(F.v[2]) * F.v[2]);
@@ -344,7 +413,11 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         int64_t walked = 0;
         // Records in x_m order: every line is visited in its own order along
         // +v; its state (the newest F record, older ones chained through
-        // prevF) lives in a table indexed by the line key.
+        // link) lives in a table indexed by the line key.
+        // The partner of a B record is far back in memory: prefetch the
+        // newest F of the line of the record kPrefetch places ahead (a stale
+        // guess when a line gains an F in between costs one useless load).
+        constexpr int64_t kPrefetch = 16;
         for (int64_t i = 0; i < n_;) {
             int64_t ge = i + 1;
             while (ge < n_ && AX[ge] == AX[i] && AY[ge] == AY[i] && AZ[ge] == AZ[i]) ++ge;
@@ -353,49 +426,20 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             int32_t lastF = ls.stamp == cur ? ls.last : -1;
             if (ls.stamp == cur) ++walked;
             const int gn = static_cast<int>(ge - i);
-            if (static_cast<int>(w.group.size()) < gn) w.group.resize(gn);
-            Hit *g = w.group.data();
-            for (int a = 0; a < gn; ++a) {
-                const int32_t p = static_cast<int32_t>(i + a);
-                g[a] = Hit{p, gn > 1 ? dot3(pn + 8 * int64_t(p), dh) : 0.0f, dot3(pn + 3 + 8 * int64_t(p), dh)};
-            }
-            if (gn > 1) sort_group(g, gn);
-            for (int a = 0; a < gn; ++a) {
-                const int32_t p = g[a].p;
-                const float c = g[a].c;
-                if (c > kTiny) {
-                    prevF[p] = lastF;
-                    lastF = p;
-                } else if (c < -kTiny && lastF >= 0) {
-                    const float *pp = pn + 8 * int64_t(p), *np = pn + 3 + 8 * int64_t(p);
-                    const double cb = -double(c) * wgt;
-                    bool got = false;
-                    const bool sp = sb && sb[p];  // two stand-ins never pair
-                    int32_t f = lastF;
-                    for (int h = 0; h < K && f >= 0; ++h, f = prevF[f]) {
-                        if (sp && sb[f]) continue;
-                        const float *pf = pn + 8 * int64_t(f), *nf = pn + 3 + 8 * int64_t(f);
-                        if (!facing(pf, nf, pp, np, eps)) continue;
-                        if (!got) {
-                            const float *vf = vl + 3 * int64_t(f);
-                            double *ap = acc + 3 * int64_t(p);
-                            ap[0] += vf[0] * cb;
-                            ap[1] += vf[1] * cb;
-                            ap[2] += vf[2] * cb;
-                            if (vs) vs[p] += cb;
-                            got = true;
-                        }
-                        if (ans[f] == cur) break;  // an answered facing F occludes the older ones
-                        const double cf = double(dot3(nf, dh)) * wgt;
-                        const float *vp = vl + 3 * int64_t(p);
-                        double *af = acc + 3 * int64_t(f);
-                        af[0] += vp[0] * cf;
-                        af[1] += vp[1] * cf;
-                        af[2] += vp[2] * cf;
-                        if (vs) vs[f] += cf;
-                        ans[f] = cur;
-                    }
+            if (gn == 1) {
+                // one record in the voxel (the common case): no depth order needed
+                process_onepass_record(rec, static_cast<int32_t>(i), dot3(rec[i].nrm, dh), lastF, K, eps,
+                                       wgt, dh, sb, vs);
+            } else {
+                if (static_cast<int>(w.group.size()) < gn) w.group.resize(gn);
+                Hit *g = w.group.data();
+                for (int a = 0; a < gn; ++a) {
+                    const int32_t p = static_cast<int32_t>(i + a);
+                    g[a] = Hit{p, dot3(rec[p].pt, dh), dot3(rec[p].nrm, dh)};
                 }
+                sort_group(g, gn);
+                for (int a = 0; a < gn; ++a)
+                    process_onepass_record(rec, g[a].p, g[a].c, lastF, K, eps, wgt, dh, sb, vs);
             }
             ls.stamp = cur;
             ls.last = lastF;
@@ -531,12 +575,22 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         for (int m = 0; m < 3; ++m) {
             if (!work[t].used[m]) continue;
             const int32_t *ord = ax_[m].order.data();
-            const double *a = work[t].acc[m].data();
-            for (int64_t i = 0; i < n_; ++i) {
-                const int64_t r = ord[i];
-                out[3 * r] += a[3 * i];
-                out[3 * r + 1] += a[3 * i + 1];
-                out[3 * r + 2] += a[3 * i + 2];
+            if (onepass) {
+                const GatherRec *a = work[t].rec[m].data();
+                for (int64_t i = 0; i < n_; ++i) {
+                    const int64_t r = ord[i];
+                    out[3 * r] += a[i].acc[0];
+                    out[3 * r + 1] += a[i].acc[1];
+                    out[3 * r + 2] += a[i].acc[2];
+                }
+            } else {
+                const double *a = work[t].acc[m].data();
+                for (int64_t i = 0; i < n_; ++i) {
+                    const int64_t r = ord[i];
+                    out[3 * r] += a[3 * i];
+                    out[3 * r + 1] += a[3 * i + 1];
+                    out[3 * r + 2] += a[3 * i + 2];
+                }
             }
             if (vis) {
                 const double *v = work[t].vis[m].data();
