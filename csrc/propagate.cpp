@@ -414,14 +414,20 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         // Records in x_m order: every line is visited in its own order along
         // +v; its state (the newest F record, older ones chained through
         // link) lives in a table indexed by the line key.
-        // The partner of a B record is far back in memory: prefetch the
-        // newest F of the line of the record kPrefetch places ahead (a stale
-        // guess when a line gains an F in between costs one useless load).
-        constexpr int64_t kPrefetch = 16;
+        int32_t rowX = std::numeric_limits<int32_t>::min(), rowY = 0;
+        uint64_t rowU = 0;
+        int64_t rowXC = 0;
         for (int64_t i = 0; i < n_;) {
             int64_t ge = i + 1;
             while (ge < n_ && AX[ge] == AX[i] && AY[ge] == AY[i] && AZ[ge] == AZ[i]) ++ge;
-            const uint32_t kk = fr.key(AX[i] - xlo, fr.yprime(AY[i]), fr.zprime(AZ[i]));
+            // key = u(x_m, y) * nw + w(x_m, z): u changes only with the row
+            if (AX[i] != rowX || AY[i] != rowY) {
+                rowX = AX[i];
+                rowY = AY[i];
+                rowU = fr.key_u(rowX - xlo, fr.yprime(rowY));
+                rowXC = fr.C * (fr.XmA - (rowX - xlo)) + fr.A / 2;
+            }
+            const uint32_t kk = static_cast<uint32_t>(rowU + fr.div(static_cast<uint64_t>(fr.A * fr.zprime(AZ[i]) + rowXC)));
             LineState &ls = table[kk];
             int32_t lastF = ls.stamp == cur ? ls.last : -1;
             if (ls.stamp == cur) ++walked;
@@ -430,6 +436,20 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 // one record in the voxel (the common case): no depth order needed
                 process_onepass_record(rec, static_cast<int32_t>(i), dot3(rec[i].nrm, dh), lastF, K, eps,
                                        wgt, dh, sb, vs);
+            } else if (gn == 2) {
+                // two records (a closed object's front record and its back
+                // twin: most voxels of a closed scene): order them along d
+                // by depth, B before F at equal depth, as sort_group would
+                const int32_t p0 = static_cast<int32_t>(i), p1 = p0 + 1;
+                const float d0 = dot3(rec[p0].pt, dh), d1 = dot3(rec[p1].pt, dh);
+                const float c0 = dot3(rec[p0].nrm, dh), c1 = dot3(rec[p1].nrm, dh);
+                if (d0 > d1 || (d0 == d1 && c0 > c1)) {
+                    process_onepass_record(rec, p1, c1, lastF, K, eps, wgt, dh, sb, vs);
+                    process_onepass_record(rec, p0, c0, lastF, K, eps, wgt, dh, sb, vs);
+                } else {
+                    process_onepass_record(rec, p0, c0, lastF, K, eps, wgt, dh, sb, vs);
+                    process_onepass_record(rec, p1, c1, lastF, K, eps, wgt, dh, sb, vs);
+                }
             } else {
                 if (static_cast<int>(w.group.size()) < gn) w.group.resize(gn);
                 Hit *g = w.group.data();
