@@ -273,6 +273,13 @@ struct alignas(64) GatherRec {
 static_assert(sizeof(GatherRec) == 64, "GatherRec must fill one cache line");
 constexpr uint32_t kAnswered = 0x80000000u;
 
+// A B record of the one-pass walk waiting for its partner: its position,
+// the newest F of its line when it was met, and n.d.
+struct PendingB {
+    int32_t p, f;
+    float c;
+};
+
 struct GatherWork {
     std::vector<LineState> table;
     std::vector<int32_t> prevF, ans;
@@ -282,26 +289,34 @@ struct GatherWork {
     std::vector<Hit> group;
     std::vector<double> acc[3], vis[3];  // per axis order (the counting-sort walk)
     std::vector<GatherRec> rec[3];       // per axis order (the one-pass walk)
+    std::vector<PendingB> pend;          // the one-pass walk's queued B records
     bool used[3] = {false, false, false};
 };
 
 // One record of the one-pass walk (records of a line arrive in order along
-// +v). An F record (c > 0) joins the line's history; a B record (c < 0)
-// receives from the newest F that faces it and answers every facing F back
-// to the first one already answered (which occludes the older ones).
-inline void process_onepass_record(GatherRec *rec, int32_t p, float c, int32_t &lastF, int K, float eps,
-                                   double wgt, const float *dh, const uint8_t *sb, double *vs) {
-    GatherRec &rp = rec[p];
+// +v). An F record (c > 0) joins the line's history at once; a B record
+// (c < 0) with an F behind it is queued: the pairs are made per slab (see
+// pair_pending).
+inline void step_record(GatherRec *rec, int32_t p, float c, int32_t &lastF, std::vector<PendingB> &pend) {
     if (c > kTiny) {
-        rp.link = static_cast<uint32_t>(lastF + 1);  // not answered yet
+        rec[p].link = static_cast<uint32_t>(lastF + 1);  // not answered yet
         lastF = p;
-        return;
+    } else if (c < -kTiny && lastF >= 0) {
+        pend.push_back(PendingB{p, lastF, c});
     }
-    if (!(c < -kTiny) || lastF < 0) return;
-    const double cb = -double(c) * wgt;
+}
+
+// A queued B record receives from the newest F that faces it and answers
+// every facing F back to the first one already answered (which occludes the
+// older ones).
+inline void pair_record(GatherRec *rec, const PendingB &q, int K, float eps, double wgt, const float *dh,
+                        const uint8_t *sb, double *vs) {
+    const int32_t p = q.p;
+    GatherRec &rp = rec[p];
+    const double cb = -double(q.c) * wgt;
     bool got = false;
     const bool sp = sb && sb[p];  // two stand-ins never pair
-    int32_t f = lastF;
+    int32_t f = q.f;
     for (int h = 0; h < K && f >= 0; ++h) {
         GatherRec &rf = rec[f];
         const int32_t older = static_cast<int32_t>(rf.link & ~kAnswered) - 1;
@@ -325,6 +340,26 @@ inline void process_onepass_record(GatherRec *rec, int32_t p, float c, int32_t &
         rf.link |= kAnswered;
         f = older;
     }
+}
+
+// Make the queued pairs of one slab (one x_m). Exact, not an approximation:
+// the B records of a slab lie on distinct lines (a naive line has one voxel
+// per x_m) except those of one voxel, which stay in order, and the F records
+// pushed after a B in the slab are newer than its queued F, so a B's chain
+// and the answered flags it reads are those of the record-by-record walk.
+// What the queue buys: a B's partner is far back in memory (a random cache
+// line), and with the queue in hand the partners of the pairs kAhead places
+// on are prefetched while this pair waits for its own.
+inline void pair_pending(GatherRec *rec, std::vector<PendingB> &pend, int K, float eps, double wgt,
+                         const float *dh, const uint8_t *sb, double *vs) {
+    constexpr size_t kAhead = 8;
+    const size_t np = pend.size();
+    for (size_t j = 0; j < std::min(np, kAhead); ++j) __builtin_prefetch(rec + pend[j].f, 1, 3);
+    for (size_t j = 0; j < np; ++j) {
+        if (j + kAhead < np) __builtin_prefetch(rec + pend[j + kAhead].f, 1, 3);
+        pair_record(rec, pend[j], K, eps, wgt, dh, sb, vs);
+    }
+    pend.clear();
 }
 
 }  // namespace
@@ -417,9 +452,12 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         int32_t rowX = std::numeric_limits<int32_t>::min(), rowY = 0;
         uint64_t rowU = 0;
         int64_t rowXC = 0;
+        std::vector<PendingB> &pend = w.pend;
+        pend.clear();
         for (int64_t i = 0; i < n_;) {
             int64_t ge = i + 1;
             while (ge < n_ && AX[ge] == AX[i] && AY[ge] == AY[i] && AZ[ge] == AZ[i]) ++ge;
+            if (AX[i] != rowX) pair_pending(rec, pend, K, eps, wgt, dh, sb, vs);  // a new slab
             // key = u(x_m, y) * nw + w(x_m, z): u changes only with the row
             if (AX[i] != rowX || AY[i] != rowY) {
                 rowX = AX[i];
@@ -434,8 +472,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             const int gn = static_cast<int>(ge - i);
             if (gn == 1) {
                 // one record in the voxel (the common case): no depth order needed
-                process_onepass_record(rec, static_cast<int32_t>(i), dot3(rec[i].nrm, dh), lastF, K, eps,
-                                       wgt, dh, sb, vs);
+                step_record(rec, static_cast<int32_t>(i), dot3(rec[i].nrm, dh), lastF, pend);
             } else if (gn == 2) {
                 // two records (a closed object's front record and its back
                 // twin: most voxels of a closed scene): order them along d
@@ -444,11 +481,11 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 const float d0 = dot3(rec[p0].pt, dh), d1 = dot3(rec[p1].pt, dh);
                 const float c0 = dot3(rec[p0].nrm, dh), c1 = dot3(rec[p1].nrm, dh);
                 if (d0 > d1 || (d0 == d1 && c0 > c1)) {
-                    process_onepass_record(rec, p1, c1, lastF, K, eps, wgt, dh, sb, vs);
-                    process_onepass_record(rec, p0, c0, lastF, K, eps, wgt, dh, sb, vs);
+                    step_record(rec, p1, c1, lastF, pend);
+                    step_record(rec, p0, c0, lastF, pend);
                 } else {
-                    process_onepass_record(rec, p0, c0, lastF, K, eps, wgt, dh, sb, vs);
-                    process_onepass_record(rec, p1, c1, lastF, K, eps, wgt, dh, sb, vs);
+                    step_record(rec, p0, c0, lastF, pend);
+                    step_record(rec, p1, c1, lastF, pend);
                 }
             } else {
                 if (static_cast<int>(w.group.size()) < gn) w.group.resize(gn);
@@ -459,12 +496,13 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 }
                 sort_group(g, gn);
                 for (int a = 0; a < gn; ++a)
-                    process_onepass_record(rec, g[a].p, g[a].c, lastF, K, eps, wgt, dh, sb, vs);
+                    step_record(rec, g[a].p, g[a].c, lastF, pend);
             }
             ls.stamp = cur;
             ls.last = lastF;
             i = ge;
         }
+        pair_pending(rec, pend, K, eps, wgt, dh, sb, vs);
         lines_walked[t] += walked;
     });
     } else {
