@@ -7,8 +7,10 @@ Run on its own (never collected by pytest)::
 Sections (all by default):
 
 - ``furnace``    uniform furnaces (sphere, box, each with and without an inner
-  object), rho in {0.3, 0.5, 0.9, 0.99}, res 48, R = 8: radiance error
-  against Le / (1 - rho), iterations, lost fraction δ.
+  object), rho in {0.3, 0.5, 0.9, 0.99}, res 48 (``--res``), R = 8
+  (``--radii``): radiance error against Le / (1 - rho), iterations, lost
+  fraction δ. Writes ``propagation_furnace.json`` (``_res<N>`` for other
+  resolutions).
 - ``cap``        emitting-cap sphere: mean / max error vs resolution (32, 64,
   128) and R (8, 16, 22); rho = 0.5.
 - ``accel``      rho = 0.99 on the cap sphere and the Cornell box (albedos
@@ -110,8 +112,8 @@ def _front_err(sol, exact):
 
 def furnace(args) -> None:
     rows = []
-    res = 32 if args.quick else 48
-    R = 8
+    res = args.res[0] if args.res else (32 if args.quick else 48)
+    R = args.radii[0] if args.radii else 8
     scenes = [
         ("sphere", lambda r: voxgi.scenes.furnace_sphere(albedo=r, emission=1.0)),
         ("sphere+box", lambda r: voxgi.scenes.furnace_sphere(albedo=r, emission=1.0, inner=True)),
@@ -160,7 +162,7 @@ def furnace(args) -> None:
             "pass",
         ],
     )
-    _write("furnace", rows)
+    _write("furnace" if res == 48 and R == 8 else f"furnace_res{res}_R{R}", rows)
 
 
 def _err_vs(sol, ref, vox) -> np.ndarray:
@@ -544,8 +546,8 @@ def main() -> None:
     ap.add_argument("sections", nargs="*", default=[], help=", ".join(SECTIONS))
     ap.add_argument("--quick", action="store_true", help="smaller cases")
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
-    ap.add_argument("--res", type=int, nargs="+", help="cap: resolutions")
-    ap.add_argument("--radii", type=int, nargs="+", help="cap: direction radii")
+    ap.add_argument("--res", type=int, nargs="+", help="cap: resolutions; furnace: the first one")
+    ap.add_argument("--radii", type=int, nargs="+", help="cap: direction radii; furnace: the first one")
     args = ap.parse_args()
     bad = [s for s in args.sections if s not in SECTIONS and s not in EXTRA]
     if bad:
