@@ -278,6 +278,24 @@ def test_cornell_box_energy_balance_converges():
     assert imb[1] < 0.05
 
 
+def test_furnace_sphere_rho099_meets_the_issue_at_res96():
+    # Issue 3's furnace at rho 0.99: 0.5% mean needs a lost fraction δ under
+    # about 5e-5 (the error is about 99 δ). The sphere's δ falls fast with
+    # the resolution (res 48: 2.45e-4, mean |err| 1.64%; res 96: 3.3e-5,
+    # mean 0.28%, max 0.60%, 4 iterations with the geometric-tail
+    # extrapolation; benchmarks/furnace_inner.py --res 96). The bounds are
+    # the issue's acceptance, not the measurement.
+    rho = 0.99
+    vox = _voxelize(voxgi.scenes.furnace_sphere(albedo=rho, emission=1.0), 96)
+    sol = voxgi.solve(vox, directions=8, shoot_directions=8, progress=False)
+    front = ~vox.back
+    err = np.abs(sol.radiance[front].astype(np.float64) * (1 - rho) - 1)
+    assert err.mean() < 5e-3
+    assert err.max() < 2e-2
+    assert sol.stats["lost_fraction"] < 5e-5
+    assert sol.bounces <= 36  # a few dozen, not the ~900 of plain Jacobi
+
+
 @pytest.mark.parametrize("rho", [0.5])
 def test_furnace_box_with_inner_sphere(rho):
     vox = _voxelize(voxgi.scenes.furnace_box(albedo=rho, emission=1.0, inner=True), 32)
