@@ -282,7 +282,6 @@ struct PendingB {
 
 struct GatherWork {
     std::vector<LineState> table;
-    std::vector<int32_t> prevF, ans;
     int32_t stamp = 0;
     std::vector<uint32_t> key, cnt;
     std::vector<int32_t> line;
@@ -451,21 +450,18 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         // link) lives in a table indexed by the line key.
         int32_t rowX = std::numeric_limits<int32_t>::min(), rowY = 0;
         uint64_t rowU = 0;
-        int64_t rowXC = 0;
         std::vector<PendingB> &pend = w.pend;
         pend.clear();
         for (int64_t i = 0; i < n_;) {
             int64_t ge = i + 1;
             while (ge < n_ && AX[ge] == AX[i] && AY[ge] == AY[i] && AZ[ge] == AZ[i]) ++ge;
             if (AX[i] != rowX) pair_pending(rec, pend, K, eps, wgt, dh, sb, vs);  // a new slab
-            // key = u(x_m, y) * nw + w(x_m, z): u changes only with the row
-            if (AX[i] != rowX || AY[i] != rowY) {
+            if (AX[i] != rowX || AY[i] != rowY) {  // the key's u part changes only with the row
                 rowX = AX[i];
                 rowY = AY[i];
                 rowU = fr.key_u(rowX - xlo, fr.yprime(rowY));
-                rowXC = fr.C * (fr.XmA - (rowX - xlo)) + fr.A / 2;
             }
-            const uint32_t kk = static_cast<uint32_t>(rowU + fr.div(static_cast<uint64_t>(fr.A * fr.zprime(AZ[i]) + rowXC)));
+            const uint32_t kk = static_cast<uint32_t>(rowU + fr.key_w(rowX - xlo, fr.zprime(AZ[i])));
             LineState &ls = table[kk];
             int32_t lastF = ls.stamp == cur ? ls.last : -1;
             if (ls.stamp == cur) ++walked;
