@@ -121,7 +121,8 @@ public:
                   const float *val, double *hd, double *unfound, int threads,
                   const StopCheck &stop, int64_t *steps, const double *send_scale = nullptr,
                   const double *recv_area = nullptr, const double *coverage = nullptr,
-                  const uint8_t *stand_in = nullptr) const;
+                  const uint8_t *stand_in = nullptr, const int32_t *object = nullptr,
+                  const double *sil_area = nullptr, const uint8_t *back = nullptr) const;
 
     // Key of every record for family v (tests: each key is one naive line).
     void keys(const int32_t v[3], uint32_t *out) const;
