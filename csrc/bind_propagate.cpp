@@ -159,7 +159,8 @@ stand-in F is not occluded/answered by a stand-in B.)doc")
             "shoot",
             [](const voxgi::LineSystem &s, I32 emitters, I32 families, F64 weights, F32 values,
                int threads, std::optional<F64> send_scale, std::optional<F64> recv_area,
-               std::optional<F64> coverage, std::optional<Bool> stand_in) {
+               std::optional<F64> coverage, std::optional<Bool> stand_in,
+               std::optional<I32> object, std::optional<F64> sil_area, std::optional<Bool> back) {
                 auto fams = to_families(families, weights);
                 const py::ssize_t n = s.size();
                 check_1d(emitters, -1, "emitters");
@@ -180,6 +181,18 @@ stand-in F is not occluded/answered by a stand-in B.)doc")
                     check_1d(*coverage, n, "coverage");
                     cov = coverage->data();
                 }
+                if (object.has_value() != sil_area.has_value() || object.has_value() != back.has_value())
+                    throw py::value_error("object, sil_area and back go together");
+                const int32_t *ob = nullptr;
+                const double *sa = nullptr;
+                if (object) {
+                    if (ss) throw py::value_error("object: only with the receiver-side deposit");
+                    check_1d(*object, n, "object");
+                    check_1d(*sil_area, n, "sil_area");
+                    ob = object->data();
+                    sa = sil_area->data();
+                }
+                const uint8_t *bk = object ? stand_in_ptr(back, n) : nullptr;
                 F64 hd({n, py::ssize_t(3)});
                 F64 unfound(ne);
                 const int32_t *e = emitters.data();
@@ -191,14 +204,15 @@ stand-in F is not occluded/answered by a stand-in B.)doc")
                 {
                     py::gil_scoped_release release;
                     rays = s.shoot(e, ne, fams.data(), static_cast<int64_t>(fams.size()), v, h, u,
-                                   threads, stop, &steps, ss, ra, cov, sb);
+                                   threads, stop, &steps, ss, ra, cov, sb, ob, sa, bk);
                 }
                 return py::make_tuple(hd, unfound, rays, steps);
             },
             "emitters"_a.noconvert(), "families"_a.noconvert(), "weights"_a.noconvert(),
             "values"_a.noconvert(), "threads"_a = 0, "send_scale"_a.noconvert() = py::none(),
             "recv_area"_a.noconvert() = py::none(), "coverage"_a.noconvert() = py::none(),
-            "stand_in"_a.noconvert() = py::none(),
+            "stand_in"_a.noconvert() = py::none(), "object"_a.noconvert() = py::none(),
+            "sil_area"_a.noconvert() = py::none(), "back"_a.noconvert() = py::none(),
             R"doc(Integer discrete rays from the emitter records along every direction they face.
 
 Returns (hd, unfound, rays, steps): hd (N, 3) float64, per receiver the sum of
@@ -212,7 +226,11 @@ units), each receiver-side deposit is scaled by the share of the line that e
 covers, coverage[e] |n_e.d| / |d_m|, and records of e's own sheet do not
 occlude it; a negative coverage[e] keeps the whole line for e. With stand_in
 (N,) bool (see gather), a stand-in receiver takes the nearest facing F that is
-not a stand-in as its sender.)doc")
+not a stand-in as its sender. With object (N,) int32 and sil_area (N,) float64
+(every record's area in voxel units), a line that leaves an object through
+another face of it (convex edge) within one step of its band of receivers only
+grazed it: the share of the line that the band does not cover goes on, past
+that object's F records, to the receivers behind (silhouettes).)doc")
         .def(
             "keys",
             [](const voxgi::LineSystem &s, I32 v) {

@@ -662,8 +662,13 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                           const float *val, double *hd, double *unfound, int threads,
                           const StopCheck &stop, int64_t *steps_out, const double *send_scale,
                           const double *recv_area, const double *coverage,
-                          const uint8_t *stand_in) const {
+                          const uint8_t *stand_in, const int32_t *object,
+                          const double *sil_area, const uint8_t *back) const {
     if (coverage && send_scale) throw std::invalid_argument("coverage is for the receiver-side deposit");
+    if ((object == nullptr) != (sil_area == nullptr) || (object == nullptr) != (back == nullptr))
+        throw std::invalid_argument("object, sil_area and back go together");
+    if (object && send_scale) throw std::invalid_argument("silhouettes: only with the receiver-side deposit");
+    const bool sil = object != nullptr;
     threads = resolve_threads(threads);
     build_occupancy();
     for (int64_t k = 0; k < ne; ++k)
@@ -695,6 +700,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
         if (acc[t].empty()) acc[t].assign(3 * n_, 0.0);
         double *H = acc[t].data();
         std::vector<Hit> group, recv(16);
+        std::vector<double> recvT(16);
         size_t nrecv = 0;
         int32_t hp[kMaxHistory];
         for (int64_t k = task * chunk; k < std::min(ne, (task + 1) * chunk); ++k) {
@@ -732,6 +738,19 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                 bool found = false, stopped = false;
                 bool first = true;
                 nrecv = 0;
+                // Silhouettes (sil): T is the share of e's ray still travelling.
+                // The current band of receivers (one object, consecutive steps)
+                // covers band_cov of the line's cross-section; if the line then
+                // leaves that object through another face of it (convex edge,
+                // within one step of the band), it only grazed the object: the
+                // uncovered share 1 - band_cov goes on, and the object's F
+                // records on that exit do not occlude it.
+                double T = 1.0;
+                int32_t band_obj = -1, band_last = -1, carry_obj = -1;
+                int64_t band_step = -8, carry_step = -8, istep = -1;
+                double band_cov = 0.0;
+                bool found_seg = false, carried = false, band_crease = false;
+                const double inv_dm = 1.0 / std::abs(double(dv[fr.m]));
                 // y' = u - floor((B (XmA - x') + h) / A), z' likewise, kept as
                 // quotient and remainder updated by +-B, +-C per step (B, C <= A):
                 // integer-only, no division in the loop.
@@ -739,6 +758,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                 int64_t qy = numy / fr.A, ry = numy % fr.A, qz = numz / fr.A, rz = numz % fr.A;
                 for (int64_t X = X0; X >= 0 && X <= Xr && !stopped; first = false) {
                     ++steps[t];
+                    ++istep;
                     const int64_t Y = u - qy;
                     const int64_t Z = w - qz;
                     if (Y < 0 || Y > Yr || Z < 0 || Z > Zr) break;
@@ -784,12 +804,54 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                                                   (pq[2] - pe[2]) * nE[2];
                                 if (off <= eps) continue;
                             }
+                            if (sil) {
+                                const int32_t op = object[p];
+                                if (op == carry_obj) {  // the remainder is outside op
+                                    carry_step = istep;
+                                    continue;
+                                }
+                                if (op == band_obj && band_crease && istep <= band_step + 1) {
+                                    // the band touched a convex crease of its object and the
+                                    // line now leaves the object (its back twins or another
+                                    // face, behind the band's plane): it clipped the edge
+                                    const float *pq = P + 3 * int64_t(p), *nq = N + 3 * int64_t(p);
+                                    const float *pb = P + 3 * int64_t(band_last), *nb = N + 3 * int64_t(band_last);
+                                    const float d0 = pq[0] - pb[0], d1 = pq[1] - pb[1], d2 = pq[2] - pb[2];
+                                    const bool convex = (d0 * nb[0] + d1 * nb[1] + d2 * nb[2] < eps) &&
+                                                        (-(d0 * nq[0] + d1 * nq[1] + d2 * nq[2]) < eps);
+                                    if (convex) {
+                                        T *= std::max(0.0, 1.0 - band_cov);
+                                        carry_obj = op;
+                                        carry_step = istep;
+                                        band_obj = -1;
+                                        carried = true;
+                                        found_seg = false;
+                                        // the object's F records seen so far no longer occlude
+                                        int hk = 1;
+                                        for (int hh = 1; hh < hn; ++hh)
+                                            if (object[hp[hh]] != op) hp[hk++] = hp[hh];
+                                        hn = hk;
+                                        if (T <= 1e-12) {
+                                            stopped = true;
+                                            break;
+                                        }
+                                        continue;
+                                    }
+                                }
+                            }
                             if (hn == K) {  // e would be forgotten: its light stops here
                                 stopped = true;
                                 break;
                             }
                             hp[hn++] = p;
                         } else if (c < -kTiny) {
+                            // the grazing remainder does not see the inside of the object
+                            // it passed (its back records)
+                            // nor, while the line still runs along it, its front records
+                            if (sil && object[p] == carry_obj && (back[p] || istep <= carry_step + 1)) {
+                                carry_step = istep;
+                                continue;
+                            }
                             const float *pp = P + 3 * int64_t(p), *np = N + 3 * int64_t(p);
                             int nearest = -1;
                             const bool sp = stand_in && stand_in[p];  // two stand-ins never pair
@@ -803,13 +865,48 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                             }
                             if (nearest == 0) {  // e is p's sender along this line
                                 found = true;
-                                if (nrecv == recv.size()) recv.resize(2 * nrecv + 4);
+                                found_seg = true;
+                                if (nrecv == recv.size()) {
+                                    recv.resize(2 * nrecv + 4);
+                                    recvT.resize(2 * nrecv + 4);
+                                }
+                                recvT[nrecv] = T;
+                                carry_obj = -1;  // a receiver ends the transparent exit
                                 recv[nrecv++] = Hit{p, 0.0f, -c};
+                                if (sil) {
+                                    if (object[p] != band_obj || istep > band_step + 1) {
+                                        band_obj = object[p];
+                                        band_cov = 0.0;
+                                        band_crease = false;
+                                    }
+                                    if (!band_crease && sil_area[p] >= 0) {
+                                        // a silhouette: p's voxel holds another face of p's
+                                        // object that this line leaves (F), at a convex edge
+                                        const float *np_ = N + 3 * int64_t(p);
+                                        for (const Hit &g : group) {
+                                            const int32_t q = g.p;
+                                            if (g.c <= kTiny || object[q] != object[p]) continue;
+                                            const float *pq = P + 3 * int64_t(q), *nq = N + 3 * int64_t(q);
+                                            const float dn = dot3(np_, nq);
+                                            if (dn >= 0.5f || dn <= -0.9f) continue;  // same face, or a twin
+                                            const float d0 = pq[0] - pp[0], d1 = pq[1] - pp[1], d2 = pq[2] - pp[2];
+                                            if (d0 * np_[0] + d1 * np_[1] + d2 * np_[2] < eps &&
+                                                -(d0 * nq[0] + d1 * nq[1] + d2 * nq[2]) < eps) {
+                                                band_crease = true;
+                                                break;
+                                            }
+                                        }
+                                    }
+                                    band_cov += sil_area[p] * double(-c) * inv_dm;
+                                    band_step = istep;
+                                    band_last = p;
+                                }
                             } else if (nearest > 0) {  // someone nearer sends to p: e is shadowed
                                 if (facing(pe, nE, pp, np, eps)) {
                                     // e's light reached p's surface: counted as received; with
                                     // the sender-side deposit p takes e's power
                                     found = true;
+                                    found_seg = true;
                                     if (send_scale) {
                                         if (nrecv == recv.size()) recv.resize(2 * nrecv + 4);
                                         recv[nrecv++] = Hit{p, 0.0f, -c};
@@ -823,7 +920,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                 }
                 if (send_scale == nullptr || recv_area == nullptr) {  // receiver side: irradiance val[e] cos_r weight
                     for (size_t q = 0; q < nrecv; ++q) {
-                        const double cr = double(recv[q].c) * fams[f].weight * alpha;
+                        const double cr = double(recv[q].c) * fams[f].weight * alpha * recvT[q];
                         double *Hp = H + 3 * int64_t(recv[q].p);
                         Hp[0] += ve[0] * cr;
                         Hp[1] += ve[1] * cr;
@@ -846,6 +943,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                     }
                 }
                 if (!found) lost += ce;
+                else if (carried && !found_seg) lost += ce * T;  // the grazing remainder escaped
             }
             unfound[k] = lost;
         }

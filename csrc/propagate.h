@@ -119,11 +119,23 @@ public:
     // stand_in (nullable, (n,)): as for gather; a stand-in receiver's
     // sender is the nearest facing F that is not a stand-in (so a stand-in
     // emitter deposits nothing on a stand-in receiver).
+    // object, sil_area, back (all null or all (n,), receiver-side mode only):
+    // silhouettes. A band of receivers of one object in consecutive steps
+    // covers sum sil_area[r] |n_r.d| / |d_m| of the line (sil_area: area in
+    // voxel units; negative: the record's object is never passed, e.g. an
+    // emitting one, whose exit face already shoots its whole line). If a
+    // receiver's voxel holds another face of the object that the line leaves
+    // (F, normals 60-154 degrees apart, convex edge) and the line then meets
+    // an F record of that object within one step, the line only grazed it:
+    // the share T (1 - band) goes on, the object's F and back records (and its
+    // front B records while the line still runs along it) no longer stop it,
+    // and later receivers take T times their usual deposit.
     int64_t shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
                   const float *val, double *hd, double *unfound, int threads,
                   const StopCheck &stop, int64_t *steps, const double *send_scale = nullptr,
                   const double *recv_area = nullptr, const double *coverage = nullptr,
-                  const uint8_t *stand_in = nullptr) const;
+                  const uint8_t *stand_in = nullptr, const int32_t *object = nullptr,
+                  const double *sil_area = nullptr, const uint8_t *back = nullptr) const;
 
     // Key of every record for family v (tests: each key is one naive line).
     void keys(const int32_t v[3], uint32_t *out) const;

@@ -181,10 +181,11 @@ def _task_gather(records, key, families, weights, values, want_vis, stand_in=Non
                     stand_in=stand_in)
 
 
-def _task_shoot(records, key, emitters, coverage, families, weights, values, stand_in=None):
+def _task_shoot(records, key, emitters, coverage, families, weights, values, stand_in=None,
+                sil=None):
     s = _system(records, key)
     return s.shoot(emitters, families, weights, values, _worker_threads(), coverage=coverage,
-                   stand_in=stand_in)
+                   stand_in=stand_in, **(sil or {}))
 
 
 def _task_normalisation(records, key, families, weights):
@@ -398,13 +399,19 @@ class DistributedLineSystem(_Farm):
         return sums, vis, lines
 
     def shoot(self, emitters, families, weights, values, threads=0, coverage=None,
-              stand_in=None):
+              stand_in=None, object=None, sil_area=None, back=None):
         """Shooting from ``emitters`` split by direction families: (hd, unfound, rays, steps)."""
         em = np.ascontiguousarray(emitters, dtype=np.int32)
         cov = None if coverage is None else np.ascontiguousarray(coverage, dtype=np.float64)
         vfut = self._values(values)
         sfut = self._stand_in(stand_in)
-        chunks = [(np.ascontiguousarray(families[c]), np.ascontiguousarray(weights[c]), vfut, sfut)
+        sil = None
+        if object is not None:
+            sil = dict(object=np.ascontiguousarray(object, dtype=np.int32),
+                       sil_area=np.ascontiguousarray(sil_area, dtype=np.float64),
+                       back=np.ascontiguousarray(back, dtype=np.bool_))
+        chunks = [(np.ascontiguousarray(families[c]), np.ascontiguousarray(weights[c]), vfut, sfut,
+                   sil)
                   for c in self._chunks(len(families))]
         parts = self._map(_task_shoot, chunks, self._records, self.key, em, cov,
                           key_prefix="voxgi-shoot")

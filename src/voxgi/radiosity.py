@@ -363,6 +363,7 @@ def solve(
     max_iterations: int = 10000,
     closed=None,
     shoot_coverage: bool = True,
+    shoot_silhouettes: bool = True,
     diagnostics: bool = True,
 ) -> Solution:
     """Solve the discrete radiosity equation on the records of ``vox``.
@@ -443,6 +444,19 @@ def solve(
         ray covers its whole line): a thin lamp seen edge-on then sends as
         if it were a voxel thick (measured on the Cornell box: 37% too much
         power at resolution 32, 15% at 64).
+    shoot_silhouettes : bool
+        Shooting lines that graze an object's silhouette (default): where a
+        line's receivers on one object include a record at a convex edge
+        whose other face the line leaves (F along it), and the line then
+        leaves the object, the share of the line that those receivers do
+        not cover (``1 - Σ ΔA_r |n_r·d| / |d_m|``, voxel units, clamped at
+        0) goes on past that object (its F records and its back records) to
+        the receivers behind. Without it a line that clips a block's rim is
+        stopped whole by the block's far side: shadows a voxel too wide, and
+        that light lost (measured on the closed black Cornell box: direct
+        light imbalance +3.5% at resolution 32, +2.0% at 64; with it +0.3%,
+        +0.4%; ``benchmarks/energy_silhouette.py``). Walls, concave corners
+        and edges between two lit faces stay opaque.
     diagnostics : bool
         Run the extra gathering pass behind ``stats["back_fraction"]``
         (default). False skips it (one pass of the ``directions`` set; the
@@ -618,9 +632,22 @@ def solve(
     if shoot_coverage:
         cov, flat = _flat_emitter_coverage(a, vox, emitters_send)
         stats["flat_emitter_objects"] = flat
+    sil = {}
+    if shoot_silhouettes and getattr(vox, "object_id", None) is not None:
+        obj_id = _validate.as_c_array(vox.object_id, np.int32, (n,), "vox.object_id")
+        sil_area = np.ascontiguousarray(area / a["pitch"] ** 2, dtype=np.float64)
+        # Only objects that send nothing in this pass: an emitting object's
+        # exit face shoots its whole line to the receivers behind it, and a
+        # carried remainder would count that part of the line twice
+        # (measured: furnace sphere with an inner box, rho 0.9, res 32: box
+        # mean error -0.3% -> +0.8%, sphere -0.3% -> +1.7%).
+        sil_area[np.isin(obj_id, np.unique(obj_id[emitters_send]))] = -1.0
+        sil = dict(object=obj_id, sil_area=sil_area,
+                   back=np.ascontiguousarray(a["back"], dtype=np.bool_))
+    stats["shoot_silhouettes"] = bool(sil)
     hd_raw, unfound, shoot_rays, steps = sysm.shoot(
         emitters_send, sds.families, sds.weights, E_send, nthreads, coverage=cov,
-        stand_in=stand_in,
+        stand_in=stand_in, **sil,
     )
     Hd = hd_raw / Ss[:, None]
     seconds["shoot"] = time.perf_counter() - t
