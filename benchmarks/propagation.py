@@ -281,7 +281,8 @@ def cornell(args) -> None:
     # The open Cornell box as it is, then (albedo 0: direct light alone) the
     # box closed by a fourth wall with and without its blocks: where the
     # remaining imbalance comes from. Each with the partial-coverage shooting
-    # (the default) and with the paper's whole-line rule.
+    # and the silhouette rule (the defaults), with coverage alone, and with
+    # the paper's whole-line rule.
     import dataclasses
 
     def closed(blocks: bool) -> voxgi.Scene:
@@ -297,13 +298,13 @@ def cornell(args) -> None:
             vox = voxgi.voxelize(scene, resolution=res)
             if black:
                 vox = dataclasses.replace(vox, albedo=np.zeros_like(vox.albedo))
-            for cov in (True, False):
+            for cov, sil in ((True, True), (True, False), (False, False)):
                 if res == 128 and not (cov and name == "open"):
                     continue  # the trend is clear from 32 and 64
                 R, Rs = 8, 16
                 t = time.perf_counter()
                 sol = voxgi.solve(vox, directions=R, shoot_directions=Rs, progress=False,
-                                  tol=1e-5, shoot_coverage=cov)
+                                  tol=1e-5, shoot_coverage=cov, shoot_silhouettes=sil)
                 dt = time.perf_counter() - t
                 e = sol.stats["energy"]
                 em = np.array(e["emitted"])
@@ -312,6 +313,7 @@ def cornell(args) -> None:
                         "scene": name,
                         "res": res,
                         "coverage": cov,
+                        "silhouettes": sil,
                         "records": len(vox),
                         "iters": sol.bounces,
                         "imbalance_r": e["imbalance"][0],
@@ -328,6 +330,7 @@ def cornell(args) -> None:
             "scene",
             "res",
             "coverage",
+            "silhouettes",
             "records",
             "iters",
             "imbalance_r",
