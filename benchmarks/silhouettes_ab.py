@@ -9,7 +9,8 @@ is noise.
 
 Usage::
 
-    python benchmarks/silhouettes_ab.py [--scenes cornell-box geometric shadow] [--res 64] [--frames 64]
+    python benchmarks/silhouettes_ab.py [--scenes cornell-box geometric shadow]
+                                        [--res 64] [--frames 64]
 """
 
 from __future__ import annotations
