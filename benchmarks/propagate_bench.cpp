@@ -5,9 +5,13 @@
 //
 //   g++ -O3 -std=c++17 -pthread -Icsrc benchmarks/propagate_bench.cpp csrc/propagate.cpp -o bench
 //   ./bench records.bin 1 2
+//   ./bench records.bin stride=10 1    (every 10th gathering family: a quick A/B of two
+//                                        builds of csrc/propagate.cpp, side by side)
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <algorithm>
 #include <fstream>
 #include <vector>
 
@@ -53,30 +57,37 @@ int main(int argc, char **argv) {
         return 1;
     }
     std::vector<int> threads;
-    for (int i = 2; i < argc; ++i) threads.push_back(std::atoi(argv[i]));
+    int64_t stride = 1;
+    for (int i = 2; i < argc; ++i) {
+        if (std::strncmp(argv[i], "stride=", 7) == 0)
+            stride = std::max<int64_t>(1, std::atoll(argv[i] + 7));
+        else
+            threads.push_back(std::atoi(argv[i]));
+    }
     if (threads.empty()) threads = {1, 2};
 
     voxgi::LineSystem sys(n, ijk.data(), nrm.data(), pt.data(), 0.02f, 16);
-    std::vector<int64_t> sel(nfg);
-    for (int64_t i = 0; i < nfg; ++i) sel[i] = i;
+    std::vector<int64_t> sel;
+    for (int64_t i = 0; i < nfg; i += stride) sel.push_back(i);
     std::vector<double> out(3 * n), hd(3 * n), unf(ne);
     voxgi::StopCheck none;
     auto now = [] { return std::chrono::steady_clock::now(); };
     auto secs = [](auto a, auto b) { return std::chrono::duration<double>(b - a).count(); };
-    std::printf("records %lld  emitters %lld  gather families %lld  shoot families %lld\n",
-                (long long)n, (long long)ne, (long long)nfg, (long long)nfs);
+    std::printf("records %lld  emitters %lld  gather families %lld (of %lld)  shoot families %lld\n",
+                (long long)n, (long long)ne, (long long)sel.size(), (long long)nfg, (long long)nfs);
     std::printf("%8s %10s %10s %12s %14s\n", "threads", "kernel", "seconds", "Mrays/s", "Mrays/s/thread");
     for (int th : threads) {
         for (int onepass = 1; onepass >= 0; --onepass) {
-            sys.gather(fams[0].data(), sel.data(), 16, val.data(), out.data(), nullptr, th, none, onepass);
+            sys.gather(fams[0].data(), sel.data(), std::min<int64_t>(16, sel.size()), val.data(), out.data(),
+                       nullptr, th, none, onepass);
             double best = 1e30;
             for (int r = 0; r < 2; ++r) {
                 auto t0 = now();
-                sys.gather(fams[0].data(), sel.data(), nfg, val.data(), out.data(), nullptr, th, none,
-                           onepass);
+                sys.gather(fams[0].data(), sel.data(), sel.size(), val.data(), out.data(), nullptr, th,
+                           none, onepass);
                 best = std::min(best, secs(t0, now()));
             }
-            const double rays = double(n) * nfg;
+            const double rays = double(n) * sel.size();
             std::printf("%8d %10s %10.3f %12.1f %14.1f\n", th, onepass ? "onepass" : "sort", best,
                         rays / best / 1e6, rays / best / 1e6 / th);
         }
