@@ -185,7 +185,7 @@ def cap(args) -> None:
     radii = args.radii or (8, 16, 22)
     # keep the rows of earlier runs (the big cases take long on a shared machine)
     old = RESULTS / "propagation_cap.json"
-    rows = json.loads(old.read_text())["rows"] if old.exists() else []
+    rows = json.loads(old.read_text())["rows"] if old.exists() and not args.fresh else []
     done = {(r["res"], r["R"]) for r in rows}
     voxs = {
         res: voxgi.voxelize(voxgi.scenes.cap_sphere(albedo=rho, emission=1.0), resolution=res)
@@ -548,6 +548,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sections", nargs="*", default=[], help=", ".join(SECTIONS))
     ap.add_argument("--quick", action="store_true", help="smaller cases")
+    ap.add_argument("--fresh", action="store_true",
+                    help="cap: run every cell (default: keep the cells of earlier runs)")
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--res", type=int, nargs="+", help="cap: resolutions; furnace: the first one")
     ap.add_argument("--radii", type=int, nargs="+", help="cap: direction radii; furnace: the first one")
