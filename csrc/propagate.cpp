@@ -287,7 +287,13 @@ struct GatherWork {
     std::vector<int32_t> line;
     std::vector<Hit> group;
     std::vector<double> acc[3], vis[3];  // per axis order (the counting-sort walk)
-    std::vector<GatherRec> rec[3];       // per axis order (the one-pass walk)
+    // The one-pass walk: the records in the order of the main axis this
+    // thread works on (rec_axis; -1: none yet), and the sums of the axes it
+    // has left, in the global order. A thread takes families in by-axis
+    // order, so it meets each axis once and one array is enough.
+    std::vector<GatherRec> rec;
+    int rec_axis = -1;
+    std::vector<double> sums;
     std::vector<PendingB> pend;          // the one-pass walk's queued B records
     bool used[3] = {false, false, false};
 };
@@ -402,9 +408,27 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
     int64_t max_keys = 1;
     for (const auto &fr : frames) max_keys = std::max<int64_t>(max_keys, fr.nu * fr.nw);
 
+    // Add a thread's one-pass sums of its current axis to its global-order
+    // sums (when it moves to the next axis, and at the end).
+    auto flush_axis = [&](GatherWork &w) {
+        if (w.rec_axis < 0) return;
+        if (w.sums.empty()) w.sums.assign(3 * n_, 0.0);
+        const int32_t *ord = ax_[w.rec_axis].order.data();
+        const GatherRec *a = w.rec.data();
+        double *o = w.sums.data();
+        for (int64_t i = 0; i < n_; ++i) {
+            const int64_t r = ord[i];
+            o[3 * r] += a[i].acc[0];
+            o[3 * r + 1] += a[i].acc[1];
+            o[3 * r + 2] += a[i].acc[2];
+        }
+        w.rec_axis = -1;
+    };
+
     if (onepass) {
     // Families grouped by main axis: a thread then works on one axis's
-    // records at a time (its cache holds one GatherRec array, not three).
+    // records at a time, in one GatherRec array (64 B a record) instead of
+    // three.
     std::vector<int64_t> by_axis(nsel);
     std::iota(by_axis.begin(), by_axis.end(), int64_t(0));
     std::stable_sort(by_axis.begin(), by_axis.end(),
@@ -416,12 +440,13 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         const LineFrame &fr = frames[k];
         const Axis &ax = ax_[fr.m];
         const int m = fr.m;
-        if (!w.used[m]) {
-            w.rec[m].resize(n_);
+        if (w.rec_axis != m) {
+            flush_axis(w);
+            w.rec.resize(n_);
             const float *pn0 = ax.pn.data();
             const float *vl0 = valax[m].data();
             for (int64_t i = 0; i < n_; ++i) {
-                GatherRec &r = w.rec[m][i];
+                GatherRec &r = w.rec[i];
                 for (int c = 0; c < 3; ++c) {
                     r.pt[c] = pn0[8 * i + c];
                     r.nrm[c] = pn0[8 * i + 3 + c];
@@ -430,13 +455,16 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 }
                 r.link = 0;
             }
+            w.rec_axis = m;
+        }
+        if (!w.used[m]) {
             if (vis) w.vis[m].assign(n_, 0.0);
             w.used[m] = true;
         }
         if (w.table.empty()) w.table.assign(max_keys, LineState{0, -1});
         const int32_t cur = ++w.stamp;  // no clearing: entries of other families carry old stamps
         LineState *table = w.table.data();
-        GatherRec *rec = w.rec[m].data();
+        GatherRec *rec = w.rec.data();
         double *vs = vis ? w.vis[m].data() : nullptr;
         const uint8_t *sb = stand_in ? sbax[m].data() : nullptr;
         const int32_t *AX = ax.X.data(), *AY = ax.Y.data(), *AZ = ax.Z.data();
@@ -625,19 +653,18 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
     // Reduce in a fixed order (thread, then axis) into the global order.
     std::fill(out, out + 3 * n_, 0.0);
     if (vis) std::fill(vis, vis + n_, 0.0);
-    for (int t = 0; t < threads; ++t)
+    for (int t = 0; t < threads; ++t) {
+        if (onepass) {
+            flush_axis(work[t]);
+            work[t].rec = std::vector<GatherRec>();  // free it before the next thread's sums
+            const double *a = work[t].sums.data();
+            if (!work[t].sums.empty())
+                for (int64_t i = 0; i < 3 * n_; ++i) out[i] += a[i];
+        }
         for (int m = 0; m < 3; ++m) {
             if (!work[t].used[m]) continue;
             const int32_t *ord = ax_[m].order.data();
-            if (onepass) {
-                const GatherRec *a = work[t].rec[m].data();
-                for (int64_t i = 0; i < n_; ++i) {
-                    const int64_t r = ord[i];
-                    out[3 * r] += a[i].acc[0];
-                    out[3 * r + 1] += a[i].acc[1];
-                    out[3 * r + 2] += a[i].acc[2];
-                }
-            } else {
+            if (!onepass) {
                 const double *a = work[t].acc[m].data();
                 for (int64_t i = 0; i < n_; ++i) {
                     const int64_t r = ord[i];
@@ -651,6 +678,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 for (int64_t i = 0; i < n_; ++i) vis[ord[i]] += v[i];
             }
         }
+    }
     int64_t total = 0;
     for (auto x : lines_walked) total += x;
     return total;

@@ -42,13 +42,17 @@ _EXTRA_HINT = 'pip install "voxgi[dask]"'
 
 # Bytes a worker holds per record: the scattered copy of ijk, normal and
 # point (36) and what the worker's LineSystem and one call need, measured as
-# the growth of the resident set over building a LineSystem, one gather (with
-# visibility) and one shoot on the bunny room at resolution 112 (146,892
-# records): 214 B for the system (three axis orders of order, X, Y, Z,
-# normal, point and the packed 32-byte line: 216 B by csrc/propagate.h),
-# 302 B after the gather (values in, float64 sums and visibility out),
-# 337 B after the shoot. 340 rounds it up.
-_BYTES_PER_RECORD = 36 + 340
+# the growth of the peak resident set over building a LineSystem, one gather
+# (all 2991 R 22 families, with visibility) and one shoot (R 35) on the bunny
+# room at resolution 112 (146,892 records), one thread: 213 B for the system
+# (three axis orders of order, X, Y, Z, normal, point and the packed 32-byte
+# line), 415 B after the gather (values in each axis order, the one-pass
+# walk's 64-byte record lines and global-order sums, float64 sums and
+# visibility out), 459 B after the shoot. 470 rounds it up. Each further
+# thread of the worker adds its own record lines and sums: 512 B after the
+# gather with 2 threads, so 100 B a thread.
+_BYTES_PER_RECORD = 36 + 470
+_BYTES_PER_RECORD_THREAD = 100
 
 
 def _require_distributed():
@@ -99,7 +103,7 @@ def _takes_n_workers(client) -> bool:
         return False
 
 
-def estimate_worker_bytes(n_records: int, box=(0, 0, 0)) -> int:
+def estimate_worker_bytes(n_records: int, box=(0, 0, 0), threads: int = 1) -> int:
     """Bytes one worker needs for the records of a distributed solve.
 
     Parameters
@@ -109,17 +113,20 @@ def estimate_worker_bytes(n_records: int, box=(0, 0, 0)) -> int:
     box : (3,) int
         Extent of the records' voxel box (the shooting occupancy bitset
         takes one bit per voxel of it).
+    threads : int
+        The worker's threads (each gathers into its own record lines).
 
     Returns
     -------
     int
-        ``N × 376`` bytes (scattered records, the worker's LineSystem, one
-        call's values and sums; measured, see ``_BYTES_PER_RECORD``) plus the
-        occupancy bitset, rounded up. The worker process itself (Python,
-        numpy, Dask: ~100-150 MB) comes on top.
+        ``N × (506 + 100 × (threads - 1))`` bytes (scattered records, the
+        worker's LineSystem, one call's values and sums; measured, see
+        ``_BYTES_PER_RECORD``) plus the occupancy bitset, rounded up. The
+        worker process itself (Python, numpy, Dask: ~100-150 MB) comes on top.
     """
     cells = int(np.prod(np.asarray(box, dtype=np.int64) + 1))
-    return int(n_records) * _BYTES_PER_RECORD + cells // 8 + 1
+    per = _BYTES_PER_RECORD + _BYTES_PER_RECORD_THREAD * (max(1, int(threads)) - 1)
+    return int(n_records) * per + cells // 8 + 1
 
 
 def _token(*arrays) -> str:
@@ -327,7 +334,9 @@ class DistributedLineSystem(_Farm):
         point = np.ascontiguousarray(point, dtype=np.float32)
         self.size = len(ijk)
         box = ijk.max(axis=0) - ijk.min(axis=0) if len(ijk) else np.zeros(3)
-        self._check_memory(estimate_worker_bytes(self.size, box),
+        info = _workers(client)
+        threads = max((int(info[a].get("nthreads", 1) or 1) for a in self.workers), default=1)
+        self._check_memory(estimate_worker_bytes(self.size, box, threads),
                            f"a solve of {self.size} records")
         self.key = _token(ijk, normal, point, np.float32([epsilon, history]))
         records = {"ijk": ijk, "normal": normal, "point": point, "epsilon": float(epsilon),
