@@ -290,6 +290,7 @@ def main(argv=None) -> int:
         default = None
         settings = (VOXGI_SETTINGS + ([HIGH] if args.high else [])
                     + ([DEFAULTS] if args.defaults else []))
+        scene_s = make_scene(name, size)  # the extra seeds' displays
         for label, res, dirs, kw in settings:
             out, sol, secs, phases = run_voxgi(size, res, dirs, kw, name=name)
             # A display's error at a few frames varies by +-40% with the seed
@@ -297,7 +298,6 @@ def main(argv=None) -> int:
             # correlated across the image): average over seeds, each a
             # display of the same solution, and time the mean display.
             errs, disp = [rel_mse(out.image, ref)], [phases["display"]]
-            scene_s = make_scene(name, size)
             for seed in range(1, args.seeds):
                 t0 = time.perf_counter()
                 o2 = voxgi.render(scene_s, sol, progress=False, seed=seed, **kw)
