@@ -531,11 +531,53 @@ def dump(args) -> None:
     print(f"wrote {path} ({len(vox)} records, {len(emit)} emitters)")
 
 
+def energy(args) -> None:
+    # The open Cornell box's energy balance against the resolution (the
+    # convergence study DESIGN-NOTES §10 asks the tolerance to come from):
+    # R 8, shooting 16, tol 1e-5, the default rules; escaping counted on the
+    # sender side. One thread (--threads: the first value) and the recorded
+    # pairs (pair_cache=True: res 512 needs about 6 GB for them).
+    radii = args.radii or [8, 16]
+    R, Rs = radii[0], radii[1] if len(radii) > 1 else 2 * radii[0]
+    ress = args.res or ([32, 64] if args.quick else [32, 64, 128, 256])
+    th = args.threads[0]
+    scene = voxgi.scenes.cornell_box(width=32, height=32)
+    rows = []
+    for res in ress:
+        vox = voxgi.voxelize(scene, resolution=res)
+        t = time.perf_counter()
+        sol = voxgi.solve(vox, directions=R, shoot_directions=Rs, progress=False, tol=1e-5,
+                          threads=th, pair_cache=True)
+        dt = time.perf_counter() - t
+        e = sol.stats["energy"]
+        em = np.array(e["emitted"])
+        rows.append({
+            "res": res,
+            "records": len(vox),
+            "R": R,
+            "Rs": Rs,
+            "iters": sol.bounces,
+            "imbalance_r": e["imbalance"][0],
+            "imbalance_g": e["imbalance"][1],
+            "imbalance_b": e["imbalance"][2],
+            "absorbed/emitted": float(e["absorbed"][0] / em[0]),
+            "escaping/emitted": float(e["escaping"][0] / em[0]),
+            "seconds": dt,
+        })
+        print(rows[-1], flush=True)
+    _table(rows, ["res", "records", "R", "Rs", "iters", "imbalance_r", "imbalance_g", "imbalance_b",
+                  "absorbed/emitted", "escaping/emitted", "seconds"])
+    _write("energy", rows, threads=th,
+           note="open Cornell box; imbalance = (emitted - absorbed - escaping) / emitted, "
+           "escaping counted on the sender side")
+
+
 SECTIONS = {
     "furnace": furnace,
     "cap": cap,
     "accel": accel,
     "cornell": cornell,
+    "energy": energy,
     "later": later,
     "linear": linear,
     "throughput": throughput,
@@ -551,8 +593,10 @@ def main() -> None:
     ap.add_argument("--fresh", action="store_true",
                     help="cap: run every cell (default: keep the cells of earlier runs)")
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
-    ap.add_argument("--res", type=int, nargs="+", help="cap: resolutions; furnace: the first one")
-    ap.add_argument("--radii", type=int, nargs="+", help="cap: direction radii; furnace: the first one")
+    ap.add_argument("--res", type=int, nargs="+",
+                    help="cap, energy: resolutions; furnace: the first one")
+    ap.add_argument("--radii", type=int, nargs="+",
+                    help="cap: direction radii; furnace: the first one; energy: R and Rs")
     args = ap.parse_args()
     bad = [s for s in args.sections if s not in SECTIONS and s not in EXTRA]
     if bad:

@@ -71,6 +71,18 @@ voxgi::LineSystem *make_system(const I32 &ijk, const F32 &normal, const F32 &poi
 }  // namespace
 
 void bind_propagate(py::module_ &m) {
+    py::class_<voxgi::PairTable>(m, "PairTable", R"doc(
+The pairs of one direction set's gathering, recorded for replay
+(LineSystem.make_pair_table, LineSystem.gather(record=...),
+LineSystem.gather_recorded). 4 bytes per record and family.)doc")
+        .def_property_readonly("nbytes", [](const voxgi::PairTable &t) { return t.bytes(); })
+        .def_property_readonly("families", [](const voxgi::PairTable &t) { return t.nfam; })
+        .def_property_readonly("recorded", [](const voxgi::PairTable &t) {
+            int64_t k = 0;
+            for (auto f : t.filled) k += f;
+            return k;
+        });
+
     py::class_<voxgi::LineSystem>(m, "LineSystem", R"doc(
 Records prepared for discrete-line propagation (DESIGN-NOTES §4).
 
@@ -114,7 +126,8 @@ history : int
         .def(
             "gather",
             [](const voxgi::LineSystem &s, I32 families, F64 weights, F32 values, I64 family_indices,
-               bool want_vis, int threads, const std::string &algorithm, std::optional<Bool> stand_in) {
+               bool want_vis, int threads, const std::string &algorithm, std::optional<Bool> stand_in,
+               bool transpose, voxgi::PairTable *record) {
                 if (algorithm != "onepass" && algorithm != "sort")
                     throw py::value_error("algorithm must be 'onepass' or 'sort'");
                 auto fams = to_families(families, weights);
@@ -138,13 +151,14 @@ history : int
                 {
                     py::gil_scoped_release release;
                     lines = s.gather(fams.data(), sel, ns, v, o, vp, threads, stop,
-                                     algorithm == "onepass", sb);
+                                     algorithm == "onepass", sb, transpose, record);
                 }
                 return py::make_tuple(out, want_vis ? py::object(vis) : py::object(py::none()), lines);
             },
             "families"_a.noconvert(), "weights"_a.noconvert(), "values"_a.noconvert(),
             "family_indices"_a.noconvert(), "want_vis"_a = false, "threads"_a = 0,
             "algorithm"_a = "onepass", "stand_in"_a.noconvert() = py::none(),
+            "transpose"_a = false, "record"_a = py::none(),
             R"doc(Jacobi gathering over a subset of direction families.
 
 Returns (sums, vis, lines): sums (N, 3) float64, for every record the sum over
@@ -154,7 +168,48 @@ which the record found a partner (None unless want_vis); lines the number of
 lines walked. Partial sums over disjoint subsets add up to the full gather.
 stand_in (N,) bool, optional: the back records of closed objects (they send
 their front twin's value); two of them never pair along a line, and a
-stand-in F is not occluded/answered by a stand-in B.)doc")
+stand-in F is not occluded/answered by a stand-in B. transpose: the transposed
+operator over the same pairs (sums[partner] += values[x] * cos_x * weight: x's
+weight, the partner receives); vis is unchanged. record (PairTable from
+make_pair_table for the same families and stand-in flags, optional): also
+write the pairs found into it (one-pass, not transposed).)doc")
+        .def(
+            "make_pair_table",
+            [](const voxgi::LineSystem &s, I32 families, F64 weights, bool with_stand_in) {
+                auto fams = to_families(families, weights);
+                py::gil_scoped_release release;
+                return s.make_pair_table(fams.data(), static_cast<int64_t>(fams.size()), with_stand_in);
+            },
+            "families"_a.noconvert(), "weights"_a.noconvert(), "with_stand_in"_a = false,
+            R"doc(An empty PairTable for these families (4 bytes per record and family,
+allocated as zero pages: memory is used as the pairs are written).)doc")
+        .def(
+            "gather_recorded",
+            [](const voxgi::LineSystem &s, const voxgi::PairTable &table, F32 values, I64 family_indices,
+               bool want_vis, int threads) {
+                const py::ssize_t n = s.size();
+                check_2d(values, n, 3, "values");
+                check_1d(family_indices, -1, "family_indices");
+                const py::ssize_t ns = family_indices.shape(0);
+                F64 out({n, py::ssize_t(3)});
+                F64 vis(want_vis ? n : 0);
+                const float *v = values.data();
+                const int64_t *sel = family_indices.data();
+                double *o = out.mutable_data();
+                double *vp = want_vis ? vis.mutable_data() : nullptr;
+                auto stop = voxgi::py_helpers::make_stop_check();
+                {
+                    py::gil_scoped_release release;
+                    s.gather_recorded(table, sel, ns, v, o, vp, threads, stop);
+                }
+                return py::make_tuple(out, want_vis ? py::object(vis) : py::object(py::none()));
+            },
+            "table"_a, "values"_a.noconvert(), "family_indices"_a.noconvert(), "want_vis"_a = false,
+            "threads"_a = 0,
+            R"doc(The gathering pass over recorded families, replayed from the table.
+
+Returns (sums, vis) as gather does (the same pairs and weights; sums equal to
+float rounding). Every family in family_indices must have been recorded.)doc")
         .def(
             "shoot",
             [](const voxgi::LineSystem &s, I32 emitters, I32 families, F64 weights, F32 values,

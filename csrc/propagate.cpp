@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <sys/mman.h>
 #include <cstring>
 #include <limits>
 #include <mutex>
@@ -295,6 +297,7 @@ struct GatherWork {
     int rec_axis = -1;
     std::vector<double> sums;
     std::vector<PendingB> pend;          // the one-pass walk's queued B records
+    std::vector<int32_t> rbuf;           // recording: one tile's columns, family-major
     bool used[3] = {false, false, false};
 };
 
@@ -314,8 +317,10 @@ inline void step_record(GatherRec *rec, int32_t p, float c, int32_t &lastF, std:
 // A queued B record receives from the newest F that faces it and answers
 // every facing F back to the first one already answered (which occludes the
 // older ones).
+// rt (nullable): the family's column of a PairTable (rt[p * rs] = sender + 1).
+template <bool Transpose>
 inline void pair_record(GatherRec *rec, const PendingB &q, int K, float eps, double wgt, const float *dh,
-                        const uint8_t *sb, double *vs) {
+                        const uint8_t *sb, double *vs, int32_t *rt, int64_t rs) {
     const int32_t p = q.p;
     GatherRec &rp = rec[p];
     const double cb = -double(q.c) * wgt;
@@ -330,18 +335,25 @@ inline void pair_record(GatherRec *rec, const PendingB &q, int K, float eps, dou
             continue;
         }
         if (!got) {
-            rp.acc[0] += rf.val[0] * cb;
-            rp.acc[1] += rf.val[1] * cb;
-            rp.acc[2] += rf.val[2] * cb;
+            // p receives from f with weight cb; transposed, f takes p's value with it
+            GatherRec &to = Transpose ? rf : rp;
+            const GatherRec &from = Transpose ? rp : rf;
+            to.acc[0] += from.val[0] * cb;
+            to.acc[1] += from.val[1] * cb;
+            to.acc[2] += from.val[2] * cb;
             if (vs) vs[p] += cb;
+            if (rt) rt[p * rs] = f + 1;
             got = true;
         }
         if (rf.link & kAnswered) break;  // an answered facing F occludes the older ones
         const double cf = double(dot3(rf.nrm, dh)) * wgt;
-        rf.acc[0] += rp.val[0] * cf;
-        rf.acc[1] += rp.val[1] * cf;
-        rf.acc[2] += rp.val[2] * cf;
+        GatherRec &to = Transpose ? rp : rf;
+        const GatherRec &from = Transpose ? rf : rp;
+        to.acc[0] += from.val[0] * cf;
+        to.acc[1] += from.val[1] * cf;
+        to.acc[2] += from.val[2] * cf;
         if (vs) vs[f] += cf;
+        if (rt) rt[int64_t(f) * rs] = p + 1;
         rf.link |= kAnswered;
         f = older;
     }
@@ -355,14 +367,15 @@ inline void pair_record(GatherRec *rec, const PendingB &q, int K, float eps, dou
 // What the queue buys: a B's partner is far back in memory (a random cache
 // line), and with the queue in hand the partners of the pairs kAhead places
 // on are prefetched while this pair waits for its own.
+template <bool Transpose>
 inline void pair_pending(GatherRec *rec, std::vector<PendingB> &pend, int K, float eps, double wgt,
-                         const float *dh, const uint8_t *sb, double *vs) {
+                         const float *dh, const uint8_t *sb, double *vs, int32_t *rt, int64_t rs) {
     constexpr size_t kAhead = 8;
     const size_t np = pend.size();
     for (size_t j = 0; j < std::min(np, kAhead); ++j) __builtin_prefetch(rec + pend[j].f, 1, 3);
     for (size_t j = 0; j < np; ++j) {
         if (j + kAhead < np) __builtin_prefetch(rec + pend[j + kAhead].f, 1, 3);
-        pair_record(rec, pend[j], K, eps, wgt, dh, sb, vs);
+        pair_record<Transpose>(rec, pend[j], K, eps, wgt, dh, sb, vs, rt, rs);
     }
     pend.clear();
 }
@@ -371,7 +384,20 @@ inline void pair_pending(GatherRec *rec, std::vector<PendingB> &pend, int K, flo
 
 int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel, const float *val,
                            double *out, double *vis, int threads, const StopCheck &stop,
-                           bool onepass, const uint8_t *stand_in) const {
+                           bool onepass, const uint8_t *stand_in, bool transpose,
+                           PairTable *record) const {
+    if (record) {
+        if (!onepass || transpose) throw std::invalid_argument("recording pairs: one-pass, not transposed");
+        if (record->n != n_) throw std::invalid_argument("pair table made for another line system");
+        if (record->with_stand_in != (stand_in != nullptr))
+            throw std::invalid_argument("pair table made with other stand-in flags");
+        for (int64_t k = 0; k < nsel; ++k) {
+            if (sel[k] < 0 || sel[k] >= record->nfam) throw std::invalid_argument("family outside the pair table");
+            for (int c = 0; c < 3; ++c)
+                if (fams[sel[k]].v[c] != record->vec[3 * sel[k] + c])
+                    throw std::invalid_argument("pair table made for other families");
+        }
+    }
     threads = resolve_threads(threads);
     threads = static_cast<int>(std::max<int64_t>(1, std::min<int64_t>(threads, nsel)));
     // Values in each main axis's order (only the axes some family needs).
@@ -433,7 +459,29 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
     std::iota(by_axis.begin(), by_axis.end(), int64_t(0));
     std::stable_sort(by_axis.begin(), by_axis.end(),
                      [&](int64_t a, int64_t b) { return frames[a].m < frames[b].m; });
-    parallel_for(nsel, threads, stop, [&](int64_t kk_, int t) {
+    // A task is one family, or when recording the families of one tile of
+    // the table (PairTable::kTile columns of one axis): one thread then
+    // writes each tile, its 64-byte rows whole, record after record.
+    std::vector<int64_t> task_start;
+    if (record) {
+        std::stable_sort(by_axis.begin(), by_axis.end(), [&](int64_t a, int64_t b) {
+            if (frames[a].m != frames[b].m) return frames[a].m < frames[b].m;
+            return record->slot[sel[a]] < record->slot[sel[b]];
+        });
+        for (int64_t q = 0; q < nsel; ++q) {
+            const int64_t f = sel[by_axis[q]];
+            if (q == 0 || frames[by_axis[q]].m != frames[by_axis[q - 1]].m ||
+                record->slot[f] / PairTable::kTile != record->slot[sel[by_axis[q - 1]]] / PairTable::kTile)
+                task_start.push_back(q);
+        }
+    } else {
+        for (int64_t q = 0; q < nsel; ++q) task_start.push_back(q);
+    }
+    task_start.push_back(nsel);
+    const int64_t ntasks = static_cast<int64_t>(task_start.size()) - 1;
+    parallel_for(ntasks, threads, stop, [&](int64_t task, int t) {
+    uint32_t lanes = 0;  // recording: the tile's columns this task fills
+    for (int64_t kk_ = task_start[task]; kk_ < task_start[task + 1]; ++kk_) {
         const int64_t k = by_axis[kk_];
         GatherWork &w = work[t];
         const Family &F = fams[sel[k]];
@@ -480,10 +528,28 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         uint64_t rowU = 0;
         std::vector<PendingB> &pend = w.pend;
         pend.clear();
+        // recording: this family's column of its axis's table
+        int32_t *rt = nullptr;
+        int64_t rs = 0;
+        if (record) {
+            // into this thread's family-major buffer (a family's writes then
+            // stay within n entries); the tile is written out row by row after
+            const int64_t f = sel[k];
+            const int lane = record->slot[f] % PairTable::kTile;
+            if (w.rbuf.empty()) w.rbuf.assign(static_cast<size_t>(PairTable::kTile) * n_, 0);
+            rs = 1;
+            rt = w.rbuf.data() + int64_t(lane) * n_;
+            lanes |= 1u << lane;
+            record->filled[f] = 1;
+        }
+        auto pair_slab = [&] {
+            if (transpose) pair_pending<true>(rec, pend, K, eps, wgt, dh, sb, vs, rt, rs);
+            else pair_pending<false>(rec, pend, K, eps, wgt, dh, sb, vs, rt, rs);
+        };
         for (int64_t i = 0; i < n_;) {
             int64_t ge = i + 1;
             while (ge < n_ && AX[ge] == AX[i] && AY[ge] == AY[i] && AZ[ge] == AZ[i]) ++ge;
-            if (AX[i] != rowX) pair_pending(rec, pend, K, eps, wgt, dh, sb, vs);  // a new slab
+            if (AX[i] != rowX) pair_slab();  // a new slab
             if (AX[i] != rowX || AY[i] != rowY) {  // the key's u part changes only with the row
                 rowX = AX[i];
                 rowY = AY[i];
@@ -526,8 +592,23 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             ls.last = lastF;
             i = ge;
         }
-        pair_pending(rec, pend, K, eps, wgt, dh, sb, vs);
+        pair_slab();
         lines_walked[t] += walked;
+    }
+    if (record) {  // write the tile's filled columns, one 64-byte row per record
+        GatherWork &w = work[t];
+        const int64_t f0 = sel[by_axis[task_start[task]]];
+        const int m = record->fam_axis[f0];
+        int32_t *blk = record->snd[m].p + int64_t(record->slot[f0] / PairTable::kTile) * n_ * PairTable::kTile;
+        int32_t *buf = w.rbuf.data();
+        for (int64_t p = 0; p < n_; ++p) {
+            int32_t *row = blk + p * PairTable::kTile;
+            for (int lane = 0; lane < PairTable::kTile; ++lane)
+                if (lanes >> lane & 1u) row[lane] = buf[int64_t(lane) * n_ + p];
+        }
+        for (int lane = 0; lane < PairTable::kTile; ++lane)
+            if (lanes >> lane & 1u) std::fill(buf + int64_t(lane) * n_, buf + int64_t(lane + 1) * n_, 0);
+    }
     });
     } else {
     parallel_for(nsel, threads, stop, [&](int64_t k, int t) {
@@ -620,8 +701,9 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                             const float *pf = pn + 8 * int64_t(f), *nf = pn + 3 + 8 * int64_t(f);
                             if (!facing(pf, nf, pp, np, eps)) continue;
                             if (!got) {
-                                const float *vf = vl + 3 * int64_t(f);
-                                double *ap = acc + 3 * int64_t(p);
+                                // transposed: f takes p's value with p's weight
+                                const float *vf = vl + 3 * int64_t(transpose ? p : f);
+                                double *ap = acc + 3 * int64_t(transpose ? f : p);
                                 ap[0] += vf[0] * cb;
                                 ap[1] += vf[1] * cb;
                                 ap[2] += vf[2] * cb;
@@ -632,8 +714,8 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                             if (ha[h]) break;
                             // F receives (along -v) from the first B that faces it.
                             const double cf = double(dot3(nf, dh)) * wgt;
-                            const float *vp = vl + 3 * int64_t(p);
-                            double *af = acc + 3 * int64_t(f);
+                            const float *vp = vl + 3 * int64_t(transpose ? f : p);
+                            double *af = acc + 3 * int64_t(transpose ? p : f);
                             af[0] += vp[0] * cf;
                             af[1] += vp[1] * cf;
                             af[2] += vp[2] * cf;
@@ -682,6 +764,165 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
     int64_t total = 0;
     for (auto x : lines_walked) total += x;
     return total;
+}
+
+// ---------------------------------------------------------------- recorded pairs
+
+PairTable::Block::~Block() { release(); }
+
+void PairTable::Block::release() {
+    if (p) munmap(p, size * sizeof(int32_t));
+    p = nullptr;
+    size = 0;
+}
+
+void PairTable::Block::allocate(size_t n) {
+    release();
+    // anonymous pages are zero and cost nothing until written; huge pages
+    // (where the kernel gives them) cut the page faults of the first pass
+    void *q = mmap(nullptr, n * sizeof(int32_t), PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (q == MAP_FAILED) throw std::bad_alloc();
+#ifdef MADV_HUGEPAGE
+    madvise(q, n * sizeof(int32_t), MADV_HUGEPAGE);
+#endif
+    p = static_cast<int32_t *>(q);
+    size = n;
+}
+
+PairTable::Block &PairTable::Block::operator=(Block &&o) noexcept {
+    if (this != &o) {
+        release();
+        p = o.p;
+        size = o.size;
+        o.p = nullptr;
+        o.size = 0;
+    }
+    return *this;
+}
+
+PairTable LineSystem::make_pair_table(const Family *fams, int64_t nf, bool with_stand_in) const {
+    PairTable t;
+    t.n = n_;
+    t.nfam = nf;
+    t.with_stand_in = with_stand_in;
+    t.slot.resize(nf);
+    t.fam_axis.resize(nf);
+    t.vec.resize(3 * nf);
+    t.dir.resize(3 * nf);
+    t.weight.resize(nf);
+    t.filled.assign(nf, 0);
+    for (int64_t f = 0; f < nf; ++f) {
+        LineFrame fr(fams[f].v, lo_, hi_);  // validates the vector
+        t.fam_axis[f] = fr.m;
+        t.slot[f] = static_cast<int32_t>(t.fams[fr.m].size());
+        t.fams[fr.m].push_back(static_cast<int32_t>(f));
+        const float len = std::sqrt(float(fams[f].v[0]) * fams[f].v[0] + float(fams[f].v[1]) * fams[f].v[1] +
+                                    float(fams[f].v[2]) * fams[f].v[2]);
+        for (int c = 0; c < 3; ++c) {
+            t.vec[3 * f + c] = fams[f].v[c];
+            t.dir[3 * f + c] = fams[f].v[c] / len;
+        }
+        t.weight[f] = fams[f].weight;
+    }
+    for (int m = 0; m < 3; ++m) {
+        const size_t tiles = (t.fams[m].size() + PairTable::kTile - 1) / PairTable::kTile;
+        const size_t size = static_cast<size_t>(n_) * tiles * PairTable::kTile;
+        if (size == 0) continue;
+        t.snd[m].allocate(size);
+    }
+    return t;
+}
+
+void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64_t nsel, const float *val,
+                                 double *out, double *vis, int threads, const StopCheck &stop) const {
+    if (tab.n != n_) throw std::invalid_argument("pair table made for another line system");
+    // the selected families of each axis: their columns, directions and weights
+    std::vector<int32_t> cols[3];
+    std::vector<float> dirs[3];
+    std::vector<double> wts[3];
+    for (int64_t k = 0; k < nsel; ++k) {
+        const int64_t f = sel[k];
+        if (f < 0 || f >= tab.nfam) throw std::invalid_argument("family outside the pair table");
+        if (!tab.filled[f]) throw std::invalid_argument("family " + std::to_string(f) + " not recorded");
+        const int m = tab.fam_axis[f];
+        cols[m].push_back(tab.slot[f]);
+        for (int c = 0; c < 3; ++c) dirs[m].push_back(tab.dir[3 * f + c]);
+        wts[m].push_back(tab.weight[f]);
+    }
+    std::fill(out, out + 3 * n_, 0.0);
+    if (vis) std::fill(vis, vis + n_, 0.0);
+    threads = resolve_threads(threads);
+    constexpr int kT = PairTable::kTile;
+    constexpr int64_t chunk = 1024;  // records whose sums stay in L1 while the tiles stream by
+    for (int m = 0; m < 3; ++m) {
+        const int64_t nc = static_cast<int64_t>(cols[m].size());
+        if (nc == 0) continue;
+        const Axis &ax = ax_[m];
+        // values in this axis's order: the senders are axis-order positions
+        std::vector<float> va(3 * n_);
+        const int32_t *ord = ax.order.data();
+        for (int64_t i = 0; i < n_; ++i)
+            for (int c = 0; c < 3; ++c) va[3 * i + c] = val[3 * int64_t(ord[i]) + c];
+        // the selected columns, in column order, grouped by tile
+        std::vector<int64_t> idx(nc);
+        std::iota(idx.begin(), idx.end(), int64_t(0));
+        std::sort(idx.begin(), idx.end(), [&](int64_t a, int64_t b) { return cols[m][a] < cols[m][b]; });
+        std::vector<int32_t> lane(nc);      // column within its tile
+        std::vector<float> dr(3 * nc);
+        std::vector<double> wt(nc);
+        std::vector<int64_t> tile, tile_first;  // tiles with a selected column, and where their columns start
+        for (int64_t q = 0; q < nc; ++q) {
+            const int64_t j = idx[q];
+            const int32_t c = cols[m][j];
+            lane[q] = c % kT;
+            for (int d = 0; d < 3; ++d) dr[3 * q + d] = dirs[m][3 * j + d];
+            wt[q] = wts[m][j];
+            if (tile.empty() || tile.back() != c / kT) {
+                tile.push_back(c / kT);
+                tile_first.push_back(q);
+            }
+        }
+        tile_first.push_back(nc);
+        const int32_t *base = tab.snd[m].p;
+        const float *nrm = ax.nrm.data();
+        const float *v = va.data();
+        // A chunk of records at a time, tile after tile: the table streams
+        // (one 64-byte row per record and tile), and every record's sum is
+        // added in column order by one thread (no dependence on threads).
+        parallel_for((n_ + chunk - 1) / chunk, threads, stop, [&](int64_t task, int) {
+            const int64_t b = task * chunk, e = std::min(n_, b + chunk);
+            double acc[chunk][4];
+            for (int64_t p = b; p < e; ++p)
+                for (int c = 0; c < 4; ++c) acc[p - b][c] = 0.0;
+            for (size_t ti = 0; ti < tile.size(); ++ti) {
+                const int32_t *blk = base + tile[ti] * n_ * kT;
+                const int64_t q0 = tile_first[ti], q1 = tile_first[ti + 1];
+                for (int64_t p = b; p < e; ++p) {
+                    const int32_t *row = blk + p * kT;
+                    const float n0 = nrm[3 * p], n1 = nrm[3 * p + 1], n2 = nrm[3 * p + 2];
+                    double *a = acc[p - b];
+                    for (int64_t q = q0; q < q1; ++q) {
+                        const int32_t s = row[lane[q]];
+                        if (s == 0) continue;
+                        const float *d = dr.data() + 3 * q;
+                        const double c = double(std::abs(n0 * d[0] + n1 * d[1] + n2 * d[2])) * wt[q];
+                        const float *vs = v + 3 * int64_t(s - 1);
+                        a[0] += vs[0] * c;
+                        a[1] += vs[1] * c;
+                        a[2] += vs[2] * c;
+                        a[3] += c;
+                    }
+                }
+            }
+            for (int64_t p = b; p < e; ++p) {
+                const int64_t r = ord[p];
+                out[3 * r] += acc[p - b][0];
+                out[3 * r + 1] += acc[p - b][1];
+                out[3 * r + 2] += acc[p - b][2];
+                if (vis) vis[r] += acc[p - b][3];
+            }
+        });
+    }
 }
 
 // ---------------------------------------------------------------- shooting

@@ -52,6 +52,44 @@ struct LineFrame {
     }
 };
 
+// The pairs one gathering pass over a direction set found, kept so that the
+// later iterations of a solve replay them instead of walking the lines again
+// (visibility does not change between iterations). For each main axis m: the
+// set's families of axis m, and record by record in axis-m order the axis-m
+// position + 1 of the record each of those families pairs it with (0: none),
+// 4 bytes per record and family, in tiles of 16 families (a 64-byte row per
+// record and tile). Filled by LineSystem::gather (record),
+// read by LineSystem::gather_recorded.
+struct PairTable {
+    static constexpr int kTile = 16;  // columns per tile: one 64-byte row per record
+    int64_t n = 0;        // records
+    int64_t nfam = 0;     // families of the set
+    bool with_stand_in = false;
+    std::vector<int32_t> slot;       // family -> its column in its axis's table
+    std::vector<int32_t> fam_axis;   // family -> main axis
+    std::vector<int32_t> fams[3];    // axis m -> its families (set indices)
+    std::vector<int32_t> vec;        // every family's vector, 3 per family (checked on use)
+    std::vector<float> dir;          // unit direction of every family, 3 per family
+    std::vector<double> weight;      // every family's weight
+    struct Block {                   // anonymous memory: zero pages come free from the OS
+        int32_t *p = nullptr;
+        size_t size = 0;
+        Block() = default;
+        Block(const Block &) = delete;
+        Block &operator=(const Block &) = delete;
+        Block(Block &&o) noexcept : p(o.p), size(o.size) { o.p = nullptr; o.size = 0; }
+        Block &operator=(Block &&o) noexcept;
+        ~Block();
+        void allocate(size_t n);  // n zero entries
+        void release();
+    };
+    // axis m: tiles of kTile columns; tile t's row for the record at axis-m
+    // position p is snd[m].p[(t * n + p) * kTile ...]
+    Block snd[3];
+    std::vector<uint8_t> filled;     // family -> recorded yet
+    size_t bytes() const { return 4 * (snd[0].size + snd[1].size + snd[2].size); }
+};
+
 // The records of a solve, prepared once: bounding box, one lexicographic
 // order per main axis (counting sort), the records' coordinates, normals and
 // surface points stored in each order (so that a family's pass streams
@@ -86,9 +124,26 @@ public:
     // pair: a stand-in B looks past the stand-in F records of its line
     // (neither receives from the other, the F is not marked answered, so it
     // does not occlude the older F records from the receivers further on).
+    // transpose: the transposed operator, out[partner] += val[x] * cos_x *
+    // weight for the same pairs (x's weight, the partner receives): for
+    // every record the power it delivers per unit sent, with val = area / S
+    // (the conservative scaling, DESIGN-NOTES §5). vis is unchanged.
     int64_t gather(const Family *fams, const int64_t *sel, int64_t nsel, const float *val,
                    double *out, double *vis, int threads, const StopCheck &stop,
-                   bool onepass = true, const uint8_t *stand_in = nullptr) const;
+                   bool onepass = true, const uint8_t *stand_in = nullptr,
+                   bool transpose = false, PairTable *record = nullptr) const;
+
+    // Record the pairs of the families gathered by `gather` into `table`
+    // (made by make_pair_table for the same family array, and the same
+    // stand-in flags every time): pass it as `record` to any gather call.
+    PairTable make_pair_table(const Family *fams, int64_t nf, bool with_stand_in) const;
+
+    // The gathering pass over the recorded families `sel` (every one of them
+    // recorded), from the table instead of the lines: the same pairs, the
+    // same weights, the sums added per record in family order (results
+    // equal gather's to float rounding, and do not depend on `threads`).
+    void gather_recorded(const PairTable &table, const int64_t *sel, int64_t nsel, const float *val,
+                         double *out, double *vis, int threads, const StopCheck &stop) const;
 
     // Shooting from the emitter records `emit[0..ne)` along every direction
     // +v and -v of every family (with n_e.s > 0): an integer march along the

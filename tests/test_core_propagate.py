@@ -360,6 +360,90 @@ def test_threads_partial_sums_and_algorithms_agree(sphere24):
     assert np.allclose(a + b, one, rtol=1e-12, atol=1e-15)
 
 
+# ----------------------------------------------------------------- recorded pairs, transpose
+
+
+@pytest.mark.parametrize("stand", [False, True])
+def test_recorded_pairs_replay_the_gathering(sphere24, stand):
+    # A pass that records its pairs returns what a plain pass returns; a
+    # replay of the table gives the same sums and visibility (to float
+    # rounding: the sums are added in another order), bit for bit the same
+    # on 1 and 2 threads, and for any subset of recorded families.
+    rec, s = sphere24
+    n = len(rec["ijk"])
+    sb = rec["back"].copy() if stand else None  # every back record a stand-in
+    vals = np.random.default_rng(5).random((n, 3)).astype(np.float32)
+    ds, fams = all_families(6)
+    plain, vis, lines = s.gather(ds.families, ds.weights, vals, fams, True, 2, stand_in=sb)
+    tab = s.make_pair_table(ds.families, ds.weights, stand)
+    assert tab.recorded == 0 and tab.families == len(fams)
+    rec_sums, rec_vis, rec_lines = s.gather(ds.families, ds.weights, vals, fams, True, 2,
+                                            stand_in=sb, record=tab)
+    assert tab.recorded == len(fams)
+    assert rec_lines == lines
+    assert np.allclose(rec_sums, plain, rtol=1e-12, atol=0)
+    one, vis1 = s.gather_recorded(tab, vals, fams, True, 1)
+    two, vis2 = s.gather_recorded(tab, vals, fams, True, 2)
+    assert np.array_equal(one, two) and np.array_equal(vis1, vis2)
+    assert np.allclose(one, plain, rtol=1e-12, atol=0)
+    assert np.allclose(vis1, vis, rtol=1e-12, atol=0)
+    sub = np.ascontiguousarray(fams[1::3])
+    part, _, _ = s.gather(ds.families, ds.weights, vals, sub, False, 1, stand_in=sb)
+    rpart, none = s.gather_recorded(tab, vals, sub, False, 1)
+    assert none is None
+    assert np.allclose(rpart, part, rtol=1e-12, atol=0)
+    # 4 bytes per record and family, each axis padded to tiles of 16
+    m = np.argmax(np.abs(ds.families), axis=1)
+    assert tab.nbytes == 4 * n * sum(-(-np.sum(m == a) // 16) * 16 for a in range(3))
+
+
+def test_recorded_pairs_refuse_what_they_do_not_hold(sphere24):
+    rec, s = sphere24
+    n = len(rec["ijk"])
+    vals = np.ones((n, 3), np.float32)
+    ds, fams = all_families(4)
+    tab = s.make_pair_table(ds.families, ds.weights, False)
+    half = np.ascontiguousarray(fams[: len(fams) // 2])
+    s.gather(ds.families, ds.weights, vals, half, False, 1, record=tab)
+    assert tab.recorded == len(half)
+    with pytest.raises(ValueError, match="not recorded"):
+        s.gather_recorded(tab, vals, fams, False, 1)
+    with pytest.raises(ValueError, match="outside"):
+        s.gather_recorded(tab, vals, np.array([len(fams)], np.int64), False, 1)
+    with pytest.raises(ValueError, match="stand-in"):
+        s.gather(ds.families, ds.weights, vals, fams, False, 1, stand_in=rec["back"].copy(),
+                 record=tab)
+    with pytest.raises(ValueError, match="one-pass"):
+        s.gather(ds.families, ds.weights, vals, fams, False, 1, "sort", record=tab)
+    other = all_families(5)[0]
+    with pytest.raises(ValueError, match="other families"):
+        s.gather(other.families, other.weights, vals, fams, False, 1, record=tab)
+    small = system(sphere_records(10), epsilon=0.02, history=16)
+    with pytest.raises(ValueError, match="another line system"):
+        small.gather_recorded(tab, np.ones((small.size, 3), np.float32), half, False, 1)
+
+
+@pytest.mark.parametrize("algorithm", ["onepass", "sort"])
+def test_transposed_gathering_is_the_adjoint(sphere24, algorithm):
+    # <x, K y> == <K^T x, y> for the gathering operator K (same pairs, the
+    # weight of the record that receives in K)
+    rec, s = sphere24
+    n = len(rec["ijk"])
+    rng = np.random.default_rng(9)
+    x = rng.random((n, 3)).astype(np.float32)
+    y = rng.random((n, 3)).astype(np.float32)
+    ds, fams = all_families(5)
+    sb = rec["back"].copy()
+    for stand in (None, sb):
+        Ky, _, _ = s.gather(ds.families, ds.weights, y, fams, False, 2, algorithm, stand_in=stand)
+        KTx, _, _ = s.gather(ds.families, ds.weights, x, fams, False, 2, algorithm,
+                             stand_in=stand, transpose=True)
+        lhs = np.sum(x.astype(np.float64) * Ky)
+        assert lhs > 0
+        assert np.sum(KTx * y) == pytest.approx(lhs, rel=1e-12)
+        assert not np.allclose(KTx, Ky, rtol=1e-3)  # K is not symmetric: the test can fail
+
+
 # ----------------------------------------------------------------- bad input
 
 

@@ -343,6 +343,87 @@ class _Extrapolator:
         return d * self.factor
 
 
+def _available_memory() -> int:
+    """MemAvailable from /proc/meminfo in bytes (Linux), else 8 GiB."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 8 << 30
+
+
+def pair_table_bytes(n: int, families: np.ndarray) -> int:
+    """Bytes of the recorded pairs of ``n`` records over ``families``: 4 per
+    record and family, each main axis's families padded to tiles of 16."""
+    fam = np.asarray(families)
+    if len(fam) == 0:
+        return 0
+    m = np.argmax(np.abs(fam), axis=1)
+    cols = sum(-(-int(np.sum(m == a)) // 16) * 16 for a in range(3))
+    return 4 * int(n) * cols
+
+
+class _Gatherer:
+    """The gathering passes of one solve. The first pass over a direction
+    set walks the lines and, where the budget allows, records the pairs it
+    finds (:class:`voxgi._core.PairTable`); later passes over recorded
+    families replay them: visibility does not change between iterations,
+    so only the first pass pays for it."""
+
+    def __init__(self, sysm, nthreads: int, stand_in, budget: int | None, passes: dict):
+        self.sysm = sysm
+        self.nthreads = nthreads
+        self.stand_in = stand_in
+        self.budget = budget  # None: never record
+        self.passes = passes  # id(ds) -> expected passes over that set
+        self.tables: dict = {}
+        self.used = 0
+        self.info: dict = {"bytes": 0, "sets": []}
+        self.replayed = 0
+
+    def _table(self, ds):
+        key = id(ds)
+        if key in self.tables:
+            return self.tables[key]
+        tab = None
+        need = pair_table_bytes(self.sysm.size, ds.families)
+        entry = {"radius": int(ds.radius), "bytes": need}
+        if self.budget is None:
+            entry["recorded"] = False
+        elif self.passes.get(key, 0) < 2:
+            entry["recorded"] = False
+            entry["reason"] = "one pass only"
+        elif self.used + need > self.budget:
+            entry["recorded"] = False
+            entry["reason"] = f"needs {need / 2**30:.2f} GiB, budget {self.budget / 2**30:.2f} GiB"
+        else:
+            tab = [self.sysm.make_pair_table(ds.families, ds.weights, self.stand_in is not None),
+                   np.zeros(len(ds.families), bool)]
+            self.used += need
+            entry["recorded"] = True
+            self.info["bytes"] = self.used
+        self.info["sets"].append(entry)
+        self.tables[key] = tab
+        return tab
+
+    def __call__(self, ds, values, sel, want_vis):
+        """(sums, vis, lines walked) of one pass over ``ds.families[sel]``."""
+        tab = self._table(ds)
+        if tab is not None and np.all(tab[1][sel]):
+            sums, vis = self.sysm.gather_recorded(tab[0], values, sel, want_vis, self.nthreads)
+            self.replayed += 1
+            return sums, vis, 0
+        out = self.sysm.gather(ds.families, ds.weights, values, sel, want_vis, self.nthreads,
+                               stand_in=self.stand_in,
+                               **({"record": tab[0]} if tab is not None else {}))
+        if tab is not None:
+            tab[1][sel] = True
+        return out
+
+
 def solve(
     vox: VoxelSet,
     directions: int = 22,
@@ -365,6 +446,8 @@ def solve(
     shoot_coverage: bool = True,
     shoot_silhouettes: bool = True,
     diagnostics: bool = True,
+    pair_cache: bool | None = None,
+    max_cache_bytes: int | None = None,
 ) -> Solution:
     """Solve the discrete radiosity equation on the records of ``vox``.
 
@@ -496,6 +579,9 @@ def solve(
     eps = _validate.real(epsilon, "epsilon", low=0.0)
     hist = _validate.integer(history, "history", low=1, high=32)
     gsb = _validate.integer(gs_blocks, "gs_blocks", low=1)
+    if pair_cache is not None and not isinstance(pair_cache, (bool, np.bool_)):
+        raise TypeError(f"pair_cache: expected True, False or None, got {pair_cache!r}")
+    cache_cap = _validate.integer(max_cache_bytes, "max_cache_bytes", low=0, allow_none=True)
     if not isinstance(method, str) or method.lower().replace("_", "-") not in (
         "jacobi",
         "gauss-seidel",
@@ -671,6 +757,21 @@ def solve(
     if not np.any(rho > 0):
         stats["skipped"]["gathering"] = "all albedos are zero"
         limit = 0
+    # recorded pairs (pair_cache): expected passes over each direction set
+    if client is not None or pair_cache is False:
+        budget = None
+        stats["pair_cache"] = {"recorded": False,
+                               "reason": "distributed" if client is not None else "pair_cache=False"}
+    else:
+        budget = cache_cap if cache_cap is not None else (
+            _available_memory() // 4 if pair_cache is None else 1 << 62)
+    extra = 1 if diagnostics else 0
+    passes = {id(gds): (min(limit, la) if lds is not None else limit) + extra}
+    if lds is not None:
+        passes[id(lds)] = passes.get(id(lds), 0) + max(0, limit - la)
+        if lds is gds:
+            passes[id(gds)] = limit + extra
+    gather = _Gatherer(sysm, nthreads, stand_in, budget, passes)
     bar = None
     if progress and limit > 0:
         from tqdm.auto import tqdm
@@ -697,15 +798,7 @@ def solve(
             if progressive:
                 # propagate only the last bounce (its increment), with this
                 # bounce's directions: B = E + Σ_k ΔR_k, ΔR_{k+1} = ρ M_k ΔR_k
-                sums, v, nl = sysm.gather(
-                    ds_it.families,
-                    ds_it.weights,
-                    _send(dk),
-                    fams,
-                    want_vis,
-                    nthreads,
-                    stand_in=stand_in,
-                )
+                sums, v, nl = gather(ds_it, _send(dk), fams, want_vis)
                 lines_walked += nl
                 h_inc = sums / S_it[:, None]
                 Hg_acc += h_inc
@@ -714,15 +807,7 @@ def solve(
                 if want_vis:
                     vis = v
             elif method == "jacobi":
-                sums, v, nl = sysm.gather(
-                    ds_it.families,
-                    ds_it.weights,
-                    _send(Rk),
-                    blk[0],
-                    want_vis,
-                    nthreads,
-                    stand_in=stand_in,
-                )
+                sums, v, nl = gather(ds_it, _send(Rk), blk[0], want_vis)
                 lines_walked += nl
                 Hg = sums / S_it[:, None]
                 R_new = rho * (Hd + Hg)
@@ -735,15 +820,7 @@ def solve(
                 cur = Rk.copy()
                 vacc = np.zeros(n) if want_vis else None
                 for bi, sel in enumerate(blk):
-                    sums, v, nl = sysm.gather(
-                        ds_it.families,
-                        ds_it.weights,
-                        _send(cur),
-                        sel,
-                        want_vis,
-                        nthreads,
-                        stand_in=stand_in,
-                    )
+                    sums, v, nl = gather(ds_it, _send(cur), sel, want_vis)
                     lines_walked += nl
                     parts[bi] = sums
                     if want_vis:
@@ -795,10 +872,7 @@ def solve(
     # --- diagnostics: lost fraction δ, energy balance (DESIGN-NOTES §5, §10)
     if vis is None:  # no gathering ran: one visibility pass for the statistics
         t = time.perf_counter()
-        _, vis, _ = sysm.gather(
-            gds.families, gds.weights, np.zeros((n, 3), np.float32), all_fams, True, nthreads,
-            stand_in=stand_in,
-        )
+        _, vis, _ = gather(gds, np.zeros((n, 3), np.float32), all_fams, True)
         seconds["visibility"] = time.perf_counter() - t
     found = vis / vis_S
     front = ~a["back"]
@@ -817,8 +891,7 @@ def solve(
         t = time.perf_counter()
         ind = np.zeros((n, 3), np.float32)
         ind[dark] = 1.0
-        gb, _, _ = sysm.gather(gds.families, gds.weights, ind, all_fams, False, nthreads,
-                               stand_in=stand_in)
+        gb, _, _ = gather(gds, ind, all_fams, False)
         seconds["back_fraction"] = time.perf_counter() - t
         share = gb[:, 0] / vis_S
         back_fraction = float(np.sum(wa * share) / np.sum(wa))
@@ -853,11 +926,15 @@ def solve(
             "imbalance": imbalance.tolist(),
         },
         extrapolations=extrap.count if extrap is not None else 0,
+        pair_cache=stats.get("pair_cache", {**gather.info, "replayed_passes": gather.replayed}),
         epsilon=eps,
         history=hist,
     )
     if it and lds is not None:
         stats["skipped"]["finer_directions_after"] = la
+    if gather.replayed:
+        stats["skipped"]["line_walks"] = (
+            f"{gather.replayed} gathering passes replayed the recorded pairs")
     return Solution(
         vox=vox, radiosity=B.astype(np.float32), bounces=it, residuals=residuals, stats=stats
     )
