@@ -428,19 +428,31 @@ def linear(args) -> None:
 
 
 def throughput(args) -> None:
+    # One gathering iteration over all 2991 families of R 22, three ways:
+    # the one-pass walk (every iteration without recorded pairs), the same
+    # walk recording its pairs (a solve's first pass over a set), and the
+    # replay of the recorded pairs (its later passes); the counting-sort
+    # walk for reference.
     rows = []
     res = 64 if args.quick else 113
     vox = _bunny(res)
+    ds = direction_set(22)
+    vals = np.random.default_rng(0).random((len(vox), 3)).astype(np.float32)
+    fam = np.arange(len(ds.families), dtype=np.int64)
+    rays = len(vox) * len(fam)
     for th in args.threads:
-        for algo in ("onepass", "sort"):
-            s = voxgi.radiosity.line_system(vox)
-            ds = direction_set(22)
-            vals = np.random.default_rng(0).random((len(vox), 3)).astype(np.float32)
-            fam = np.arange(len(ds.families), dtype=np.int64)
+        s = voxgi.radiosity.line_system(vox)
+        tab = s.make_pair_table(ds.families, ds.weights, False)
+        runs = {
+            "onepass": lambda: s.gather(ds.families, ds.weights, vals, fam, False, th),
+            "sort": lambda: s.gather(ds.families, ds.weights, vals, fam, False, th, "sort"),
+            "record": lambda: s.gather(ds.families, ds.weights, vals, fam, False, th, record=tab),
+            "replay": lambda: s.gather_recorded(tab, vals, fam, False, th),
+        }
+        for algo, fn in runs.items():
             t = time.perf_counter()
-            s.gather(ds.families, ds.weights, vals, fam, False, th, algo)
+            fn()
             dt = time.perf_counter() - t
-            rays = len(vox) * len(fam)
             rows.append(
                 {
                     "records": len(vox),
@@ -450,18 +462,23 @@ def throughput(args) -> None:
                     "seconds": dt,
                     "Mrays_s": rays / dt / 1e6,
                     "Mrays_s_per_thread": rays / dt / 1e6 / th,
+                    "table_GB": tab.nbytes / 1e9 if algo in ("record", "replay") else 0.0,
                 }
             )
             print(rows[-1], flush=True)
-    _table(rows, ["records", "threads", "algorithm", "seconds", "Mrays_s", "Mrays_s_per_thread"])
-    _write("throughput", rows, res=res, note="one gathering iteration over all 2991 families")
+        del tab
+    _table(rows, ["records", "threads", "algorithm", "seconds", "Mrays_s", "Mrays_s_per_thread",
+                  "table_GB"])
+    _write("throughput", rows, res=res,
+           note="one gathering iteration over all 2991 families; a ray is one record meeting "
+           "one direction family in one iteration")
 
 
 def paper(args) -> None:
     rows = []
     res = 64 if args.quick else 112
     vox = _bunny(res)
-    for th in args.threads:
+    for th, cache in [(th, c) for c in (False, None) for th in args.threads]:
         t = time.perf_counter()
         sol = voxgi.solve(
             vox,
@@ -471,6 +488,7 @@ def paper(args) -> None:
             threads=th,
             progress=False,
             accelerate=False,
+            pair_cache=cache,
         )
         dt = time.perf_counter() - t
         sec = sol.stats["seconds"]
@@ -479,6 +497,7 @@ def paper(args) -> None:
                 "records": len(vox),
                 "emitters": sol.stats["emitters"],
                 "threads": th,
+                "pairs": "replayed" if sol.stats["pair_cache"].get("replayed_passes") else "walked",
                 "shoot_s": sec["shoot"],
                 "gather_s": sec["gather"],
                 "total_s": dt,
@@ -497,6 +516,7 @@ def paper(args) -> None:
             "records",
             "emitters",
             "threads",
+            "pairs",
             "shoot_s",
             "gather_s",
             "total_s",
@@ -531,6 +551,32 @@ def dump(args) -> None:
     print(f"wrote {path} ({len(vox)} records, {len(emit)} emitters)")
 
 
+def _send_ratio(vox, R: int, threads: int) -> dict:
+    """Per object: the power its records deliver through the gathering
+    operator per unit radiosity (the transposed pass of area / S) over the
+    power they send into the directions in which they found a partner
+    (area x found share). 1 everywhere would make the gathering conserve
+    energy; where it is not 1 is where the imbalance comes from."""
+    from voxgi import _core
+    from voxgi.radiosity import _check_vox
+
+    a = _check_vox(vox)
+    n = len(vox)
+    s = _core.LineSystem(a["ijk"], a["normal"], a["point"], epsilon=0.02, history=16)
+    ds = direction_set(R)
+    fam = np.arange(len(ds.families), dtype=np.int64)
+    S = s.normalisation(ds.families, ds.weights, threads)
+    w = np.repeat((a["area"] / S)[:, None], 3, axis=1).astype(np.float32)
+    _, vis, _ = s.gather(ds.families, ds.weights, np.zeros((n, 3), np.float32), fam, True, threads)
+    col, _, _ = s.gather(ds.families, ds.weights, w, fam, False, threads, transpose=True)
+    target = a["area"] * vis / S
+    out = {}
+    for o in np.unique(vox.object_id):
+        m = (vox.object_id == o) & ~a["back"]
+        out[str(int(o))] = float(col[m, 0].sum() / target[m].sum()) if target[m].sum() > 0 else 0.0
+    return out
+
+
 def energy(args) -> None:
     # The open Cornell box's energy balance against the resolution (the
     # convergence study DESIGN-NOTES §10 asks the tolerance to come from):
@@ -542,9 +588,12 @@ def energy(args) -> None:
     ress = args.res or ([32, 64] if args.quick else [32, 64, 128, 256])
     th = args.threads[0]
     scene = voxgi.scenes.cornell_box(width=32, height=32)
+    names = [o.name for o in scene.objects]
     rows = []
     for res in ress:
         vox = voxgi.voxelize(scene, resolution=res)
+        ratio = _send_ratio(vox, R, th) if res <= 128 else {}
+        ratio = {names[int(k)]: v for k, v in ratio.items()}
         t = time.perf_counter()
         sol = voxgi.solve(vox, directions=R, shoot_directions=Rs, progress=False, tol=1e-5,
                           threads=th, pair_cache=True)
@@ -563,11 +612,16 @@ def energy(args) -> None:
             "absorbed/emitted": float(e["absorbed"][0] / em[0]),
             "escaping/emitted": float(e["escaping"][0] / em[0]),
             "seconds": dt,
+            "send_ratio": ratio,
         })
         print(rows[-1], flush=True)
     _table(rows, ["res", "records", "R", "Rs", "iters", "imbalance_r", "imbalance_g", "imbalance_b",
                   "absorbed/emitted", "escaping/emitted", "seconds"])
-    _write("energy", rows, threads=th,
+    print("send ratio of the gathering (delivered / sent per unit radiosity; front records):")
+    for r in rows:
+        if r["send_ratio"]:
+            print(f"  res {r['res']:4d}: " + "  ".join(f"{k} {v:.4f}" for k, v in r["send_ratio"].items()))
+    _write(f"energy_R{R}", rows, threads=th,
            note="open Cornell box; imbalance = (emitted - absorbed - escaping) / emitted, "
            "escaping counted on the sender side")
 

@@ -601,13 +601,26 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         const int m = record->fam_axis[f0];
         int32_t *blk = record->snd[m].p + int64_t(record->slot[f0] / PairTable::kTile) * n_ * PairTable::kTile;
         int32_t *buf = w.rbuf.data();
-        for (int64_t p = 0; p < n_; ++p) {
-            int32_t *row = blk + p * PairTable::kTile;
-            for (int lane = 0; lane < PairTable::kTile; ++lane)
-                if (lanes >> lane & 1u) row[lane] = buf[int64_t(lane) * n_ + p];
+        constexpr int kT = PairTable::kTile;
+        // (the buffer is cleared as it is read: the next tile finds it zero)
+        if (lanes == (1u << kT) - 1) {
+            for (int64_t p = 0; p < n_; ++p) {
+                int32_t *row = blk + p * kT;
+                for (int lane = 0; lane < kT; ++lane) {
+                    row[lane] = buf[int64_t(lane) * n_ + p];
+                    buf[int64_t(lane) * n_ + p] = 0;
+                }
+            }
+        } else {
+            for (int64_t p = 0; p < n_; ++p) {
+                int32_t *row = blk + p * kT;
+                for (int lane = 0; lane < kT; ++lane)
+                    if (lanes >> lane & 1u) {
+                        row[lane] = buf[int64_t(lane) * n_ + p];
+                        buf[int64_t(lane) * n_ + p] = 0;
+                    }
+            }
         }
-        for (int lane = 0; lane < PairTable::kTile; ++lane)
-            if (lanes >> lane & 1u) std::fill(buf + int64_t(lane) * n_, buf + int64_t(lane + 1) * n_, 0);
     }
     });
     } else {
