@@ -36,7 +36,7 @@ from . import _core, _validate
 from .directions import direction_set
 from .voxels import VoxelSet
 
-__all__ = ["Solution", "gather_partial", "line_system", "solve"]
+__all__ = ["Solution", "gather_partial", "line_system", "pair_table_bytes", "solve"]
 
 
 @dataclass
@@ -545,6 +545,22 @@ def solve(
         (default). False skips it (one pass of the ``directions`` set; the
         statistics then say it was skipped); the energy balance and the lost
         fraction come from passes the solve runs anyway.
+    pair_cache : bool or None
+        Record the pairs the first gathering pass over a direction set finds
+        (4 bytes per record and family) and replay them in the later passes
+        over that set (visibility does not change between iterations; the
+        same sums to float rounding, 5-6x faster per pass; measured on 150k
+        records at R 22: 279 M rays/s replayed, 49 M walked, 37 M while
+        recording). Only for a set gathered at least twice (iterations plus
+        the diagnostics pass). None (default): when the pairs fit in
+        ``max_cache_bytes``; True: the same with no default budget; False:
+        walk the lines every pass. Never with ``client`` (the workers walk).
+        ``stats["pair_cache"]`` gives the bytes, the sets recorded (or why
+        not) and the passes replayed.
+    max_cache_bytes : int or None
+        Budget for the recorded pairs of all direction sets; None: a quarter
+        of the memory available when the solve starts (``pair_cache=None``),
+        no limit (``pair_cache=True``).
     Returns
     -------
     Solution
