@@ -443,15 +443,16 @@ def throughput(args) -> None:
     for th in args.threads:
         s = voxgi.radiosity.line_system(vox)
         tab = s.make_pair_table(ds.families, ds.weights, False)
+        args_ = (ds.families, ds.weights, vals, fam, False, th)
         runs = {
-            "onepass": lambda: s.gather(ds.families, ds.weights, vals, fam, False, th),
-            "sort": lambda: s.gather(ds.families, ds.weights, vals, fam, False, th, "sort"),
-            "record": lambda: s.gather(ds.families, ds.weights, vals, fam, False, th, record=tab),
-            "replay": lambda: s.gather_recorded(tab, vals, fam, False, th),
+            "onepass": (s.gather, args_, {}),
+            "sort": (s.gather, (*args_, "sort"), {}),
+            "record": (s.gather, args_, {"record": tab}),
+            "replay": (s.gather_recorded, (tab, vals, fam, False, th), {}),
         }
-        for algo, fn in runs.items():
+        for algo, (fn, a, kw) in runs.items():
             t = time.perf_counter()
-            fn()
+            fn(*a, **kw)
             dt = time.perf_counter() - t
             rows.append(
                 {
@@ -620,7 +621,8 @@ def energy(args) -> None:
     print("send ratio of the gathering (delivered / sent per unit radiosity; front records):")
     for r in rows:
         if r["send_ratio"]:
-            print(f"  res {r['res']:4d}: " + "  ".join(f"{k} {v:.4f}" for k, v in r["send_ratio"].items()))
+            ratios = "  ".join(f"{k} {v:.4f}" for k, v in r["send_ratio"].items())
+            print(f"  res {r['res']:4d}: {ratios}")
     _write(f"energy_R{R}", rows, threads=th,
            note="open Cornell box; imbalance = (emitted - absorbed - escaping) / emitted, "
            "escaping counted on the sender side")

@@ -376,15 +376,18 @@ def test_recorded_pairs_replay_the_gathering(sphere24, stand):
     ds, fams = all_families(6)
     plain, vis, lines = s.gather(ds.families, ds.weights, vals, fams, True, 2, stand_in=sb)
     tab = s.make_pair_table(ds.families, ds.weights, stand)
-    assert tab.recorded == 0 and tab.families == len(fams)
+    assert tab.recorded == 0
+    assert tab.families == len(fams)
     rec_sums, rec_vis, rec_lines = s.gather(ds.families, ds.weights, vals, fams, True, 2,
                                             stand_in=sb, record=tab)
     assert tab.recorded == len(fams)
     assert rec_lines == lines
+    assert np.allclose(rec_vis, vis, rtol=1e-12, atol=0)
     assert np.allclose(rec_sums, plain, rtol=1e-12, atol=0)
     one, vis1 = s.gather_recorded(tab, vals, fams, True, 1)
     two, vis2 = s.gather_recorded(tab, vals, fams, True, 2)
-    assert np.array_equal(one, two) and np.array_equal(vis1, vis2)
+    assert np.array_equal(one, two)
+    assert np.array_equal(vis1, vis2)
     assert np.allclose(one, plain, rtol=1e-12, atol=0)
     assert np.allclose(vis1, vis, rtol=1e-12, atol=0)
     sub = np.ascontiguousarray(fams[1::3])

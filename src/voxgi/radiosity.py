@@ -776,8 +776,8 @@ def solve(
     # recorded pairs (pair_cache): expected passes over each direction set
     if client is not None or pair_cache is False:
         budget = None
-        stats["pair_cache"] = {"recorded": False,
-                               "reason": "distributed" if client is not None else "pair_cache=False"}
+        why = "distributed" if client is not None else "pair_cache=False"
+        stats["pair_cache"] = {"recorded": False, "reason": why}
     else:
         budget = cache_cap if cache_cap is not None else (
             _available_memory() // 4 if pair_cache is None else 1 << 62)
