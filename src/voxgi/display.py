@@ -884,6 +884,8 @@ def run_cli(args) -> int:
                 threads=args.threads, progress=not args.quiet, diagnostics=False)
     t_sol = time.perf_counter() - t0
     say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in {t_sol:.2f} s")
+    for what, why in sol.stats.get("skipped", {}).items():
+        say(f"  solve skipped {what}: {why}")
     res = render(scene, sol, max_frames=args.frames, seed=args.seed, progress=not args.quiet,
                  threads=args.threads)
     s = res.stats
