@@ -623,6 +623,15 @@ def energy(args) -> None:
         if r["send_ratio"]:
             ratios = "  ".join(f"{k} {v:.4f}" for k, v in r["send_ratio"].items())
             print(f"  res {r['res']:4d}: {ratios}")
+    # keep the rows of other resolutions from earlier runs (a 768 run takes
+    # a while on its own); each row says its threads and seconds
+    for r in rows:
+        r["threads"] = th
+    old = RESULTS / f"propagation_energy_R{R}.json"
+    if old.exists() and not args.fresh:
+        done = {r["res"] for r in rows}
+        rows = sorted([r for r in json.loads(old.read_text())["rows"] if r["res"] not in done] + rows,
+                      key=lambda r: r["res"])
     _write(f"energy_R{R}", rows, threads=th,
            note="open Cornell box; imbalance = (emitted - absorbed - escaping) / emitted, "
            "escaping counted on the sender side")
@@ -647,7 +656,7 @@ def main() -> None:
     ap.add_argument("sections", nargs="*", default=[], help=", ".join(SECTIONS))
     ap.add_argument("--quick", action="store_true", help="smaller cases")
     ap.add_argument("--fresh", action="store_true",
-                    help="cap: run every cell (default: keep the cells of earlier runs)")
+                    help="cap, energy: run every cell (default: keep the cells of earlier runs)")
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--res", type=int, nargs="+",
                     help="cap, energy: resolutions; furnace: the first one")
