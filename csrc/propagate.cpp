@@ -540,7 +540,6 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             rs = 1;
             rt = w.rbuf.data() + int64_t(lane) * n_;
             lanes |= 1u << lane;
-            record->filled[f] = 1;
         }
         auto pair_slab = [&] {
             if (transpose) pair_pending<true>(rec, pend, K, eps, wgt, dh, sb, vs, rt, rs);
@@ -621,6 +620,9 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                     }
             }
         }
+        // only now: a pass stopped half-way (Ctrl-C) leaves its families unrecorded
+        for (int64_t kk_ = task_start[task]; kk_ < task_start[task + 1]; ++kk_)
+            record->filled[sel[by_axis[kk_]]] = 1;
     }
     });
     } else {
@@ -791,8 +793,8 @@ void PairTable::Block::release() {
 
 void PairTable::Block::allocate(size_t n) {
     release();
-    // anonymous pages are zero and cost nothing until written; huge pages
-    // (where the kernel gives them) cut the page faults of the first pass
+    // anonymous pages are zero and cost nothing until written (huge pages
+    // asked for: the kernel grants them in THP "madvise" mode)
     void *q = mmap(nullptr, n * sizeof(int32_t), PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (q == MAP_FAILED) throw std::bad_alloc();
 #ifdef MADV_HUGEPAGE

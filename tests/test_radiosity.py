@@ -343,7 +343,8 @@ def test_cornell_box_energy_balance_converges():
     # 64 with R 8 and 16: the gathering still stops grazing lines whole).
     # The convergence study behind the bound (R 8, 16, tol 1e-5,
     # benchmarks/propagation.py energy): 0.26% / 0.90% / 0.63% / 0.11% /
-    # 0.066% (red; green 0.106% at 512) at res 32 / 64 / 128 / 256 / 512.
+    # 0.066% / 0.104% (red; green 0.106%, 0.122%) at res 32 / 64 / 128 / 256 /
+    # 512 / 768: it levels off near 1e-3.
     scene = voxgi.scenes.cornell_box(width=32, height=32)
     imb = []
     for res in (24, 48):

@@ -783,10 +783,8 @@ def solve(
             _available_memory() // 4 if pair_cache is None else 1 << 62)
     extra = 1 if diagnostics else 0
     passes = {id(gds): (min(limit, la) if lds is not None else limit) + extra}
-    if lds is not None:
+    if lds is not None:  # (the same object as gds when later_directions == directions)
         passes[id(lds)] = passes.get(id(lds), 0) + max(0, limit - la)
-        if lds is gds:
-            passes[id(gds)] = limit + extra
     gather = _Gatherer(sysm, nthreads, stand_in, budget, passes)
     bar = None
     if progress and limit > 0:
