@@ -82,7 +82,7 @@ def mc_reference(scene, vox, n=2_000_000, seed=1):
         obj = owner[tri]
         per_obj += np.bincount(obj, minlength=len(names))
         vk = np.floor((loc - vox.origin) / vox.pitch).astype(np.int64)
-        key = (obj * 1_000_000 + vk[:, 0] * 10_000 + vk[:, 1] * 100 + vk[:, 2]) if vox.resolution < 100 else None
+        key = obj * 1_000_000_000 + vk[:, 0] * 1_000_000 + vk[:, 1] * 1_000 + vk[:, 2]
         uk, cnt = np.unique(key, return_counts=True)
         for kk, c in zip(uk, cnt):
             bins[int(kk)] = bins.get(int(kk), 0) + int(c)
@@ -121,9 +121,9 @@ def main():
         dpow = {}
         for r in sel:
             i, j, k = ijk[r]
-            key = fl * 1_000_000 + i * 10_000 + j * 100 + k
+            key = fl * 1_000_000_000 + i * 1_000_000 + j * 1_000 + k
             dpow[key] = dpow.get(key, 0.0) + power[r] / emitted
-        keys = set(dpow) | {k for k in bins if k // 1_000_000 == fl}
+        keys = set(dpow) | {k for k in bins if k // 1_000_000_000 == fl}
         diff = np.array([dpow.get(k, 0.0) - bins.get(k, 0.0) for k in keys])
         refv = np.array([bins.get(k, 0.0) for k in keys])
         dscv = np.array([dpow.get(k, 0.0) for k in keys])
