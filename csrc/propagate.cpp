@@ -317,6 +317,17 @@ inline void step_record(GatherRec *rec, int32_t p, float c, int32_t &lastF, std:
 // A queued B record receives from the newest F that faces it and answers
 // every facing F back to the first one already answered (which occludes the
 // older ones).
+// `receiver` takes `sender`'s value with weight w (transposed: the other way
+// round, with the same weight).
+template <bool Transpose>
+inline void add(GatherRec &receiver, GatherRec &sender, double w) {
+    GatherRec &to = Transpose ? sender : receiver;
+    const GatherRec &from = Transpose ? receiver : sender;
+    to.acc[0] += from.val[0] * w;
+    to.acc[1] += from.val[1] * w;
+    to.acc[2] += from.val[2] * w;
+}
+
 // rt (nullable): the family's column of a PairTable (rt[p * rs] = sender + 1).
 template <bool Transpose>
 inline void pair_record(GatherRec *rec, const PendingB &q, int K, float eps, double wgt, const float *dh,
@@ -336,22 +347,14 @@ inline void pair_record(GatherRec *rec, const PendingB &q, int K, float eps, dou
         }
         if (!got) {
             // p receives from f with weight cb; transposed, f takes p's value with it
-            GatherRec &to = Transpose ? rf : rp;
-            const GatherRec &from = Transpose ? rp : rf;
-            to.acc[0] += from.val[0] * cb;
-            to.acc[1] += from.val[1] * cb;
-            to.acc[2] += from.val[2] * cb;
+            add<Transpose>(rp, rf, cb);
             if (vs) vs[p] += cb;
             if (rt) rt[p * rs] = f + 1;
             got = true;
         }
         if (rf.link & kAnswered) break;  // an answered facing F occludes the older ones
         const double cf = double(dot3(rf.nrm, dh)) * wgt;
-        GatherRec &to = Transpose ? rp : rf;
-        const GatherRec &from = Transpose ? rf : rp;
-        to.acc[0] += from.val[0] * cf;
-        to.acc[1] += from.val[1] * cf;
-        to.acc[2] += from.val[2] * cf;
+        add<Transpose>(rf, rp, cf);
         if (vs) vs[f] += cf;
         if (rt) rt[int64_t(f) * rs] = p + 1;
         rf.link |= kAnswered;

@@ -34,7 +34,7 @@ import numpy as np
 
 from . import _core, _validate
 from .directions import direction_set
-from .voxels import VoxelSet
+from .voxels import VoxelSet, _available_memory
 
 __all__ = ["Solution", "gather_partial", "line_system", "pair_table_bytes", "solve"]
 
@@ -341,18 +341,6 @@ class _Extrapolator:
         self.count += 1
         self.factor = np.where(active, lam / (1 - lam), 0.0)
         return d * self.factor
-
-
-def _available_memory() -> int:
-    """MemAvailable from /proc/meminfo in bytes (Linux), else 8 GiB."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return 8 << 30
 
 
 def pair_table_bytes(n: int, families: np.ndarray) -> int:
