@@ -1033,7 +1033,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                 // uncovered share 1 - band_cov goes on, and the object's F
                 // records on that exit do not occlude it.
                 double T = 1.0;
-                int32_t band_obj = -1, band_last = -1, carry_obj = -1;
+                int32_t band_obj = -1, band_last = -1, carry_obj = -1, carry_face = -1, crease_rec = -1;
                 int64_t band_step = -8, carry_step = -8, istep = -1;
                 double band_cov = 0.0;
                 bool found_seg = false, carried = false, band_crease = false;
@@ -1109,6 +1109,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                                     if (convex) {
                                         T *= std::max(0.0, 1.0 - band_cov);
                                         carry_obj = op;
+                                        carry_face = crease_rec;  // the face the line grazed
                                         carry_step = istep;
                                         band_obj = -1;
                                         carried = true;
@@ -1135,7 +1136,11 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                             // the grazing remainder does not see the inside of the object
                             // it passed (its back records)
                             // nor, while the line still runs along it, its front records
-                            if (sil && object[p] == carry_obj && (back[p] || istep <= carry_step + 1)) {
+                            // (another face of it, which the remainder runs towards, does
+                            // receive it: a lit side below a grazed top edge)
+                            if (sil && object[p] == carry_obj &&
+                                (back[p] || (istep <= carry_step + 1 &&
+                                             dot3(N + 3 * int64_t(p), N + 3 * int64_t(carry_face)) > 0.5f))) {
                                 carry_step = istep;
                                 continue;
                             }
@@ -1180,6 +1185,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                                             if (d0 * np_[0] + d1 * np_[1] + d2 * np_[2] < eps &&
                                                 -(d0 * nq[0] + d1 * nq[1] + d2 * nq[2]) < eps) {
                                                 band_crease = true;
+                                                crease_rec = p;  // the grazed face's record
                                                 break;
                                             }
                                         }
