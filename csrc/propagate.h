@@ -182,9 +182,12 @@ public:
     // receiver's voxel holds another face of the object that the line leaves
     // (F, normals 60-154 degrees apart, convex edge) and the line then meets
     // an F record of that object within one step, the line only grazed it:
-    // the share T (1 - band) goes on, the object's F and back records (and its
-    // front B records while the line still runs along it) no longer stop it,
-    // and later receivers take T times their usual deposit.
+    // the share T (1 - band) goes on, the object's F and back records (and the
+    // front B records of the grazed face, within 60 degrees of its normal,
+    // while the line still runs along it) no longer stop it, and later
+    // receivers take T times their usual deposit; another face of the object
+    // that the line runs towards (a lit side below a grazed top edge) is such
+    // a receiver.
     int64_t shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
                   const float *val, double *hd, double *unfound, int threads,
                   const StopCheck &stop, int64_t *steps, const double *send_scale = nullptr,
