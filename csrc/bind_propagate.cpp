@@ -71,17 +71,26 @@ voxgi::LineSystem *make_system(const I32 &ijk, const F32 &normal, const F32 &poi
 }  // namespace
 
 void bind_propagate(py::module_ &m) {
-    py::class_<voxgi::PairTable>(m, "PairTable", R"doc(
+    auto pair_table = py::class_<voxgi::PairTable>(m, "PairTable", R"doc(
 The pairs of one direction set's gathering, recorded for replay
 (LineSystem.make_pair_table, LineSystem.gather(record=...),
-LineSystem.gather_recorded). 4 bytes per record and family.)doc")
+LineSystem.gather_recorded). 4 bytes per record and family, each main
+axis's families padded to tiles of TILE.)doc");
+    pair_table.attr("TILE") = voxgi::PairTable::kTile;
+    pair_table
         .def_property_readonly("nbytes", [](const voxgi::PairTable &t) { return t.bytes(); })
         .def_property_readonly("families", [](const voxgi::PairTable &t) { return t.nfam; })
         .def_property_readonly("recorded", [](const voxgi::PairTable &t) {
             int64_t k = 0;
             for (auto f : t.filled) k += f;
             return k;
-        });
+        })
+        .def_property_readonly("recorded_mask", [](const voxgi::PairTable &t) {
+            py::array_t<bool> out(static_cast<py::ssize_t>(t.filled.size()));
+            bool *o = out.mutable_data();
+            for (size_t f = 0; f < t.filled.size(); ++f) o[f] = t.filled[f] != 0;
+            return out;
+        }, "(families,) bool: which families' pairs are recorded");
 
     py::class_<voxgi::LineSystem>(m, "LineSystem", R"doc(
 Records prepared for discrete-line propagation (DESIGN-NOTES §4).

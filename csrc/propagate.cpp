@@ -186,6 +186,13 @@ int64_t LineSystem::linear(int32_t x, int32_t y, int32_t z) const {
     return ((int64_t(x) - lo_[0]) * ny + (int64_t(y) - lo_[1])) * nz + (int64_t(z) - lo_[2]);
 }
 
+void LineSystem::to_axis_order(int m, const float *val, std::vector<float> &out) const {
+    out.resize(3 * n_);
+    const int32_t *ord = ax_[m].order.data();
+    for (int64_t i = 0; i < n_; ++i)
+        for (int c = 0; c < 3; ++c) out[3 * i + c] = val[3 * int64_t(ord[i]) + c];
+}
+
 void LineSystem::keys(const int32_t v[3], uint32_t *out) const {
     LineFrame fr(v, lo_, hi_);
     const Axis &ax = ax_[fr.m];
@@ -414,10 +421,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
     std::vector<float> valax[3];
     for (int m = 0; m < 3; ++m) {
         if (!need[m]) continue;
-        valax[m].resize(3 * n_);
-        const int32_t *ord = ax_[m].order.data();
-        for (int64_t i = 0; i < n_; ++i)
-            for (int c = 0; c < 3; ++c) valax[m][3 * i + c] = val[3 * int64_t(ord[i]) + c];
+        to_axis_order(m, val, valax[m]);
     }
     // stand-in flags in each needed axis order (empty: no stand-ins)
     std::vector<uint8_t> sbax[3];
@@ -832,8 +836,7 @@ PairTable LineSystem::make_pair_table(const Family *fams, int64_t nf, bool with_
     for (int64_t f = 0; f < nf; ++f) {
         LineFrame fr(fams[f].v, lo_, hi_);  // validates the vector
         t.fam_axis[f] = fr.m;
-        t.slot[f] = static_cast<int32_t>(t.fams[fr.m].size());
-        t.fams[fr.m].push_back(static_cast<int32_t>(f));
+        t.slot[f] = static_cast<int32_t>(t.cols[fr.m]++);
         const float len = std::sqrt(float(fams[f].v[0]) * fams[f].v[0] + float(fams[f].v[1]) * fams[f].v[1] +
                                     float(fams[f].v[2]) * fams[f].v[2]);
         for (int c = 0; c < 3; ++c) {
@@ -843,7 +846,7 @@ PairTable LineSystem::make_pair_table(const Family *fams, int64_t nf, bool with_
         t.weight[f] = fams[f].weight;
     }
     for (int m = 0; m < 3; ++m) {
-        const size_t tiles = (t.fams[m].size() + PairTable::kTile - 1) / PairTable::kTile;
+        const size_t tiles = (static_cast<size_t>(t.cols[m]) + PairTable::kTile - 1) / PairTable::kTile;
         const size_t size = static_cast<size_t>(n_) * tiles * PairTable::kTile;
         if (size == 0) continue;
         t.snd[m].allocate(size);
@@ -877,10 +880,9 @@ void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64
         if (nc == 0) continue;
         const Axis &ax = ax_[m];
         // values in this axis's order: the senders are axis-order positions
-        std::vector<float> va(3 * n_);
+        std::vector<float> va;
+        to_axis_order(m, val, va);
         const int32_t *ord = ax.order.data();
-        for (int64_t i = 0; i < n_; ++i)
-            for (int c = 0; c < 3; ++c) va[3 * i + c] = val[3 * int64_t(ord[i]) + c];
         // the selected columns, in column order, grouped by tile
         std::vector<int64_t> idx(nc);
         std::iota(idx.begin(), idx.end(), int64_t(0));

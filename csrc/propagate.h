@@ -67,7 +67,7 @@ struct PairTable {
     bool with_stand_in = false;
     std::vector<int32_t> slot;       // family -> its column in its axis's table
     std::vector<int32_t> fam_axis;   // family -> main axis
-    std::vector<int32_t> fams[3];    // axis m -> its families (set indices)
+    int64_t cols[3] = {0, 0, 0};     // axis m -> how many of the set's families it has
     std::vector<int32_t> vec;        // every family's vector, 3 per family (checked on use)
     std::vector<float> dir;          // unit direction of every family, 3 per family
     std::vector<double> weight;      // every family's weight
@@ -222,6 +222,8 @@ private:
     std::vector<float> own_normal_, own_point_;  // copies in the global record order
     const float *normal_, *point_;
     int64_t linear(int32_t x, int32_t y, int32_t z) const;
+    // val (n,3) global order -> out (n,3) in main axis m's order
+    void to_axis_order(int m, const float *val, std::vector<float> &out) const;
 };
 
 }  // namespace voxgi

@@ -409,6 +409,7 @@ def test_recorded_pairs_refuse_what_they_do_not_hold(sphere24):
     half = np.ascontiguousarray(fams[: len(fams) // 2])
     s.gather(ds.families, ds.weights, vals, half, False, 1, record=tab)
     assert tab.recorded == len(half)
+    assert np.array_equal(np.flatnonzero(tab.recorded_mask), half)
     with pytest.raises(ValueError, match="not recorded"):
         s.gather_recorded(tab, vals, fams, False, 1)
     with pytest.raises(ValueError, match="outside"):

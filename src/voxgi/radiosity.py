@@ -350,7 +350,8 @@ def pair_table_bytes(n: int, families: np.ndarray) -> int:
     if len(fam) == 0:
         return 0
     m = np.argmax(np.abs(fam), axis=1)
-    cols = sum(-(-int(np.sum(m == a)) // 16) * 16 for a in range(3))
+    tile = _core.PairTable.TILE
+    cols = sum(-(-int(np.sum(m == a)) // tile) * tile for a in range(3))
     return 4 * int(n) * cols
 
 
@@ -388,8 +389,7 @@ class _Gatherer:
             entry["recorded"] = False
             entry["reason"] = f"needs {need / 2**30:.2f} GiB, budget {self.budget / 2**30:.2f} GiB"
         else:
-            tab = [self.sysm.make_pair_table(ds.families, ds.weights, self.stand_in is not None),
-                   np.zeros(len(ds.families), bool)]
+            tab = self.sysm.make_pair_table(ds.families, ds.weights, self.stand_in is not None)
             self.used += need
             entry["recorded"] = True
             self.info["bytes"] = self.used
@@ -400,16 +400,13 @@ class _Gatherer:
     def __call__(self, ds, values, sel, want_vis):
         """(sums, vis, lines walked) of one pass over ``ds.families[sel]``."""
         tab = self._table(ds)
-        if tab is not None and np.all(tab[1][sel]):
-            sums, vis = self.sysm.gather_recorded(tab[0], values, sel, want_vis, self.nthreads)
+        if tab is not None and np.all(tab.recorded_mask[sel]):
+            sums, vis = self.sysm.gather_recorded(tab, values, sel, want_vis, self.nthreads)
             self.replayed += 1
             return sums, vis, 0
-        out = self.sysm.gather(ds.families, ds.weights, values, sel, want_vis, self.nthreads,
-                               stand_in=self.stand_in,
-                               **({"record": tab[0]} if tab is not None else {}))
-        if tab is not None:
-            tab[1][sel] = True
-        return out
+        return self.sysm.gather(ds.families, ds.weights, values, sel, want_vis, self.nthreads,
+                                stand_in=self.stand_in,
+                                **({"record": tab} if tab is not None else {}))
 
 
 def solve(
