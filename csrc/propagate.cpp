@@ -985,6 +985,15 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
     const int K = hist_;
     const float *P = point_, *N = normal_;
 
+    // q and p lie in one plane with one normal (to 1e-5 in the normal, eps along it)
+    auto same_plane = [&](int32_t q, int32_t p) {
+        const float *nq = N + 3 * int64_t(q), *np = N + 3 * int64_t(p);
+        if (dot3(nq, np) < 1.0f - 1e-5f) return false;
+        const float *pq = P + 3 * int64_t(q), *pp = P + 3 * int64_t(p);
+        const float off = (pp[0] - pq[0]) * nq[0] + (pp[1] - pq[1]) * nq[1] + (pp[2] - pq[2]) * nq[2];
+        return std::abs(off) <= eps;
+    };
+
     parallel_for(tasks, threads, stop, [&](int64_t task, int t) {
         if (acc[t].empty()) acc[t].assign(3 * n_, 0.0);
         double *H = acc[t].data();
@@ -1128,6 +1137,18 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                                         continue;
                                     }
                                 }
+                            }
+                            // A run of F records in one plane with one normal (the back
+                            // twins of a face the line runs along, nearly parallel to it)
+                            // keeps only its first and latest records: whether a later
+                            // receiver is in front of such a record is one half-space test
+                            // for the whole run, and the run would otherwise fill the
+                            // history and stop e's light with nothing received (the
+                            // closed black Cornell box lost 0.08% of the emitted power
+                            // that way at res 128 and at 256).
+                            if (hn >= 3 && same_plane(hp[hn - 1], p) && same_plane(hp[hn - 2], p)) {
+                                hp[hn - 1] = p;
+                                continue;
                             }
                             if (hn == K) {  // e would be forgotten: its light stops here
                                 stopped = true;
