@@ -99,7 +99,9 @@ public:
     // ijk (n,3) voxel coordinates; normal (n,3) unit; point (n,3) a point of
     // the surface in voxel units (voxel ijk spans [ijk, ijk+1]); epsilon the
     // facing-rule margin in voxel units; history the number of F records
-    // remembered per line (1..32).
+    // remembered per line (1..32; the shooting keeps only the first and the
+    // latest of a run of F records in one plane, so a face the line runs
+    // along takes two places, not one a voxel).
     LineSystem(int64_t n, const int32_t *ijk, const float *normal, const float *point,
                float epsilon, int history);
 
