@@ -1,4 +1,4 @@
-"""Where the Cornell box's energy imbalance levels off: the direct light alone.
+"""The Cornell box's energy imbalance in the direct light alone (the shooting).
 
 All albedos 0, so the solve is the shooting alone (no gathering): the open
 box and the box closed by a fourth wall, against the resolution. R 8,
