@@ -985,8 +985,12 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
     const int K = hist_;
     const float *P = point_, *N = normal_;
 
-    // q and p lie in one plane with one normal (to 1e-5 in the normal, eps along it)
+    // q and p lie in one plane with one normal (to 1e-5 in the normal, eps
+    // along it), and are alike for the rules that pick among F records (one
+    // object, both stand-ins or neither)
     auto same_plane = [&](int32_t q, int32_t p) {
+        if (object && object[q] != object[p]) return false;
+        if (stand_in && stand_in[q] != stand_in[p]) return false;
         const float *nq = N + 3 * int64_t(q), *np = N + 3 * int64_t(p);
         if (dot3(nq, np) < 1.0f - 1e-5f) return false;
         const float *pq = P + 3 * int64_t(q), *pp = P + 3 * int64_t(p);
