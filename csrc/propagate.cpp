@@ -1145,8 +1145,10 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                             // A run of F records in one plane with one normal (the back
                             // twins of a face the line runs along, nearly parallel to it)
                             // keeps only its first and latest records: whether a later
-                            // receiver is in front of such a record is one half-space test
-                            // for the whole run, and the run would otherwise fill the
+                            // receiver lies behind such a record's plane is one test for
+                            // the whole run, and whether the record lies in front of the
+                            // receiver's plane, a linear function along the run, is
+                            // decided at its ends. The run would otherwise fill the
                             // history and stop e's light with nothing received (the
                             // closed black Cornell box lost 0.08% of the emitted power
                             // that way at res 128 and at 256).
