@@ -528,9 +528,9 @@ def test_ctrl_c_stops_a_long_kernel(kernel):
     assert time.perf_counter() - t < 1.5
 
 
-def _grazing_run_records(eps=0.02):
+def _grazing_run_records():
     """An emitter above a closed object's face that its line runs along
-    (n.d = -0.003 over 35 voxels), and past that face two floor records in one
+    (n.d = -0.003 over 36 voxels), and past that face two floor records in one
     voxel: one in front of the face (outside the object), one behind it."""
     v = np.array([-1, 16, 0], np.int32)  # main axis y; an emitter facing -y marches +x, -y
     grid = np.array([(x, y, 0) for x in range(-1, 6) for y in range(0, 41)], np.int32)

@@ -546,6 +546,7 @@ def solve(
         Budget for the recorded pairs of all direction sets; None: a quarter
         of the memory available when the solve starts (``pair_cache=None``),
         no limit (``pair_cache=True``).
+
     Returns
     -------
     Solution
