@@ -156,6 +156,26 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
         }
     }
 
+    for (int m = 0; m < 3; ++m) {
+        Axis &ax = ax_[m];
+        for (int64_t i = 0; i < n; ++i) {
+            const bool slab = i == 0 || ax.X[i] != ax.X[i - 1];
+            if (slab || ax.Y[i] != ax.Y[i - 1] || ax.Z[i] != ax.Z[i - 1]) {
+                ax.gstart.push_back(static_cast<int32_t>(i));
+                ax.gflag.push_back(slab ? Axis::kSlab : 0);
+            }
+        }
+        ax.gstart.push_back(static_cast<int32_t>(n));
+        for (size_t k = 0; k + 1 < ax.gstart.size(); ++k) {
+            const int64_t i = ax.gstart[k];
+            if (ax.gstart[k + 1] - i != 2) continue;
+            const float *p0 = &ax.pt[3 * i], *n0 = &ax.nrm[3 * i];
+            bool twin = true;
+            for (int c = 0; c < 3; ++c) twin = twin && p0[c] == p0[3 + c] && n0[c] == -n0[3 + c];
+            if (twin) ax.gflag[k] |= Axis::kTwin;
+        }
+    }
+
     // Voxel index from the (x, y, z) order (the occupancy bitset is built on
     // the first shoot: gathering does not need it).
     const Axis &a0 = ax_[0];
@@ -263,20 +283,24 @@ void LineSystem::normalisation(const Family *fams, int64_t nf, double *S, int th
 namespace {
 
 struct LineState {
-    int32_t stamp;  // family pass that last wrote the entry
+    int32_t stamp;  // family pass that last wrote the entry (the one-pass walk: 2 * pass + 1 bit)
     int32_t last;   // newest F record on the line (axis-order position), -1: none
 };
 
-// Everything the one-pass walk touches for one record, in one 64-byte cache
-// line: where a B record meets its partner F (a record far back along the
-// line, i.e. a random place in memory), the facing test, the value sent and
-// the value received all hit this one line instead of four arrays. Each
-// thread owns a copy per main axis (acc and link are written).
+// Everything a pair of the one-pass walk touches for one record, in one
+// 64-byte cache line: where a B record meets its partner F (a record far
+// back along the line, i.e. a random place in memory), the facing test, the
+// value sent and the value received all hit this one line instead of four
+// arrays. Each thread owns a copy per main axis (acc is written). The walk
+// along the records reads the compact per-axis normals and points instead
+// (24 bytes a record, not 64), and keeps the line links in their own array
+// (4 bytes a record, written for every record), so it streams a third of
+// the bytes.
 struct alignas(64) GatherRec {
     float pt[3];     // surface point (voxel units)
     float nrm[3];    // unit normal
     float val[3];    // value sent (RGB)
-    uint32_t link;   // bits 0-30: previous F on the line + 1 (0: none); bit 31: answered
+    uint32_t pad;
     double acc[3];   // gathered (RGB), summed over this thread's families
 };
 static_assert(sizeof(GatherRec) == 64, "GatherRec must fill one cache line");
@@ -304,6 +328,8 @@ struct GatherWork {
     int rec_axis = -1;
     std::vector<double> sums;
     std::vector<PendingB> pend;          // the one-pass walk's queued B records
+    std::vector<uint32_t> lnk;           // per record (axis order): bits 0-30 previous F on the line + 1
+                                         // (0: none), bit 31 answered; valid for F records
     std::vector<int32_t> rbuf;           // recording: one tile's columns, family-major
     bool used[3] = {false, false, false};
 };
@@ -311,14 +337,15 @@ struct GatherWork {
 // One record of the one-pass walk (records of a line arrive in order along
 // +v). An F record (c > 0) joins the line's history at once; a B record
 // (c < 0) with an F behind it is queued: the pairs are made per slab (see
-// pair_pending).
-inline void step_record(GatherRec *rec, int32_t p, float c, int32_t &lastF, std::vector<PendingB> &pend) {
-    if (c > kTiny) {
-        rec[p].link = static_cast<uint32_t>(lastF + 1);  // not answered yet
-        lastF = p;
-    } else if (c < -kTiny && lastF >= 0) {
-        pend.push_back(PendingB{p, lastF, c});
-    }
+// pair_pending). Without branches (which of F, B or neither a record is, is
+// a coin toss from one record to the next): the link is written for every
+// record (only F records are ever read through it), the B entry is written
+// always and kept by advancing the count.
+inline void step_record(uint32_t *lnk, int32_t p, float c, int32_t &lastF, PendingB *pend, size_t &np) {
+    lnk[p] = static_cast<uint32_t>(lastF + 1);
+    pend[np] = PendingB{p, lastF, c};
+    np += static_cast<size_t>((c < -kTiny) & (lastF >= 0));
+    lastF = c > kTiny ? p : lastF;
 }
 
 // A queued B record receives from the newest F that faces it and answers
@@ -337,7 +364,7 @@ inline void add(GatherRec &receiver, GatherRec &sender, double w) {
 
 // rt (nullable): the family's column of a PairTable (rt[p * rs] = sender + 1).
 template <bool Transpose>
-inline void pair_record(GatherRec *rec, const PendingB &q, int K, float eps, double wgt, const float *dh,
+inline void pair_record(GatherRec *rec, uint32_t *lnk, const PendingB &q, int K, float eps, double wgt, const float *dh,
                         const uint8_t *sb, double *vs, int32_t *rt, int64_t rs) {
     const int32_t p = q.p;
     GatherRec &rp = rec[p];
@@ -347,7 +374,7 @@ inline void pair_record(GatherRec *rec, const PendingB &q, int K, float eps, dou
     int32_t f = q.f;
     for (int h = 0; h < K && f >= 0; ++h) {
         GatherRec &rf = rec[f];
-        const int32_t older = static_cast<int32_t>(rf.link & ~kAnswered) - 1;
+        const int32_t older = static_cast<int32_t>(lnk[f] & ~kAnswered) - 1;
         if ((sp && sb[f]) || !facing(rf.pt, rf.nrm, rp.pt, rp.nrm, eps)) {
             f = older;
             continue;
@@ -359,12 +386,12 @@ inline void pair_record(GatherRec *rec, const PendingB &q, int K, float eps, dou
             if (rt) rt[p * rs] = f + 1;
             got = true;
         }
-        if (rf.link & kAnswered) break;  // an answered facing F occludes the older ones
+        if (lnk[f] & kAnswered) break;  // an answered facing F occludes the older ones
         const double cf = double(dot3(rf.nrm, dh)) * wgt;
         add<Transpose>(rf, rp, cf);
         if (vs) vs[f] += cf;
         if (rt) rt[int64_t(f) * rs] = p + 1;
-        rf.link |= kAnswered;
+        lnk[f] |= kAnswered;
         f = older;
     }
 }
@@ -378,16 +405,22 @@ inline void pair_record(GatherRec *rec, const PendingB &q, int K, float eps, dou
 // line), and with the queue in hand the partners of the pairs kAhead places
 // on are prefetched while this pair waits for its own.
 template <bool Transpose>
-inline void pair_pending(GatherRec *rec, std::vector<PendingB> &pend, int K, float eps, double wgt,
+inline void pair_pending(GatherRec *rec, uint32_t *lnk, const PendingB *pend, size_t np, int K, float eps, double wgt,
                          const float *dh, const uint8_t *sb, double *vs, int32_t *rt, int64_t rs) {
     constexpr size_t kAhead = 8;
-    const size_t np = pend.size();
-    for (size_t j = 0; j < std::min(np, kAhead); ++j) __builtin_prefetch(rec + pend[j].f, 1, 3);
-    for (size_t j = 0; j < np; ++j) {
-        if (j + kAhead < np) __builtin_prefetch(rec + pend[j + kAhead].f, 1, 3);
-        pair_record<Transpose>(rec, pend[j], K, eps, wgt, dh, sb, vs, rt, rs);
+    for (size_t j = 0; j < std::min(np, kAhead); ++j) {
+        __builtin_prefetch(rec + pend[j].f, 1, 3);
+        __builtin_prefetch(rec + pend[j].p, 1, 3);
+        __builtin_prefetch(lnk + pend[j].f, 1, 3);
     }
-    pend.clear();
+    for (size_t j = 0; j < np; ++j) {
+        if (j + kAhead < np) {
+            __builtin_prefetch(rec + pend[j + kAhead].f, 1, 3);
+            __builtin_prefetch(rec + pend[j + kAhead].p, 1, 3);
+            __builtin_prefetch(lnk + pend[j + kAhead].f, 1, 3);
+        }
+        pair_record<Transpose>(rec, lnk, pend[j], K, eps, wgt, dh, sb, vs, rt, rs);
+    }
 }
 
 }  // namespace
@@ -508,7 +541,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                     r.val[c] = vl0[3 * i + c];
                     r.acc[c] = 0.0;
                 }
-                r.link = 0;
+                r.pad = 0;
             }
             w.rec_axis = m;
         }
@@ -531,10 +564,6 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         // Records in x_m order: every line is visited in its own order along
         // +v; its state (the newest F record, older ones chained through
         // link) lives in a table indexed by the line key.
-        int32_t rowX = std::numeric_limits<int32_t>::min(), rowY = 0;
-        uint64_t rowU = 0;
-        std::vector<PendingB> &pend = w.pend;
-        pend.clear();
         // recording: this family's column of its axis's table
         int32_t *rt = nullptr;
         int64_t rs = 0;
@@ -548,57 +577,96 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             rt = w.rbuf.data() + int64_t(lane) * n_;
             lanes |= 1u << lane;
         }
-        auto pair_slab = [&] {
-            if (transpose) pair_pending<true>(rec, pend, K, eps, wgt, dh, sb, vs, rt, rs);
-            else pair_pending<false>(rec, pend, K, eps, wgt, dh, sb, vs, rt, rs);
+        // the queued B records of the current slab (room for all n: the
+        // branch-free step writes one entry past the kept ones)
+        if (w.pend.size() < static_cast<size_t>(n_) + 1) w.pend.resize(n_ + 1);
+        if (w.lnk.size() < static_cast<size_t>(n_)) w.lnk.assign(n_, 0);
+        uint32_t *lnk = w.lnk.data();
+        PendingB *pend = w.pend.data();
+        // Locals only in the loop: the frame's constants, the counts and
+        // the pointers copied out of the references the task captures, so
+        // that the stores to the table, the links and the queue (int32
+        // arrays, which could alias the frame's int32 members) do not force
+        // them back to memory on every voxel.
+        const int32_t *__restrict GS = ax.gstart.data();
+        const uint8_t *__restrict GL = ax.gflag.data();
+        const float *__restrict NR = ax.nrm.data();  // compact: the walk streams 24 B a record, not 64
+        const float *__restrict PT = ax.pt.data();
+        const int64_t nvox = static_cast<int64_t>(ax.gstart.size()) - 1;
+        const uint64_t fA = static_cast<uint64_t>(fr.A), fB = static_cast<uint64_t>(fr.B), fC = static_cast<uint64_t>(fr.C);
+        const uint64_t fXmA = static_cast<uint64_t>(fr.XmA), fmagic = fr.magic, fnw = static_cast<uint64_t>(fr.nw);
+        const uint64_t half = fA / 2;
+        // Y' = y - lo or hi - y: y * ys + yo with ys = +-1 (the same for Z')
+        const int64_t ys = fr.pos1 ? 1 : -1, yo = fr.pos1 ? -int64_t(fr.lo[fr.o1]) : int64_t(fr.hi[fr.o1]);
+        const int64_t zs = fr.pos2 ? 1 : -1, zo = fr.pos2 ? -int64_t(fr.lo[fr.o2]) : int64_t(fr.hi[fr.o2]);
+        const float dh0 = dh[0], dh1 = dh[1], dh2 = dh[2];
+        LineState *__restrict tbl = table;
+        uint32_t *__restrict lk = lnk;
+        PendingB *__restrict pq = pend;
+        int64_t nwalked = 0;
+        size_t nq = 0;
+        auto flush = [&](size_t cnt) {
+            if (transpose) pair_pending<true>(rec, lnk, pend, cnt, K, eps, wgt, dh, sb, vs, rt, rs);
+            else pair_pending<false>(rec, lnk, pend, cnt, K, eps, wgt, dh, sb, vs, rt, rs);
         };
-        for (int64_t i = 0; i < n_;) {
-            int64_t ge = i + 1;
-            while (ge < n_ && AX[ge] == AX[i] && AY[ge] == AY[i] && AZ[ge] == AZ[i]) ++ge;
-            if (AX[i] != rowX) pair_slab();  // a new slab
-            if (AX[i] != rowX || AY[i] != rowY) {  // the key's u part changes only with the row
-                rowX = AX[i];
-                rowY = AY[i];
-                rowU = fr.key_u(rowX - xlo, fr.yprime(rowY));
+        for (int64_t g = 0; g < nvox; ++g) {
+            const int32_t i = GS[g];
+            const int gn = GS[g + 1] - i;
+            const uint8_t gf = GL[g];
+            if (gf & Axis::kSlab) {  // a new slab: pair the last one's queue
+                if (nq) flush(nq);
+                nq = 0;
             }
-            const uint32_t kk = static_cast<uint32_t>(rowU + fr.key_w(rowX - xlo, fr.zprime(AZ[i])));
-            LineState &ls = table[kk];
-            int32_t lastF = ls.stamp == cur ? ls.last : -1;
-            if (ls.stamp == cur) ++walked;
-            const int gn = static_cast<int>(ge - i);
-            if (gn == 1) {
-                // one record in the voxel (the common case): no depth order needed
-                step_record(rec, static_cast<int32_t>(i), dot3(rec[i].nrm, dh), lastF, pend);
+            const uint64_t Xr = fXmA - static_cast<uint64_t>(AX[i] - xlo);
+            const uint64_t Yp = static_cast<uint64_t>(AY[i] * ys + yo), Zp = static_cast<uint64_t>(AZ[i] * zs + zo);
+            const uint64_t ku = ((fA * Yp + fB * Xr + half) * fmagic) >> 32;
+            const uint64_t kw = ((fA * Zp + fC * Xr + half) * fmagic) >> 32;
+            LineState &ls = tbl[static_cast<uint32_t>(ku * fnw + kw)];
+            // stamp = 2 * pass + (the line holds >= 2 records so far)
+            const bool seen = (ls.stamp >> 1) == cur;
+            const bool multi = seen || gn > 1;
+            int32_t lastF = seen ? ls.last : -1;
+            nwalked += multi & !(seen & (ls.stamp & 1));  // a line counts once it has two records
+            if (gf & Axis::kTwin) {
+                // a front record and its back twin (most voxels of a closed
+                // scene): at one depth, so the one with n.d < 0 comes first
+                // (as sort_group orders them); their n.d are c and -c exactly
+                const float *nr = NR + 3 * int64_t(i);
+                const float c = nr[0] * dh0 + nr[1] * dh1 + nr[2] * dh2;
+                const bool first_is_f = c > 0.0f;  // then the twin (i + 1) is the B, met first
+                const int32_t pa = first_is_f ? i + 1 : i, pb = first_is_f ? i : i + 1;
+                const float ac = std::fabs(c);
+                step_record(lk, pa, -ac, lastF, pq, nq);
+                step_record(lk, pb, ac, lastF, pq, nq);
+            } else if (gn == 1) {
+                // one record in the voxel: no depth order needed
+                const float *nr = NR + 3 * int64_t(i);
+                step_record(lk, i, nr[0] * dh0 + nr[1] * dh1 + nr[2] * dh2, lastF, pq, nq);
             } else if (gn == 2) {
-                // two records (a closed object's front record and its back
-                // twin: most voxels of a closed scene): order them along d
-                // by depth, B before F at equal depth, as sort_group would
-                const int32_t p0 = static_cast<int32_t>(i), p1 = p0 + 1;
-                const float d0 = dot3(rec[p0].pt, dh), d1 = dot3(rec[p1].pt, dh);
-                const float c0 = dot3(rec[p0].nrm, dh), c1 = dot3(rec[p1].nrm, dh);
-                if (d0 > d1 || (d0 == d1 && c0 > c1)) {
-                    step_record(rec, p1, c1, lastF, pend);
-                    step_record(rec, p0, c0, lastF, pend);
-                } else {
-                    step_record(rec, p0, c0, lastF, pend);
-                    step_record(rec, p1, c1, lastF, pend);
-                }
+                // two records that are not twins: order them along d by
+                // depth, B before F at equal depth, as sort_group would
+                const float d0 = dot3(PT + 3 * i, dh), d1 = dot3(PT + 3 * i + 3, dh);
+                const float c0 = dot3(NR + 3 * i, dh), c1 = dot3(NR + 3 * i + 3, dh);
+                const bool swap = d0 > d1 || (d0 == d1 && c0 > c1);
+                const int32_t pa = swap ? i + 1 : i, pb = swap ? i : i + 1;
+                const float ca = swap ? c1 : c0, cb = swap ? c0 : c1;
+                step_record(lk, pa, ca, lastF, pq, nq);
+                step_record(lk, pb, cb, lastF, pq, nq);
             } else {
                 if (static_cast<int>(w.group.size()) < gn) w.group.resize(gn);
-                Hit *g = w.group.data();
+                Hit *hg = w.group.data();
                 for (int a = 0; a < gn; ++a) {
-                    const int32_t p = static_cast<int32_t>(i + a);
-                    g[a] = Hit{p, dot3(rec[p].pt, dh), dot3(rec[p].nrm, dh)};
+                    const int32_t p = i + a;
+                    hg[a] = Hit{p, dot3(PT + 3 * int64_t(p), dh), dot3(NR + 3 * int64_t(p), dh)};
                 }
-                sort_group(g, gn);
-                for (int a = 0; a < gn; ++a)
-                    step_record(rec, g[a].p, g[a].c, lastF, pend);
+                sort_group(hg, gn);
+                for (int a = 0; a < gn; ++a) step_record(lk, hg[a].p, hg[a].c, lastF, pq, nq);
             }
-            ls.stamp = cur;
+            ls.stamp = 2 * cur + multi;
             ls.last = lastF;
-            i = ge;
         }
-        pair_slab();
+        if (nq) flush(nq);
+        walked = nwalked;
         lines_walked[t] += walked;
     }
     if (record) {  // write the tile's filled columns, one 64-byte row per record

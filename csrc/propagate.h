@@ -209,6 +209,16 @@ private:
         std::vector<int32_t> X, Y, Z;  // coordinates along m, o1, o2
         std::vector<float> nrm, pt;    // (n,3) world-axis normal and point, in this order
         std::vector<float> pn;         // (n,8) point then normal: one 32-byte line per record
+        // The voxels in this order: voxel k holds records gstart[k] ..
+        // gstart[k+1]) (one record, or a closed object's front record and
+        // its back twin, mostly); gflag[k]: kSlab where voxel k starts a
+        // slab (a new x_m), kTwin where it holds two records with one
+        // surface point and opposite normals (a front record and its back
+        // twin), whose order along any d is the sign of one dot product.
+        // Found once, so a family's walk does not compare coordinates.
+        static constexpr uint8_t kSlab = 1, kTwin = 2;
+        std::vector<int32_t> gstart;
+        std::vector<uint8_t> gflag;
     };
     int64_t n_;
     float eps_;
