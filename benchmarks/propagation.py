@@ -506,6 +506,7 @@ def paper(args) -> None:
                 "gather_rays": sol.stats["gather_rays"],
                 "shoot_Mrays_s": sol.stats["shoot_rays"] / sec["shoot"] / 1e6,
                 "gather_Mrays_s": sol.stats["gather_rays"] / sec["gather"] / 1e6,
+                "gather_Mrays_s_per_thread": sol.stats["gather_rays"] / sec["gather"] / 1e6 / th,
                 "paper_shoot_s": 93,
                 "paper_propagate_s": 404,
             }
@@ -523,6 +524,8 @@ def paper(args) -> None:
             "total_s",
             "shoot_rays",
             "gather_rays",
+            "gather_Mrays_s",
+            "gather_Mrays_s_per_thread",
             "paper_shoot_s",
             "paper_propagate_s",
         ],
