@@ -430,6 +430,34 @@ def test_onepass_walk_agrees_with_the_sorted_walk_on_every_voxel_kind(stand):
     assert np.allclose(t1, t2, rtol=1e-12, atol=1e-300)
 
 
+@pytest.mark.parametrize("history", [3, 16])
+@pytest.mark.parametrize("stand", [False, True])
+def test_onepass_walk_passes_coplanar_runs_as_the_sorted_walk_does(history, stand):
+    # A line that runs along a face meets one record of the face per voxel:
+    # a run of F records in one plane, which the one-pass walk lets a B
+    # record behind that plane pass at once (counting every F it passes
+    # towards the history, as the record-by-record walk does). Two closed
+    # boxes with back records, the inner one off the grid, and directions
+    # that graze their faces: the same sums and visibility as the sorted
+    # walk, which steps over every record.
+    rec = merge(
+        box_records([1.3, 1.4, 1.6], [26.7, 19.2, 22.4], back=True),
+        box_records([7.55, 5.35, 6.45], [15.45, 11.65, 17.3], inward=False, back=True),
+    )
+    s = system(rec, epsilon=0.02, history=history)
+    n = len(rec["ijk"])
+    sb = rec["back"].copy() if stand else None
+    vals = np.random.default_rng(4).random((n, 3)).astype(np.float32)
+    ds, fams = all_families(11)
+    one, vis1, lines1 = s.gather(ds.families, ds.weights, vals, fams, True, 2, stand_in=sb)
+    srt, vis2, lines2 = s.gather(ds.families, ds.weights, vals, fams, True, 1, "sort", stand_in=sb)
+    assert lines1 == lines2
+    assert np.allclose(one, srt, rtol=1e-12, atol=1e-300)
+    assert np.allclose(vis1, vis2, rtol=1e-12, atol=1e-300)
+    front = ~rec["back"]
+    assert np.all(vis1[front] > 0)
+
+
 # ----------------------------------------------------------------- recorded pairs, transpose
 
 
