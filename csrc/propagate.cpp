@@ -198,7 +198,7 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
     // where float rounding in the facing test stays far under kRunMargin.
     {
         bool near = n < (int64_t(1) << 26) - 1;  // the walk packs a run's end in 26 bits
-        for (int64_t i = 0; i < 3 * n && near; ++i) near = std::fabs(point[i]) < kPlaneReach;
+        for (int64_t i = 0; i < 3 * n && near; ++i) near = std::fabs(point[i]) < kPlaneReach;  // (false for NaN)
         std::vector<uint32_t> pid(n, kNoPlane);
         if (near) {
             struct Key {
@@ -220,6 +220,7 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
             for (int64_t r = 0; r < n; ++r) {
                 const float *nr = normal + 3 * r;
                 const float d = dot3(point + 3 * r, nr);
+                if (!std::isfinite(d)) continue;  // (the bindings refuse such records; no run then)
                 Key k;
                 std::memcpy(k.nb, nr, sizeof(k.nb));
                 k.bin = static_cast<int64_t>(std::floor(double(d) / kPlaneBin));
@@ -377,7 +378,7 @@ struct alignas(64) GatherRec {
     float pt[3];     // surface point (voxel units)
     float nrm[3];    // unit normal
     float val[3];    // value sent (RGB)
-    uint32_t pad;
+    uint32_t pad;    // (the line links live in GatherWork::chain)
     double acc[3];   // gathered (RGB), summed over this thread's families
 };
 static_assert(sizeof(GatherRec) == 64, "GatherRec must fill one cache line");
