@@ -18,16 +18,6 @@ namespace voxgi {
 namespace {
 
 constexpr float kTiny = 1e-6f;  // |n.d| below this: the record is parallel to d (neither F nor B)
-// Coplanar runs (the one-pass walk): points binned by n.p in bins of
-// kPlaneBin voxels, only within kPlaneReach voxels of the origin. There the
-// facing test's float error (coordinates under 2^11: about 1e-3 for the
-// differences and dot products together) plus a bin width stays under
-// kRunMargin, so a record that is kRunMargin behind one F of a run is
-// behind every F of it.
-constexpr double kPlaneBin = 1e-3;
-constexpr float kPlaneReach = 2048.0f;
-constexpr float kRunMargin = 0.01f;
-constexpr uint32_t kNoPlane = 0xffffffffu;
 constexpr int kMaxHistory = 32;
 
 // Floor division for a positive divisor (numerators may be negative).
@@ -61,16 +51,9 @@ inline float dot3(const float *a, const float *b) { return a[0] * b[0] + a[1] * 
 
 // The facing rule (DESIGN-NOTES §4): B at pb (normal nb) and F at pf (normal
 // nf) see each other when each lies strictly in front of the other's plane.
-// s1: how far B lies in front of F's plane.
-inline bool facing(const float *pf, const float *nf, const float *pb, const float *nb, float eps, float &s1) {
-    const float d0 = pb[0] - pf[0], d1 = pb[1] - pf[1], d2 = pb[2] - pf[2];
-    s1 = d0 * nf[0] + d1 * nf[1] + d2 * nf[2];
-    return (s1 > eps) && (-(d0 * nb[0] + d1 * nb[1] + d2 * nb[2]) > eps);
-}
-
 inline bool facing(const float *pf, const float *nf, const float *pb, const float *nb, float eps) {
-    float s1;
-    return facing(pf, nf, pb, nb, eps, s1);
+    const float d0 = pb[0] - pf[0], d1 = pb[1] - pf[1], d2 = pb[2] - pf[2];
+    return (d0 * nf[0] + d1 * nf[1] + d2 * nf[2] > eps) && (-(d0 * nb[0] + d1 * nb[1] + d2 * nb[2]) > eps);
 }
 
 }  // namespace
@@ -193,47 +176,6 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
         }
     }
 
-    // Plane ids (see Axis::plane): the key is the normal's bits and the bin
-    // of n.p; only while every point lies within kPlaneReach of the origin,
-    // where float rounding in the facing test stays far under kRunMargin.
-    {
-        bool near = n < (int64_t(1) << 26) - 1;  // the walk packs a run's end in 26 bits
-        for (int64_t i = 0; i < 3 * n && near; ++i) near = std::fabs(point[i]) < kPlaneReach;  // (false for NaN)
-        std::vector<uint32_t> pid(n, kNoPlane);
-        if (near) {
-            struct Key {
-                uint32_t nb[3];
-                int64_t bin;
-                bool operator==(const Key &o) const {
-                    return nb[0] == o.nb[0] && nb[1] == o.nb[1] && nb[2] == o.nb[2] && bin == o.bin;
-                }
-            };
-            struct Hash {
-                size_t operator()(const Key &k) const {
-                    uint64_t h = 1469598103934665603ull;
-                    for (uint32_t x : k.nb) h = (h ^ x) * 1099511628211ull;
-                    return static_cast<size_t>((h ^ static_cast<uint64_t>(k.bin)) * 1099511628211ull);
-                }
-            };
-            std::unordered_map<Key, uint32_t, Hash> ids;
-            ids.reserve(static_cast<size_t>(n));
-            for (int64_t r = 0; r < n; ++r) {
-                const float *nr = normal + 3 * r;
-                const float d = dot3(point + 3 * r, nr);
-                if (!std::isfinite(d)) continue;  // (the bindings refuse such records; no run then)
-                Key k;
-                std::memcpy(k.nb, nr, sizeof(k.nb));
-                k.bin = static_cast<int64_t>(std::floor(double(d) / kPlaneBin));
-                pid[r] = ids.emplace(k, static_cast<uint32_t>(ids.size())).first->second;
-            }
-        }
-        for (int m = 0; m < 3; ++m) {
-            Axis &ax = ax_[m];
-            ax.plane.resize(n);
-            for (int64_t i = 0; i < n; ++i) ax.plane[i] = pid[ax.order[i]];
-        }
-    }
-
     // Voxel index from the (x, y, z) order (the occupancy bitset is built on
     // the first shoot: gathering does not need it).
     const Axis &a0 = ax_[0];
@@ -343,26 +285,6 @@ namespace {
 struct LineState {
     int32_t stamp;  // family pass that last wrote the entry (the one-pass walk: 2 * pass + 1 bit)
     int32_t last;   // newest F record on the line (axis-order position), -1: none
-    uint32_t pid;   // the one-pass walk: last's plane id (kNoPlane: none)
-    uint32_t run;   // and its Chain::run
-};
-
-// The one-pass walk's chain of F records on a line, per record (axis order;
-// valid for F records). link: bits 0-30 the previous F + 1 (0: none), bit 31
-// answered. run: the F records just older than this one that lie in its
-// plane (Axis::plane) are skipped by a B record behind this one's plane:
-// bits 26-31 how many (0: none), bits 0-25 the F after them + 1 (0: none).
-struct Chain {
-    uint32_t link;
-    uint32_t run;
-};
-constexpr int kRunShift = 26;
-constexpr uint32_t kRunTarget = (1u << kRunShift) - 1, kRunMax = 63;
-
-// The newest F of the line being walked: position, plane id, run.
-struct LastF {
-    int32_t f;
-    uint32_t pid, run;
 };
 
 // Everything a pair of the one-pass walk touches for one record, in one
@@ -378,7 +300,7 @@ struct alignas(64) GatherRec {
     float pt[3];     // surface point (voxel units)
     float nrm[3];    // unit normal
     float val[3];    // value sent (RGB)
-    uint32_t pad;    // (the line links live in GatherWork::chain)
+    uint32_t pad;    // (the line links live in GatherWork::lnk)
     double acc[3];   // gathered (RGB), summed over this thread's families
 };
 static_assert(sizeof(GatherRec) == 64, "GatherRec must fill one cache line");
@@ -406,7 +328,8 @@ struct GatherWork {
     int rec_axis = -1;
     std::vector<double> sums;
     std::vector<PendingB> pend;          // the one-pass walk's queued B records
-    std::vector<Chain> chain;            // the one-pass walk's F chains, per record (axis order)
+    std::vector<uint32_t> lnk;           // per record (axis order): bits 0-30 previous F on the line + 1
+                                         // (0: none), bit 31 answered; valid for F records
     std::vector<int32_t> rbuf;           // recording: one tile's columns, family-major
     bool used[3] = {false, false, false};
 };
@@ -415,22 +338,14 @@ struct GatherWork {
 // +v). An F record (c > 0) joins the line's history at once; a B record
 // (c < 0) with an F behind it is queued: the pairs are made per slab (see
 // pair_pending). Without branches (which of F, B or neither a record is, is
-// a coin toss from one record to the next): the chain entry is written for
-// every record (only F records are ever read through it), the B entry is
-// written always and kept by advancing the count. An F in the plane of the
-// line's newest F extends that one's run.
-inline void step_record(Chain *ch, const uint32_t *PL, int32_t p, float c, LastF &L, PendingB *pend, size_t &np) {
-    const uint32_t pid = PL[p];
-    const uint32_t cnt = L.run >> kRunShift;
-    const bool extend = (pid == L.pid) & (pid != kNoPlane) & (cnt < kRunMax);
-    const uint32_t run = extend ? L.run + (1u << kRunShift) : static_cast<uint32_t>(L.f + 1) & kRunTarget;
-    ch[p] = Chain{static_cast<uint32_t>(L.f + 1), run};
-    pend[np] = PendingB{p, L.f, c};
-    np += static_cast<size_t>((c < -kTiny) & (L.f >= 0));
-    const bool isF = c > kTiny;
-    L.f = isF ? p : L.f;
-    L.pid = isF ? pid : L.pid;
-    L.run = isF ? run : L.run;
+// a coin toss from one record to the next): the link is written for every
+// record (only F records are ever read through it), the B entry is written
+// always and kept by advancing the count.
+inline void step_record(uint32_t *lnk, int32_t p, float c, int32_t &lastF, PendingB *pend, size_t &np) {
+    lnk[p] = static_cast<uint32_t>(lastF + 1);
+    pend[np] = PendingB{p, lastF, c};
+    np += static_cast<size_t>((c < -kTiny) & (lastF >= 0));
+    lastF = c > kTiny ? p : lastF;
 }
 
 // A queued B record receives from the newest F that faces it and answers
@@ -449,7 +364,7 @@ inline void add(GatherRec &receiver, GatherRec &sender, double w) {
 
 // rt (nullable): the family's column of a PairTable (rt[p * rs] = sender + 1).
 template <bool Transpose>
-inline void pair_record(GatherRec *rec, Chain *ch, const PendingB &q, int K, float eps, double wgt, const float *dh,
+inline void pair_record(GatherRec *rec, uint32_t *lnk, const PendingB &q, int K, float eps, double wgt, const float *dh,
                         const uint8_t *sb, double *vs, int32_t *rt, int64_t rs) {
     const int32_t p = q.p;
     GatherRec &rp = rec[p];
@@ -459,24 +374,11 @@ inline void pair_record(GatherRec *rec, Chain *ch, const PendingB &q, int K, flo
     int32_t f = q.f;
     for (int h = 0; h < K && f >= 0; ++h) {
         GatherRec &rf = rec[f];
-        const Chain cl = ch[f];
-        float s1;
-        if (!facing(rf.pt, rf.nrm, rp.pt, rp.nrm, eps, s1) || (sp && sb[f])) {
-            // p is not seen by f. If p lies behind f's plane by kRunMargin,
-            // it lies behind the plane of every F of f's run too: none of
-            // them faces p, and the record-by-record walk would step over
-            // them one by one (a line along a wall meets one back record per
-            // voxel). The steps count towards K all the same.
-            const uint32_t skipped = cl.run >> kRunShift;
-            if (skipped != 0 && s1 <= eps - kRunMargin) {
-                h += static_cast<int>(skipped);
-                f = static_cast<int32_t>(cl.run & kRunTarget) - 1;
-            } else {
-                f = static_cast<int32_t>(cl.link & ~kAnswered) - 1;
-            }
+        const int32_t older = static_cast<int32_t>(lnk[f] & ~kAnswered) - 1;
+        if ((sp && sb[f]) || !facing(rf.pt, rf.nrm, rp.pt, rp.nrm, eps)) {
+            f = older;
             continue;
         }
-        const int32_t older = static_cast<int32_t>(cl.link & ~kAnswered) - 1;
         if (!got) {
             // p receives from f with weight cb; transposed, f takes p's value with it
             add<Transpose>(rp, rf, cb);
@@ -484,12 +386,12 @@ inline void pair_record(GatherRec *rec, Chain *ch, const PendingB &q, int K, flo
             if (rt) rt[p * rs] = f + 1;
             got = true;
         }
-        if (cl.link & kAnswered) break;  // an answered facing F occludes the older ones
+        if (lnk[f] & kAnswered) break;  // an answered facing F occludes the older ones
         const double cf = double(dot3(rf.nrm, dh)) * wgt;
         add<Transpose>(rf, rp, cf);
         if (vs) vs[f] += cf;
         if (rt) rt[int64_t(f) * rs] = p + 1;
-        ch[f].link |= kAnswered;
+        lnk[f] |= kAnswered;
         f = older;
     }
 }
@@ -503,21 +405,21 @@ inline void pair_record(GatherRec *rec, Chain *ch, const PendingB &q, int K, flo
 // line), and with the queue in hand the partners of the pairs kAhead places
 // on are prefetched while this pair waits for its own.
 template <bool Transpose>
-inline void pair_pending(GatherRec *rec, Chain *ch, const PendingB *pend, size_t np, int K, float eps, double wgt,
+inline void pair_pending(GatherRec *rec, uint32_t *lnk, const PendingB *pend, size_t np, int K, float eps, double wgt,
                          const float *dh, const uint8_t *sb, double *vs, int32_t *rt, int64_t rs) {
     constexpr size_t kAhead = 8;
     for (size_t j = 0; j < std::min(np, kAhead); ++j) {
         __builtin_prefetch(rec + pend[j].f, 1, 3);
         __builtin_prefetch(rec + pend[j].p, 1, 3);
-        __builtin_prefetch(ch + pend[j].f, 1, 3);
+        __builtin_prefetch(lnk + pend[j].f, 1, 3);
     }
     for (size_t j = 0; j < np; ++j) {
         if (j + kAhead < np) {
             __builtin_prefetch(rec + pend[j + kAhead].f, 1, 3);
             __builtin_prefetch(rec + pend[j + kAhead].p, 1, 3);
-            __builtin_prefetch(ch + pend[j + kAhead].f, 1, 3);
+            __builtin_prefetch(lnk + pend[j + kAhead].f, 1, 3);
         }
-        pair_record<Transpose>(rec, ch, pend[j], K, eps, wgt, dh, sb, vs, rt, rs);
+        pair_record<Transpose>(rec, lnk, pend[j], K, eps, wgt, dh, sb, vs, rt, rs);
     }
 }
 
@@ -647,7 +549,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             if (vis) w.vis[m].assign(n_, 0.0);
             w.used[m] = true;
         }
-        if (w.table.empty()) w.table.assign(max_keys, LineState{0, -1, kNoPlane, 0});
+        if (w.table.empty()) w.table.assign(max_keys, LineState{0, -1});
         const int32_t cur = ++w.stamp;  // no clearing: entries of other families carry old stamps
         LineState *table = w.table.data();
         GatherRec *rec = w.rec.data();
@@ -678,8 +580,8 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         // the queued B records of the current slab (room for all n: the
         // branch-free step writes one entry past the kept ones)
         if (w.pend.size() < static_cast<size_t>(n_) + 1) w.pend.resize(n_ + 1);
-        if (w.chain.size() < static_cast<size_t>(n_)) w.chain.assign(n_, Chain{0, 0});
-        Chain *ch = w.chain.data();
+        if (w.lnk.size() < static_cast<size_t>(n_)) w.lnk.assign(n_, 0);
+        uint32_t *lnk = w.lnk.data();
         PendingB *pend = w.pend.data();
         // Locals only in the loop: the frame's constants, the counts and
         // the pointers copied out of the references the task captures, so
@@ -699,14 +601,13 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         const int64_t zs = fr.pos2 ? 1 : -1, zo = fr.pos2 ? -int64_t(fr.lo[fr.o2]) : int64_t(fr.hi[fr.o2]);
         const float dh0 = dh[0], dh1 = dh[1], dh2 = dh[2];
         LineState *__restrict tbl = table;
-        Chain *__restrict lk = ch;
-        const uint32_t *__restrict PL = ax.plane.data();
+        uint32_t *__restrict lk = lnk;
         PendingB *__restrict pq = pend;
         int64_t nwalked = 0;
         size_t nq = 0;
         auto flush = [&](size_t cnt) {
-            if (transpose) pair_pending<true>(rec, ch, pend, cnt, K, eps, wgt, dh, sb, vs, rt, rs);
-            else pair_pending<false>(rec, ch, pend, cnt, K, eps, wgt, dh, sb, vs, rt, rs);
+            if (transpose) pair_pending<true>(rec, lnk, pend, cnt, K, eps, wgt, dh, sb, vs, rt, rs);
+            else pair_pending<false>(rec, lnk, pend, cnt, K, eps, wgt, dh, sb, vs, rt, rs);
         };
         for (int64_t g = 0; g < nvox; ++g) {
             const int32_t i = GS[g];
@@ -724,7 +625,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             // stamp = 2 * pass + (the line holds >= 2 records so far)
             const bool seen = (ls.stamp >> 1) == cur;
             const bool multi = seen || gn > 1;
-            LastF lastF = seen ? LastF{ls.last, ls.pid, ls.run} : LastF{-1, kNoPlane, 0};
+            int32_t lastF = seen ? ls.last : -1;
             nwalked += multi & !(seen & (ls.stamp & 1));  // a line counts once it has two records
             if (gf & Axis::kTwin) {
                 // a front record and its back twin (most voxels of a closed
@@ -735,12 +636,12 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 const bool first_is_f = c > 0.0f;  // then the twin (i + 1) is the B, met first
                 const int32_t pa = first_is_f ? i + 1 : i, pb = first_is_f ? i : i + 1;
                 const float ac = std::fabs(c);
-                step_record(lk, PL, pa, -ac, lastF, pq, nq);
-                step_record(lk, PL, pb, ac, lastF, pq, nq);
+                step_record(lk, pa, -ac, lastF, pq, nq);
+                step_record(lk, pb, ac, lastF, pq, nq);
             } else if (gn == 1) {
                 // one record in the voxel: no depth order needed
                 const float *nr = NR + 3 * int64_t(i);
-                step_record(lk, PL, i, nr[0] * dh0 + nr[1] * dh1 + nr[2] * dh2, lastF, pq, nq);
+                step_record(lk, i, nr[0] * dh0 + nr[1] * dh1 + nr[2] * dh2, lastF, pq, nq);
             } else if (gn == 2) {
                 // two records that are not twins: order them along d by
                 // depth, B before F at equal depth, as sort_group would
@@ -749,8 +650,8 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 const bool swap = d0 > d1 || (d0 == d1 && c0 > c1);
                 const int32_t pa = swap ? i + 1 : i, pb = swap ? i : i + 1;
                 const float ca = swap ? c1 : c0, cb = swap ? c0 : c1;
-                step_record(lk, PL, pa, ca, lastF, pq, nq);
-                step_record(lk, PL, pb, cb, lastF, pq, nq);
+                step_record(lk, pa, ca, lastF, pq, nq);
+                step_record(lk, pb, cb, lastF, pq, nq);
             } else {
                 if (static_cast<int>(w.group.size()) < gn) w.group.resize(gn);
                 Hit *hg = w.group.data();
@@ -759,12 +660,10 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                     hg[a] = Hit{p, dot3(PT + 3 * int64_t(p), dh), dot3(NR + 3 * int64_t(p), dh)};
                 }
                 sort_group(hg, gn);
-                for (int a = 0; a < gn; ++a) step_record(lk, PL, hg[a].p, hg[a].c, lastF, pq, nq);
+                for (int a = 0; a < gn; ++a) step_record(lk, hg[a].p, hg[a].c, lastF, pq, nq);
             }
             ls.stamp = 2 * cur + multi;
-            ls.last = lastF.f;
-            ls.pid = lastF.pid;
-            ls.run = lastF.run;
+            ls.last = lastF;
         }
         if (nq) flush(nq);
         walked = nwalked;

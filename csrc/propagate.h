@@ -219,12 +219,6 @@ private:
         static constexpr uint8_t kSlab = 1, kTwin = 2;
         std::vector<int32_t> gstart;
         std::vector<uint8_t> gflag;
-        // plane[i]: records with one normal (bit for bit) and surface
-        // points within kPlaneBin of one plane share an id (kNoPlane: none,
-        // e.g. far from the origin, where the bound below does not hold).
-        // The one-pass walk lets a B record pass a run of such F records
-        // at once (see pair_record).
-        std::vector<uint32_t> plane;
     };
     int64_t n_;
     float eps_;

@@ -434,12 +434,12 @@ def test_onepass_walk_agrees_with_the_sorted_walk_on_every_voxel_kind(stand):
 @pytest.mark.parametrize("stand", [False, True])
 def test_onepass_walk_passes_coplanar_runs_as_the_sorted_walk_does(history, stand):
     # A line that runs along a face meets one record of the face per voxel:
-    # a run of F records in one plane, which the one-pass walk lets a B
-    # record behind that plane pass at once (counting every F it passes
-    # towards the history, as the record-by-record walk does). Two closed
-    # boxes with back records, the inner one off the grid, and directions
-    # that graze their faces: the same sums and visibility as the sorted
-    # walk, which steps over every record.
+    # a run of F records in one plane that a B record behind that plane
+    # steps over one by one, each step counting towards the history. Two
+    # closed boxes with back records, the inner one off the grid, and
+    # directions that graze their faces: the one-pass walk (queued pairs,
+    # twins ordered by one dot product) gives the same sums and visibility as
+    # the sorted walk, with a history short enough to run out.
     rec = merge(
         box_records([1.3, 1.4, 1.6], [26.7, 19.2, 22.4], back=True),
         box_records([7.55, 5.35, 6.45], [15.45, 11.65, 17.3], inward=False, back=True),
