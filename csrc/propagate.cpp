@@ -560,7 +560,6 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         const float len = std::sqrt(float(F.v[0]) * F.v[0] + float(F.v[1]) * F.v[1] + float(F.v[2]) * F.v[2]);
         const float dh[3] = {F.v[0] / len, F.v[1] / len, F.v[2] / len};
         const int32_t xlo = fr.lo[m];
-        int64_t walked = 0;
         // Records in x_m order: every line is visited in its own order along
         // +v; its state (the newest F record, older ones chained through
         // link) lives in a table indexed by the line key.
@@ -666,8 +665,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             ls.last = lastF;
         }
         if (nq) flush(nq);
-        walked = nwalked;
-        lines_walked[t] += walked;
+        lines_walked[t] += nwalked;
     }
     if (record) {  // write the tile's filled columns, one 64-byte row per record
         GatherWork &w = work[t];
