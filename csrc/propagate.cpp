@@ -616,6 +616,11 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 if (nq) flush(nq);
                 nq = 0;
             }
+            // LineFrame::key, written out with the constants above: calling
+            // it on a local copy of the frame measured 1.7% more instructions
+            // and 11% more mispredicted branches (its Y'/Z' branches) in
+            // callgrind; the tests hold the two walks, and so the two keys,
+            // to the same pairs
             const uint64_t Xr = fXmA - static_cast<uint64_t>(AX[i] - xlo);
             const uint64_t Yp = static_cast<uint64_t>(AY[i] * ys + yo), Zp = static_cast<uint64_t>(AZ[i] * zs + zo);
             const uint64_t ku = ((fA * Yp + fB * Xr + half) * fmagic) >> 32;
