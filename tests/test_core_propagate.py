@@ -401,18 +401,21 @@ def mixed_voxel_records(seed=11, size=14, voxels=500):
     }
 
 
+@pytest.mark.parametrize("radius", [1, 2, 7])
 @pytest.mark.parametrize("stand", [False, True])
-def test_onepass_walk_agrees_with_the_sorted_walk_on_every_voxel_kind(stand):
+def test_onepass_walk_agrees_with_the_sorted_walk_on_every_voxel_kind(stand, radius):
     # The sorted walk orders every voxel's records by depth with one general
     # rule; the one-pass walk takes shortcuts for one record and for exact
     # twins. Both must find the same pairs: the same sums, visibility and
-    # lines, also when recording, transposed, and with stand-ins.
+    # lines, also when recording, transposed, and with stand-ins. (The
+    # one-pass walk also computes the line keys its own way, dividing once
+    # per slab; radii 1 and 2 give main components A = 1 and 2.)
     rec = mixed_voxel_records()
     s = system(rec, epsilon=0.02, history=4)  # a short history: its limit is reached
     n = len(rec["ijk"])
     sb = (np.arange(n) % 3 == 1) if stand else None
     vals = np.random.default_rng(2).random((n, 3)).astype(np.float32)
-    ds, fams = all_families(7)
+    ds, fams = all_families(radius)
     one, vis1, lines1 = s.gather(ds.families, ds.weights, vals, fams, True, 1, stand_in=sb)
     srt, vis2, lines2 = s.gather(ds.families, ds.weights, vals, fams, True, 1, "sort", stand_in=sb)
     assert lines1 == lines2 > 0
