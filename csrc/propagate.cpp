@@ -657,9 +657,9 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         // the pairing made for this walk's options (recording is never transposed)
         const PairFn pair_fn = pick_pairing(transpose, vs != nullptr, rt != nullptr, sb != nullptr);
         auto flush = [&](size_t cnt) { pair_fn(rec, lnk, pend, cnt, K, eps, wgt, dh, sb, vs, rt, rs); };
+        const int32_t counted = 2 * cur + 1;  // the stamp of a line with >= 2 records in this pass
         for (int64_t g = 0; g < nvox; ++g) {
             const int32_t i = GS[g];
-            const int gn = GS[g + 1] - i;
             const uint8_t gf = GL[g];
             if (gf & Axis::kSlab) {  // a new slab: pair the last one's queue
                 if (nq) flush(nq);
@@ -670,11 +670,11 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             // (the tests hold this key and LineFrame::key, through the two
             // walks, to the same pairs)
             LineState &ls = tbl[static_cast<uint32_t>(int64_t(AY[i]) * ysn + int64_t(AZ[i]) * zs + base)];
-            // stamp = 2 * pass + (the line holds >= 2 records so far)
-            const bool seen = (ls.stamp >> 1) == cur;
-            const bool multi = seen || gn > 1;
+            // stamp = 2 * pass + (the line holds >= 2 records so far); a
+            // line counts once it has two records
+            const int32_t old = ls.stamp;
+            const bool seen = (old >> 1) == cur;
             int32_t lastF = seen ? ls.last : -1;
-            nwalked += multi & !(seen & (ls.stamp & 1));  // a line counts once it has two records
             if (gf & Axis::kTwin) {
                 // a front record and its back twin (most voxels of a closed
                 // scene): at one depth, so the one with n.d < 0 comes first
@@ -692,7 +692,15 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 pq[nq] = PendingB{pa, lastF, -ac};
                 nq += static_cast<size_t>(live & (lastF >= 0));
                 lastF = live ? pb : lastF;
-            } else if (gn == 1) {
+                nwalked += old != counted;  // two records: the line has two now
+                ls.stamp = counted;
+                ls.last = lastF;
+                continue;
+            }
+            const int gn = GS[g + 1] - i;
+            const bool multi = seen || gn > 1;
+            nwalked += multi & (old != counted);
+            if (gn == 1) {
                 // one record in the voxel: no depth order needed
                 const float *nr = NR + 3 * int64_t(i);
                 step_record(lk, i, nr[0] * dh0 + nr[1] * dh1 + nr[2] * dh2, lastF, pq, nq);
@@ -716,7 +724,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 sort_group(hg, gn);
                 for (int a = 0; a < gn; ++a) step_record(lk, hg[a].p, hg[a].c, lastF, pq, nq);
             }
-            ls.stamp = 2 * cur + multi;
+            ls.stamp = multi ? counted : 2 * cur;
             ls.last = lastF;
         }
         if (nq) flush(nq);
