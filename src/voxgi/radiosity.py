@@ -534,9 +534,9 @@ def solve(
         Record the pairs the first gathering pass over a direction set finds
         (4 bytes per record and family) and replay them in the later passes
         over that set (visibility does not change between iterations; the
-        same sums to float rounding, 5-6x faster per pass; measured on 150k
-        records at R 22: 279 M rays/s replayed, 49 M walked, 37 M while
-        recording). Only for a set gathered at least twice (iterations plus
+        same sums to float rounding, 3-4x faster per pass; measured on 150k
+        records at R 22, 1 thread: 265 M rays/s replayed, 77 M walked, 50 M
+        while recording). Only for a set gathered at least twice (iterations plus
         the diagnostics pass). None (default): when the pairs fit in
         ``max_cache_bytes``; True: the same with no default budget; False:
         walk the lines every pass. Never with ``client`` (the workers walk).
