@@ -303,7 +303,7 @@ struct alignas(64) GatherRec {
     float pt[3];     // surface point (voxel units)
     float nrm[3];    // unit normal
     float val[3];    // value sent (RGB)
-    uint32_t pad;    // (the line links live in GatherWork::lnk)
+    uint32_t stand;  // 1: a stand-in (its flag on the line the pairing reads anyway); the line links live in GatherWork::lnk
     double acc[3];   // gathered (RGB), summed over this thread's families
 };
 static_assert(sizeof(GatherRec) == 64, "GatherRec must fill one cache line");
@@ -390,22 +390,23 @@ inline void add(GatherRec &receiver, GatherRec &sender, double w) {
 }
 
 // rt (nullable): the family's column of a PairTable (rt[p * rs] = sender + 1).
-// Vis, Rec, Stand: vs, rt, sb are set (fixed for a family's walk, so they
-// are template arguments, not branches in the chain loop).
+// Vis, Rec: vs, rt are set; Stand: the records carry stand-in flags (fixed
+// for a family's walk, so they are template arguments, not branches in the
+// chain loop).
 template <bool Transpose, bool Vis, bool Rec, bool Stand>
 inline void pair_record(GatherRec *rec, uint32_t *lnk, const PendingB &q, int K, float eps, double wgt, const float *dh,
-                        const uint8_t *sb, double *vs, int32_t *rt, int64_t rs) {
+                        double *vs, int32_t *rt, int64_t rs) {
     const int32_t p = q.p;
     GatherRec &rp = rec[p];
     const double cb = -double(q.c) * wgt;
     bool got = false;
-    const bool sp = Stand && sb[p];  // two stand-ins never pair
+    const bool sp = Stand && rp.stand;  // two stand-ins never pair
     int32_t f = q.f;
     const FacingB fb(rp);
     for (int h = 0; h < K && f >= 0; ++h) {
         GatherRec &rf = rec[f];
         const int32_t older = static_cast<int32_t>(lnk[f] & ~kAnswered) - 1;
-        if ((Stand && sp && sb[f]) || !fb.faces(rf, eps)) {
+        if ((Stand && sp && rf.stand) || !fb.faces(rf, eps)) {
             f = older;
             continue;
         }
@@ -436,7 +437,7 @@ inline void pair_record(GatherRec *rec, uint32_t *lnk, const PendingB &q, int K,
 // on are prefetched while this pair waits for its own.
 template <bool Transpose, bool Vis, bool Rec, bool Stand>
 inline void pair_pending(GatherRec *rec, uint32_t *lnk, const PendingB *pend, size_t np, int K, float eps, double wgt,
-                         const float *dh, const uint8_t *sb, double *vs, int32_t *rt, int64_t rs) {
+                         const float *dh, double *vs, int32_t *rt, int64_t rs) {
     constexpr size_t kAhead = 8;
     for (size_t j = 0; j < std::min(np, kAhead); ++j) {
         __builtin_prefetch(rec + pend[j].f, 1, 3);
@@ -449,13 +450,13 @@ inline void pair_pending(GatherRec *rec, uint32_t *lnk, const PendingB *pend, si
             __builtin_prefetch(rec + pend[j + kAhead].p, 1, 3);
             __builtin_prefetch(lnk + pend[j + kAhead].f, 1, 3);
         }
-        pair_record<Transpose, Vis, Rec, Stand>(rec, lnk, pend[j], K, eps, wgt, dh, sb, vs, rt, rs);
+        pair_record<Transpose, Vis, Rec, Stand>(rec, lnk, pend[j], K, eps, wgt, dh, vs, rt, rs);
     }
 }
 
 // The pair_pending instance for a walk's options.
 using PairFn = void (*)(GatherRec *, uint32_t *, const PendingB *, size_t, int, float, double, const float *,
-                        const uint8_t *, double *, int32_t *, int64_t);
+                        double *, int32_t *, int64_t);
 template <bool Transpose, bool Vis>
 PairFn pick_pairing(bool rec, bool stand) {
     if (rec) return stand ? &pair_pending<Transpose, Vis, true, true> : &pair_pending<Transpose, Vis, true, false>;
@@ -577,6 +578,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             w.rec.resize(n_);
             const float *pn0 = ax.pn.data();
             const float *vl0 = valax[m].data();
+            const uint8_t *sb0 = stand_in ? sbax[m].data() : nullptr;
             for (int64_t i = 0; i < n_; ++i) {
                 GatherRec &r = w.rec[i];
                 for (int c = 0; c < 3; ++c) {
@@ -585,7 +587,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                     r.val[c] = vl0[3 * i + c];
                     r.acc[c] = 0.0;
                 }
-                r.pad = 0;
+                r.stand = sb0 ? sb0[i] : 0;
             }
             w.rec_axis = m;
         }
@@ -598,7 +600,6 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         LineState *table = w.table.data();
         GatherRec *rec = w.rec.data();
         double *vs = vis ? w.vis[m].data() : nullptr;
-        const uint8_t *sb = stand_in ? sbax[m].data() : nullptr;
         const int32_t *AX = ax.X.data(), *AY = ax.Y.data(), *AZ = ax.Z.data();
         const double wgt = F.weight;
         const float len = std::sqrt(float(F.v[0]) * F.v[0] + float(F.v[1]) * F.v[1] + float(F.v[2]) * F.v[2]);
@@ -655,8 +656,8 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         int64_t nwalked = 0;
         size_t nq = 0;
         // the pairing made for this walk's options (recording is never transposed)
-        const PairFn pair_fn = pick_pairing(transpose, vs != nullptr, rt != nullptr, sb != nullptr);
-        auto flush = [&](size_t cnt) { pair_fn(rec, lnk, pend, cnt, K, eps, wgt, dh, sb, vs, rt, rs); };
+        const PairFn pair_fn = pick_pairing(transpose, vs != nullptr, rt != nullptr, stand_in != nullptr);
+        auto flush = [&](size_t cnt) { pair_fn(rec, lnk, pend, cnt, K, eps, wgt, dh, vs, rt, rs); };
         const int32_t counted = 2 * cur + 1;  // the stamp of a line with >= 2 records in this pass
         for (int64_t g = 0; g < nvox; ++g) {
             const int32_t i = GS[g];
