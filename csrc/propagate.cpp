@@ -164,11 +164,15 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
         for (int64_t i = 0; i < n; ++i) {
             const bool slab = i == 0 || ax.X[i] != ax.X[i - 1];
             if (slab || ax.Y[i] != ax.Y[i - 1] || ax.Z[i] != ax.Z[i - 1]) {
+                if (slab) ax.gslab.push_back(static_cast<int32_t>(ax.gstart.size()));
                 ax.gstart.push_back(static_cast<int32_t>(i));
                 ax.gflag.push_back(slab ? Axis::kSlab : 0);
             }
         }
+        ax.gslab.push_back(static_cast<int32_t>(ax.gstart.size()));
         ax.gstart.push_back(static_cast<int32_t>(n));
+        for (size_t k = 0; k + 1 < ax.gstart.size(); ++k)
+            ax.gmax = std::max(ax.gmax, ax.gstart[k + 1] - ax.gstart[k]);
         for (size_t k = 0; k + 1 < ax.gstart.size(); ++k) {
             const int64_t i = ax.gstart[k];
             if (ax.gstart[k + 1] - i != 2) continue;
@@ -636,7 +640,6 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         const uint8_t *__restrict GL = ax.gflag.data();
         const float *__restrict NR = ax.nrm.data();  // compact: the walk streams 24 B a record, not 64
         const float *__restrict PT = ax.pt.data();
-        const int64_t nvox = static_cast<int64_t>(ax.gstart.size()) - 1;
         // LineFrame::key without a division per voxel: with X' fixed (one
         // slab), u = floor((A Y' + B X' + h) / A) = Y' + floor((B X' + h) / A)
         // exactly (A Y' is a multiple of A), the same for w, so the key
@@ -648,7 +651,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         const int64_t ys = fr.pos1 ? 1 : -1, yo = fr.pos1 ? -int64_t(fr.lo[fr.o1]) : int64_t(fr.hi[fr.o1]);
         const int64_t zs = fr.pos2 ? 1 : -1, zo = fr.pos2 ? -int64_t(fr.lo[fr.o2]) : int64_t(fr.hi[fr.o2]);
         const int64_t ysn = ys * fnw;
-        int64_t base = 0;  // set by the first voxel (voxel 0 starts a slab)
+        int64_t base = 0;  // set per slab
         const float dh0 = dh[0], dh1 = dh[1], dh2 = dh[2];
         LineState *__restrict tbl = table;
         uint32_t *__restrict lk = lnk;
@@ -659,15 +662,21 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         const PairFn pair_fn = pick_pairing(transpose, vs != nullptr, rt != nullptr, stand_in != nullptr);
         auto flush = [&](size_t cnt) { pair_fn(rec, lnk, pend, cnt, K, eps, wgt, dh, vs, rt, rs); };
         const int32_t counted = 2 * cur + 1;  // the stamp of a line with >= 2 records in this pass
-        for (int64_t g = 0; g < nvox; ++g) {
+        if (static_cast<int>(w.group.size()) < ax.gmax) w.group.resize(ax.gmax);
+        Hit *hg = w.group.data();
+        // Slab by slab, its queue paired after it: the voxel loop itself
+        // calls nothing, so its values can stay in registers.
+        const int32_t *__restrict SL = ax.gslab.data();
+        const int64_t nslab = static_cast<int64_t>(ax.gslab.size()) - 1;
+        for (int64_t sl = 0; sl < nslab; ++sl) {
+          const int64_t g1 = SL[sl + 1];
+          {
+            const int64_t Xr = fXmA - (int64_t(AX[GS[SL[sl]]]) - xlo);
+            base = (yo + (fB * Xr + half) / fA) * fnw + zo + (fC * Xr + half) / fA;
+          }
+          for (int64_t g = SL[sl]; g < g1; ++g) {
             const int32_t i = GS[g];
             const uint8_t gf = GL[g];
-            if (gf & Axis::kSlab) {  // a new slab: pair the last one's queue
-                if (nq) flush(nq);
-                nq = 0;
-                const int64_t Xr = fXmA - (int64_t(AX[i]) - xlo);
-                base = (yo + (fB * Xr + half) / fA) * fnw + zo + (fC * Xr + half) / fA;
-            }
             // (the tests hold this key and LineFrame::key, through the two
             // walks, to the same pairs)
             LineState &ls = tbl[static_cast<uint32_t>(int64_t(AY[i]) * ysn + int64_t(AZ[i]) * zs + base)];
@@ -716,8 +725,6 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                 step_record(lk, pa, ca, lastF, pq, nq);
                 step_record(lk, pb, cb, lastF, pq, nq);
             } else {
-                if (static_cast<int>(w.group.size()) < gn) w.group.resize(gn);
-                Hit *hg = w.group.data();
                 for (int a = 0; a < gn; ++a) {
                     const int32_t p = i + a;
                     hg[a] = Hit{p, dot3(PT + 3 * int64_t(p), dh), dot3(NR + 3 * int64_t(p), dh)};
@@ -727,8 +734,10 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
             }
             ls.stamp = multi ? counted : 2 * cur;
             ls.last = lastF;
+          }
+          if (nq) flush(nq);
+          nq = 0;
         }
-        if (nq) flush(nq);
         lines_walked[t] += nwalked;
     }
     if (record) {  // write the tile's filled columns, one 64-byte row per record

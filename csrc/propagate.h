@@ -219,6 +219,8 @@ private:
         static constexpr uint8_t kSlab = 1, kTwin = 2;
         std::vector<int32_t> gstart;
         std::vector<uint8_t> gflag;
+        std::vector<int32_t> gslab;  // the voxels of slab s: gslab[s] .. gslab[s+1])
+        int gmax = 0;                // most records in one voxel
     };
     int64_t n_;
     float eps_;
