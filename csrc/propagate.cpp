@@ -166,7 +166,7 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
             if (slab || ax.Y[i] != ax.Y[i - 1] || ax.Z[i] != ax.Z[i - 1]) {
                 if (slab) ax.gslab.push_back(static_cast<int32_t>(ax.gstart.size()));
                 ax.gstart.push_back(static_cast<int32_t>(i));
-                ax.gflag.push_back(slab ? Axis::kSlab : 0);
+                ax.gflag.push_back(0);
             }
         }
         ax.gslab.push_back(static_cast<int32_t>(ax.gstart.size()));

@@ -211,16 +211,16 @@ private:
         std::vector<float> pn;         // (n,8) point then normal: one 32-byte line per record
         // The voxels in this order: voxel k holds records gstart[k] ..
         // gstart[k+1]) (one record, or a closed object's front record and
-        // its back twin, mostly); gflag[k]: kSlab where voxel k starts a
-        // slab (a new x_m), kTwin where it holds two records with one
-        // surface point and opposite normals (a front record and its back
-        // twin), whose order along any d is the sign of one dot product.
+        // its back twin, mostly); gflag[k]: kTwin where it holds two records
+        // with one surface point and opposite normals (a front record and
+        // its back twin), whose order along any d is the sign of one dot
+        // product. Slab s (one x_m) holds voxels gslab[s] .. gslab[s+1]).
         // Found once, so a family's walk does not compare coordinates.
-        static constexpr uint8_t kSlab = 1, kTwin = 2;
+        static constexpr uint8_t kTwin = 2;
         std::vector<int32_t> gstart;
         std::vector<uint8_t> gflag;
-        std::vector<int32_t> gslab;  // the voxels of slab s: gslab[s] .. gslab[s+1])
-        int gmax = 0;                // most records in one voxel
+        std::vector<int32_t> gslab;
+        int gmax = 0;  // most records in one voxel
     };
     int64_t n_;
     float eps_;
