@@ -171,10 +171,9 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
         }
         ax.gslab.push_back(static_cast<int32_t>(ax.gstart.size()));
         ax.gstart.push_back(static_cast<int32_t>(n));
-        for (size_t k = 0; k + 1 < ax.gstart.size(); ++k)
-            ax.gmax = std::max(ax.gmax, ax.gstart[k + 1] - ax.gstart[k]);
         for (size_t k = 0; k + 1 < ax.gstart.size(); ++k) {
             const int64_t i = ax.gstart[k];
+            ax.gmax = std::max(ax.gmax, ax.gstart[k + 1] - ax.gstart[k]);
             if (ax.gstart[k + 1] - i != 2) continue;
             const float *p0 = &ax.pt[3 * i], *n0 = &ax.nrm[3 * i];
             bool twin = true;
