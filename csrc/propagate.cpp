@@ -650,7 +650,6 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         const int64_t ys = fr.pos1 ? 1 : -1, yo = fr.pos1 ? -int64_t(fr.lo[fr.o1]) : int64_t(fr.hi[fr.o1]);
         const int64_t zs = fr.pos2 ? 1 : -1, zo = fr.pos2 ? -int64_t(fr.lo[fr.o2]) : int64_t(fr.hi[fr.o2]);
         const int64_t ysn = ys * fnw;
-        int64_t base = 0;  // set per slab
         const float dh0 = dh[0], dh1 = dh[1], dh2 = dh[2];
         LineState *__restrict tbl = table;
         uint32_t *__restrict lk = lnk;
@@ -669,10 +668,8 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         const int64_t nslab = static_cast<int64_t>(ax.gslab.size()) - 1;
         for (int64_t sl = 0; sl < nslab; ++sl) {
           const int64_t g1 = SL[sl + 1];
-          {
-            const int64_t Xr = fXmA - (int64_t(AX[GS[SL[sl]]]) - xlo);
-            base = (yo + (fB * Xr + half) / fA) * fnw + zo + (fC * Xr + half) / fA;
-          }
+          const int64_t Xr = fXmA - (int64_t(AX[GS[SL[sl]]]) - xlo);
+          const int64_t base = (yo + (fB * Xr + half) / fA) * fnw + zo + (fC * Xr + half) / fA;
           for (int64_t g = SL[sl]; g < g1; ++g) {
             const int32_t i = GS[g];
             const uint8_t gf = GL[g];

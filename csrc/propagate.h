@@ -37,18 +37,13 @@ struct LineFrame {
     inline int64_t zprime(int32_t z) const { return pos2 ? z - lo[o2] : hi[o2] - z; }
     inline uint32_t div(uint64_t num) const { return static_cast<uint32_t>((num * magic) >> 32); }
     // key from main-axis-relative coordinates X' = x_m - lo[m], Y', Z':
-    // key = u(X', Y') * nw + w(X', Z'), split so that a walk in x_m order can
-    // compute the u part once per row
-    inline uint64_t key_u(int64_t Xp, int64_t Yp) const {
-        const uint64_t h = static_cast<uint64_t>(A / 2);
-        return div(static_cast<uint64_t>(A * Yp + B * (XmA - Xp)) + h) * static_cast<uint64_t>(nw);
-    }
-    inline uint64_t key_w(int64_t Xp, int64_t Zp) const {
-        const uint64_t h = static_cast<uint64_t>(A / 2);
-        return div(static_cast<uint64_t>(A * Zp + C * (XmA - Xp)) + h);
-    }
+    // key = u(X', Y') * nw + w(X', Z') (the one-pass walk forms the same key
+    // from a constant per slab; see LineSystem::gather)
     inline uint32_t key(int64_t Xp, int64_t Yp, int64_t Zp) const {
-        return static_cast<uint32_t>(key_u(Xp, Yp) + key_w(Xp, Zp));
+        const uint64_t h = static_cast<uint64_t>(A / 2);
+        const uint64_t u = div(static_cast<uint64_t>(A * Yp + B * (XmA - Xp)) + h);
+        const uint64_t w = div(static_cast<uint64_t>(A * Zp + C * (XmA - Xp)) + h);
+        return static_cast<uint32_t>(u * static_cast<uint64_t>(nw) + w);
     }
 };
 
