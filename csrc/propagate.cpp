@@ -747,11 +747,27 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         if (lanes == (1u << kT) - 1) {
             for (int64_t p = 0; p < n_; ++p) {
                 int32_t *row = blk + p * kT;
+#if defined(__SSE2__)
+                // the row is one whole 64-byte line that nothing reads back
+                // in this pass: stream it out (no read for ownership)
+                alignas(16) int32_t tmp[kT];
+                for (int lane = 0; lane < kT; ++lane) {
+                    tmp[lane] = buf[int64_t(lane) * n_ + p];
+                    buf[int64_t(lane) * n_ + p] = 0;
+                }
+                for (int q = 0; q < kT; q += 4)
+                    _mm_stream_si128(reinterpret_cast<__m128i *>(row + q),
+                                     _mm_load_si128(reinterpret_cast<const __m128i *>(tmp + q)));
+#else
                 for (int lane = 0; lane < kT; ++lane) {
                     row[lane] = buf[int64_t(lane) * n_ + p];
                     buf[int64_t(lane) * n_ + p] = 0;
                 }
+#endif
             }
+#if defined(__SSE2__)
+            _mm_sfence();
+#endif
         } else {
             for (int64_t p = 0; p < n_; ++p) {
                 int32_t *row = blk + p * kT;
