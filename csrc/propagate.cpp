@@ -1039,14 +1039,16 @@ void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64
         std::iota(idx.begin(), idx.end(), int64_t(0));
         std::sort(idx.begin(), idx.end(), [&](int64_t a, int64_t b) { return cols[m][a] < cols[m][b]; });
         std::vector<int32_t> lane(nc);      // column within its tile
-        std::vector<float> dr(3 * nc);
+        std::vector<float> dx(nc), dy(nc), dz(nc);  // directions, one array per component
         std::vector<double> wt(nc);
         std::vector<int64_t> tile, tile_first;  // tiles with a selected column, and where their columns start
         for (int64_t q = 0; q < nc; ++q) {
             const int64_t j = idx[q];
             const int32_t c = cols[m][j];
             lane[q] = c % kT;
-            for (int d = 0; d < 3; ++d) dr[3 * q + d] = dirs[m][3 * j + d];
+            dx[q] = dirs[m][3 * j];
+            dy[q] = dirs[m][3 * j + 1];
+            dz[q] = dirs[m][3 * j + 2];
             wt[q] = wts[m][j];
             if (tile.empty() || tile.back() != c / kT) {
                 tile.push_back(c / kT);
@@ -1068,15 +1070,22 @@ void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64
             for (size_t ti = 0; ti < tile.size(); ++ti) {
                 const int32_t *blk = base + tile[ti] * n_ * kT;
                 const int64_t q0 = tile_first[ti], q1 = tile_first[ti + 1];
+                const int nq = static_cast<int>(q1 - q0);  // at most kT
+                const float *tx = dx.data() + q0, *ty = dy.data() + q0, *tz = dz.data() + q0;
+                const int32_t *tl = lane.data() + q0;
+                const double *tw = wt.data() + q0;
                 for (int64_t p = b; p < e; ++p) {
                     const int32_t *row = blk + p * kT;
                     const float n0 = nrm[3 * p], n1 = nrm[3 * p + 1], n2 = nrm[3 * p + 2];
                     double *a = acc[p - b];
-                    for (int64_t q = q0; q < q1; ++q) {
-                        const int32_t s = row[lane[q]];
+                    // the tile's |n.d| at once (a loop the compiler vectorises;
+                    // each lane the same float operations in the same order)
+                    alignas(16) float cs[kT];
+                    for (int q = 0; q < nq; ++q) cs[q] = std::abs(n0 * tx[q] + n1 * ty[q] + n2 * tz[q]);
+                    for (int q = 0; q < nq; ++q) {
+                        const int32_t s = row[tl[q]];
                         if (s == 0) continue;
-                        const float *d = dr.data() + 3 * q;
-                        const double c = double(std::abs(n0 * d[0] + n1 * d[1] + n2 * d[2])) * wt[q];
+                        const double c = double(cs[q]) * tw[q];
                         const float *vs = v + 3 * int64_t(s - 1);
                         a[0] += vs[0] * c;
                         a[1] += vs[1] * c;
