@@ -397,13 +397,19 @@ class _Gatherer:
         self.tables[key] = tab
         return tab
 
-    def __call__(self, ds, values, sel, want_vis):
-        """(sums, vis, lines walked) of one pass over ``ds.families[sel]``."""
+    def __call__(self, ds, values, sel, want_vis, defer_vis=True):
+        """(sums, vis, lines walked) of one pass over ``ds.families[sel]``.
+
+        With ``defer_vis``, a pass that records leaves ``vis`` (None) to the
+        next pass, which replays and sums it at no cost (the walk pays about
+        10% for it)."""
         tab = self._table(ds)
         if tab is not None and np.all(tab.recorded_mask[sel]):
             sums, vis = self.sysm.gather_recorded(tab, values, sel, want_vis, self.nthreads)
             self.replayed += 1
             return sums, vis, 0
+        if tab is not None and defer_vis:
+            want_vis = False
         return self.sysm.gather(ds.families, ds.weights, values, sel, want_vis, self.nthreads,
                                 stand_in=self.stand_in,
                                 **({"record": tab} if tab is not None else {}))
@@ -823,8 +829,9 @@ def solve(
                     sums, v, nl = gather(ds_it, _send(cur), sel, want_vis)
                     lines_walked += nl
                     parts[bi] = sums
-                    if want_vis:
-                        vacc += v
+                    if vacc is not None:
+                        # (None: a recording pass left it to the next sweep)
+                        vacc = vacc + v if v is not None else None
                     Hg = sum(parts) / S_it[:, None]
                     cur = rho * (Hd + Hg)
                 R_new = cur
@@ -870,9 +877,9 @@ def solve(
         Hg = Hg_acc
     B = E + Rk
     # --- diagnostics: lost fraction δ, energy balance (DESIGN-NOTES §5, §10)
-    if vis is None:  # no gathering ran: one visibility pass for the statistics
+    if vis is None:  # no gathering ran (or only a recording pass): one visibility pass
         t = time.perf_counter()
-        _, vis, _ = gather(gds, np.zeros((n, 3), np.float32), all_fams, True)
+        _, vis, _ = gather(gds, np.zeros((n, 3), np.float32), all_fams, True, defer_vis=False)
         seconds["visibility"] = time.perf_counter() - t
     found = vis / vis_S
     front = ~a["back"]
