@@ -74,9 +74,12 @@ void bind_propagate(py::module_ &m) {
     auto pair_table = py::class_<voxgi::PairTable>(m, "PairTable", R"doc(
 The pairs of one direction set's gathering, recorded for replay
 (LineSystem.make_pair_table, LineSystem.gather(record=...),
-LineSystem.gather_recorded). 4 bytes per record and family, each main
-axis's families padded to tiles of TILE.)doc");
+LineSystem.gather_recorded). ENTRY_BYTES (3) bytes per record and family,
+each main axis's families padded to tiles of TILE; at most MAX_RECORDS
+records.)doc");
     pair_table.attr("TILE") = voxgi::PairTable::kTile;
+    pair_table.attr("ENTRY_BYTES") = voxgi::PairTable::kEntry;
+    pair_table.attr("MAX_RECORDS") = voxgi::PairTable::kMaxRecords;
     pair_table
         .def_property_readonly("nbytes", [](const voxgi::PairTable &t) { return t.bytes(); })
         .def_property_readonly("families", [](const voxgi::PairTable &t) { return t.nfam; })

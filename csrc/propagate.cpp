@@ -736,33 +736,33 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         }
         lines_walked[t] += nwalked;
     }
-    if (record) {  // write the tile's filled columns, one 64-byte row per record
+    if (record) {  // write the tile's filled columns, one 48-byte row per record
         GatherWork &w = work[t];
         const int64_t f0 = sel[by_axis[task_start[task]]];
         const int m = record->fam_axis[f0];
-        int32_t *blk = record->snd[m].p + int64_t(record->slot[f0] / PairTable::kTile) * n_ * PairTable::kTile;
+        constexpr int kT = PairTable::kTile, kE = PairTable::kEntry, kR = PairTable::kRow;
+        uint8_t *blk = record->snd[m].p + int64_t(record->slot[f0] / kT) * n_ * kR;
         int32_t *buf = w.rbuf.data();
-        constexpr int kT = PairTable::kTile;
         // (the buffer is cleared as it is read: the next tile finds it zero)
         if (lanes == (1u << kT) - 1) {
             for (int64_t p = 0; p < n_; ++p) {
-                int32_t *row = blk + p * kT;
-#if defined(__SSE2__)
-                // the row is one whole 64-byte line that nothing reads back
-                // in this pass: stream it out (no read for ownership)
-                alignas(16) int32_t tmp[kT];
+                uint8_t *row = blk + p * kR;
+                // the row packed in order (each 4-byte write's top byte is
+                // the next entry's first, or spare past the row's end) ...
+                alignas(16) uint8_t tmp[kR + 16];
                 for (int lane = 0; lane < kT; ++lane) {
-                    tmp[lane] = buf[int64_t(lane) * n_ + p];
+                    const uint32_t x = static_cast<uint32_t>(buf[int64_t(lane) * n_ + p]);
+                    std::memcpy(tmp + kE * lane, &x, 4);
                     buf[int64_t(lane) * n_ + p] = 0;
                 }
-                for (int q = 0; q < kT; q += 4)
+#if defined(__SSE2__)
+                // ... and streamed out: nothing reads it back in this pass
+                // (no read for ownership; rows are 16-byte aligned)
+                for (int q = 0; q < kR; q += 16)
                     _mm_stream_si128(reinterpret_cast<__m128i *>(row + q),
                                      _mm_load_si128(reinterpret_cast<const __m128i *>(tmp + q)));
 #else
-                for (int lane = 0; lane < kT; ++lane) {
-                    row[lane] = buf[int64_t(lane) * n_ + p];
-                    buf[int64_t(lane) * n_ + p] = 0;
-                }
+                std::memcpy(row, tmp, kR);
 #endif
             }
 #if defined(__SSE2__)
@@ -770,10 +770,11 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
 #endif
         } else {
             for (int64_t p = 0; p < n_; ++p) {
-                int32_t *row = blk + p * kT;
+                uint8_t *row = blk + p * kR;
                 for (int lane = 0; lane < kT; ++lane)
                     if (lanes >> lane & 1u) {
-                        row[lane] = buf[int64_t(lane) * n_ + p];
+                        const uint32_t x = static_cast<uint32_t>(buf[int64_t(lane) * n_ + p]);
+                        std::memcpy(row + kE * lane, &x, kE);  // little-endian: the low 3 bytes
                         buf[int64_t(lane) * n_ + p] = 0;
                     }
             }
@@ -944,22 +945,22 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
 PairTable::Block::~Block() { release(); }
 
 void PairTable::Block::release() {
-    if (p) munmap(p, size * sizeof(int32_t));
+    if (p) munmap(p, size + kSlack);
     p = nullptr;
     size = 0;
 }
 
-void PairTable::Block::allocate(size_t n) {
+void PairTable::Block::allocate(size_t bytes) {
     release();
     // anonymous pages are zero and cost nothing until written (huge pages
     // asked for: the kernel grants them in THP "madvise" mode)
-    void *q = mmap(nullptr, n * sizeof(int32_t), PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    void *q = mmap(nullptr, bytes + kSlack, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (q == MAP_FAILED) throw std::bad_alloc();
 #ifdef MADV_HUGEPAGE
-    madvise(q, n * sizeof(int32_t), MADV_HUGEPAGE);
+    madvise(q, bytes + kSlack, MADV_HUGEPAGE);
 #endif
-    p = static_cast<int32_t *>(q);
-    size = n;
+    p = static_cast<uint8_t *>(q);
+    size = bytes;
 }
 
 PairTable::Block &PairTable::Block::operator=(Block &&o) noexcept {
@@ -974,6 +975,9 @@ PairTable::Block &PairTable::Block::operator=(Block &&o) noexcept {
 }
 
 PairTable LineSystem::make_pair_table(const Family *fams, int64_t nf, bool with_stand_in) const {
+    if (n_ > PairTable::kMaxRecords)
+        throw std::invalid_argument("pair table: " + std::to_string(n_) + " records, at most " +
+                                    std::to_string(PairTable::kMaxRecords) + " fit its 3-byte entries");
     PairTable t;
     t.n = n_;
     t.nfam = nf;
@@ -998,7 +1002,7 @@ PairTable LineSystem::make_pair_table(const Family *fams, int64_t nf, bool with_
     }
     for (int m = 0; m < 3; ++m) {
         const size_t tiles = (static_cast<size_t>(t.cols[m]) + PairTable::kTile - 1) / PairTable::kTile;
-        const size_t size = static_cast<size_t>(n_) * tiles * PairTable::kTile;
+        const size_t size = static_cast<size_t>(n_) * tiles * PairTable::kRow;
         if (size == 0) continue;
         t.snd[m].allocate(size);
     }
@@ -1064,7 +1068,7 @@ void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64
             }
         }
         tile_first.push_back(nc);
-        const int32_t *base = tab.snd[m].p;
+        const uint8_t *base = tab.snd[m].p;
         const float *nrm = ax.nrm.data();
         const float *v = va.data();
         // A chunk of records at a time, tile after tile: the table streams
@@ -1076,14 +1080,14 @@ void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64
             for (int64_t p = b; p < e; ++p)
                 for (int c = 0; c < 4; ++c) acc[p - b][c] = 0.0;
             for (size_t ti = 0; ti < tile.size(); ++ti) {
-                const int32_t *blk = base + tile[ti] * n_ * kT;
+                const uint8_t *blk = base + tile[ti] * n_ * PairTable::kRow;
                 const int64_t q0 = tile_first[ti], q1 = tile_first[ti + 1];
                 const int nq = static_cast<int>(q1 - q0);  // at most kT
                 const float *tx = dx.data() + q0, *ty = dy.data() + q0, *tz = dz.data() + q0;
                 const int32_t *tl = lane.data() + q0;
                 const double *tw = wt.data() + q0;
                 for (int64_t p = b; p < e; ++p) {
-                    const int32_t *row = blk + p * kT;
+                    const uint8_t *row = blk + p * PairTable::kRow;
                     const float n0 = nrm[3 * p], n1 = nrm[3 * p + 1], n2 = nrm[3 * p + 2];
                     double *a = acc[p - b];
                     // the tile's |n.d| at once (a loop the compiler vectorises;
@@ -1091,7 +1095,7 @@ void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64
                     alignas(16) float cs[kT];
                     for (int q = 0; q < nq; ++q) cs[q] = std::abs(n0 * tx[q] + n1 * ty[q] + n2 * tz[q]);
                     for (int q = 0; q < nq; ++q) {
-                        const int32_t s = row[tl[q]];
+                        const uint32_t s = PairTable::entry(row, tl[q]);
                         if (s == 0) continue;
                         const double c = double(cs[q]) * tw[q];
                         const float *vs = v + 4 * int64_t(s - 1);

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <cstring>
 #include <mutex>
 #include <vector>
 
@@ -52,11 +53,20 @@ struct LineFrame {
 // (visibility does not change between iterations). For each main axis m: the
 // set's families of axis m, and record by record in axis-m order the axis-m
 // position + 1 of the record each of those families pairs it with (0: none),
-// 4 bytes per record and family, in tiles of 16 families (a 64-byte row per
-// record and tile). Filled by LineSystem::gather (record),
+// 3 bytes per record and family (little-endian), in tiles of 16 families (a
+// 48-byte row per record and tile). Filled by LineSystem::gather (record),
 // read by LineSystem::gather_recorded.
 struct PairTable {
-    static constexpr int kTile = 16;  // columns per tile: one 64-byte row per record
+    static constexpr int kTile = 16;   // columns per tile
+    static constexpr int kEntry = 3;   // bytes per entry
+    static constexpr int kRow = kTile * kEntry;  // bytes per record and tile (a multiple of 16)
+    static constexpr int64_t kMaxRecords = (int64_t(1) << 24) - 2;  // position + 1 fits 3 bytes
+    // entry `lane` of a row (reads 4 bytes: a block has slack after its last row)
+    static inline uint32_t entry(const uint8_t *row, int lane) {
+        uint32_t x;
+        std::memcpy(&x, row + kEntry * lane, 4);
+        return x & 0xFFFFFFu;
+    }
     int64_t n = 0;        // records
     int64_t nfam = 0;     // families of the set
     bool with_stand_in = false;
@@ -67,7 +77,7 @@ struct PairTable {
     std::vector<float> dir;          // unit direction of every family, 3 per family
     std::vector<double> weight;      // every family's weight
     struct Block {                   // anonymous memory: zero pages come free from the OS
-        int32_t *p = nullptr;
+        uint8_t *p = nullptr;
         size_t size = 0;
         Block() = default;
         Block(const Block &) = delete;
@@ -75,14 +85,15 @@ struct PairTable {
         Block(Block &&o) noexcept : p(o.p), size(o.size) { o.p = nullptr; o.size = 0; }
         Block &operator=(Block &&o) noexcept;
         ~Block();
-        void allocate(size_t n);  // n zero entries
+        void allocate(size_t bytes);  // zero bytes (and kSlack more)
+        static constexpr size_t kSlack = 16;
         void release();
     };
     // axis m: tiles of kTile columns; tile t's row for the record at axis-m
-    // position p is snd[m].p[(t * n + p) * kTile ...]
+    // position p is snd[m].p[(t * n + p) * kRow ...]
     Block snd[3];
     std::vector<uint8_t> filled;     // family -> recorded yet
-    size_t bytes() const { return 4 * (snd[0].size + snd[1].size + snd[2].size); }
+    size_t bytes() const { return snd[0].size + snd[1].size + snd[2].size; }
 };
 
 // The records of a solve, prepared once: bounding box, one lexicographic

@@ -496,9 +496,35 @@ def test_recorded_pairs_replay_the_gathering(sphere24, stand):
     rpart, none = s.gather_recorded(tab, vals, sub, False, 1)
     assert none is None
     assert np.allclose(rpart, part, rtol=1e-12, atol=0)
-    # 4 bytes per record and family, each axis padded to tiles of 16
+    # 3 bytes per record and family, each axis padded to tiles of 16
     m = np.argmax(np.abs(ds.families), axis=1)
-    assert tab.nbytes == 4 * n * sum(-(-np.sum(m == a) // 16) * 16 for a in range(3))
+    assert _core.PairTable.ENTRY_BYTES == 3
+    assert tab.nbytes == 3 * n * sum(-(-np.sum(m == a) // 16) * 16 for a in range(3))
+
+
+def test_recorded_pairs_hold_positions_past_two_bytes():
+    # Two facing 190 x 190 plates: 72,200 records, so partners past position
+    # 65,535 need the third byte of an entry. Every record of one plate sees
+    # the other along every family that crosses the gap; the replay gives the
+    # walk's sums (a dropped or misplaced byte names another record).
+    k = 190
+    g = np.stack(np.meshgrid(np.arange(k), np.arange(k), indexing="ij"), -1).reshape(-1, 2)
+    ijk = np.concatenate([np.c_[g, np.zeros(len(g))], np.c_[g, np.full(len(g), 9)]]).astype(np.int32)
+    normal = np.zeros((len(ijk), 3), np.float32)
+    normal[: len(g), 2], normal[len(g):, 2] = 1.0, -1.0
+    point = (ijk + 0.5).astype(np.float32)
+    n = len(ijk)
+    assert n > 65536
+    s = _core.LineSystem(ijk, normal, point, epsilon=0.02, history=16)
+    ds = direction_set(3)
+    fams = np.flatnonzero(np.abs(ds.families[:, 2]) > 0).astype(np.int64)  # those that cross the gap
+    vals = np.random.default_rng(7).random((n, 3)).astype(np.float32)
+    tab = s.make_pair_table(ds.families, ds.weights, False)
+    walked, vis, _ = s.gather(ds.families, ds.weights, vals, fams, True, 2, record=tab)
+    replayed, rvis = s.gather_recorded(tab, vals, fams, True, 2)
+    assert np.all(vis > 0)
+    assert np.allclose(replayed, walked, rtol=1e-12, atol=0)
+    assert np.allclose(rvis, vis, rtol=1e-12, atol=0)
 
 
 def test_recorded_pairs_refuse_what_they_do_not_hold(sphere24):

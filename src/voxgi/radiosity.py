@@ -344,7 +344,7 @@ class _Extrapolator:
 
 
 def pair_table_bytes(n: int, families: np.ndarray) -> int:
-    """Bytes of the recorded pairs of ``n`` records over ``families``: 4 per
+    """Bytes of the recorded pairs of ``n`` records over ``families``: 3 per
     record and family, each main axis's families padded to tiles of 16."""
     fam = np.asarray(families)
     if len(fam) == 0:
@@ -352,7 +352,7 @@ def pair_table_bytes(n: int, families: np.ndarray) -> int:
     m = np.argmax(np.abs(fam), axis=1)
     tile = _core.PairTable.TILE
     cols = sum(-(-int(np.sum(m == a)) // tile) * tile for a in range(3))
-    return 4 * int(n) * cols
+    return _core.PairTable.ENTRY_BYTES * int(n) * cols
 
 
 class _Gatherer:
@@ -382,6 +382,9 @@ class _Gatherer:
         entry = {"radius": int(ds.radius), "bytes": need}
         if self.budget is None:
             entry["recorded"] = False
+        elif self.sysm.size > _core.PairTable.MAX_RECORDS:
+            entry["recorded"] = False
+            entry["reason"] = f"more than {_core.PairTable.MAX_RECORDS} records"
         elif self.passes.get(key, 0) < 2:
             entry["recorded"] = False
             entry["reason"] = "one pass only"
