@@ -541,12 +541,13 @@ def solve(
         fraction come from passes the solve runs anyway.
     pair_cache : bool or None
         Record the pairs the first gathering pass over a direction set finds
-        (4 bytes per record and family) and replay them in the later passes
-        over that set (visibility does not change between iterations; the
-        same sums to float rounding, 3-4x faster per pass; measured on 150k
-        records at R 22, 1 thread: 265 M rays/s replayed, 77 M walked, 50 M
-        while recording). Only for a set gathered at least twice (iterations plus
-        the diagnostics pass). None (default): when the pairs fit in
+        (3 bytes per record and family, at most 16,777,214 records) and
+        replay them in the later passes over that set (visibility does not
+        change between iterations; the same sums to float rounding, about 4x
+        faster per pass; measured on 150k records at R 22, 1 thread: 270-300
+        M rays/s replayed, 72-77 M walked, 50 M while recording, which then
+        leaves the visibility sums to the first replay). Only for a set
+        gathered at least twice (iterations plus the diagnostics pass). None (default): when the pairs fit in
         ``max_cache_bytes``; True: the same with no default budget; False:
         walk the lines every pass. Never with ``client`` (the workers walk).
         ``stats["pair_cache"]`` gives the bytes, the sets recorded (or why
