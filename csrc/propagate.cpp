@@ -204,6 +204,14 @@ void LineSystem::build_occupancy() const {
             throw std::invalid_argument("voxel box too large for the shooting bitset");
         occ_.assign((nx * ny * nz + 63) / 64, 0);
         for (int64_t k : vkey_) occ_[k >> 6] |= uint64_t(1) << (k & 63);
+        // vkey_ is sorted, so an occupied voxel's slot in it is the number of
+        // set bits before its own: a prefix count per word and a popcount
+        occ_rank_.resize(occ_.size());
+        int64_t before = 0;
+        for (size_t w = 0; w < occ_.size(); ++w) {
+            occ_rank_[w] = static_cast<int32_t>(before);
+            before += __builtin_popcountll(occ_[w]);
+        }
     });
 }
 
@@ -1187,6 +1195,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
         std::vector<double> recvT(16);
         size_t nrecv = 0;
         int32_t hp[kMaxHistory];
+        int64_t nsteps = 0;  // (a local: a counter in memory would chain every step through a store)
         for (int64_t k = task * chunk; k < std::min(ne, (task + 1) * chunk); ++k) {
             const int32_t e = emit[k];
             const float *pe = P + 3 * int64_t(e), *nE = N + 3 * int64_t(e);
@@ -1241,7 +1250,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                 int64_t numy = fr.B * (fr.XmA - X0) + h, numz = fr.C * (fr.XmA - X0) + h;
                 int64_t qy = numy / fr.A, ry = numy % fr.A, qz = numz / fr.A, rz = numz % fr.A;
                 for (int64_t X = X0; X >= 0 && X <= Xr && !stopped; first = false) {
-                    ++steps[t];
+                    ++nsteps;
                     ++istep;
                     const int64_t Y = u - qy;
                     const int64_t Z = w - qz;
@@ -1251,21 +1260,32 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                     c3[o1] = static_cast<int32_t>(fr.pos1 ? Y + fr.lo[o1] : fr.hi[o1] - Y);
                     c3[o2] = static_cast<int32_t>(fr.pos2 ? Z + fr.lo[o2] : fr.hi[o2] - Z);
                     // next voxel of the line
+                    // (without branches: whether a remainder wraps is a coin
+                    // toss from one step to the next; m = -1 where it does)
                     X += s;
                     if (s > 0) {  // numerators fall by B, C
                         ry -= fr.B;
-                        if (ry < 0) { ry += fr.A; --qy; }
+                        const int64_t my = ry >> 63;
+                        ry += fr.A & my;
+                        qy += my;
                         rz -= fr.C;
-                        if (rz < 0) { rz += fr.A; --qz; }
+                        const int64_t mz = rz >> 63;
+                        rz += fr.A & mz;
+                        qz += mz;
                     } else {
                         ry += fr.B;
-                        if (ry >= fr.A) { ry -= fr.A; ++qy; }
+                        const int64_t my = ~((ry - fr.A) >> 63);
+                        ry -= fr.A & my;
+                        qy -= my;
                         rz += fr.C;
-                        if (rz >= fr.A) { rz -= fr.A; ++qz; }
+                        const int64_t mz = ~((rz - fr.A) >> 63);
+                        rz -= fr.A & mz;
+                        qz -= mz;
                     }
                     const int64_t lin = linear(c3[0], c3[1], c3[2]);
                     if (!((occ_[lin >> 6] >> (lin & 63)) & 1)) continue;
-                    const int64_t slot = std::lower_bound(vkey_.begin(), vkey_.end(), lin) - vkey_.begin();
+                    const uint64_t below = occ_[lin >> 6] & ((uint64_t(1) << (lin & 63)) - 1);
+                    const int64_t slot = occ_rank_[lin >> 6] + __builtin_popcountll(below);
                     const int32_t b = vstart_[slot], en = vstart_[slot + 1];
                     group.clear();
                     for (int32_t i = b; i < en; ++i) {
@@ -1451,6 +1471,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
             }
             unfound[k] = lost;
         }
+        steps[t] += nsteps;
     });
     std::fill(hd, hd + 3 * n_, 0.0);
     for (int t = 0; t < threads; ++t) {

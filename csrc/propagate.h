@@ -235,6 +235,7 @@ private:
     Axis ax_[3];
     // shooting: occupancy bitset over the box and the records of each voxel
     mutable std::vector<uint64_t> occ_;
+    mutable std::vector<int32_t> occ_rank_;  // occupied voxels before each word of occ_: a voxel's slot in vkey_ in O(1)
     mutable std::once_flag occ_once_;
     void build_occupancy() const;
     std::vector<int64_t> vkey_;    // sorted linear keys of occupied voxels (one per voxel)
