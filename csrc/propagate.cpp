@@ -1195,7 +1195,9 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
         std::vector<double> recvT(16);
         size_t nrecv = 0;
         int32_t hp[kMaxHistory];
-        int64_t nsteps = 0;  // (a local: a counter in memory would chain every step through a store)
+        // (locals: the per-thread counters share a cache line, and a counter
+        // in memory would chain every step through a store)
+        int64_t nsteps = 0, nrays = 0;
         for (int64_t k = task * chunk; k < std::min(ne, (task + 1) * chunk); ++k) {
             const int32_t e = emit[k];
             const float *pe = P + 3 * int64_t(e), *nE = N + 3 * int64_t(e);
@@ -1216,7 +1218,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                 const bool partial = coverage && coverage[e] >= 0;
                 const double alpha =
                     partial ? coverage[e] * std::abs(double(cv)) / std::abs(double(dv[fr.m])) : 1.0;
-                ++rays[t];
+                ++nrays;
                 // the line through e's voxel: u, w fixed; y', z' follow from x'
                 const int m = fr.m, o1 = fr.o1, o2 = fr.o2;
                 const int64_t X0 = eijk[m] - fr.lo[m];
@@ -1472,6 +1474,7 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
             unfound[k] = lost;
         }
         steps[t] += nsteps;
+        rays[t] += nrays;
     });
     std::fill(hd, hd + 3 * n_, 0.0);
     for (int t = 0; t < threads; ++t) {
