@@ -1042,9 +1042,9 @@ void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64
         const int64_t nc = static_cast<int64_t>(cols[m].size());
         if (nc == 0) continue;
         const Axis &ax = ax_[m];
-        // values in this axis's order: the senders are axis-order positions
-        // values in this axis's order, 16 bytes a record: the value, then
-        // 1 (so that one pair of packed multiply-adds also sums the weight)
+        // values in this axis's order (the senders are axis-order
+        // positions), 16 bytes a record: the value, then 1 (so that one pair
+        // of packed multiply-adds also sums the weight)
         std::vector<float> va(4 * n_);
         const int32_t *ord = ax.order.data();
         for (int64_t i = 0; i < n_; ++i) {
@@ -1261,9 +1261,9 @@ int64_t LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, i
                     c3[m] = static_cast<int32_t>(X + fr.lo[m]);
                     c3[o1] = static_cast<int32_t>(fr.pos1 ? Y + fr.lo[o1] : fr.hi[o1] - Y);
                     c3[o2] = static_cast<int32_t>(fr.pos2 ? Z + fr.lo[o2] : fr.hi[o2] - Z);
-                    // next voxel of the line
-                    // (without branches: whether a remainder wraps is a coin
-                    // toss from one step to the next; m = -1 where it does)
+                    // next voxel of the line, without branches (whether a
+                    // remainder wraps is a coin toss from one step to the
+                    // next; my, mz have every bit set where it does)
                     X += s;
                     if (s > 0) {  // numerators fall by B, C
                         ry -= fr.B;
