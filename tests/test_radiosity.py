@@ -139,6 +139,11 @@ def test_recorded_pairs_give_the_same_solution(sphere32, kw):
     rep = voxgi.solve(vox, **base)
     assert rep.bounces == walk.bounces
     assert np.allclose(rep.radiosity, walk.radiosity, rtol=1e-6, atol=1e-9)
+    # the recording pass leaves the visibility sums to the first replay: the
+    # same lost fraction and energy balance as the walk's
+    assert rep.stats["lost_fraction"] == pytest.approx(walk.stats["lost_fraction"], rel=1e-9)
+    assert np.allclose(rep.stats["energy"]["escaping"], walk.stats["energy"]["escaping"], rtol=1e-6)
+    assert "visibility" not in rep.stats["seconds"]
     pc = rep.stats["pair_cache"]
     assert pc["replayed_passes"] >= rep.bounces - 1
     assert all(e["recorded"] for e in pc["sets"])
@@ -154,6 +159,14 @@ def test_recorded_pairs_give_the_same_solution(sphere32, kw):
     once = voxgi.solve(vox, max_bounces=1, diagnostics=False, **{
         k: v for k, v in base.items() if k != "tol"})
     assert once.stats["pair_cache"]["sets"][0]["reason"] == "one pass only"
+    # one bounce and the diagnostics pass: the bounce records, so the
+    # visibility sums come from a replayed pass of their own
+    one = voxgi.solve(vox, max_bounces=1, **{k: v for k, v in base.items() if k != "tol"})
+    one_walk = voxgi.solve(vox, max_bounces=1, pair_cache=False, **{
+        k: v for k, v in base.items() if k != "tol"})
+    assert "visibility" in one.stats["seconds"]
+    assert one.stats["pair_cache"]["replayed_passes"] >= 1
+    assert one.stats["lost_fraction"] == pytest.approx(one_walk.stats["lost_fraction"], rel=1e-9)
 
 
 def test_pair_cache_arguments_are_checked(sphere32):
