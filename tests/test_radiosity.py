@@ -156,14 +156,13 @@ def test_recorded_pairs_give_the_same_solution(sphere32, kw):
     assert np.array_equal(tight.radiosity, walk.radiosity)
     assert "budget" in tight.stats["pair_cache"]["sets"][0]["reason"]
     # one pass over the set: nothing to replay, nothing recorded
-    once = voxgi.solve(vox, max_bounces=1, diagnostics=False, **{
-        k: v for k, v in base.items() if k != "tol"})
+    no_tol = {k: v for k, v in base.items() if k != "tol"}
+    once = voxgi.solve(vox, max_bounces=1, diagnostics=False, **no_tol)
     assert once.stats["pair_cache"]["sets"][0]["reason"] == "one pass only"
     # one bounce and the diagnostics pass: the bounce records, so the
     # visibility sums come from a replayed pass of their own
-    one = voxgi.solve(vox, max_bounces=1, **{k: v for k, v in base.items() if k != "tol"})
-    one_walk = voxgi.solve(vox, max_bounces=1, pair_cache=False, **{
-        k: v for k, v in base.items() if k != "tol"})
+    one = voxgi.solve(vox, max_bounces=1, **no_tol)
+    one_walk = voxgi.solve(vox, max_bounces=1, pair_cache=False, **no_tol)
     assert "visibility" in one.stats["seconds"]
     assert one.stats["pair_cache"]["replayed_passes"] >= 1
     assert one.stats["lost_fraction"] == pytest.approx(one_walk.stats["lost_fraction"], rel=1e-9)

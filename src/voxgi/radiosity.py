@@ -547,9 +547,9 @@ def solve(
         faster per pass; measured on 150k records at R 22, 1 thread: 270-300
         M rays/s replayed, 72-77 M walked, 50 M while recording, which then
         leaves the visibility sums to the first replay). Only for a set
-        gathered at least twice (iterations plus the diagnostics pass). None (default): when the pairs fit in
-        ``max_cache_bytes``; True: the same with no default budget; False:
-        walk the lines every pass. Never with ``client`` (the workers walk).
+        gathered at least twice (iterations plus the diagnostics pass).
+        None (default): when the pairs fit in ``max_cache_bytes``; True: the
+        same with no default budget; False: walk the lines every pass. Never with ``client`` (the workers walk).
         ``stats["pair_cache"]`` gives the bytes, the sets recorded (or why
         not) and the passes replayed.
     max_cache_bytes : int or None
