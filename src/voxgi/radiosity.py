@@ -549,9 +549,9 @@ def solve(
         leaves the visibility sums to the first replay). Only for a set
         gathered at least twice (iterations plus the diagnostics pass).
         None (default): when the pairs fit in ``max_cache_bytes``; True: the
-        same with no default budget; False: walk the lines every pass. Never with ``client`` (the workers walk).
-        ``stats["pair_cache"]`` gives the bytes, the sets recorded (or why
-        not) and the passes replayed.
+        same with no default budget; False: walk the lines every pass. Never
+        with ``client`` (the workers walk). ``stats["pair_cache"]`` gives the
+        bytes, the sets recorded (or why not) and the passes replayed.
     max_cache_bytes : int or None
         Budget for the recorded pairs of all direction sets; None: a quarter
         of the memory available when the solve starts (``pair_cache=None``),
