@@ -509,7 +509,8 @@ def test_recorded_pairs_hold_positions_past_two_bytes():
     # walk's sums (a dropped or misplaced byte names another record).
     k = 190
     g = np.stack(np.meshgrid(np.arange(k), np.arange(k), indexing="ij"), -1).reshape(-1, 2)
-    ijk = np.concatenate([np.c_[g, np.zeros(len(g))], np.c_[g, np.full(len(g), 9)]]).astype(np.int32)
+    lower, upper = np.c_[g, np.zeros(len(g))], np.c_[g, np.full(len(g), 9)]
+    ijk = np.concatenate([lower, upper]).astype(np.int32)
     normal = np.zeros((len(ijk), 3), np.float32)
     normal[: len(g), 2], normal[len(g):, 2] = 1.0, -1.0
     point = (ijk + 0.5).astype(np.float32)
@@ -517,7 +518,8 @@ def test_recorded_pairs_hold_positions_past_two_bytes():
     assert n > 65536
     s = _core.LineSystem(ijk, normal, point, epsilon=0.02, history=16)
     ds = direction_set(3)
-    fams = np.flatnonzero(np.abs(ds.families[:, 2]) > 0).astype(np.int64)  # those that cross the gap
+    # the families that cross the gap
+    fams = np.flatnonzero(np.abs(ds.families[:, 2]) > 0).astype(np.int64)
     vals = np.random.default_rng(7).random((n, 3)).astype(np.float32)
     tab = s.make_pair_table(ds.families, ds.weights, False)
     walked, vis, _ = s.gather(ds.families, ds.weights, vals, fams, True, 2, record=tab)
