@@ -40,8 +40,8 @@ def main() -> int:
             vox = voxgi.voxelize(scene, resolution=res)
             for sil in (False, True):
                 t = time.perf_counter()
-                sol = voxgi.solve(vox, directions=voxgi.display.RENDER_DIRECTIONS,
-                                  tol=voxgi.display.RENDER_SOLVE_TOL, diagnostics=False,
+                sol = voxgi.solve(vox, directions=voxgi.pipeline.RENDER_DIRECTIONS,
+                                  tol=voxgi.pipeline.RENDER_SOLVE_TOL, diagnostics=False,
                                   progress=False, shoot_silhouettes=sil)
                 dt = time.perf_counter() - t
                 errs = []

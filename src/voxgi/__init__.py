@@ -17,7 +17,8 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 
 from . import _core, io, metrics, scenes
-from .display import RenderResult, render
+from .display import RenderResult
+from .pipeline import render
 from .radiosity import Solution, solve
 from .scene import AshikhminShirley, Camera, Material, Scene, SceneObject
 from .voxels import VoxelSet, voxelize

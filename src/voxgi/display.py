@@ -20,22 +20,7 @@ import numpy as np
 from . import _core, _validate
 from .scene import Camera, Scene
 
-__all__ = ["RENDER_DIRECTIONS", "RENDER_RESOLUTION", "RENDER_SOLVE_TOL", "RenderResult", "render",
-           "run_cli"]
-
-#: Voxel resolution and gathering radius used by ``render(scene)`` without a
-#: solution and by ``voxgi render``. Measured on the Cornell box at 256x256
-#: against Mitsuba (benchmarks/time_vs_error.py, display run to an estimated
-#: noise relMSE of 3e-4): relMSE 5.5e-4 at resolution 48, 3.5e-4 at 64,
-#: 3.3e-4 at 80 and 96 (R 8), 3.8e-4 at 64 with R 6. At the default display
-#: tolerance the noise (~1e-3) dominates from 64 on.
-RENDER_RESOLUTION = 64
-RENDER_DIRECTIONS = 8
-#: The solve's ``tol`` in that pipeline: the display stops at relMSE 1e-3,
-#: and a solve to 1e-3 instead of 1e-4 changes the Cornell box's radiosity by
-#: 8e-5 (relative, area-weighted) and its picture's error not at all
-#: (3.49e-4 against 3.46e-4) with 10 bounces instead of 13.
-RENDER_SOLVE_TOL = 1e-3
+__all__ = ["RenderResult", "render"]
 
 #: relMSE's epsilon (voxgi.metrics.rel_mse), used by the stopping rule too.
 _REL_EPS = 0.01
@@ -588,8 +573,7 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
            tol: float | None = None, seed: int = 0, progress: bool = True,
            threads: int | None = None, client=None, *, camera: Camera | None = None,
            min_frames: int = 4, emitter_share: float | None = None, gather: int = 4,
-           vpl_pdf: str = "power",
-           resolution: int | None = None, directions: int | None = None) -> RenderResult:
+           vpl_pdf: str = "power") -> RenderResult:
     r"""Render ``scene`` from its camera using the voxel solution ``sol``.
 
     Each pixel's primary ray (Embree) hits a point x with normal n, albedo ρ
@@ -640,9 +624,9 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     ----------
     scene : Scene
         With a camera (``scene.camera``, or ``camera=``).
-    sol : Solution or None
-        The voxel solution of ``scene``; None voxelizes and solves with the
-        defaults (or ``resolution`` / ``directions``) first.
+    sol : Solution
+        The voxel solution of ``scene`` (:func:`voxgi.solve`);
+        :func:`voxgi.pipeline.render` also takes None and solves first.
     vpls_per_frame : int
         VPLs per pixel per frame (>= 1), shared by all pixels.
     max_frames : int or None
@@ -678,13 +662,6 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     vpl_pdf : {"power", "area"}
         VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
         paper); see :class:`VPLSampler`.
-    resolution, directions : int, optional
-        Passed to :func:`voxgi.voxelize` / :func:`voxgi.solve` when ``sol`` is
-        None; default :data:`RENDER_RESOLUTION` (64) and
-        :data:`RENDER_DIRECTIONS` (8), solved to :data:`RENDER_SOLVE_TOL`
-        without the solve's diagnostic passes: past resolution 64 the
-        display's noise, not the voxels, sets the Cornell box's error
-        (``benchmarks/time_vs_error.py``).
 
     Returns
     -------
@@ -710,6 +687,9 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
     scene.check_nonempty()
+    if sol is None:
+        raise TypeError("sol: expected a voxgi.Solution (voxgi.render, the pipeline's "
+                        "render, solves the scene first when given none)")
     cam = camera if camera is not None else scene.camera
     if cam is None:
         raise ValueError("render: the scene has no camera (set scene.camera or pass camera=)")
@@ -742,18 +722,6 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
     seconds: dict[str, float] = {}
     skipped: list[str] = []
 
-    if sol is None:
-        from .radiosity import solve
-        from .voxels import voxelize
-
-        t0 = time.perf_counter()
-        vox = voxelize(scene, resolution=RENDER_RESOLUTION if resolution is None else resolution)
-        seconds["voxelize"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        sol = solve(vox, directions=RENDER_DIRECTIONS if directions is None else directions,
-                    tol=RENDER_SOLVE_TOL, threads=threads, progress=progress, client=client,
-                    diagnostics=False)
-        seconds["solve"] = time.perf_counter() - t0
     _check_solution(scene, sol)
 
     t0 = time.perf_counter()
@@ -817,7 +785,7 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         stderr = np.sqrt(m2 / (frames - 1) / frames).reshape(H, W, 3).astype(np.float32)
     seconds.update(shader.seconds)
     seconds["total"] = time.perf_counter() - t_start
-    seconds["display"] = seconds["total"] - seconds.get("voxelize", 0.0) - seconds.get("solve", 0.0)
+    seconds["display"] = seconds["total"]
     stats = {
         "seconds": seconds,
         "primary_rays": int(shader.primary_rays),
@@ -836,76 +804,3 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         "threads": nthreads,
     }
     return RenderResult(image=image, frames=frames, stderr=stderr, stats=stats, solution=sol)
-
-
-# --------------------------------------------------------------------------
-# Command line
-# --------------------------------------------------------------------------
-def run_cli(args) -> int:
-    """``voxgi render``: load or build the scene, voxelize, solve, display,
-    write EXR + PNG, print what was done and the seconds of each phase."""
-    from pathlib import Path
-
-    from . import io, scenes
-    from .radiosity import solve
-    from .voxels import voxelize
-
-    say = print
-    src = Path(args.scene)
-    if src.suffix.lower() == ".toml" or src.exists():
-        if not src.exists():
-            raise SystemExit(f"voxgi render: scene file not found: {src}")
-        scene = Scene.load(src)
-        name = src.stem
-    else:
-        try:
-            scene = scenes.get(args.scene)
-        except ValueError as exc:
-            raise SystemExit(f"voxgi render: {exc}") from None
-        name = args.scene
-    if scene.camera is None:
-        raise SystemExit(f"voxgi render: scene {name!r} has no camera")
-    try:
-        changes = {k: v for k, v in (("width", args.width), ("height", args.height)) if v is not None}
-        if changes:
-            scene.camera = scene.camera.replace(**changes)
-    except (TypeError, ValueError) as exc:
-        raise SystemExit(f"voxgi render: {exc}") from None
-    out = Path(args.output) if args.output else Path(f"{name}.exr")
-    cam = scene.camera
-    say(f"scene {name}: {len(scene.objects)} objects, {scene.n_triangles} triangles, "
-        f"{cam.width}x{cam.height} pixels")
-    t0 = time.perf_counter()
-    vox = voxelize(scene, resolution=args.resolution or RENDER_RESOLUTION)
-    t_vox = time.perf_counter() - t0
-    say(f"voxelize: {len(vox)} records (resolution {vox.resolution}) in {t_vox:.2f} s")
-    t0 = time.perf_counter()
-    sol = solve(vox, directions=args.directions or RENDER_DIRECTIONS, tol=RENDER_SOLVE_TOL,
-                threads=args.threads, progress=not args.quiet, diagnostics=False)
-    t_sol = time.perf_counter() - t0
-    say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in {t_sol:.2f} s")
-    for what, why in sol.stats.get("skipped", {}).items():
-        say(f"  solve skipped {what}: {why}")
-    res = render(scene, sol, max_frames=args.frames, seed=args.seed, progress=not args.quiet,
-                 threads=args.threads)
-    s = res.stats
-    sec = s["seconds"]
-    say(f"display: {res.frames} frames, {s['vpls']} VPLs/pixel, {s['primary_rays']:.3g} primary "
-        f"+ {s['shadow_rays']:.3g} shadow + {s['gather_rays']:.3g} gather rays in "
-        f"{sec['display']:.2f} s "
-        f"(estimated relMSE of the noise {s['est_rel_mse']:.2e})")
-    timings = {"voxelize": t_vox, "solve": t_sol, **{k: v for k, v in sec.items()
-                                                      if k not in ("voxelize", "solve", "total")}}
-    timings["total"] = t_vox + t_sol + sec["display"]
-    meta = {
-        "scene": name, "width": cam.width, "height": cam.height, "resolution": vox.resolution,
-        "records": len(vox), "directions": args.directions, "frames": res.frames,
-        "vpls_per_pixel": s["vpls"], "seed": args.seed, "seconds": timings,
-        "skipped": s["skipped"],
-    }
-    io.write_exr(out, res.image, metadata=meta)
-    png = out.with_suffix(".png")
-    io.write_png(png, res.image)
-    say(f"wrote {out} and {png}")
-    say("seconds: " + ", ".join(f"{k} {v:.2f}" for k, v in timings.items()))
-    return 0
