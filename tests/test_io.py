@@ -38,3 +38,63 @@ def test_bad_images(tmp_path):
         io.write_png(tmp_path / "x.png", np.array([["a"]]))
     with pytest.raises(FileNotFoundError):
         io.read_exr(tmp_path / "missing.exr")
+
+
+# A write that fails part-way (here: the file-size limit RLIMIT_FSIZE, with
+# SIGXFSZ ignored so the write returns EFBIG instead of killing the process)
+# must leave the earlier file whole and no temporary file behind.
+_FSIZE_SCRIPT = """
+import resource, signal, sys
+import numpy as np
+from voxgi import io
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+kind, path = sys.argv[1], sys.argv[2]
+big = np.random.default_rng(0).random((256, 256, 3)).astype(np.float32)  # incompressible
+resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000))
+try:
+    getattr(io, "write_" + kind)(path, big)
+except OSError as exc:
+    print("refused:", exc)
+    sys.exit(3)
+"""
+
+
+@pytest.mark.parametrize("kind", ["exr", "png"])
+def test_failed_write_keeps_the_earlier_file(tmp_path, kind):
+    import subprocess
+    import sys
+
+    path = tmp_path / f"a.{kind}"
+    small = np.full((4, 5, 3), 0.25, np.float32)
+    getattr(io, f"write_{kind}")(path, small)
+    before = path.read_bytes()
+    r = subprocess.run([sys.executable, "-c", _FSIZE_SCRIPT, kind, str(path)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 3, r.stdout + r.stderr
+    assert "refused:" in r.stdout
+    assert path.read_bytes() == before
+    if kind == "exr":
+        np.testing.assert_array_equal(io.read_exr(path), small)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
+
+
+def test_atomic_path_removes_the_temporary_file_on_error(tmp_path):
+    target = tmp_path / "keep.txt"
+    target.write_text("old")
+    target.chmod(0o640)
+    with pytest.raises(KeyboardInterrupt), io.atomic_path(target) as tmp:
+        assert tmp.parent == tmp_path and tmp.suffix == ".txt"
+        tmp.write_text("half")
+        raise KeyboardInterrupt
+    assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"]
+    with io.atomic_path(target) as tmp:
+        tmp.write_text("new")
+    assert target.read_text() == "new"
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"]
+    assert target.stat().st_mode & 0o777 == 0o640  # the replaced file's permissions
+
+
+def test_write_into_a_folder_name_is_refused(tmp_path):
+    with pytest.raises(IsADirectoryError, match="folder"):
+        io.write_exr(tmp_path, np.zeros((2, 2, 3)))

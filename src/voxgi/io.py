@@ -1,13 +1,79 @@
-"""Image files: OpenEXR for data (linear float32), PNG for eyes (tone-mapped sRGB)."""
+"""Image files: OpenEXR for data (linear float32), PNG for eyes (tone-mapped sRGB).
+
+Every file voxgi writes (images here, solutions, scene files) goes through
+:func:`atomic_path`: it is written under a temporary name in the target's
+folder and renamed over the target only once complete, so a failed or
+interrupted write (disk full, file-size limit, Ctrl-C) leaves the earlier
+file as it was.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_exr", "read_exr_header", "to_srgb8", "write_exr", "write_png"]
+__all__ = ["atomic_path", "read_exr", "read_exr_header", "to_srgb8", "write_exr", "write_png"]
+
+
+def _umask() -> int:
+    """The process's umask, read without changing it where the OS allows."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):  # pragma: no cover - not Linux
+        pass
+    mask = os.umask(0o022)  # pragma: no cover
+    os.umask(mask)  # pragma: no cover
+    return mask  # pragma: no cover
+
+
+@contextlib.contextmanager
+def atomic_path(path) -> Iterator[Path]:
+    """Write a file all at once: yield a temporary path, then rename it onto ``path``.
+
+    The temporary file lies in ``path``'s folder (so the rename is atomic on
+    one file system) and keeps ``path``'s extension (writers that choose the
+    format from it still work). When the ``with`` body completes, the file
+    is flushed to disk and moved onto ``path`` with :func:`os.replace`; when
+    it raises (including ``KeyboardInterrupt``), the temporary file is
+    removed and ``path`` is left untouched. The new file gets the old one's
+    permission bits, or the usual ``0o666 & ~umask``.
+
+    Examples
+    --------
+    >>> with atomic_path("out.txt") as tmp:                 # doctest: +SKIP
+    ...     tmp.write_text("complete or not at all")
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"{path}: is a folder, expected a file name")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}",
+                                dir=path.parent)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        try:
+            mode = path.stat().st_mode & 0o7777
+        except OSError:
+            mode = 0o666 & ~_umask()
+        os.chmod(tmp, mode)
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
 
 
 def _check_image(image, what: str = "image") -> np.ndarray:
@@ -40,9 +106,11 @@ def write_exr(path, image, metadata: dict | None = None) -> Path:
     for k, v in (metadata or {}).items():
         header[f"voxgi_{k}"] = v if isinstance(v, str) else json.dumps(v, default=float)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with OpenEXR.File(header, {"RGB": img}) as f:
-        f.write(str(path))
+    with atomic_path(path) as tmp, OpenEXR.File(header, {"RGB": img}) as f:
+        try:
+            f.write(str(tmp))
+        except RuntimeError as exc:  # OpenEXR reports a failed write (disk full...) this way
+            raise OSError(f"{path}: cannot write the EXR file ({exc})") from None
     return path
 
 
@@ -107,6 +175,7 @@ def write_png(path, image, exposure: float = 0.0) -> Path:
     from skimage.io import imsave
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    imsave(str(path), to_srgb8(image, exposure), check_contrast=False)
+    srgb = to_srgb8(image, exposure)
+    with atomic_path(path) as tmp:
+        imsave(str(tmp), srgb, check_contrast=False)
     return path
