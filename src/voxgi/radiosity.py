@@ -82,6 +82,8 @@ class Solution:
         Path
             The file written.
         """
+        from .io import atomic_path
+
         path = Path(path)
         if path.suffix != ".npz":
             path = path.with_name(path.name + ".npz")
@@ -102,7 +104,9 @@ class Solution:
         arrays["meta"] = np.frombuffer(
             json.dumps(meta, default=_json_default).encode(), dtype=np.uint8
         )
-        np.savez_compressed(path, **arrays)
+        # (the temporary name keeps the .npz suffix, so numpy adds none)
+        with atomic_path(path) as tmp:
+            np.savez_compressed(tmp, **arrays)
         return path
 
     @classmethod
@@ -119,18 +123,55 @@ class Solution:
         Solution
             With its :class:`VoxelSet`.
         """
+        import zlib
+
         path = Path(path)
         if not path.exists():
             raise FileNotFoundError(f"solution file not found: {path}")
+        if path.is_file() and path.stat().st_size == 0:
+            raise ValueError(f"{path}: empty file (0 bytes), not a voxgi solution file")
         try:
             sol = cls._load(path)
-        except (OSError, ValueError, KeyError, TypeError, json.JSONDecodeError, zipfile.BadZipFile) as exc:
-            raise ValueError(f"{path}: not a voxgi solution file ({type(exc).__name__}: {exc})") from None
-        n = len(sol.vox.ijk)
+        except (OSError, EOFError, ValueError, KeyError, TypeError, zlib.error,
+                zipfile.BadZipFile) as exc:
+            # (json and Unicode decoding errors are ValueErrors)
+            raise ValueError(f"{path}: not a readable voxgi solution file "
+                             f"({type(exc).__name__}: {exc})") from None
+        vox = sol.vox
+        ijk = np.asarray(vox.ijk)
+        if ijk.ndim != 2:
+            raise ValueError(f"{path}: vox_ijk must have shape (N, 3), got {ijk.shape}")
+        n = len(ijk)
+        # Every per-record array has the record count and the type VoxelSet
+        # documents: a short one would otherwise load and fail later in render.
+        want = {"ijk": ((n, 3), np.int32), "normal": ((n, 3), np.float32),
+                "area": ((n,), np.float32), "albedo": ((n, 3), np.float32),
+                "emission": ((n, 3), np.float32), "centroid": ((n, 3), np.float64),
+                "object_id": ((n,), np.int32), "back": ((n,), np.bool_),
+                "side": ((n,), np.int8), "origin": ((3,), np.float64)}
+        for name, (shape, dtype) in want.items():
+            a = getattr(vox, name)
+            if a is None and name == "side":
+                continue
+            a = np.asarray(a)
+            if a.shape != shape or a.dtype != dtype:
+                raise ValueError(f"{path}: vox_{name} must be {np.dtype(dtype).name} of shape "
+                                 f"{shape} for {n} records, got {a.dtype} {a.shape}")
+            if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+                raise ValueError(f"{path}: vox_{name} has non-finite values")
+        if n and ijk.min() < 0:
+            raise ValueError(f"{path}: vox_ijk has negative voxel coordinates")
+        if not (np.isfinite(vox.pitch) and vox.pitch > 0) or vox.resolution < 2:
+            raise ValueError(f"{path}: bad grid (pitch {vox.pitch}, resolution "
+                             f"{vox.resolution})")
         r = np.asarray(sol.radiosity)
-        if r.shape != (n, 3) or not np.issubdtype(r.dtype, np.floating) or not np.all(np.isfinite(r)):
-            raise ValueError(f"{path}: radiosity must be finite floats of shape ({n}, 3), got "
+        if r.shape != (n, 3) or r.dtype.kind != "f":
+            raise ValueError(f"{path}: radiosity must be floats of shape ({n}, 3), got "
                              f"{r.dtype} {r.shape}")
+        with np.errstate(over="ignore"):
+            sol.radiosity = r.astype(np.float32)
+        if not np.all(np.isfinite(sol.radiosity)):
+            raise ValueError(f"{path}: radiosity has values that are not finite in float32")
         return sol
 
     @classmethod
