@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import trimesh
@@ -23,6 +25,10 @@ def test_material_scalar_and_rgb():
     ({"albedo": float("nan")}, "Material.albedo: non-finite"),
     ({"emission": -1.0}, "Material.emission"),
     ({"emission": (1, 2)}, "Material.emission.*shape"),
+    # the kernels hold these in float32
+    ({"albedo": 1 - 1e-12}, r"Material.albedo.*rounds to 1.0 in float32"),
+    ({"albedo": (0.5, 0.5, 0.99999999)}, r"Material.albedo.*rounds to 1.0 in float32"),
+    ({"emission": 1e39}, r"Material.emission.*1e\+39 does not fit in float32"),
 ])
 def test_material_bad_values(kw, match):
     with pytest.raises(ValueError, match=match):
@@ -93,6 +99,24 @@ def test_degenerate_faces_are_skipped_with_a_warning():
     assert obj.n_triangles == 1
 
 
+@pytest.mark.parametrize(("shift", "scale"), [(1e12, 1.0), (1e7, 1.0), (0.0, 1e-9),
+                                               (0.0, 1e12), (-3e9, 1e-3)])
+def test_degenerate_test_is_relative_to_each_triangle(shift, scale):
+    box = trimesh.creation.box()
+    box.apply_scale(scale)
+    box.apply_translation([shift, -shift, 0.5 * shift])
+    s = Scene()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        obj = s.add(box, name="box")
+    assert obj.n_triangles == 12
+    # a sliver whose corners are collinear to 1e-14 of its size is still degenerate
+    v = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1e-14, 0], [0, 1, 0]]) * scale + shift
+    with pytest.warns(UserWarning, match="skipped 1 degenerate"):
+        obj = s.add(trimesh.Trimesh(v, [[0, 1, 2], [0, 1, 3]], process=False), name="sliver")
+    assert obj.n_triangles == 1
+
+
 def test_empty_scene_is_an_error():
     with pytest.raises(ValueError, match="scene is empty"):
         Scene().bounds  # noqa: B018
@@ -133,6 +157,12 @@ def test_toml_transforms_and_named_materials(tmp_path):
     ("[camera]\nfov = 200\n", r"\[camera\].*Camera.fov"),
     ("[camera]\nzoom = 2\n", r"\[camera\]"),
     ("lights = 3\n", "unknown top-level"),
+    ("[[object]]\nmesh = 5\n", r"object #0.*'mesh' must be a string, got int 5"),
+    ("[[object]]\nmesh = 'box.obj'\nmaterial = [1]\n",
+     r"object #0.*'material' must be a string, got list \[1\]"),
+    ("[[object]]\nmesh = 'box.obj'\nname = 3\n", r"'name' must be a string"),
+    ("x = " + "[" * 5000 + "]" * 5000 + "\n", "nested too deeply"),
+    ("x = " + "{a = " * 5000 + "1" + "}" * 5000 + "\n", "nested too deeply"),
 ])
 def test_toml_errors_name_where(tmp_path, text, match):
     trimesh.creation.box().export(tmp_path / "box.obj")
@@ -140,6 +170,42 @@ def test_toml_errors_name_where(tmp_path, text, match):
     p.write_text(text)
     with pytest.raises(ValueError, match=match):
         Scene.load(p)
+
+
+@pytest.mark.parametrize("name", ["junk.obj", "junk.off"])
+def test_random_bytes_as_a_text_mesh(tmp_path, name):
+    (tmp_path / name).write_bytes(np.random.default_rng(1).bytes(3000))
+    p = tmp_path / "s.toml"
+    p.write_text(f"[[object]]\nmesh = '{name}'\n")
+    with pytest.raises(ValueError, match=rf"object #0.*{name} is not UTF-8 text"):
+        Scene.load(p)
+
+
+def test_failed_save_keeps_the_earlier_files(tmp_path):
+    import subprocess
+    import sys
+
+    small = voxgi.scenes.furnace_box()
+    path = small.save(tmp_path / "s.toml")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    script = """
+import resource, signal, sys
+import trimesh, voxgi
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+s = voxgi.Scene()
+s.add(trimesh.creation.icosphere(subdivisions=6), voxgi.Material(albedo=0.5), name="big")
+resource.setrlimit(resource.RLIMIT_FSIZE, (50000, 50000))
+try:
+    s.save(sys.argv[1])
+except OSError as exc:
+    print("refused:", exc)
+    sys.exit(3)
+"""
+    r = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 3, r.stdout + r.stderr
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    assert Scene.load(path).fingerprint() == small.fingerprint()
 
 
 def test_missing_scene_file(tmp_path):

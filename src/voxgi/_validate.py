@@ -42,9 +42,17 @@ def as_c_array(value, dtype, shape: Sequence[int], what: str, *, finite: bool = 
     return out
 
 
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
 def rgb(value, what: str, *, low: float = 0.0, high: float | None = None,
-        high_inclusive: bool = True) -> tuple[float, float, float]:
-    """Colour argument: a scalar or 3 finite numbers within [low, high]."""
+        high_inclusive: bool = True, float32: bool = False) -> tuple[float, float, float]:
+    """Colour argument: a scalar or 3 finite numbers within [low, high].
+
+    With ``float32``, each value must also fit in float32 (the kernels'
+    type), and an exclusive ``high`` must hold after rounding to float32
+    (``1 - 1e-12`` is 1 there).
+    """
     if isinstance(value, bool) or value is None or isinstance(value, (str, bytes)):
         raise TypeError(f"{what}: expected a number or 3 numbers, got {value!r}")
     if isinstance(value, numbers.Real):
@@ -65,6 +73,13 @@ def rgb(value, what: str, *, low: float = 0.0, high: float | None = None,
         if high is not None and (v > high or (v == high and not high_inclusive)):
             rng = f"[{low}, {high}]" if high_inclusive else f"[{low}, {high})"
             raise ValueError(f"{what}: value {v} is outside {rng}")
+        if float32:
+            if abs(v) > _F32_MAX:
+                raise ValueError(f"{what}: value {v} does not fit in float32 (largest "
+                                 f"{_F32_MAX:.4g})")
+            if high is not None and not high_inclusive and float(np.float32(v)) >= high:
+                raise ValueError(f"{what}: value {v!r} rounds to {high} in float32; use at "
+                                 f"most {float(np.nextafter(np.float32(high), np.float32(0)))!r}")
     return vals  # type: ignore[return-value]
 
 

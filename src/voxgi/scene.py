@@ -18,6 +18,7 @@ import numpy as np
 import trimesh
 
 from . import _validate
+from .io import atomic_path
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -76,9 +77,12 @@ class Material:
     specular: AshikhminShirley | None = None
 
     def __post_init__(self):
-        object.__setattr__(self, "albedo", _validate.rgb(self.albedo, "Material.albedo",
-                                                         high=1.0, high_inclusive=False))
-        object.__setattr__(self, "emission", _validate.rgb(self.emission, "Material.emission"))
+        # The kernels hold albedo and emission in float32: a value must stay
+        # itself there (an albedo that rounds to 1 never converges).
+        object.__setattr__(self, "albedo", _validate.rgb(
+            self.albedo, "Material.albedo", high=1.0, high_inclusive=False, float32=True))
+        object.__setattr__(self, "emission", _validate.rgb(self.emission, "Material.emission",
+                                                           float32=True))
         if self.specular is not None and not isinstance(self.specular, AshikhminShirley):
             raise TypeError("Material.specular: expected voxgi.AshikhminShirley or None, got "
                             f"{type(self.specular).__name__}")
@@ -211,12 +215,14 @@ def _mesh_arrays(mesh, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | 
         raise ValueError(f"mesh {name!r}: vertex {bad} is not finite: {v[bad].tolist()}")
     if f.min() < 0 or f.max() >= len(v):
         raise ValueError(f"mesh {name!r}: face indices out of range [0, {len(v)})")
-    # Degenerate faces (zero area, repeated vertex) carry no light: drop them.
+    # Degenerate faces (zero area, repeated vertex, collinear corners) carry
+    # no light: drop them. The test is relative to each triangle's own size,
+    # so that a scene far from the origin or at any scale keeps its faces.
     t = v[f]
-    cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-    dbl_area = np.linalg.norm(cross, axis=1)
-    scale = np.max(np.abs(v)) if len(v) else 1.0
-    keep = dbl_area > (1e-12 * max(scale, 1e-300)) ** 2
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    dbl_area = np.linalg.norm(np.cross(e1, e2), axis=1)
+    edge2 = np.max([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e2 - e1)], axis=0)
+    keep = dbl_area > 1e-12 * edge2
     if not keep.all():
         warnings.warn(f"mesh {name!r}: skipped {int((~keep).sum())} degenerate face(s) "
                       "(zero area)", UserWarning, stacklevel=3)
@@ -414,6 +420,9 @@ class Scene:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise ValueError(f"scene file {path}: malformed TOML: {exc}") from None
+        except RecursionError:
+            raise ValueError(f"scene file {path}: arrays or tables nested too deeply "
+                             "to be a scene file") from None
         try:
             return cls.from_dict(data, base_dir=path.parent, source=str(path))
         except ValueError as exc:
@@ -466,6 +475,10 @@ class Scene:
                 raise ValueError(f"{where}: unknown key(s) {sorted(bad)}")
             if "mesh" not in o:
                 raise ValueError(f"{where}: missing key 'mesh'")
+            for key in ("mesh", "material", "name"):
+                if key in o and not isinstance(o[key], str):
+                    raise ValueError(f"{where}: '{key}' must be a string, got "
+                                     f"{type(o[key]).__name__} {o[key]!r}")
             if "material" in o:
                 if set(o) & mat_keys:
                     raise ValueError(f"{where}: give either 'material' or inline albedo/emission")
@@ -480,11 +493,7 @@ class Scene:
                 mesh_path = base_dir / mesh_path
             if not mesh_path.exists():
                 raise ValueError(f"{where}: mesh file not found: {mesh_path}")
-            try:
-                mesh = trimesh.load(mesh_path, force="mesh", process=False,
-                                    maintain_order=True)
-            except Exception as exc:
-                raise ValueError(f"{where}: cannot load mesh {mesh_path}: {exc}") from None
+            mesh = _load_mesh(mesh_path, where)
             matrix = _transform_from_dict(o, where)
             if matrix is not None:
                 mesh = mesh.copy()
@@ -522,7 +531,8 @@ class Scene:
             lines.append("")
         for i, o in enumerate(self.objects):
             fname = f"{path.stem}_{i:03d}.obj"
-            (path.parent / fname).write_text(o.to_trimesh().export(file_type="obj", digits=17))
+            with atomic_path(path.parent / fname) as tmp:
+                tmp.write_text(o.to_trimesh().export(file_type="obj", digits=17))
             lines.append("[[object]]")
             lines.append(f"name = {_toml_str(o.name)}")
             lines.append(f"mesh = {_toml_str(fname)}")
@@ -533,8 +543,36 @@ class Scene:
             if s is not None:
                 lines.append(f"specular = {{ rs = {_toml_list(s.rs)}, nu = {s.nu!r}, nv = {s.nv!r} }}")
             lines.append("")
-        path.write_text("\n".join(lines), encoding="utf-8")
+        with atomic_path(path) as tmp:
+            tmp.write_text("\n".join(lines), encoding="utf-8")
         return path
+
+
+# Mesh formats that are text only: trimesh guesses the encoding of any
+# other bytes with an optional package and reports that package missing.
+_TEXT_MESH_FORMATS = {".obj", ".off"}
+
+
+def _load_mesh(mesh_path: Path, where: str) -> trimesh.Trimesh:
+    """Read a mesh file through trimesh; ValueError naming the file if it cannot."""
+    kind = mesh_path.suffix.lower()
+    if kind in _TEXT_MESH_FORMATS:
+        try:
+            data = mesh_path.read_bytes()
+        except OSError as exc:
+            raise ValueError(f"{where}: cannot read mesh file {mesh_path}: {exc}") from None
+        try:
+            data.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{where}: mesh file {mesh_path} is not UTF-8 text (byte "
+                             f"{exc.start}), so not a {kind[1:].upper()} file") from None
+    try:
+        return trimesh.load(mesh_path, force="mesh", process=False, maintain_order=True)
+    except ImportError as exc:  # an optional decoder trimesh wanted for odd content
+        raise ValueError(f"{where}: cannot load mesh {mesh_path}: unreadable content "
+                         f"({exc})") from None
+    except Exception as exc:
+        raise ValueError(f"{where}: cannot load mesh {mesh_path}: {exc}") from None
 
 
 def _error_line(text: str, data, msg: str) -> int | None:
