@@ -12,7 +12,8 @@ def test_exr_round_trip_is_exact_with_metadata(tmp_path, rng):
     img = (rng.random((7, 11, 3)) * 100).astype(np.float32)
     p = io.write_exr(tmp_path / "a.exr", img, metadata={"seconds": {"solve": 1.5}, "scene": "x"})
     back = io.read_exr(p)
-    assert back.dtype == np.float32 and back.shape == (7, 11, 3)
+    assert back.dtype == np.float32
+    assert back.shape == (7, 11, 3)
     np.testing.assert_array_equal(back, img)
     assert io.read_exr_header(p) == {"seconds": {"solve": 1.5}, "scene": "x"}
 
@@ -22,7 +23,8 @@ def test_png_tone_mapping(tmp_path):
     img[0, 0] = 1.0
     img[1, 1] = 0.5
     srgb = io.to_srgb8(img)
-    assert srgb[0, 0, 0] == 255 and srgb[0, 1, 0] == 0
+    assert srgb[0, 0, 0] == 255
+    assert srgb[0, 1, 0] == 0
     assert srgb[1, 1, 0] == 188  # sRGB(0.5) = 0.7354 -> 188
     assert io.to_srgb8(img, exposure=1.0)[1, 1, 0] == 255
     from skimage.io import imread
@@ -82,10 +84,18 @@ def test_atomic_path_removes_the_temporary_file_on_error(tmp_path):
     target = tmp_path / "keep.txt"
     target.write_text("old")
     target.chmod(0o640)
-    with pytest.raises(KeyboardInterrupt), io.atomic_path(target) as tmp:
-        assert tmp.parent == tmp_path and tmp.suffix == ".txt"
-        tmp.write_text("half")
-        raise KeyboardInterrupt
+    seen = []
+
+    def interrupted_write():
+        with io.atomic_path(target) as tmp:
+            seen.append(tmp)
+            tmp.write_text("half")
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        interrupted_write()
+    assert seen[0].parent == tmp_path
+    assert seen[0].suffix == ".txt"
     assert target.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["keep.txt"]
     with io.atomic_path(target) as tmp:

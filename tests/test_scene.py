@@ -130,7 +130,7 @@ def test_toml_round_trip(tmp_path):
     t = Scene.load(path)
     assert t.camera == s.camera
     assert [o.name for o in t.objects] == [o.name for o in s.objects]
-    for a, b in zip(s.objects, t.objects):
+    for a, b in zip(s.objects, t.objects, strict=False):
         assert a.material == b.material
         np.testing.assert_allclose(a.vertices[a.faces], b.vertices[b.faces], rtol=1e-12)
     assert t.fingerprint() == s.fingerprint()
@@ -232,7 +232,8 @@ def test_cornell_box_dimensions(cornell):
 def test_cornell_box_closed_without_blocks():
     s = voxgi.scenes.cornell_box(width=32, height=32, blocks=False, closed=True)
     names = [o.name for o in s.objects]
-    assert "short_block" not in names and "tall_block" not in names
+    assert "short_block" not in names
+    assert "tall_block" not in names
     front = s.objects[names.index("front")]
     t = front.vertices[front.faces]
     assert np.allclose(t[..., 2], 0.0)
@@ -249,14 +250,16 @@ def test_furnace_normals_point_inward(make):
     n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
     assert np.all(np.einsum("ij,ij->i", n, -t.mean(axis=1)) > 0)
     inner = s.objects[1].to_trimesh()
-    assert inner.is_watertight and inner.volume > 0  # outward-facing closed object
+    assert inner.is_watertight
+    assert inner.volume > 0
 
 
 def test_bunny_room_is_closed_and_lit():
     s = voxgi.scenes.bunny_room()
     room, bunny, light = s.objects
     assert bunny.to_trimesh().is_watertight
-    assert light.material.is_emitter and not room.material.is_emitter
+    assert light.material.is_emitter
+    assert not room.material.is_emitter
 
 
 def test_scene_registry():
@@ -275,7 +278,8 @@ def test_paper_scenes_are_lit_and_inside_their_enclosure(name):
     # the camera sits inside the scene's bounding box (these are interiors)
     eye = np.asarray(s.camera.eye)
     if name != "cornell-box":  # the Cornell camera stands in front of the open side
-        assert np.all(eye > lo) and np.all(eye < hi)
+        assert np.all(eye > lo)
+        assert np.all(eye < hi)
     # objects other than the enclosure and the one-sided light quads are closed solids
     for o in s.objects:
         m = o.to_trimesh()

@@ -25,7 +25,8 @@ def test_round_trip(tmp_path, sol):
     back = Solution.load(p)
     np.testing.assert_array_equal(back.radiosity, sol.radiosity)
     np.testing.assert_array_equal(back.vox.centroid, sol.vox.centroid)
-    assert back.bounces == 3 and [p.name for p in tmp_path.iterdir()] == ["s.npz"]
+    assert back.bounces == 3
+    assert [p.name for p in tmp_path.iterdir()] == ["s.npz"]
 
 
 def test_empty_file(tmp_path):

@@ -1,11 +1,25 @@
-"""Command line: ``voxgi render SCENE -o out.exr``."""
+"""Command line: ``voxgi render SCENE -o out.exr`` and ``voxgi scenes``.
+
+Exit codes: 0 done, 2 bad arguments or an output that cannot be written
+(checked before any work), 130 interrupted (Ctrl-C).
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import time
 from pathlib import Path
+
+#: What ``-o`` may end with; both files are always written.
+OUTPUT_EXTENSIONS = (".exr", ".png")
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report a Ctrl-C
+
+
+class UsageError(Exception):
+    """A bad argument or output path: reported in one line, exit code 2."""
 
 
 def _at_least(low: int):
@@ -22,103 +36,268 @@ def _at_least(low: int):
     return conv
 
 
+def _finite(low: float | None = None):
+    """argparse type: a finite float (>= ``low`` when given)."""
+    def conv(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if v != v or v in (float("inf"), float("-inf")):
+            raise argparse.ArgumentTypeError(f"must be finite, got {text}")
+        if low is not None and v < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low:g}, got {v:g}")
+        return v
+    conv.__name__ = "number" if low is None else f"number >= {low:g}"
+    return conv
+
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows ``(default: X)`` after every option whose default is a value; the
+    help of an option without one (None) says what happens instead."""
+
+    def _get_help_string(self, action):
+        if action.default is None or action.default is False:
+            return action.help
+        return super()._get_help_string(action)
+
+
+def _version() -> str:
+    from . import __version__
+
+    return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="voxgi", description="Voxel-based global illumination")
-    sub = p.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("render", help="voxelize, solve and render a scene to EXR + PNG")
-    r.add_argument("scene", help="scene TOML file or built-in name (cornell-box, furnace-sphere, ...)")
-    r.add_argument("-o", "--output", default=None, help="output EXR path (PNG written beside it)")
-    r.add_argument("--resolution", type=_at_least(2), default=None, help="voxels along the longest side")
-    r.add_argument("--directions", type=_at_least(1), default=None, help="gathering direction radius R")
-    r.add_argument("--frames", "--spp", dest="frames", type=_at_least(1), default=None,
-                   help="maximum progressive frames")
-    r.add_argument("--width", type=int, default=None)
-    r.add_argument("--height", type=int, default=None)
-    r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--threads", type=_at_least(1), default=None)
-    r.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    from .pipeline import RENDER_DIRECTIONS, RENDER_RESOLUTION
+
+    p = argparse.ArgumentParser(
+        prog="voxgi", formatter_class=_HelpFormatter,
+        description="Voxel-based global illumination: voxelize a scene, solve its radiosity "
+                    "on the voxels and display it by progressive VPL ray tracing.")
+    p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    r = sub.add_parser(
+        "render", formatter_class=_HelpFormatter,
+        help="voxelize, solve and render a scene to EXR + PNG",
+        description="Render a scene to a linear EXR and a tone-mapped PNG preview beside it. "
+                    "Exit codes: 0 done, 2 bad arguments or an output that cannot be "
+                    "written (checked before any work), 130 interrupted by Ctrl-C (a partial "
+                    "image is written only if a frame finished; its EXR header says so).")
+    r.add_argument("scene", help="scene TOML file, or a built-in scene name (see 'voxgi scenes')")
+    r.add_argument("-o", "--output", metavar="PATH", default=None,
+                   help="output file ending in .exr or .png; the other of the two is written "
+                        "beside it with the same name (default: SCENE.exr in the current "
+                        "folder)")
+    r.add_argument("--resolution", metavar="N", type=_at_least(2), default=RENDER_RESOLUTION,
+                   help="voxels along the scene's longest side")
+    r.add_argument("--directions", metavar="R", type=_at_least(1), default=RENDER_DIRECTIONS,
+                   help="radius R of the solve's gathering direction set")
+    r.add_argument("--frames", "--spp", dest="frames", metavar="N", type=_at_least(1), default=256,
+                   help="most progressive display frames")
+    r.add_argument("--tol", metavar="T", type=_finite(0.0), default=1e-3,
+                   help="stop the display once the estimated relMSE of the image's noise is "
+                        "under this (0: run all --frames)")
+    r.add_argument("--exposure", metavar="EV", type=_finite(), default=0.0,
+                   help="exposure of the PNG preview in stops (the EXR stays linear)")
+    r.add_argument("--width", metavar="PX", type=_at_least(1), default=None,
+                   help="image width in pixels (default: the scene camera's)")
+    r.add_argument("--height", metavar="PX", type=_at_least(1), default=None,
+                   help="image height in pixels (default: the scene camera's)")
+    r.add_argument("--seed", metavar="S", type=int, default=0,
+                   help="seed of the display's sample sequences")
+    r.add_argument("--threads", metavar="N", type=_at_least(1), default=None,
+                   help="worker threads (default: all hardware threads)")
+    talk = r.add_mutually_exclusive_group()
+    talk.add_argument("-q", "--quiet", action="store_true",
+                      help="no progress bars (the summary lines stay)")
+    talk.add_argument("-v", "--verbose", action="store_true",
+                      help="also print diagnostics: what each stage skipped and why")
+    sub.add_parser("scenes", formatter_class=_HelpFormatter,
+                   help="list the built-in scenes",
+                   description="List the built-in scenes that 'voxgi render NAME' accepts.")
     return p
 
 
+def output_paths(output: str | Path) -> tuple[Path, Path]:
+    """The ``(EXR, PNG)`` pair that ``-o output`` names.
+
+    ``out.exr`` gives ``out.exr`` and the preview ``out.png``; ``out.png``
+    gives ``out.png`` and the data ``out.exr``. Any other extension is a
+    :class:`UsageError` naming the supported ones.
+    """
+    out = Path(output)
+    ext = out.suffix.lower()
+    if ext == ".exr":
+        return out, out.with_suffix(".png")
+    if ext == ".png":
+        return out.with_suffix(".exr"), out
+    raise UsageError(f"-o {out}: unsupported extension {ext or '(none)'!r}; use .exr or .png "
+                     "(voxgi writes both: the linear EXR and a tone-mapped PNG beside it)")
+
+
+def check_writable(paths) -> None:
+    """Fail now, before any work, if a file cannot be written at each of ``paths``.
+
+    Creates missing folders, then a temporary file in each folder (removed
+    at once): the same steps the final writes take.
+    """
+    for path in paths:
+        path = Path(path)
+        if path.is_dir():
+            raise UsageError(f"cannot write {path}: it is a folder")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.stem}.",
+                                             suffix=".probe"):
+                pass
+        except OSError as exc:
+            raise UsageError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def _scene_source(spec: str) -> tuple[Path | None, str]:
+    """``(TOML path or None for a built-in scene, name)``, checked without loading."""
+    from . import scenes
+
+    src = Path(spec)
+    if src.suffix.lower() == ".toml" or src.exists():
+        if not src.is_file():
+            raise UsageError(f"scene file not found: {src}")
+        return src, src.stem
+    if spec.replace("_", "-").lower() not in scenes.names():
+        raise UsageError(f"unknown built-in scene {spec!r}; known: {', '.join(scenes.names())} "
+                         "(or give a scene .toml file)")
+    return None, spec
+
+
 def run_render(args) -> int:
-    """``voxgi render``: load or build the scene, voxelize, solve, display,
-    write EXR + PNG, print what was done and the seconds of each phase."""
-    from . import io, scenes
+    """``voxgi render``: decide and check the outputs, load the scene, voxelize,
+    solve, display, write EXR + PNG; print what was done and each phase's seconds."""
+    from . import io
     from .display import render
-    from .pipeline import RENDER_RESOLUTION, solve_for_display
-    from .scene import Scene
+    from .pipeline import solve_for_display
     from .voxels import voxelize
 
-    say = print
-    src = Path(args.scene)
-    if src.suffix.lower() == ".toml" or src.exists():
-        if not src.exists():
-            raise SystemExit(f"voxgi render: scene file not found: {src}")
-        scene = Scene.load(src)
-        name = src.stem
-    else:
-        try:
-            scene = scenes.get(args.scene)
-        except ValueError as exc:
-            raise SystemExit(f"voxgi render: {exc}") from None
-        name = args.scene
+    def say(text: str) -> None:
+        print(text, flush=True)
+
+    def note(text: str) -> None:
+        if args.verbose:
+            say(f"  {text}")
+
+    from . import scenes
+    from .scene import Scene
+
+    src, name = _scene_source(args.scene)
+    exr, png = output_paths(args.output if args.output else f"{name}.exr")
+    check_writable((exr, png))
+    scene = Scene.load(src) if src is not None else scenes.get(name)
     if scene.camera is None:
-        raise SystemExit(f"voxgi render: scene {name!r} has no camera")
-    try:
-        changes = {k: v for k, v in (("width", args.width), ("height", args.height)) if v is not None}
-        if changes:
-            scene.camera = scene.camera.replace(**changes)
-    except (TypeError, ValueError) as exc:
-        raise SystemExit(f"voxgi render: {exc}") from None
-    out = Path(args.output) if args.output else Path(f"{name}.exr")
+        raise UsageError(f"scene {name!r} has no camera")
+    changes = {k: v for k, v in (("width", args.width), ("height", args.height)) if v is not None}
+    if changes:
+        scene.camera = scene.camera.replace(**changes)
     cam = scene.camera
+    progress = not args.quiet
     say(f"scene {name}: {len(scene.objects)} objects, {scene.n_triangles} triangles, "
         f"{cam.width}x{cam.height} pixels")
-    t0 = time.perf_counter()
-    vox = voxelize(scene, resolution=args.resolution or RENDER_RESOLUTION)
-    t_vox = time.perf_counter() - t0
-    say(f"voxelize: {len(vox)} records (resolution {vox.resolution}) in {t_vox:.2f} s")
-    t0 = time.perf_counter()
-    sol = solve_for_display(vox, directions=args.directions, threads=args.threads,
-                            progress=not args.quiet)
-    t_sol = time.perf_counter() - t0
-    say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in {t_sol:.2f} s")
-    for what, why in sol.stats.get("skipped", {}).items():
-        say(f"  solve skipped {what}: {why}")
-    res = render(scene, sol, max_frames=args.frames, seed=args.seed, progress=not args.quiet,
-                 threads=args.threads)
+
+    phase = "voxelize"
+    try:
+        t0 = time.perf_counter()
+        vox = voxelize(scene, resolution=args.resolution, threads=args.threads,
+                       progress=progress)
+        t_vox = time.perf_counter() - t0
+        say(f"voxelize: {len(vox)} records (resolution {vox.resolution}) in {t_vox:.2f} s")
+        for key in ("skipped_degenerate", "polygon_overflows", "cut_limit_hits"):
+            if vox.stats.get(key):
+                note(f"voxelize {key}: {vox.stats[key]}")
+        phase = "solve"
+        t0 = time.perf_counter()
+        sol = solve_for_display(vox, directions=args.directions, threads=args.threads,
+                                progress=progress)
+        t_sol = time.perf_counter() - t0
+        say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in "
+            f"{t_sol:.2f} s")
+        for what, why in sol.stats.get("skipped", {}).items():
+            note(f"solve skipped {what}: {why}")
+        phase = "display"
+        res = render(scene, sol, max_frames=args.frames, tol=args.tol, seed=args.seed,
+                     progress=progress, threads=args.threads)
+    except KeyboardInterrupt:
+        print(f"voxgi render: interrupted during {phase}; nothing written", file=sys.stderr,
+              flush=True)
+        return EXIT_INTERRUPTED
+
     s = res.stats
     sec = s["seconds"]
-    say(f"display: {res.frames} frames, {s['vpls']} VPLs/pixel, {s['primary_rays']:.3g} primary "
-        f"+ {s['shadow_rays']:.3g} shadow + {s['gather_rays']:.3g} gather rays in "
-        f"{sec['display']:.2f} s "
+    interrupted = bool(s.get("interrupted"))
+    if interrupted and res.frames == 0:
+        print("voxgi render: interrupted before the first display frame finished; nothing "
+              "written", file=sys.stderr, flush=True)
+        return EXIT_INTERRUPTED
+    say(f"display: {res.frames} frames{' (interrupted)' if interrupted else ''}, "
+        f"{s['vpls']} VPLs/pixel, {s['primary_rays']:.3g} primary + {s['shadow_rays']:.3g} "
+        f"shadow + {s['gather_rays']:.3g} gather rays in {sec['display']:.2f} s "
         f"(estimated relMSE of the noise {s['est_rel_mse']:.2e})")
+    for why in s.get("skipped", []):
+        note(f"display skipped {why}")
     timings = {"voxelize": t_vox, "solve": t_sol, **{k: v for k, v in sec.items()
                                                       if k not in ("voxelize", "solve", "total")}}
     timings["total"] = t_vox + t_sol + sec["display"]
     meta = {
         "scene": name, "width": cam.width, "height": cam.height, "resolution": vox.resolution,
         "records": len(vox), "directions": args.directions, "frames": res.frames,
-        "vpls_per_pixel": s["vpls"], "seed": args.seed, "seconds": timings,
-        "skipped": s["skipped"],
+        "max_frames": args.frames, "tol": args.tol, "est_rel_mse": s["est_rel_mse"],
+        "vpls_per_pixel": s["vpls"], "seed": args.seed, "exposure": args.exposure,
+        "interrupted": interrupted, "seconds": timings, "skipped": s["skipped"],
     }
-    io.write_exr(out, res.image, metadata=meta)
-    png = out.with_suffix(".png")
-    io.write_png(png, res.image)
-    say(f"wrote {out} and {png}")
+    # Each write is atomic (voxgi.io.atomic_path): a Ctrl-C here leaves every
+    # file either as it was or complete.
+    try:
+        io.write_exr(exr, res.image, metadata=meta)
+        io.write_png(png, res.image, exposure=args.exposure)
+    except KeyboardInterrupt:
+        print("voxgi render: interrupted while writing; the outputs are whole (old or new)",
+              file=sys.stderr, flush=True)
+        return EXIT_INTERRUPTED
+    if interrupted:
+        say(f"interrupted: wrote a partial image ({res.frames} frames) to {exr} and {png}")
+    else:
+        say(f"wrote {exr} and {png}")
     say("seconds: " + ", ".join(f"{k} {v:.2f}" for k, v in timings.items()))
+    return EXIT_INTERRUPTED if interrupted else 0
+
+
+def run_scenes(args) -> int:
+    """``voxgi scenes``: each built-in scene's name and the first line of its description."""
+    from . import scenes
+
+    names = scenes.names()
+    width = max(len(n) for n in names)
+    for n in names:
+        fn = getattr(scenes, n.replace("-", "_"), None)
+        doc = (getattr(fn, "__doc__", None) or "").strip().splitlines()
+        print(f"{n:<{width}}  {doc[0].strip() if doc else ''}")
     return 0
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    if args.command == "render":
-        try:
-            return run_render(args)
-        except (ValueError, TypeError, FileNotFoundError) as exc:
-            # bad scene files and arguments: a message, not a traceback
-            raise SystemExit(f"voxgi render: {exc}") from None
-    return 2
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    run = {"render": run_render, "scenes": run_scenes}[args.command]
+    try:
+        return run(args)
+    except UsageError as exc:
+        print(f"voxgi {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except (ValueError, TypeError, FileNotFoundError) as exc:
+        # bad scene files and values: a message, not a traceback
+        print(f"voxgi {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"voxgi {args.command}: interrupted; nothing written", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":  # pragma: no cover
