@@ -79,15 +79,26 @@ def test_exposure_and_tol(tmp_path):
 ])
 def test_errors_are_one_line_with_exit_code_2(argv, msg, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    assert cli.main(argv) == 2
+    with pytest.raises(SystemExit) as exc:
+        cli.main(argv)
+    assert exc.value.code == 2
     cap = capsys.readouterr()
     assert cap.out == ""  # no work started
     assert cap.err.count("\n") == 1
     assert "Traceback" not in cap.err
-
-
     assert re.search(msg, cap.err), cap.err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_bad_scene_file_is_one_line_with_exit_code_1(tmp_path, capsys):
+    p = tmp_path / "s.toml"
+    p.write_text("[[object]]\nmesh = 5\n")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["render", str(p), "-o", str(tmp_path / "o.exr")])
+    assert re.fullmatch(r"voxgi render: error: .*s\.toml: object #0: 'mesh' must be a string.*",
+                        str(exc.value.code))
+    assert capsys.readouterr().out == ""
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["s.toml"]
 
 
 @pytest.mark.parametrize(("argv", "msg"), [
@@ -107,15 +118,39 @@ def test_bad_arguments_exit_2(argv, msg, capsys):
 def test_unwritable_output_is_refused_before_any_work(tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    assert cli.main(["render", "cornell-box", "-o", str(blocker / "out.exr"), *SMALL]) == 2
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["render", "cornell-box", "-o", str(blocker / "out.exr"), *SMALL])
+    assert exc.value.code == 2
     cap = capsys.readouterr()
     assert "cannot write" in cap.err
     assert str(blocker) in cap.err
     assert "Traceback" not in cap.err
     assert cap.out == ""
     (tmp_path / "dir.exr").mkdir()
-    assert cli.main(["render", "cornell-box", "-o", str(tmp_path / "dir.exr"), *SMALL]) == 2
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["render", "cornell-box", "-o", str(tmp_path / "dir.exr"), *SMALL])
+    assert exc.value.code == 2
     assert "is a folder" in capsys.readouterr().err
+
+
+def test_unwritable_folder_exit_code_from_the_command(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    targets = [tmp_path / "file" / "out.exr"]
+    (tmp_path / "file").write_text("not a folder")
+    if os.geteuid() != 0:  # root writes into read-only folders
+        ro = tmp_path / "ro"
+        ro.mkdir(mode=0o500)
+        targets.append(ro / "out.png")
+    for out in targets:
+        r = subprocess.run([sys.executable, "-m", "voxgi.cli", "render", "cornell-box", "-o",
+                            str(out)], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2, r.stderr
+        assert r.stdout == ""
+        assert r.stderr.startswith(f"voxgi render: error: cannot write {out.with_suffix('.exr')}")
+        assert r.stderr.count("\n") == 1
 
 
 def test_diagnostics_only_with_verbose(tmp_path, capsys):

@@ -1,7 +1,9 @@
 """Command line: ``voxgi render SCENE -o out.exr`` and ``voxgi scenes``.
 
-Exit codes: 0 done, 2 bad arguments or an output that cannot be written
-(checked before any work), 130 interrupted (Ctrl-C).
+Exit codes: 0 done; 1 a scene file or value that cannot be used; 2 a bad
+command line or an output that cannot be written (both checked before any
+work); 130 interrupted (Ctrl-C). Errors are one line on stderr, never a
+traceback.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ EXIT_INTERRUPTED = 130  # 128 + SIGINT, as shells report a Ctrl-C
 
 
 class UsageError(Exception):
-    """A bad argument or output path: reported in one line, exit code 2."""
+    """A bad argument or output path: reported in one line, exit code 2 (as
+    argparse reports its own errors)."""
 
 
 def _at_least(low: int):
@@ -81,9 +84,10 @@ def build_parser() -> argparse.ArgumentParser:
         "render", formatter_class=_HelpFormatter,
         help="voxelize, solve and render a scene to EXR + PNG",
         description="Render a scene to a linear EXR and a tone-mapped PNG preview beside it. "
-                    "Exit codes: 0 done, 2 bad arguments or an output that cannot be "
-                    "written (checked before any work), 130 interrupted by Ctrl-C (a partial "
-                    "image is written only if a frame finished; its EXR header says so).")
+                    "Exit codes: 0 done, 1 a scene or value that cannot be used, 2 a bad "
+                    "command line or an output that cannot be written (checked before any "
+                    "work), 130 interrupted by Ctrl-C (a partial image is written only if a "
+                    "frame finished; its EXR header says so).")
     r.add_argument("scene", help="scene TOML file, or a built-in scene name (see 'voxgi scenes')")
     r.add_argument("-o", "--output", metavar="PATH", default=None,
                    help="output file ending in .exr or .png; the other of the two is written "
@@ -283,6 +287,9 @@ def run_scenes(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit code, or raises ``SystemExit``
+    on an error (code 2 for the command line and outputs, as argparse does,
+    else the one-line message, which exits with 1)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     run = {"render": run_render, "scenes": run_scenes}[args.command]
@@ -290,11 +297,10 @@ def main(argv: list[str] | None = None) -> int:
         return run(args)
     except UsageError as exc:
         print(f"voxgi {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        raise SystemExit(EXIT_USAGE) from None
     except (ValueError, TypeError, FileNotFoundError) as exc:
         # bad scene files and values: a message, not a traceback
-        print(f"voxgi {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        raise SystemExit(f"voxgi {args.command}: error: {exc}") from None
     except KeyboardInterrupt:
         print(f"voxgi {args.command}: interrupted; nothing written", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -345,8 +345,8 @@ def voxelize(scene, resolution: int = 128, *, max_memory: int | None = None,
     budget = max_memory if max_memory is not None else _available_memory() // 2
     if est["bytes"] > budget:
         raise ValueError(
-            f"voxelize: resolution {resolution} needs about {est['bytes']:,} bytes "
-            f"(estimate: {est['expected_pairs']:,} voxel-triangle pairs, "
+            f"voxelize: resolution {resolution} needs up to {est['bytes']:,} bytes "
+            f"(estimated with a 25% margin from {est['expected_pairs']:,} voxel-triangle pairs, "
             f"{est['expected_records']:,} records for {len(triangles):,} triangles), over the "
             f"budget of {budget:,} bytes "
             f"({'max_memory' if max_memory is not None else 'half the available memory'}); "
