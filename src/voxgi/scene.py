@@ -134,7 +134,8 @@ class Camera:
         fwd = target - eye
         if np.linalg.norm(fwd) <= 1e-12 * max(1.0, np.linalg.norm(eye)):
             raise ValueError(f"Camera: eye {eye.tolist()} and target {target.tolist()} coincide")
-        if np.linalg.norm(np.cross(fwd / np.linalg.norm(fwd), up)) < 1e-6 * max(np.linalg.norm(up), 1e-300):
+        side = np.linalg.norm(np.cross(fwd / np.linalg.norm(fwd), up))
+        if side < 1e-6 * max(np.linalg.norm(up), 1e-300):
             raise ValueError(f"Camera.up {up.tolist()} is zero or parallel to the view direction")
         object.__setattr__(self, "fov", _validate.real(self.fov, "Camera.fov", low=0.0, high=180.0,
                                                        low_open=True, high_open=True))
@@ -190,7 +191,8 @@ class SceneObject:
     def area(self) -> float:
         """Total area of the non-degenerate triangles (scene units²)."""
         t = self.vertices[self.faces]
-        return float(0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum())
+        cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        return float(0.5 * np.linalg.norm(cross, axis=1).sum())
 
     def to_trimesh(self) -> trimesh.Trimesh:
         return trimesh.Trimesh(self.vertices.copy(), self.faces.copy(), process=False)
@@ -349,7 +351,8 @@ class Scene:
         """
         self.check_nonempty()
         tri = np.concatenate([o.vertices[o.faces] for o in self.objects])
-        obj = np.concatenate([np.full(len(o.faces), i, np.int32) for i, o in enumerate(self.objects)])
+        obj = np.concatenate([np.full(len(o.faces), i, np.int32)
+                              for i, o in enumerate(self.objects)])
         return {
             "triangles": np.ascontiguousarray(tri),
             "object": obj,
@@ -514,37 +517,37 @@ class Scene:
         digits (PLY and GLB would round vertices to float32), so ``Scene.load``
         of the result gives bit-identical geometry, materials and camera.
         """
+        import tomli_w  # (writes any name as valid TOML: control characters escaped)
+
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        lines = []
+        doc: dict = {}
         if self.camera is not None:
             c = self.camera
-            lines.append("[camera]")
-            for f in ("eye", "target", "up"):
-                lines.append(f"{f} = {_toml_list(getattr(c, f))}")
-            for f in ("fov", "aperture"):
-                lines.append(f"{f} = {float(getattr(c, f))!r}")
-            lines.append(f"width = {c.width}")
-            lines.append(f"height = {c.height}")
+            doc["camera"] = {f: [float(x) for x in getattr(c, f)] for f in ("eye", "target", "up")}
+            doc["camera"].update(fov=float(c.fov), aperture=float(c.aperture), width=c.width,
+                                 height=c.height)
             if c.focus_distance is not None:
-                lines.append(f"focus_distance = {float(c.focus_distance)!r}")
-            lines.append("")
+                doc["camera"]["focus_distance"] = float(c.focus_distance)
+        objects = []
         for i, o in enumerate(self.objects):
             fname = f"{path.stem}_{i:03d}.obj"
             with atomic_path(path.parent / fname) as tmp:
                 tmp.write_text(o.to_trimesh().export(file_type="obj", digits=17))
-            lines.append("[[object]]")
-            lines.append(f"name = {_toml_str(o.name)}")
-            lines.append(f"mesh = {_toml_str(fname)}")
-            lines.append(f"albedo = {_toml_list(o.material.albedo)}")
-            lines.append(f"emission = {_toml_list(o.material.emission)}")
-            lines.append(f"two_sided = {'true' if o.two_sided else 'false'}")
-            s = o.material.specular
-            if s is not None:
-                lines.append(f"specular = {{ rs = {_toml_list(s.rs)}, nu = {s.nu!r}, nv = {s.nv!r} }}")
-            lines.append("")
+            entry = {"name": o.name, "mesh": fname,
+                     "albedo": [float(x) for x in o.material.albedo],
+                     "emission": [float(x) for x in o.material.emission],
+                     "two_sided": bool(o.two_sided)}
+            spec = o.material.specular
+            if spec is not None:
+                entry["specular"] = {"rs": [float(x) for x in spec.rs], "nu": float(spec.nu),
+                                     "nv": float(spec.nv)}
+            objects.append(entry)
+        if objects:
+            doc["object"] = objects
+        text = tomli_w.dumps(doc)
         with atomic_path(path) as tmp:
-            tmp.write_text("\n".join(lines), encoding="utf-8")
+            tmp.write_text(text, encoding="utf-8")
         return path
 
 
@@ -623,14 +626,6 @@ def _error_line(text: str, data, msg: str) -> int | None:
         if section == want and header is None:
             header = i
     return header
-
-
-def _toml_list(v) -> str:
-    return "[" + ", ".join(repr(float(x)) for x in v) + "]"
-
-
-def _toml_str(s: str) -> str:
-    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
 def _material_from_dict(m, where: str) -> Material:
