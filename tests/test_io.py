@@ -108,3 +108,13 @@ def test_atomic_path_removes_the_temporary_file_on_error(tmp_path):
 def test_write_into_a_folder_name_is_refused(tmp_path):
     with pytest.raises(IsADirectoryError, match="folder"):
         io.write_exr(tmp_path, np.zeros((2, 2, 3)))
+
+
+def test_a_symbolic_link_is_kept_and_its_target_replaced(tmp_path):
+    real = io.write_exr(tmp_path / "real.exr", np.zeros((2, 2, 3)))
+    link = tmp_path / "link.exr"
+    link.symlink_to(real)
+    io.write_exr(link, np.ones((2, 2, 3)))
+    assert link.is_symlink()
+    np.testing.assert_array_equal(io.read_exr(real), np.ones((2, 2, 3), np.float32))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.exr", "real.exr"]

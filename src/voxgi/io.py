@@ -45,7 +45,8 @@ def atomic_path(path) -> Iterator[Path]:
     is flushed to disk and moved onto ``path`` with :func:`os.replace`; when
     it raises (including ``KeyboardInterrupt``), the temporary file is
     removed and ``path`` is left untouched. The new file gets the old one's
-    permission bits, or the usual ``0o666 & ~umask``.
+    permission bits, or the usual ``0o666 & ~umask``; a symbolic link is
+    kept and the file it points to is replaced.
 
     Examples
     --------
@@ -53,6 +54,8 @@ def atomic_path(path) -> Iterator[Path]:
     ...     tmp.write_text("complete or not at all")
     """
     path = Path(path)
+    if path.is_symlink():  # replace the file the link points to, and keep the link
+        path = Path(os.path.realpath(path))
     if path.is_dir():
         raise IsADirectoryError(f"{path}: is a folder, expected a file name")
     path.parent.mkdir(parents=True, exist_ok=True)
