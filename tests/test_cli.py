@@ -13,15 +13,42 @@ from voxgi import cli
 
 EXR_MAGIC = b"\x76\x2f\x31\x01"
 PNG_MAGIC = b"\x89PNG"
-SMALL = ["--resolution", "12", "--directions", "4", "--frames", "2", "--width", "8",
-         "--height", "8", "-q"]
+SMALL = [
+    "--resolution",
+    "12",
+    "--directions",
+    "4",
+    "--frames",
+    "2",
+    "--width",
+    "8",
+    "--height",
+    "8",
+    "-q",
+]
 
 
 def test_render_builtin_scene_writes_exr_png_and_metadata(tmp_path, capsys):
     out = tmp_path / "f.exr"
-    rc = cli.main(["render", "furnace-sphere", "-o", str(out), "--resolution", "16",
-                   "--directions", "6", "--frames", "6", "--width", "12", "--height", "10",
-                   "-q"])
+    rc = cli.main(
+        [
+            "render",
+            "furnace-sphere",
+            "-o",
+            str(out),
+            "--resolution",
+            "16",
+            "--directions",
+            "6",
+            "--frames",
+            "6",
+            "--width",
+            "12",
+            "--height",
+            "10",
+            "-q",
+        ]
+    )
     assert rc == 0
     img = voxgi.io.read_exr(out)
     assert img.shape == (10, 12, 3)
@@ -59,8 +86,12 @@ def test_png_output_writes_the_exr_beside_it(tmp_path, capsys):
 def test_exposure_and_tol(tmp_path):
     a, b = tmp_path / "a.exr", tmp_path / "b.exr"
     assert cli.main(["render", "furnace-box", "-o", str(a), *SMALL]) == 0
-    assert cli.main(["render", "furnace-box", "-o", str(b), "--exposure", "-2", "--tol", "0.5",
-                     *SMALL]) == 0
+    assert (
+        cli.main(
+            ["render", "furnace-box", "-o", str(b), "--exposure", "-2", "--tol", "0.5", *SMALL]
+        )
+        == 0
+    )
     np.testing.assert_array_equal(voxgi.io.read_exr(a), voxgi.io.read_exr(b))
     from skimage.io import imread
 
@@ -70,13 +101,18 @@ def test_exposure_and_tol(tmp_path):
     assert meta["tol"] == 0.5
 
 
-@pytest.mark.parametrize(("argv", "msg"), [
-    (["render", "no-such-scene"], "unknown built-in scene 'no-such-scene'; known: bunny-room"),
-    (["render", "missing.toml"], "scene file not found: missing.toml"),
-    (["render", "cornell-box", "-o", "out.jpg"],
-     r"unsupported extension '.jpg'; use .exr or .png"),
-    (["render", "cornell-box", "-o", "out"], r"unsupported extension '\(none\)'"),
-])
+@pytest.mark.parametrize(
+    ("argv", "msg"),
+    [
+        (["render", "no-such-scene"], "unknown built-in scene 'no-such-scene'; known: bunny-room"),
+        (["render", "missing.toml"], "scene file not found: missing.toml"),
+        (
+            ["render", "cornell-box", "-o", "out.jpg"],
+            r"unsupported extension '.jpg'; use .exr or .png",
+        ),
+        (["render", "cornell-box", "-o", "out"], r"unsupported extension '\(none\)'"),
+    ],
+)
 def test_errors_are_one_line_with_exit_code_2(argv, msg, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit) as exc:
@@ -95,19 +131,23 @@ def test_bad_scene_file_is_one_line_with_exit_code_1(tmp_path, capsys):
     p.write_text("[[object]]\nmesh = 5\n")
     with pytest.raises(SystemExit) as exc:
         cli.main(["render", str(p), "-o", str(tmp_path / "o.exr")])
-    assert re.fullmatch(r"voxgi render: error: .*s\.toml: object #0: 'mesh' must be a string.*",
-                        str(exc.value.code))
+    assert re.fullmatch(
+        r"voxgi render: error: .*s\.toml: object #0: 'mesh' must be a string.*", str(exc.value.code)
+    )
     assert capsys.readouterr().out == ""
     assert sorted(x.name for x in tmp_path.iterdir()) == ["s.toml"]
 
 
-@pytest.mark.parametrize(("argv", "msg"), [
-    (["render", "cornell-box", "--width", "0"], "--width: must be >= 1"),
-    (["render", "cornell-box", "--height", "-2"], "--height: must be >= 1"),
-    (["render", "cornell-box", "--tol", "nan"], "--tol: must be finite"),
-    (["render", "cornell-box", "--exposure", "x"], "--exposure: expected a number"),
-    (["render", "cornell-box", "-q", "-v"], "not allowed with argument"),
-])
+@pytest.mark.parametrize(
+    ("argv", "msg"),
+    [
+        (["render", "cornell-box", "--width", "0"], "--width: must be >= 1"),
+        (["render", "cornell-box", "--height", "-2"], "--height: must be >= 1"),
+        (["render", "cornell-box", "--tol", "nan"], "--tol: must be finite"),
+        (["render", "cornell-box", "--exposure", "x"], "--exposure: expected a number"),
+        (["render", "cornell-box", "-q", "-v"], "not allowed with argument"),
+    ],
+)
 def test_bad_arguments_exit_2(argv, msg, capsys):
     with pytest.raises(SystemExit) as exc:
         cli.main(argv)
@@ -145,8 +185,12 @@ def test_unwritable_folder_exit_code_from_the_command(tmp_path):
         ro.mkdir(mode=0o500)
         targets.append(ro / "out.png")
     for out in targets:
-        r = subprocess.run([sys.executable, "-m", "voxgi.cli", "render", "cornell-box", "-o",
-                            str(out)], capture_output=True, text=True, timeout=120)
+        r = subprocess.run(
+            [sys.executable, "-m", "voxgi.cli", "render", "cornell-box", "-o", str(out)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert r.returncode == 2, r.stderr
         assert r.stdout == ""
         assert r.stderr.startswith(f"voxgi render: error: cannot write {out.with_suffix('.exr')}")
@@ -179,9 +223,15 @@ def test_help_shows_the_defaults(capsys):
     text = " ".join(capsys.readouterr().out.split())
     from voxgi.pipeline import RENDER_DIRECTIONS, RENDER_RESOLUTION
 
-    for want in (f"(default: {RENDER_RESOLUTION})", f"(default: {RENDER_DIRECTIONS})",
-                 "(default: 256)", "(default: 0.001)", "(default: 0.0)",
-                 "(default: the scene camera's)", "(default: all hardware threads)",
-                 "(default: SCENE.exr in the current folder)"):
+    for want in (
+        f"(default: {RENDER_RESOLUTION})",
+        f"(default: {RENDER_DIRECTIONS})",
+        "(default: 256)",
+        "(default: 0.001)",
+        "(default: 0.0)",
+        "(default: the scene camera's)",
+        "(default: all hardware threads)",
+        "(default: SCENE.exr in the current folder)",
+    ):
         assert want in text, want
     assert "(default: None)" not in text

@@ -23,8 +23,8 @@ import pytest
 
 import voxgi
 
-DELAY = 0.3   # seconds before the signal: the call is then well inside its kernels
-LIMIT = 1.0   # most seconds from Ctrl-C to control returning
+DELAY = 0.3  # seconds before the signal: the call is then well inside its kernels
+LIMIT = 1.0  # most seconds from Ctrl-C to control returning
 
 
 class _CtrlC:
@@ -85,8 +85,14 @@ def test_ctrl_c_during_render_returns_partial_image(cornell):
     vox = voxgi.voxelize(cornell, resolution=24, progress=False)
     sol = voxgi.solve(vox, directions=4, shoot_directions=4, progress=False)
     with _CtrlC() as c:
-        out = voxgi.render(cornell, sol, camera=cornell.camera.replace(width=48, height=48),
-                           max_frames=100000, tol=0.0, progress=False)
+        out = voxgi.render(
+            cornell,
+            sol,
+            camera=cornell.camera.replace(width=48, height=48),
+            max_frames=100000,
+            tol=0.0,
+            progress=False,
+        )
     assert c.sent is not None, "render finished before the signal: make the workload larger"
     print(f"render: control back {c.returned - c.sent:.3f} s after SIGINT, {out.frames} frames")
     assert c.returned - c.sent < LIMIT
@@ -135,10 +141,31 @@ def _interrupted_cli(tmp_path, stage):
     voxgi.io.write_exr(exr, np.full((3, 3, 3), 7.0, np.float32), metadata={"scene": "earlier"})
     voxgi.io.write_png(png, np.full((3, 3, 3), 0.5, np.float32))
     before = {p.name: p.read_bytes() for p in (exr, png)}
-    argv = ["render", "furnace-box", "-o", str(exr), "--resolution", "8", "--directions", "2",
-            "--frames", "50", "--tol", "0", "--width", "8", "--height", "6", "-q"]
-    proc = subprocess.Popen([sys.executable, "-c", _CLI_SCRIPT, stage, *argv],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    argv = [
+        "render",
+        "furnace-box",
+        "-o",
+        str(exr),
+        "--resolution",
+        "8",
+        "--directions",
+        "2",
+        "--frames",
+        "50",
+        "--tol",
+        "0",
+        "--width",
+        "8",
+        "--height",
+        "6",
+        "-q",
+    ]
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _CLI_SCRIPT, stage, *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     lines = []
     try:
         for line in proc.stdout:

@@ -70,8 +70,12 @@ def test_failed_write_keeps_the_earlier_file(tmp_path, kind):
     small = np.full((4, 5, 3), 0.25, np.float32)
     getattr(io, f"write_{kind}")(path, small)
     before = path.read_bytes()
-    r = subprocess.run([sys.executable, "-c", _FSIZE_SCRIPT, kind, str(path)],
-                       capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-c", _FSIZE_SCRIPT, kind, str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert r.returncode == 3, r.stdout + r.stderr
     assert "refused:" in r.stdout
     assert path.read_bytes() == before

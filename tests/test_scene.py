@@ -19,17 +19,20 @@ def test_material_scalar_and_rgb():
     assert m.is_emitter
 
 
-@pytest.mark.parametrize(("kw", "match"), [
-    ({"albedo": 1.0}, r"Material.albedo.*\[0.0, 1.0\)"),
-    ({"albedo": -0.1}, "Material.albedo"),
-    ({"albedo": float("nan")}, "Material.albedo: non-finite"),
-    ({"emission": -1.0}, "Material.emission"),
-    ({"emission": (1, 2)}, "Material.emission.*shape"),
-    # the kernels hold these in float32
-    ({"albedo": 1 - 1e-12}, r"Material.albedo.*rounds to 1.0 in float32"),
-    ({"albedo": (0.5, 0.5, 0.99999999)}, r"Material.albedo.*rounds to 1.0 in float32"),
-    ({"emission": 1e39}, r"Material.emission.*1e\+39 does not fit in float32"),
-])
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        ({"albedo": 1.0}, r"Material.albedo.*\[0.0, 1.0\)"),
+        ({"albedo": -0.1}, "Material.albedo"),
+        ({"albedo": float("nan")}, "Material.albedo: non-finite"),
+        ({"emission": -1.0}, "Material.emission"),
+        ({"emission": (1, 2)}, "Material.emission.*shape"),
+        # the kernels hold these in float32
+        ({"albedo": 1 - 1e-12}, r"Material.albedo.*rounds to 1.0 in float32"),
+        ({"albedo": (0.5, 0.5, 0.99999999)}, r"Material.albedo.*rounds to 1.0 in float32"),
+        ({"emission": 1e39}, r"Material.emission.*1e\+39 does not fit in float32"),
+    ],
+)
 def test_material_bad_values(kw, match):
     with pytest.raises(ValueError, match=match):
         voxgi.Material(**kw)
@@ -52,17 +55,20 @@ def test_camera_frame_is_right_handed_as_documented():
     assert cam.focus == pytest.approx(1.0)
 
 
-@pytest.mark.parametrize(("kw", "exc", "match"), [
-    ({"width": 0}, ValueError, "Camera.width"),
-    ({"height": -3}, ValueError, "Camera.height"),
-    ({"width": 2.5}, TypeError, "Camera.width"),
-    ({"fov": 0.0}, ValueError, "Camera.fov"),
-    ({"fov": 180.0}, ValueError, "Camera.fov"),
-    ({"eye": (0, 0, 0), "target": (0, 0, 0)}, ValueError, "coincide"),
-    ({"up": (0, 0, 1), "eye": (0, 0, 0), "target": (0, 0, -1)}, ValueError, "parallel"),
-    ({"eye": (0, np.inf, 0)}, ValueError, "Camera.eye"),
-    ({"aperture": -1.0}, ValueError, "Camera.aperture"),
-])
+@pytest.mark.parametrize(
+    ("kw", "exc", "match"),
+    [
+        ({"width": 0}, ValueError, "Camera.width"),
+        ({"height": -3}, ValueError, "Camera.height"),
+        ({"width": 2.5}, TypeError, "Camera.width"),
+        ({"fov": 0.0}, ValueError, "Camera.fov"),
+        ({"fov": 180.0}, ValueError, "Camera.fov"),
+        ({"eye": (0, 0, 0), "target": (0, 0, 0)}, ValueError, "coincide"),
+        ({"up": (0, 0, 1), "eye": (0, 0, 0), "target": (0, 0, -1)}, ValueError, "parallel"),
+        ({"eye": (0, np.inf, 0)}, ValueError, "Camera.eye"),
+        ({"aperture": -1.0}, ValueError, "Camera.aperture"),
+    ],
+)
 def test_camera_bad_input(kw, exc, match):
     with pytest.raises(exc, match=match):
         voxgi.Camera(**kw)
@@ -99,8 +105,9 @@ def test_degenerate_faces_are_skipped_with_a_warning():
     assert obj.n_triangles == 1
 
 
-@pytest.mark.parametrize(("shift", "scale"), [(1e12, 1.0), (1e7, 1.0), (0.0, 1e-9),
-                                               (0.0, 1e12), (-3e9, 1e-3)])
+@pytest.mark.parametrize(
+    ("shift", "scale"), [(1e12, 1.0), (1e7, 1.0), (0.0, 1e-9), (0.0, 1e12), (-3e9, 1e-3)]
+)
 def test_degenerate_test_is_relative_to_each_triangle(shift, scale):
     box = trimesh.creation.box()
     box.apply_scale(scale)
@@ -125,7 +132,8 @@ def test_empty_scene_is_an_error():
 def test_toml_round_trip(tmp_path):
     s = voxgi.scenes.cornell_box(width=32, height=24)
     s.objects[0].material = voxgi.Material(
-        albedo=0.3, specular=voxgi.AshikhminShirley(rs=0.2, nu=10, nv=1000))
+        albedo=0.3, specular=voxgi.AshikhminShirley(rs=0.2, nu=10, nv=1000)
+    )
     path = s.save(tmp_path / "cbox.toml")
     t = Scene.load(path)
     assert t.camera == s.camera
@@ -150,31 +158,37 @@ def test_toml_round_trip_of_awkward_names(tmp_path):
 def test_toml_transforms_and_named_materials(tmp_path):
     trimesh.creation.box().export(tmp_path / "box.obj")
     (tmp_path / "s.toml").write_text(
-        '[materials.grey]\nalbedo = 0.5\n\n'
+        "[materials.grey]\nalbedo = 0.5\n\n"
         '[[object]]\nmesh = "box.obj"\nmaterial = "grey"\nscale = 2.0\n'
-        'rotate = [90, 0, 0, 1]\ntranslate = [10, 0, 0]\n')
+        "rotate = [90, 0, 0, 1]\ntranslate = [10, 0, 0]\n"
+    )
     s = Scene.load(tmp_path / "s.toml")
     np.testing.assert_allclose(s.bounds, [[9, -1, -1], [11, 1, 1]], atol=1e-12)
     assert s.objects[0].material.albedo == (0.5, 0.5, 0.5)
     assert s.area() == pytest.approx(24.0)
 
 
-@pytest.mark.parametrize(("text", "match"), [
-    ("[camera\n", r"malformed TOML.*line 1"),
-    ("[[object]]\nmesh = 'nope.ply'\n", "object #0.*mesh file not found"),
-    ("[[object]]\nname='a'\nmesh = 'box.obj'\nalbedo = 2.0\n", r"object #0 \('a'\).*albedo"),
-    ("[[object]]\nmesh = 'box.obj'\ncolour = 1\n", r"unknown key\(s\) \['colour'\]"),
-    ("[[object]]\nmesh = 'box.obj'\nmaterial = 'x'\n", "unknown material 'x'"),
-    ("[camera]\nfov = 200\n", r"\[camera\].*Camera.fov"),
-    ("[camera]\nzoom = 2\n", r"\[camera\]"),
-    ("lights = 3\n", "unknown top-level"),
-    ("[[object]]\nmesh = 5\n", r"object #0.*'mesh' must be a string, got int 5"),
-    ("[[object]]\nmesh = 'box.obj'\nmaterial = [1]\n",
-     r"object #0.*'material' must be a string, got list \[1\]"),
-    ("[[object]]\nmesh = 'box.obj'\nname = 3\n", r"'name' must be a string"),
-    ("x = " + "[" * 5000 + "]" * 5000 + "\n", "nested too deeply"),
-    ("x = " + "{a = " * 5000 + "1" + "}" * 5000 + "\n", "nested too deeply"),
-])
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("[camera\n", r"malformed TOML.*line 1"),
+        ("[[object]]\nmesh = 'nope.ply'\n", "object #0.*mesh file not found"),
+        ("[[object]]\nname='a'\nmesh = 'box.obj'\nalbedo = 2.0\n", r"object #0 \('a'\).*albedo"),
+        ("[[object]]\nmesh = 'box.obj'\ncolour = 1\n", r"unknown key\(s\) \['colour'\]"),
+        ("[[object]]\nmesh = 'box.obj'\nmaterial = 'x'\n", "unknown material 'x'"),
+        ("[camera]\nfov = 200\n", r"\[camera\].*Camera.fov"),
+        ("[camera]\nzoom = 2\n", r"\[camera\]"),
+        ("lights = 3\n", "unknown top-level"),
+        ("[[object]]\nmesh = 5\n", r"object #0.*'mesh' must be a string, got int 5"),
+        (
+            "[[object]]\nmesh = 'box.obj'\nmaterial = [1]\n",
+            r"object #0.*'material' must be a string, got list \[1\]",
+        ),
+        ("[[object]]\nmesh = 'box.obj'\nname = 3\n", r"'name' must be a string"),
+        ("x = " + "[" * 5000 + "]" * 5000 + "\n", "nested too deeply"),
+        ("x = " + "{a = " * 5000 + "1" + "}" * 5000 + "\n", "nested too deeply"),
+    ],
+)
 def test_toml_errors_name_where(tmp_path, text, match):
     trimesh.creation.box().export(tmp_path / "box.obj")
     p = tmp_path / "bad.toml"
@@ -212,8 +226,9 @@ except OSError as exc:
     print("refused:", exc)
     sys.exit(3)
 """
-    r = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True,
-                       text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-c", script, str(path)], capture_output=True, text=True, timeout=120
+    )
     assert r.returncode == 3, r.stdout + r.stderr
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
     assert Scene.load(path).fingerprint() == small.fingerprint()
@@ -279,8 +294,10 @@ def test_scene_registry():
         voxgi.scenes.get("nope")
 
 
-@pytest.mark.parametrize("name", ["labyrinth", "emission", "shadow", "geometric", "sponza-atrium",
-                                  "bunny-room", "cornell-box"])
+@pytest.mark.parametrize(
+    "name",
+    ["labyrinth", "emission", "shadow", "geometric", "sponza-atrium", "bunny-room", "cornell-box"],
+)
 def test_paper_scenes_are_lit_and_inside_their_enclosure(name):
     s = voxgi.scenes.get(name, width=16, height=16)
     assert any(o.material.is_emitter for o in s.objects)
@@ -294,8 +311,10 @@ def test_paper_scenes_are_lit_and_inside_their_enclosure(name):
     # objects other than the enclosure and the one-sided light quads are closed solids
     for o in s.objects:
         m = o.to_trimesh()
-        if o.name not in ("room", "hall", "light", "small_light", "panel_light", "sky") \
-                and name != "cornell-box":
+        if (
+            o.name not in ("room", "hall", "light", "small_light", "panel_light", "sky")
+            and name != "cornell-box"
+        ):
             assert m.is_watertight, o.name
 
 

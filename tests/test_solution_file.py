@@ -59,17 +59,20 @@ def _rewrite(src, dst, **changes):
     np.savez_compressed(dst, **arrays)
 
 
-@pytest.mark.parametrize(("key", "fix", "match"), [
-    ("vox_centroid", lambda a: a[:-1], "vox_centroid must be float64 of shape"),
-    ("vox_normal", lambda a: a[:-2], "vox_normal must be float32 of shape"),
-    ("vox_area", lambda a: a.astype(np.float64), "vox_area must be float32"),
-    ("vox_ijk", lambda a: a.astype(np.float32), "vox_ijk must be int32"),
-    ("vox_back", lambda a: a[:, None], "vox_back must be bool"),
-    ("vox_origin", lambda a: a[:2], "vox_origin"),
-    ("radiosity", lambda a: a[:-1], "radiosity must be floats of shape"),
-    ("radiosity", lambda a: a * np.inf, "not finite"),
-    ("vox_normal", lambda a: a * np.nan, "non-finite"),
-])
+@pytest.mark.parametrize(
+    ("key", "fix", "match"),
+    [
+        ("vox_centroid", lambda a: a[:-1], "vox_centroid must be float64 of shape"),
+        ("vox_normal", lambda a: a[:-2], "vox_normal must be float32 of shape"),
+        ("vox_area", lambda a: a.astype(np.float64), "vox_area must be float32"),
+        ("vox_ijk", lambda a: a.astype(np.float32), "vox_ijk must be int32"),
+        ("vox_back", lambda a: a[:, None], "vox_back must be bool"),
+        ("vox_origin", lambda a: a[:2], "vox_origin"),
+        ("radiosity", lambda a: a[:-1], "radiosity must be floats of shape"),
+        ("radiosity", lambda a: a * np.inf, "not finite"),
+        ("vox_normal", lambda a: a * np.nan, "non-finite"),
+    ],
+)
 def test_arrays_are_checked_against_the_record_count(tmp_path, sol, key, fix, match):
     good = sol.save(tmp_path / "s.npz")
     with np.load(good) as z:
@@ -96,8 +99,9 @@ except OSError as exc:
     print("refused:", exc)
     sys.exit(3)
 """
-    r = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True,
-                       text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-c", script, str(path)], capture_output=True, text=True, timeout=120
+    )
     assert r.returncode == 3, r.stdout + r.stderr
     assert path.read_bytes() == before
     np.testing.assert_array_equal(Solution.load(path).radiosity, sol.radiosity)

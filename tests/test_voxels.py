@@ -99,8 +99,12 @@ def _area_cases():
     sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.8)
     bunny = voxgi.scenes.load_bunny()
     two = quad([[0, 0, 0], [1, 0.2, 0.1], [1.1, 0.9, 0.5], [0.1, 0.8, 0.3]])
-    return {"cube": (cube, False), "sphere": (sphere, False), "bunny": (bunny, False),
-            "two_sided_quad": (two, True)}
+    return {
+        "cube": (cube, False),
+        "sphere": (sphere, False),
+        "bunny": (bunny, False),
+        "two_sided_quad": (two, True),
+    }
 
 
 @pytest.mark.parametrize("name", ["cube", "sphere", "bunny", "two_sided_quad"])
@@ -188,8 +192,9 @@ def _naive_line_leaks(vox, mesh, rng, n_lines, keep=None):
     d = rng.normal(size=(n_lines, 3))
     d /= np.abs(d).max(axis=1, keepdims=True)
     p0 = start + rng.uniform(-0.5, 0.5, size=(n_lines, 3)) * (1 - 1e-9)
-    p0[np.arange(n_lines), np.abs(d).argmax(axis=1)] = start[np.arange(n_lines),
-                                                                np.abs(d).argmax(axis=1)]
+    p0[np.arange(n_lines), np.abs(d).argmax(axis=1)] = start[
+        np.arange(n_lines), np.abs(d).argmax(axis=1)
+    ]
     alive = np.ones(n_lines, bool)
     leaks = 0
     for t in range(int((hi - lo).max()) + 3):
@@ -206,8 +211,11 @@ def _naive_line_leaks(vox, mesh, rng, n_lines, keep=None):
 
 def _closed_meshes():
     torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.35)
-    return {"icosphere": trimesh.creation.icosphere(subdivisions=2, radius=1.0),
-            "torus": torus, "bunny": voxgi.scenes.load_bunny()}
+    return {
+        "icosphere": trimesh.creation.icosphere(subdivisions=2, radius=1.0),
+        "torus": torus,
+        "bunny": voxgi.scenes.load_bunny(),
+    }
 
 
 @pytest.mark.parametrize("name", ["icosphere", "torus", "bunny"])
@@ -262,8 +270,10 @@ def test_sharp_edges_and_thin_walls_keep_separate_orientations():
     f = front(vox)
     up = vox.normal[f] @ rot[:, 1] > 0.99
     down = vox.normal[f] @ rot[:, 1] < -0.99
-    both = np.intersect1d(np.unique(vox.ijk[f][up], axis=0).view([("", np.int32)] * 3),
-                          np.unique(vox.ijk[f][down], axis=0).view([("", np.int32)] * 3))
+    both = np.intersect1d(
+        np.unique(vox.ijk[f][up], axis=0).view([("", np.int32)] * 3),
+        np.unique(vox.ijk[f][down], axis=0).view([("", np.int32)] * 3),
+    )
     assert len(both) > 0.5 * up.sum()
 
 
@@ -297,8 +307,9 @@ def test_material_mapping_and_back_records(cornell):
 def test_two_sided_records_are_live_on_both_sides():
     mat = voxgi.Material(albedo=(0.2, 0.4, 0.6), emission=(1.0, 2.0, 3.0))
     # Inconsistent winding must not matter for a two-sided surface.
-    q = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 3, 2]],
-                        process=False)
+    q = trimesh.Trimesh(
+        [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 3, 2]], process=False
+    )
     vox = voxgi.voxelize(scene_of(q, two_sided=True, materials=[mat]), 9)
     assert not vox.back.any()
     assert vox.stats["two_sided_records"] == len(vox) // 2
@@ -326,8 +337,10 @@ def test_light_under_ceiling_has_its_own_records():
     np.testing.assert_allclose(vox.centroid[L, 1], y_light, rtol=0, atol=1e-12)
     np.testing.assert_allclose(vox.centroid[C, 1], y_ceiling, rtol=0, atol=1e-12)
     np.testing.assert_allclose(vox.normal[L], np.tile([0, -1, 0], (L.sum(), 1)), atol=1e-6)
-    shared = np.intersect1d(np.unique(vox.ijk[L], axis=0).view([("", np.int32)] * 3),
-                            np.unique(vox.ijk[C], axis=0).view([("", np.int32)] * 3))
+    shared = np.intersect1d(
+        np.unique(vox.ijk[L], axis=0).view([("", np.int32)] * 3),
+        np.unique(vox.ijk[C], axis=0).view([("", np.int32)] * 3),
+    )
     assert len(shared) > 0.5 * L.sum()
     assert vox.area[L].sum(dtype=np.float64) == pytest.approx(s.objects[light].area(), rel=1e-6)
 
@@ -393,7 +406,8 @@ def test_floor_is_cut_by_a_thin_divider():
     pf = front(plain) & (plain.object_id == 0) & (plain.ijk[:, 0] == i_wall)
     assert pf.sum() == len(np.unique(plain.ijk[pf], axis=0))
     assert plain.area[front(plain)].sum(dtype=np.float64) == pytest.approx(
-        vox.area[front(vox)].sum(dtype=np.float64), rel=1e-6)
+        vox.area[front(vox)].sum(dtype=np.float64), rel=1e-6
+    )
 
 
 def test_same_orientation_surfaces_do_not_cut_each_other():
@@ -410,7 +424,8 @@ def test_same_orientation_surfaces_do_not_cut_each_other():
         assert got == pytest.approx(obj.area(), rel=1e-5)
     shared = np.intersect1d(
         np.unique(vox.ijk[f & (vox.object_id == 0)], axis=0).view([("", np.int32)] * 3),
-        np.unique(vox.ijk[f & (vox.object_id == 1)], axis=0).view([("", np.int32)] * 3))
+        np.unique(vox.ijk[f & (vox.object_id == 1)], axis=0).view([("", np.int32)] * 3),
+    )
     assert len(shared) > 0  # they do share voxels
 
 
@@ -420,8 +435,17 @@ def test_same_orientation_surfaces_do_not_cut_each_other():
 def test_order_and_thread_independence(cornell):
     a = voxgi.voxelize(cornell, 40, threads=1)
     b = voxgi.voxelize(cornell, 40, threads=2)
-    for name in ("ijk", "normal", "area", "albedo", "emission", "centroid", "object_id", "back",
-                 "side"):
+    for name in (
+        "ijk",
+        "normal",
+        "area",
+        "albedo",
+        "emission",
+        "centroid",
+        "object_id",
+        "back",
+        "side",
+    ):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
     key = a.ijk.astype(np.int64)
     lex = (key[:, 0] * 4096 + key[:, 1]) * 4096 + key[:, 2]
@@ -496,16 +520,31 @@ def test_memory_estimate_is_within_2x_of_the_measured_peak(subdivisions, resolut
     # ru_maxrss survives exec, and a forked child starts from its parent's RSS:
     # a small Python in between keeps pytest's own memory out of the figure.
     launcher = "import subprocess, sys; sys.exit(subprocess.run(sys.argv[1:]).returncode)"
-    r = subprocess.run([sys.executable, "-c", launcher, sys.executable, "-c", _PEAK_SCRIPT,
-                        str(tmp_path / "mesh.npz"), str(resolution)],
-                       capture_output=True, text=True, timeout=300, check=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            launcher,
+            sys.executable,
+            "-c",
+            _PEAK_SCRIPT,
+            str(tmp_path / "mesh.npz"),
+            str(resolution),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=True,
+    )
     m = json.loads(r.stdout.strip().splitlines()[-1])
     growth = m["peak"] - m["rss0"]
     # the high-water mark is the call's own, not one from building the scene
     assert m["peak"] > m["before"]
     ratio = m["estimate"] / growth
-    print(f"{m['triangles']:,} triangles at {resolution}: estimate {m['estimate'] / 2**20:.1f} "
-          f"MiB, peak RSS growth {growth / 2**20:.1f} MiB, ratio {ratio:.2f}")
+    print(
+        f"{m['triangles']:,} triangles at {resolution}: estimate {m['estimate'] / 2**20:.1f} "
+        f"MiB, peak RSS growth {growth / 2**20:.1f} MiB, ratio {ratio:.2f}"
+    )
     assert 0.5 <= ratio <= 2.0
 
 
@@ -541,8 +580,9 @@ def test_triangle_too_small_for_the_grid_is_skipped_and_counted():
     # Scene.add keeps a triangle of size 1e-70 (it is not degenerate at its
     # own scale), but inside a box of size 1e12 it vanishes in voxel units.
     big = trimesh.creation.box(extents=[1e12, 1e12, 1e12])
-    s = scene_of(big, trimesh.Trimesh([[0, 0, 0], [1e-70, 0, 0], [0, 1e-70, 0]], [[0, 1, 2]],
-                                      process=False))
+    s = scene_of(
+        big, trimesh.Trimesh([[0, 0, 0], [1e-70, 0, 0], [0, 1e-70, 0]], [[0, 1, 2]], process=False)
+    )
     vox = voxgi.voxelize(s, 8)
     assert vox.stats["skipped_degenerate"] == 1
     for name in ("normal", "area", "centroid", "albedo", "emission"):

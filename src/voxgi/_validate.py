@@ -28,7 +28,8 @@ def as_c_array(value, dtype, shape: Sequence[int], what: str, *, finite: bool = 
         raise TypeError(f"{what}: expected a numeric array, got dtype {arr.dtype}")
     # (zip is strict: the ndim test before it guarantees equal lengths)
     if arr.ndim != len(shape) or any(
-            s not in (-1, a) for s, a in zip(shape, arr.shape, strict=True)):
+        s not in (-1, a) for s, a in zip(shape, arr.shape, strict=True)
+    ):
         want = "(" + ", ".join("N" if s == -1 else str(s) for s in shape) + ")"
         raise ValueError(f"{what}: expected shape {want}, got {arr.shape}")
     if np.issubdtype(np.dtype(dtype), np.integer) and not np.issubdtype(arr.dtype, np.integer):
@@ -45,8 +46,15 @@ def as_c_array(value, dtype, shape: Sequence[int], what: str, *, finite: bool = 
 _F32_MAX = float(np.finfo(np.float32).max)
 
 
-def rgb(value, what: str, *, low: float = 0.0, high: float | None = None,
-        high_inclusive: bool = True, float32: bool = False) -> tuple[float, float, float]:
+def rgb(
+    value,
+    what: str,
+    *,
+    low: float = 0.0,
+    high: float | None = None,
+    high_inclusive: bool = True,
+    float32: bool = False,
+) -> tuple[float, float, float]:
     """Colour argument: a scalar or 3 finite numbers within [low, high].
 
     With ``float32``, each value must also fit in float32 (the kernels'
@@ -75,11 +83,14 @@ def rgb(value, what: str, *, low: float = 0.0, high: float | None = None,
             raise ValueError(f"{what}: value {v} is outside {rng}")
         if float32:
             if abs(v) > _F32_MAX:
-                raise ValueError(f"{what}: value {v} does not fit in float32 (largest "
-                                 f"{_F32_MAX:.4g})")
+                raise ValueError(
+                    f"{what}: value {v} does not fit in float32 (largest {_F32_MAX:.4g})"
+                )
             if high is not None and not high_inclusive and float(np.float32(v)) >= high:
-                raise ValueError(f"{what}: value {v!r} rounds to {high} in float32; use at "
-                                 f"most {float(np.nextafter(np.float32(high), np.float32(0)))!r}")
+                raise ValueError(
+                    f"{what}: value {v!r} rounds to {high} in float32; use at "
+                    f"most {float(np.nextafter(np.float32(high), np.float32(0)))!r}"
+                )
     return vals  # type: ignore[return-value]
 
 
@@ -98,8 +109,9 @@ def vec3(value, what: str) -> np.ndarray:
     return arr
 
 
-def integer(value, what: str, *, low: int | None = None, high: int | None = None,
-            allow_none: bool = False) -> int | None:
+def integer(
+    value, what: str, *, low: int | None = None, high: int | None = None, allow_none: bool = False
+) -> int | None:
     """An int (numpy integers accepted, bools and floats refused)."""
     if value is None and allow_none:
         return None
@@ -113,8 +125,16 @@ def integer(value, what: str, *, low: int | None = None, high: int | None = None
     return v
 
 
-def real(value, what: str, *, low: float | None = None, high: float | None = None,
-         low_open: bool = False, high_open: bool = False, allow_none: bool = False) -> float | None:
+def real(
+    value,
+    what: str,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+    allow_none: bool = False,
+) -> float | None:
     """A finite real number within optional (open or closed) bounds."""
     if value is None and allow_none:
         return None

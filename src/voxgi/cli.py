@@ -27,6 +27,7 @@ class UsageError(Exception):
 
 def _at_least(low: int):
     """argparse type: an integer >= ``low`` (checked before any work starts)."""
+
     def conv(text: str) -> int:
         try:
             v = int(text)
@@ -35,12 +36,14 @@ def _at_least(low: int):
         if v < low:
             raise argparse.ArgumentTypeError(f"must be >= {low}, got {v}")
         return v
+
     conv.__name__ = f"integer >= {low}"
     return conv
 
 
 def _finite(low: float | None = None):
     """argparse type: a finite float (>= ``low`` when given)."""
+
     def conv(text: str) -> float:
         try:
             v = float(text)
@@ -51,6 +54,7 @@ def _finite(low: float | None = None):
         if low is not None and v < low:
             raise argparse.ArgumentTypeError(f"must be >= {low:g}, got {v:g}")
         return v
+
     conv.__name__ = "number" if low is None else f"number >= {low:g}"
     return conv
 
@@ -75,51 +79,111 @@ def build_parser() -> argparse.ArgumentParser:
     from .pipeline import RENDER_DIRECTIONS, RENDER_RESOLUTION
 
     p = argparse.ArgumentParser(
-        prog="voxgi", formatter_class=_HelpFormatter,
+        prog="voxgi",
+        formatter_class=_HelpFormatter,
         description="Voxel-based global illumination: voxelize a scene, solve its radiosity "
-                    "on the voxels and display it by progressive VPL ray tracing.")
+        "on the voxels and display it by progressive VPL ray tracing.",
+    )
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     r = sub.add_parser(
-        "render", formatter_class=_HelpFormatter,
+        "render",
+        formatter_class=_HelpFormatter,
         help="voxelize, solve and render a scene to EXR + PNG",
         description="Render a scene to a linear EXR and a tone-mapped PNG preview beside it. "
-                    "Exit codes: 0 done, 1 a scene or value that cannot be used, 2 a bad "
-                    "command line or an output that cannot be written (checked before any "
-                    "work), 130 interrupted by Ctrl-C (a partial image is written only if a "
-                    "frame finished; its EXR header says so).")
+        "Exit codes: 0 done, 1 a scene or value that cannot be used, 2 a bad "
+        "command line or an output that cannot be written (checked before any "
+        "work), 130 interrupted by Ctrl-C (a partial image is written only if a "
+        "frame finished; its EXR header says so).",
+    )
     r.add_argument("scene", help="scene TOML file, or a built-in scene name (see 'voxgi scenes')")
-    r.add_argument("-o", "--output", metavar="PATH", default=None,
-                   help="output file ending in .exr or .png; the other of the two is written "
-                        "beside it with the same name (default: SCENE.exr in the current "
-                        "folder)")
-    r.add_argument("--resolution", metavar="N", type=_at_least(2), default=RENDER_RESOLUTION,
-                   help="voxels along the scene's longest side")
-    r.add_argument("--directions", metavar="R", type=_at_least(1), default=RENDER_DIRECTIONS,
-                   help="radius R of the solve's gathering direction set")
-    r.add_argument("--frames", "--spp", dest="frames", metavar="N", type=_at_least(1), default=256,
-                   help="most progressive display frames")
-    r.add_argument("--tol", metavar="T", type=_finite(0.0), default=1e-3,
-                   help="stop the display once the estimated relMSE of the image's noise is "
-                        "under this (0: run all --frames)")
-    r.add_argument("--exposure", metavar="EV", type=_finite(), default=0.0,
-                   help="exposure of the PNG preview in stops (the EXR stays linear)")
-    r.add_argument("--width", metavar="PX", type=_at_least(1), default=None,
-                   help="image width in pixels (default: the scene camera's)")
-    r.add_argument("--height", metavar="PX", type=_at_least(1), default=None,
-                   help="image height in pixels (default: the scene camera's)")
-    r.add_argument("--seed", metavar="S", type=int, default=0,
-                   help="seed of the display's sample sequences")
-    r.add_argument("--threads", metavar="N", type=_at_least(1), default=None,
-                   help="worker threads (default: all hardware threads)")
+    r.add_argument(
+        "-o",
+        "--output",
+        metavar="PATH",
+        default=None,
+        help="output file ending in .exr or .png; the other of the two is written "
+        "beside it with the same name (default: SCENE.exr in the current "
+        "folder)",
+    )
+    r.add_argument(
+        "--resolution",
+        metavar="N",
+        type=_at_least(2),
+        default=RENDER_RESOLUTION,
+        help="voxels along the scene's longest side",
+    )
+    r.add_argument(
+        "--directions",
+        metavar="R",
+        type=_at_least(1),
+        default=RENDER_DIRECTIONS,
+        help="radius R of the solve's gathering direction set",
+    )
+    r.add_argument(
+        "--frames",
+        "--spp",
+        dest="frames",
+        metavar="N",
+        type=_at_least(1),
+        default=256,
+        help="most progressive display frames",
+    )
+    r.add_argument(
+        "--tol",
+        metavar="T",
+        type=_finite(0.0),
+        default=1e-3,
+        help="stop the display once the estimated relMSE of the image's noise is "
+        "under this (0: run all --frames)",
+    )
+    r.add_argument(
+        "--exposure",
+        metavar="EV",
+        type=_finite(),
+        default=0.0,
+        help="exposure of the PNG preview in stops (the EXR stays linear)",
+    )
+    r.add_argument(
+        "--width",
+        metavar="PX",
+        type=_at_least(1),
+        default=None,
+        help="image width in pixels (default: the scene camera's)",
+    )
+    r.add_argument(
+        "--height",
+        metavar="PX",
+        type=_at_least(1),
+        default=None,
+        help="image height in pixels (default: the scene camera's)",
+    )
+    r.add_argument(
+        "--seed", metavar="S", type=int, default=0, help="seed of the display's sample sequences"
+    )
+    r.add_argument(
+        "--threads",
+        metavar="N",
+        type=_at_least(1),
+        default=None,
+        help="worker threads (default: all hardware threads)",
+    )
     talk = r.add_mutually_exclusive_group()
-    talk.add_argument("-q", "--quiet", action="store_true",
-                      help="no progress bars (the summary lines stay)")
-    talk.add_argument("-v", "--verbose", action="store_true",
-                      help="also print diagnostics: what each stage skipped and why")
-    sub.add_parser("scenes", formatter_class=_HelpFormatter,
-                   help="list the built-in scenes",
-                   description="List the built-in scenes that 'voxgi render NAME' accepts.")
+    talk.add_argument(
+        "-q", "--quiet", action="store_true", help="no progress bars (the summary lines stay)"
+    )
+    talk.add_argument(
+        "-v",
+        "--verbose",
+        action="store_true",
+        help="also print diagnostics: what each stage skipped and why",
+    )
+    sub.add_parser(
+        "scenes",
+        formatter_class=_HelpFormatter,
+        help="list the built-in scenes",
+        description="List the built-in scenes that 'voxgi render NAME' accepts.",
+    )
     return p
 
 
@@ -136,8 +200,10 @@ def output_paths(output: str | Path) -> tuple[Path, Path]:
         return out, out.with_suffix(".png")
     if ext == ".png":
         return out.with_suffix(".exr"), out
-    raise UsageError(f"-o {out}: unsupported extension {ext or '(none)'!r}; use .exr or .png "
-                     "(voxgi writes both: the linear EXR and a tone-mapped PNG beside it)")
+    raise UsageError(
+        f"-o {out}: unsupported extension {ext or '(none)'!r}; use .exr or .png "
+        "(voxgi writes both: the linear EXR and a tone-mapped PNG beside it)"
+    )
 
 
 def check_writable(paths) -> None:
@@ -152,8 +218,9 @@ def check_writable(paths) -> None:
             raise UsageError(f"cannot write {path}: it is a folder")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.stem}.",
-                                             suffix=".probe"):
+            with tempfile.NamedTemporaryFile(
+                dir=path.parent, prefix=f".{path.stem}.", suffix=".probe"
+            ):
                 pass
         except OSError as exc:
             raise UsageError(f"cannot write {path}: {exc.strerror or exc}") from None
@@ -169,8 +236,10 @@ def _scene_source(spec: str) -> tuple[Path | None, str]:
             raise UsageError(f"scene file not found: {src}")
         return src, src.stem
     if spec.replace("_", "-").lower() not in scenes.names():
-        raise UsageError(f"unknown built-in scene {spec!r}; known: {', '.join(scenes.names())} "
-                         "(or give a scene .toml file)")
+        raise UsageError(
+            f"unknown built-in scene {spec!r}; known: {', '.join(scenes.names())} "
+            "(or give a scene .toml file)"
+        )
     return None, spec
 
 
@@ -203,14 +272,15 @@ def run_render(args) -> int:
         scene.camera = scene.camera.replace(**changes)
     cam = scene.camera
     progress = not args.quiet
-    say(f"scene {name}: {len(scene.objects)} objects, {scene.n_triangles} triangles, "
-        f"{cam.width}x{cam.height} pixels")
+    say(
+        f"scene {name}: {len(scene.objects)} objects, {scene.n_triangles} triangles, "
+        f"{cam.width}x{cam.height} pixels"
+    )
 
     phase = "voxelize"
     try:
         t0 = time.perf_counter()
-        vox = voxelize(scene, resolution=args.resolution, threads=args.threads,
-                       progress=progress)
+        vox = voxelize(scene, resolution=args.resolution, threads=args.threads, progress=progress)
         t_vox = time.perf_counter() - t0
         say(f"voxelize: {len(vox)} records (resolution {vox.resolution}) in {t_vox:.2f} s")
         for key in ("skipped_degenerate", "polygon_overflows", "cut_limit_hits"):
@@ -218,43 +288,72 @@ def run_render(args) -> int:
                 note(f"voxelize {key}: {vox.stats[key]}")
         phase = "solve"
         t0 = time.perf_counter()
-        sol = solve_for_display(vox, directions=args.directions, threads=args.threads,
-                                progress=progress)
+        sol = solve_for_display(
+            vox, directions=args.directions, threads=args.threads, progress=progress
+        )
         t_sol = time.perf_counter() - t0
-        say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in "
-            f"{t_sol:.2f} s")
+        say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in {t_sol:.2f} s")
         for what, why in sol.stats.get("skipped", {}).items():
             note(f"solve skipped {what}: {why}")
         phase = "display"
-        res = render(scene, sol, max_frames=args.frames, tol=args.tol, seed=args.seed,
-                     progress=progress, threads=args.threads)
+        res = render(
+            scene,
+            sol,
+            max_frames=args.frames,
+            tol=args.tol,
+            seed=args.seed,
+            progress=progress,
+            threads=args.threads,
+        )
     except KeyboardInterrupt:
-        print(f"voxgi render: interrupted during {phase}; nothing written", file=sys.stderr,
-              flush=True)
+        print(
+            f"voxgi render: interrupted during {phase}; nothing written",
+            file=sys.stderr,
+            flush=True,
+        )
         return EXIT_INTERRUPTED
 
     s = res.stats
     sec = s["seconds"]
     interrupted = bool(s.get("interrupted"))
     if interrupted and res.frames == 0:
-        print("voxgi render: interrupted before the first display frame finished; nothing "
-              "written", file=sys.stderr, flush=True)
+        print(
+            "voxgi render: interrupted before the first display frame finished; nothing written",
+            file=sys.stderr,
+            flush=True,
+        )
         return EXIT_INTERRUPTED
-    say(f"display: {res.frames} frames{' (interrupted)' if interrupted else ''}, "
+    say(
+        f"display: {res.frames} frames{' (interrupted)' if interrupted else ''}, "
         f"{s['vpls']} VPLs/pixel, {s['primary_rays']:.3g} primary + {s['shadow_rays']:.3g} "
         f"shadow + {s['gather_rays']:.3g} gather rays in {sec['display']:.2f} s "
-        f"(estimated relMSE of the noise {s['est_rel_mse']:.2e})")
+        f"(estimated relMSE of the noise {s['est_rel_mse']:.2e})"
+    )
     for why in s.get("skipped", []):
         note(f"display skipped {why}")
-    timings = {"voxelize": t_vox, "solve": t_sol, **{k: v for k, v in sec.items()
-                                                      if k not in ("voxelize", "solve", "total")}}
+    timings = {
+        "voxelize": t_vox,
+        "solve": t_sol,
+        **{k: v for k, v in sec.items() if k not in ("voxelize", "solve", "total")},
+    }
     timings["total"] = t_vox + t_sol + sec["display"]
     meta = {
-        "scene": name, "width": cam.width, "height": cam.height, "resolution": vox.resolution,
-        "records": len(vox), "directions": args.directions, "frames": res.frames,
-        "max_frames": args.frames, "tol": args.tol, "est_rel_mse": s["est_rel_mse"],
-        "vpls_per_pixel": s["vpls"], "seed": args.seed, "exposure": args.exposure,
-        "interrupted": interrupted, "seconds": timings, "skipped": s["skipped"],
+        "scene": name,
+        "width": cam.width,
+        "height": cam.height,
+        "resolution": vox.resolution,
+        "records": len(vox),
+        "directions": args.directions,
+        "frames": res.frames,
+        "max_frames": args.frames,
+        "tol": args.tol,
+        "est_rel_mse": s["est_rel_mse"],
+        "vpls_per_pixel": s["vpls"],
+        "seed": args.seed,
+        "exposure": args.exposure,
+        "interrupted": interrupted,
+        "seconds": timings,
+        "skipped": s["skipped"],
     }
     # Each write is atomic (voxgi.io.atomic_path): a Ctrl-C here leaves every
     # file either as it was or complete.
@@ -262,8 +361,11 @@ def run_render(args) -> int:
         io.write_exr(exr, res.image, metadata=meta)
         io.write_png(png, res.image, exposure=args.exposure)
     except KeyboardInterrupt:
-        print("voxgi render: interrupted while writing; the outputs are whole (old or new)",
-              file=sys.stderr, flush=True)
+        print(
+            "voxgi render: interrupted while writing; the outputs are whole (old or new)",
+            file=sys.stderr,
+            flush=True,
+        )
         return EXIT_INTERRUPTED
     if interrupted:
         say(f"interrupted: wrote a partial image ({res.frames} frames) to {exr} and {png}")

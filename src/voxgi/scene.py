@@ -51,10 +51,16 @@ class AshikhminShirley:
 
     def __post_init__(self):
         object.__setattr__(self, "rs", _validate.rgb(self.rs, "AshikhminShirley.rs", high=1.0))
-        object.__setattr__(self, "nu", _validate.real(self.nu, "AshikhminShirley.nu", low=0.0,
-                                                      low_open=True, high=1e6))
-        object.__setattr__(self, "nv", _validate.real(self.nv, "AshikhminShirley.nv", low=0.0,
-                                                      low_open=True, high=1e6))
+        object.__setattr__(
+            self,
+            "nu",
+            _validate.real(self.nu, "AshikhminShirley.nu", low=0.0, low_open=True, high=1e6),
+        )
+        object.__setattr__(
+            self,
+            "nv",
+            _validate.real(self.nv, "AshikhminShirley.nv", low=0.0, low_open=True, high=1e6),
+        )
 
 
 @dataclass(frozen=True)
@@ -79,13 +85,21 @@ class Material:
     def __post_init__(self):
         # The kernels hold albedo and emission in float32: a value must stay
         # itself there (an albedo that rounds to 1 never converges).
-        object.__setattr__(self, "albedo", _validate.rgb(
-            self.albedo, "Material.albedo", high=1.0, high_inclusive=False, float32=True))
-        object.__setattr__(self, "emission", _validate.rgb(self.emission, "Material.emission",
-                                                           float32=True))
+        object.__setattr__(
+            self,
+            "albedo",
+            _validate.rgb(
+                self.albedo, "Material.albedo", high=1.0, high_inclusive=False, float32=True
+            ),
+        )
+        object.__setattr__(
+            self, "emission", _validate.rgb(self.emission, "Material.emission", float32=True)
+        )
         if self.specular is not None and not isinstance(self.specular, AshikhminShirley):
-            raise TypeError("Material.specular: expected voxgi.AshikhminShirley or None, got "
-                            f"{type(self.specular).__name__}")
+            raise TypeError(
+                "Material.specular: expected voxgi.AshikhminShirley or None, got "
+                f"{type(self.specular).__name__}"
+            )
 
     @property
     def is_emitter(self) -> bool:
@@ -137,16 +151,33 @@ class Camera:
         side = np.linalg.norm(np.cross(fwd / np.linalg.norm(fwd), up))
         if side < 1e-6 * max(np.linalg.norm(up), 1e-300):
             raise ValueError(f"Camera.up {up.tolist()} is zero or parallel to the view direction")
-        object.__setattr__(self, "fov", _validate.real(self.fov, "Camera.fov", low=0.0, high=180.0,
-                                                       low_open=True, high_open=True))
-        object.__setattr__(self, "width", _validate.integer(self.width, "Camera.width", low=1,
-                                                            high=1 << 15))
-        object.__setattr__(self, "height", _validate.integer(self.height, "Camera.height", low=1,
-                                                             high=1 << 15))
-        object.__setattr__(self, "aperture", _validate.real(self.aperture, "Camera.aperture",
-                                                            low=0.0))
-        object.__setattr__(self, "focus_distance", _validate.real(
-            self.focus_distance, "Camera.focus_distance", low=0.0, low_open=True, allow_none=True))
+        object.__setattr__(
+            self,
+            "fov",
+            _validate.real(
+                self.fov, "Camera.fov", low=0.0, high=180.0, low_open=True, high_open=True
+            ),
+        )
+        object.__setattr__(
+            self, "width", _validate.integer(self.width, "Camera.width", low=1, high=1 << 15)
+        )
+        object.__setattr__(
+            self, "height", _validate.integer(self.height, "Camera.height", low=1, high=1 << 15)
+        )
+        object.__setattr__(
+            self, "aperture", _validate.real(self.aperture, "Camera.aperture", low=0.0)
+        )
+        object.__setattr__(
+            self,
+            "focus_distance",
+            _validate.real(
+                self.focus_distance,
+                "Camera.focus_distance",
+                low=0.0,
+                low_open=True,
+                allow_none=True,
+            ),
+        )
 
     def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Orthonormal ``(right, up, forward)`` basis, float64 (3,) each."""
@@ -226,8 +257,11 @@ def _mesh_arrays(mesh, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | 
     edge2 = np.max([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e2 - e1)], axis=0)
     keep = dbl_area > 1e-12 * edge2
     if not keep.all():
-        warnings.warn(f"mesh {name!r}: skipped {int((~keep).sum())} degenerate face(s) "
-                      "(zero area)", UserWarning, stacklevel=3)
+        warnings.warn(
+            f"mesh {name!r}: skipped {int((~keep).sum())} degenerate face(s) (zero area)",
+            UserWarning,
+            stacklevel=3,
+        )
         f = f[keep]
         if len(f) == 0:
             raise ValueError(f"mesh {name!r}: all faces are degenerate")
@@ -273,8 +307,13 @@ class Scene:
         self._camera = cam
 
     # -- building -----------------------------------------------------------
-    def add(self, mesh, material: Material | None = None, name: str | None = None,
-            two_sided: bool = False) -> SceneObject:
+    def add(
+        self,
+        mesh,
+        material: Material | None = None,
+        name: str | None = None,
+        two_sided: bool = False,
+    ) -> SceneObject:
         """Add a triangle mesh with a material.
 
         Parameters
@@ -301,13 +340,20 @@ class Scene:
         if material is None:
             material = Material()
         if not isinstance(material, Material):
-            raise TypeError(f"mesh {name!r}: material must be voxgi.Material, got "
-                            f"{type(material).__name__}")
+            raise TypeError(
+                f"mesh {name!r}: material must be voxgi.Material, got {type(material).__name__}"
+            )
         if not isinstance(two_sided, (bool, np.bool_)):
             raise TypeError(f"mesh {name!r}: two_sided must be a bool, got {two_sided!r}")
         v, f, vn = _mesh_arrays(mesh, name)
-        obj = SceneObject(name=name, vertices=v, faces=f, material=material,
-                          two_sided=bool(two_sided), vertex_normals=vn)
+        obj = SceneObject(
+            name=name,
+            vertices=v,
+            faces=f,
+            material=material,
+            two_sided=bool(two_sided),
+            vertex_normals=vn,
+        )
         self.objects.append(obj)
         return obj
 
@@ -316,8 +362,10 @@ class Scene:
         return len(self.objects)
 
     def __repr__(self) -> str:
-        return (f"Scene({len(self.objects)} objects, {self.n_triangles} triangles, "
-                f"camera={'set' if self.camera else 'None'})")
+        return (
+            f"Scene({len(self.objects)} objects, {self.n_triangles} triangles, "
+            f"camera={'set' if self.camera else 'None'})"
+        )
 
     @property
     def n_triangles(self) -> int:
@@ -351,8 +399,9 @@ class Scene:
         """
         self.check_nonempty()
         tri = np.concatenate([o.vertices[o.faces] for o in self.objects])
-        obj = np.concatenate([np.full(len(o.faces), i, np.int32)
-                              for i, o in enumerate(self.objects)])
+        obj = np.concatenate(
+            [np.full(len(o.faces), i, np.int32) for i, o in enumerate(self.objects)]
+        )
         return {
             "triangles": np.ascontiguousarray(tri),
             "object": obj,
@@ -424,8 +473,9 @@ class Scene:
         except tomllib.TOMLDecodeError as exc:
             raise ValueError(f"scene file {path}: malformed TOML: {exc}") from None
         except RecursionError:
-            raise ValueError(f"scene file {path}: arrays or tables nested too deeply "
-                             "to be a scene file") from None
+            raise ValueError(
+                f"scene file {path}: arrays or tables nested too deeply to be a scene file"
+            ) from None
         try:
             return cls.from_dict(data, base_dir=path.parent, source=str(path))
         except ValueError as exc:
@@ -442,8 +492,10 @@ class Scene:
             raise TypeError(f"{source}: expected a table at the top level")
         unknown = set(data) - {"camera", "materials", "object"}
         if unknown:
-            raise ValueError(f"{source}: unknown top-level key(s) {sorted(unknown)}; "
-                             "expected camera, materials, object")
+            raise ValueError(
+                f"{source}: unknown top-level key(s) {sorted(unknown)}; "
+                "expected camera, materials, object"
+            )
         scene = cls()
         if "camera" in data:
             cam = data["camera"]
@@ -465,8 +517,16 @@ class Scene:
         if not isinstance(objs, list):
             raise ValueError(f"{source}: 'object' must be an array of tables ([[object]])")
         mat_keys = {"albedo", "emission", "specular"}
-        allowed = {"mesh", "material", "name", "two_sided", "translate", "rotate", "scale",
-                   "matrix"} | mat_keys
+        allowed = {
+            "mesh",
+            "material",
+            "name",
+            "two_sided",
+            "translate",
+            "rotate",
+            "scale",
+            "matrix",
+        } | mat_keys
         for k, o in enumerate(objs):
             where = f"{source}: object #{k}"
             if not isinstance(o, dict):
@@ -480,14 +540,16 @@ class Scene:
                 raise ValueError(f"{where}: missing key 'mesh'")
             for key in ("mesh", "material", "name"):
                 if key in o and not isinstance(o[key], str):
-                    raise ValueError(f"{where}: '{key}' must be a string, got "
-                                     f"{type(o[key]).__name__} {o[key]!r}")
+                    raise ValueError(
+                        f"{where}: '{key}' must be a string, got {type(o[key]).__name__} {o[key]!r}"
+                    )
             if "material" in o:
                 if set(o) & mat_keys:
                     raise ValueError(f"{where}: give either 'material' or inline albedo/emission")
                 if o["material"] not in materials:
-                    raise ValueError(f"{where}: unknown material {o['material']!r}; defined: "
-                                     f"{sorted(materials)}")
+                    raise ValueError(
+                        f"{where}: unknown material {o['material']!r}; defined: {sorted(materials)}"
+                    )
                 mat = materials[o["material"]]
             else:
                 mat = _material_from_dict({kk: o[kk] for kk in mat_keys if kk in o}, where)
@@ -525,8 +587,9 @@ class Scene:
         if self.camera is not None:
             c = self.camera
             doc["camera"] = {f: [float(x) for x in getattr(c, f)] for f in ("eye", "target", "up")}
-            doc["camera"].update(fov=float(c.fov), aperture=float(c.aperture), width=c.width,
-                                 height=c.height)
+            doc["camera"].update(
+                fov=float(c.fov), aperture=float(c.aperture), width=c.width, height=c.height
+            )
             if c.focus_distance is not None:
                 doc["camera"]["focus_distance"] = float(c.focus_distance)
         objects = []
@@ -534,14 +597,20 @@ class Scene:
             fname = f"{path.stem}_{i:03d}.obj"
             with atomic_path(path.parent / fname) as tmp:
                 tmp.write_text(o.to_trimesh().export(file_type="obj", digits=17))
-            entry = {"name": o.name, "mesh": fname,
-                     "albedo": [float(x) for x in o.material.albedo],
-                     "emission": [float(x) for x in o.material.emission],
-                     "two_sided": bool(o.two_sided)}
+            entry = {
+                "name": o.name,
+                "mesh": fname,
+                "albedo": [float(x) for x in o.material.albedo],
+                "emission": [float(x) for x in o.material.emission],
+                "two_sided": bool(o.two_sided),
+            }
             spec = o.material.specular
             if spec is not None:
-                entry["specular"] = {"rs": [float(x) for x in spec.rs], "nu": float(spec.nu),
-                                     "nv": float(spec.nv)}
+                entry["specular"] = {
+                    "rs": [float(x) for x in spec.rs],
+                    "nu": float(spec.nu),
+                    "nv": float(spec.nv),
+                }
             objects.append(entry)
         if objects:
             doc["object"] = objects
@@ -567,13 +636,16 @@ def _load_mesh(mesh_path: Path, where: str) -> trimesh.Trimesh:
         try:
             data.decode("utf-8")
         except UnicodeDecodeError as exc:
-            raise ValueError(f"{where}: mesh file {mesh_path} is not UTF-8 text (byte "
-                             f"{exc.start}), so not a {kind[1:].upper()} file") from None
+            raise ValueError(
+                f"{where}: mesh file {mesh_path} is not UTF-8 text (byte "
+                f"{exc.start}), so not a {kind[1:].upper()} file"
+            ) from None
     try:
         return trimesh.load(mesh_path, force="mesh", process=False, maintain_order=True)
     except ImportError as exc:  # an optional decoder trimesh wanted for odd content
-        raise ValueError(f"{where}: cannot load mesh {mesh_path}: unreadable content "
-                         f"({exc})") from None
+        raise ValueError(
+            f"{where}: cannot load mesh {mesh_path}: unreadable content ({exc})"
+        ) from None
     except Exception as exc:
         raise ValueError(f"{where}: cannot load mesh {mesh_path}: {exc}") from None
 
@@ -592,7 +664,7 @@ def _error_line(text: str, data, msg: str) -> int | None:
         want, table = ("object", int(m.group(1))), None
         objs = data.get("object") if isinstance(data, dict) else None
         table = objs[want[1]] if isinstance(objs, list) and want[1] < len(objs) else None
-    elif (m := re.search(r"\[materials\.([^\]]+)\]", msg)):
+    elif m := re.search(r"\[materials\.([^\]]+)\]", msg):
         want = ("materials", m.group(1))
         mats = data.get("materials") if isinstance(data, dict) else None
         table = mats.get(want[1]) if isinstance(mats, dict) else None
@@ -602,8 +674,14 @@ def _error_line(text: str, data, msg: str) -> int | None:
         want, table = (None,), data
     # the key named in the message (longest first, so "focus_distance" beats "focus")
     keys = sorted(table, key=len, reverse=True) if isinstance(table, dict) else []
-    key = next((k for k in keys if re.search(rf"(?<!\w){re.escape(str(k))}(?!\w)",
-                                             msg.split(": ", 1)[-1])), None)
+    key = next(
+        (
+            k
+            for k in keys
+            if re.search(rf"(?<!\w){re.escape(str(k))}(?!\w)", msg.split(": ", 1)[-1])
+        ),
+        None,
+    )
     section: tuple = (None,)
     n_obj = -1
     header = None
@@ -612,15 +690,18 @@ def _error_line(text: str, data, msg: str) -> int | None:
         if re.match(r"^\[\[\s*object\s*\]\]", line):
             n_obj += 1
             section = ("object", n_obj)
-        elif (h := re.match(r"^\[\s*materials\.\s*[\"']?([^\]\"']+)[\"']?\s*\]", line)):
+        elif h := re.match(r"^\[\s*materials\.\s*[\"']?([^\]\"']+)[\"']?\s*\]", line):
             section = ("materials", h.group(1).strip())
         elif re.match(r"^\[\s*camera\s*\]", line):
             section = ("camera",)
         elif line.startswith("["):
             section = ("other",)
         else:
-            if section == want and key is not None and re.match(
-                    rf"^[\"']?{re.escape(str(key))}[\"']?\s*=", line):
+            if (
+                section == want
+                and key is not None
+                and re.match(rf"^[\"']?{re.escape(str(key))}[\"']?\s*=", line)
+            ):
                 return i
             continue
         if section == want and header is None:

@@ -81,8 +81,10 @@ class VoxelSet:
         return int(self.ijk.shape[0])
 
     def __repr__(self) -> str:
-        return (f"VoxelSet({len(self)} records, resolution={self.resolution}, "
-                f"pitch={self.pitch:.4g}, emitters={int(self.is_emitter.sum())})")
+        return (
+            f"VoxelSet({len(self)} records, resolution={self.resolution}, "
+            f"pitch={self.pitch:.4g}, emitters={int(self.is_emitter.sum())})"
+        )
 
     def positions(self) -> np.ndarray:
         """(N, 3) float64 world-space voxel centres."""
@@ -92,8 +94,6 @@ class VoxelSet:
     def is_emitter(self) -> np.ndarray:
         """(N,) bool: records with non-zero emission."""
         return np.any(self.emission > 0, axis=1)
-
-
 
 
 # Bytes per (voxel, triangle) pair and per record in the C++ kernel
@@ -171,14 +171,19 @@ def estimate_memory(triangles: np.ndarray, pitch: float) -> dict:
     records = 2.0 * cells
     tri_bytes = _TRIANGLE_BYTES * n_tri
     nbytes = tri_bytes + max(
-        _ESTIMATE_TRIANGLE_BYTES * n_tri,                                   # this estimate
-        2 * _PAIR_BYTES * pairs,                                            # pairs + radix buffer
-        _PAIR_BYTES * pairs + 8 * cells + _KERNEL_RECORD_BYTES * records,   # pairs -> records
-        (_KERNEL_RECORD_BYTES + _ARRAY_RECORD_BYTES) * records,             # records -> numpy
-        _ARRAY_RECORD_BYTES * records + _CLOSED_CHECK_TRIANGLE_BYTES * n_tri)  # closed check
-    return {"bytes": math.ceil(_MARGIN * nbytes), "expected_pairs": math.ceil(pairs),
-            "expected_records": math.ceil(records), "pairs": math.ceil(bound_pairs),
-            "records": math.ceil(2.0 * bound_pairs)}
+        _ESTIMATE_TRIANGLE_BYTES * n_tri,  # this estimate
+        2 * _PAIR_BYTES * pairs,  # pairs + radix buffer
+        _PAIR_BYTES * pairs + 8 * cells + _KERNEL_RECORD_BYTES * records,  # pairs -> records
+        (_KERNEL_RECORD_BYTES + _ARRAY_RECORD_BYTES) * records,  # records -> numpy
+        _ARRAY_RECORD_BYTES * records + _CLOSED_CHECK_TRIANGLE_BYTES * n_tri,
+    )  # closed check
+    return {
+        "bytes": math.ceil(_MARGIN * nbytes),
+        "expected_pairs": math.ceil(pairs),
+        "expected_records": math.ceil(records),
+        "pairs": math.ceil(bound_pairs),
+        "records": math.ceil(2.0 * bound_pairs),
+    }
 
 
 def _available_memory() -> int:
@@ -215,8 +220,9 @@ def _progress_bar(enabled: bool):
         if phase != state["phase"]:
             if state["bar"] is not None:
                 state["bar"].close()
-            state["bar"] = tqdm(total=max(int(total), 1), desc=names.get(phase, "voxelize"),
-                                leave=False)
+            state["bar"] = tqdm(
+                total=max(int(total), 1), desc=names.get(phase, "voxelize"), leave=False
+            )
             state["phase"] = phase
         bar = state["bar"]
         bar.update(max(0, int(done) - bar.n))
@@ -234,8 +240,15 @@ def _is_closed(obj) -> bool:
     return bool(m.is_watertight and m.is_winding_consistent)
 
 
-def voxelize(scene, resolution: int = 128, *, max_memory: int | None = None,
-             threads: int | None = None, progress: bool = False, cut: bool = True) -> VoxelSet:
+def voxelize(
+    scene,
+    resolution: int = 128,
+    *,
+    max_memory: int | None = None,
+    threads: int | None = None,
+    progress: bool = False,
+    cut: bool = True,
+) -> VoxelSet:
     """Convert the surfaces of a scene into oriented surface voxel records.
 
     Every voxel whose closed cube meets a triangle (the supercover, which no
@@ -335,9 +348,11 @@ def voxelize(scene, resolution: int = 128, *, max_memory: int | None = None,
     # Areas and normals are float32 (API): a voxel face must be representable
     # with room to spare (normal float32 range ~1e-38 .. 3e38).
     if not 1e-30 <= pitch * pitch <= 1e30:
-        raise ValueError(f"voxelize: voxel pitch {pitch:.3g} (scene size {longest:.3g} over "
-                         f"resolution {resolution}) gives voxel areas outside float32's range; "
-                         "rescale the scene")
+        raise ValueError(
+            f"voxelize: voxel pitch {pitch:.3g} (scene size {longest:.3g} over "
+            f"resolution {resolution}) gives voxel areas outside float32's range; "
+            "rescale the scene"
+        )
     origin = lo - 0.5 * pitch
     dims = (np.floor((hi - origin) / pitch) + 1).astype(np.int32)
 
@@ -350,14 +365,24 @@ def voxelize(scene, resolution: int = 128, *, max_memory: int | None = None,
             f"{est['expected_records']:,} records for {len(triangles):,} triangles), over the "
             f"budget of {budget:,} bytes "
             f"({'max_memory' if max_memory is not None else 'half the available memory'}); "
-            "lower the resolution or raise max_memory")
+            "lower the resolution or raise max_memory"
+        )
 
     callback, close = _progress_bar(bool(progress))
     try:
         res = _core.voxelize(
-            triangles, tri["object"], tri["two_sided"], tri["albedo"], tri["emission"],
-            np.ascontiguousarray(origin, dtype=np.float64), float(pitch), dims,
-            cut=bool(cut), threads=nthreads, progress=callback)
+            triangles,
+            tri["object"],
+            tri["two_sided"],
+            tri["albedo"],
+            tri["emission"],
+            np.ascontiguousarray(origin, dtype=np.float64),
+            float(pitch),
+            dims,
+            cut=bool(cut),
+            threads=nthreads,
+            progress=callback,
+        )
     finally:
         close()
     st = dict(res["stats"])
@@ -387,12 +412,25 @@ def voxelize(scene, resolution: int = 128, *, max_memory: int | None = None,
         # inside can never be seen, which voxgi.solve uses (closed=None).
         "closed_objects": [i for i, o in enumerate(scene.objects) if _is_closed(o)],
         "seconds": seconds,
-        "phase_seconds": {"pairs": st["seconds_pairs"], "sort": st["seconds_sort"],
-                          "records": st["seconds_records"]},
+        "phase_seconds": {
+            "pairs": st["seconds_pairs"],
+            "sort": st["seconds_sort"],
+            "records": st["seconds_records"],
+        },
     }
     return VoxelSet(
-        ijk=res["ijk"], normal=res["normal"], area=res["area"], albedo=res["albedo"],
-        emission=res["emission"], centroid=res["centroid"], object_id=res["object_id"],
-        back=res["back"], pitch=float(pitch), origin=np.asarray(origin, dtype=np.float64),
-        resolution=resolution, scene_fingerprint=scene.fingerprint(), stats=stats,
-        side=res["side"])
+        ijk=res["ijk"],
+        normal=res["normal"],
+        area=res["area"],
+        albedo=res["albedo"],
+        emission=res["emission"],
+        centroid=res["centroid"],
+        object_id=res["object_id"],
+        back=res["back"],
+        pitch=float(pitch),
+        origin=np.asarray(origin, dtype=np.float64),
+        resolution=resolution,
+        scene_fingerprint=scene.fingerprint(),
+        stats=stats,
+        side=res["side"],
+    )
