@@ -10,17 +10,31 @@ depends on the camera: a new view of a solved scene costs only the display.
 
 from __future__ import annotations
 
+import itertools
 import math
+import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from . import _core, _validate
+from .radiosity import Solution
 from .scene import Camera, Scene
 
-__all__ = ["RenderResult", "render"]
+__all__ = [
+    "FrameExecutor",
+    "FrameShaderSpec",
+    "LocalFrames",
+    "RenderResult",
+    "RenderTuning",
+    "VPLSampler",
+    "camera_rays",
+    "frame_samples",
+    "render",
+]
 
 #: relMSE's epsilon (voxgi.metrics.rel_mse), used by the stopping rule too.
 _REL_EPS = 0.01
@@ -107,7 +121,7 @@ class _Tracer:
         if self._pool is None or n < 4096:
             return one(0, n)
         cuts = np.linspace(0, n, self.threads + 1).astype(np.int64)
-        futs = [self._pool.submit(one, int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:])]
+        futs = [self._pool.submit(one, int(a), int(b)) for a, b in itertools.pairwise(cuts)]
         return np.concatenate([f.result() for f in futs])
 
     def intersect(self, org: np.ndarray, dirs: np.ndarray) -> np.ndarray:
@@ -337,7 +351,7 @@ class VPLSampler:
         """The VPLs of frame ``f``: the same for every pixel and every view."""
         rng = np.random.default_rng([self.seed, int(f), 0x1B1])
         idx_all, w_all, pa_all = [], [], []
-        for s, ((idx, cum, _, dens), k) in enumerate(zip(self.sets, self.counts)):
+        for s, ((idx, cum, _, dens), k) in enumerate(zip(self.sets, self.counts, strict=True)):
             if k == 0:
                 continue
             u = (np.arange(k) + rng.random(k)) / k * float(cum[-1])  # stratified along the table
@@ -549,13 +563,193 @@ class _FrameShader:
         vpl = None if self.sampler.empty else self.sampler.frame(f)
         return self.shade(h, vpl)
 
+    def close(self) -> None:
+        """Release the tracer's threads."""
+        self.tracer.close()
+
+
+# --------------------------------------------------------------------------
+# Frame sources: the spec of a frame shader and where it runs
+# --------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class FrameShaderSpec:
+    """What a frame shader is built from; picklable, so an executor can ship it.
+
+    Frames are independent (each has its own VPLs, sub-pixel offset and
+    gather-ray seed), so a shader built from the same spec anywhere returns
+    the same frame ``f``.
+
+    Attributes
+    ----------
+    scene : Scene
+    camera : Camera
+    sampler : VPLSampler
+    eps : float
+        Shadow-ray offset (scene units).
+    gather : int
+        Gather rays per pixel and frame for the non-emitter light (0: VPLs only).
+    seed : int
+    """
+
+    scene: Scene
+    camera: Camera
+    sampler: VPLSampler
+    eps: float
+    gather: int
+    seed: int
+
+    @property
+    def gather_per_frame(self) -> int:
+        """Gather rays per pixel and frame the shader will trace."""
+        return int(self.gather) if self.sampler.mis else 0
+
+    @property
+    def glossy(self) -> bool:
+        """Whether any material has a specular layer."""
+        return any(o.material.specular is not None for o in self.scene.objects)
+
+    def build(self, threads: int = 1) -> _FrameShader:
+        """The shader (Embree scene, material tables, buffers) on ``threads`` threads.
+
+        It has ``frame(f, seed)`` -> (H*W, 3) float32, the counters
+        ``primary_rays``, ``shadow_rays``, ``gather_rays``, ``seconds``, and
+        ``close()``."""
+        tracer = _Tracer(self.scene, threads)
+        return _FrameShader(self.scene, self.camera, tracer, self.sampler, self.eps, threads,
+                            self.gather, self.seed)
+
+
+class FrameExecutor(Protocol):
+    """Where a render's frames are computed (``docs/design.md`` §8).
+
+    ``frames(spec, max_frames, threads=...)`` returns a frame source with
+    the interface of :meth:`FrameShaderSpec.build`'s shader: ``frame(f,
+    seed)`` must return frame ``f`` as the local shader would, whatever
+    the order of computation; the render loop asks for frames 0, 1, ... and
+    stops after at most ``max_frames``.
+    """
+
+    def frames(self, spec: FrameShaderSpec, max_frames: int, *, threads: int = 1): ...
+
+
+class LocalFrames:
+    """The default frame executor: every frame in this process."""
+
+    def frames(self, spec: FrameShaderSpec, max_frames: int, *, threads: int = 1):
+        """The shader built here."""
+        return spec.build(threads)
+
 
 # --------------------------------------------------------------------------
 # render
 # --------------------------------------------------------------------------
-def _check_solution(scene: Scene, sol) -> None:
-    from .radiosity import Solution
+@dataclass(frozen=True)
+class RenderTuning:
+    """Expert settings of :func:`render`, for studies and benchmarks.
 
+    Attributes
+    ----------
+    min_frames : int
+        Frames before the stopping rule is trusted (>= 2).
+    emitter_share : float or None
+        Share of each frame's VPLs taken from emitters; None splits by power
+        (see :class:`VPLSampler`).
+    gather : int
+        Cosine-distributed gather rays per pixel and frame for the
+        non-emitter light, MIS-combined with its VPLs (0: VPLs only, the
+        paper's display).
+    vpl_pdf : {"power", "area"}
+        VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
+        paper); see :class:`VPLSampler`.
+
+    >>> RenderTuning(gather=0).min_frames
+    4
+    """
+
+    min_frames: int = 4
+    emitter_share: float | None = None
+    gather: int = 4
+    vpl_pdf: str = "power"
+
+
+@dataclass(frozen=True)
+class _RenderSettings:
+    """The validated arguments of one render."""
+
+    cam: Camera
+    K: int
+    max_frames: int
+    tol: float
+    seed: int
+    min_frames: int
+    emitter_share: float | None
+    gather: int
+    vpl_pdf: str
+    threads: int
+
+
+def _available_memory() -> int:
+    """Bytes of memory available now (MemAvailable, else free physical pages)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:  # pragma: no cover - not Linux
+        pass
+    try:  # pragma: no cover - not Linux
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover
+        return 1 << 32
+
+
+def _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads,
+                  tuning) -> _RenderSettings:
+    """Image checks: scene, solution, camera and numbers; TypeError/ValueError naming them."""
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
+    scene.check_nonempty()
+    if sol is None:
+        raise TypeError("sol: expected a voxgi.Solution (voxgi.render, the pipeline's "
+                        "render, solves the scene first when given none)")
+    cam = camera if camera is not None else scene.camera
+    if cam is None:
+        raise ValueError("render: the scene has no camera (set scene.camera or pass camera=)")
+    if not isinstance(cam, Camera):
+        raise TypeError(f"camera: expected voxgi.Camera, got {type(cam).__name__}")
+    t = RenderTuning() if tuning is None else tuning
+    if not isinstance(t, RenderTuning):
+        raise TypeError(f"tuning: expected voxgi.RenderTuning or None, got {type(t).__name__}")
+    tol = _validate.real(tol, "tol", low=0.0, allow_none=True)
+    return _RenderSettings(
+        cam=cam,
+        K=_validate.integer(vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16),
+        max_frames=_validate.integer(max_frames, "max_frames", low=1, allow_none=True) or 256,
+        tol=1e-3 if tol is None else tol,
+        seed=_validate.integer(seed, "seed"),
+        min_frames=_validate.integer(t.min_frames, "min_frames", low=2),
+        emitter_share=_validate.real(t.emitter_share, "emitter_share", low=0.0, high=1.0,
+                                     allow_none=True),
+        gather=_validate.integer(t.gather, "gather", low=0, high=4096),
+        vpl_pdf=t.vpl_pdf,
+        threads=_validate.threads(threads),
+    )
+
+
+def _check_image_memory(cam: Camera) -> None:
+    """Refuse an image that cannot fit before allocating anything: a render
+    holds about 950 bytes per pixel (running mean and variance, hit records,
+    frame buffers) plus about 30 MB of tile buffers."""
+    need = 1000 * cam.width * cam.height + (32 << 20)
+    budget = _available_memory() // 2
+    if need > budget:
+        raise ValueError(f"render: a {cam.width}x{cam.height} image needs about {need:,} bytes "
+                         f"(~1000 bytes per pixel), over the budget of {budget:,} bytes (half "
+                         "the available memory); lower Camera.width/height")
+
+
+def _check_solution(scene: Scene, sol) -> None:
+    """The solution is a :class:`Solution` of this scene, one radiosity per record."""
     if not isinstance(sol, Solution):
         raise TypeError(f"sol: expected voxgi.Solution or None, got {type(sol).__name__}")
     fp = getattr(sol.vox, "scene_fingerprint", "")
@@ -569,56 +763,143 @@ def _check_solution(scene: Scene, sol) -> None:
         raise ValueError(f"sol.radiosity: expected shape ({n}, 3), got {r.shape}")
 
 
-def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = None,
+def _check_executor(executor) -> FrameExecutor:
+    """The executor given, or the local one for None."""
+    if executor is None:
+        return LocalFrames()
+    if not callable(getattr(executor, "frames", None)):
+        raise TypeError(
+            f"executor: expected an object with a frames(spec, max_frames, threads=...) method "
+            f"(voxgi.display.FrameExecutor) or None, got {type(executor).__name__}; "
+            "voxgi.render also takes a dask.distributed.Client as client=")
+    return executor
+
+
+def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
+    """The VPL sampler and the shadow-ray offset of this scene and solution."""
+    sampler = VPLSampler(sol, opt.K, opt.seed, opt.emitter_share, mis=opt.gather > 0,
+                         pdf=opt.vpl_pdf)
+    diag = float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
+    # Shadow-ray offsets: well above float32 rounding of the coordinates
+    # (~1e-7 relative) and well below any feature of a sensible scene.
+    return FrameShaderSpec(scene, opt.cam, sampler, 1e-4 * diag, opt.gather, opt.seed)
+
+
+def _skipped(spec: FrameShaderSpec) -> list[str]:
+    """What this render leaves out, and why."""
+    sampler, skipped = spec.sampler, []
+    if not spec.glossy:
+        skipped.append("glossy: no material has a specular layer")
+    if sampler.counts[0] == 0:
+        skipped.append("emitter VPLs: no emitting record with power")
+    if sampler.counts[1] == 0:
+        skipped.append("non-emitter VPLs: no reflecting record with power")
+    if sampler.skipped_records:
+        skipped.append(f"{sampler.skipped_records} records with zero radiosity or area "
+                       "(back records) are never VPLs")
+    return skipped
+
+
+@dataclass
+class _Mean:
+    """The progressive mean of the frames (Welford) and its stopping rule.
+
+    The estimated relMSE of the remaining noise is ``mean(se² / (L² + 0.01))``
+    over pixels and channels, ``se`` the standard error of the running mean
+    from the spread between frames (``docs/design.md`` §6)."""
+
+    mean: np.ndarray
+    m2: np.ndarray
+    frames: int = 0
+    est: float = float("inf")
+
+    def add(self, x: np.ndarray) -> None:
+        """Fold one frame in and update the estimate."""
+        self.frames += 1
+        delta = x - self.mean
+        self.mean += delta / self.frames
+        self.m2 += delta * (x - self.mean)
+        if self.frames >= 2:
+            se2 = self.m2 / (self.frames - 1) / self.frames
+            self.est = float(np.mean(se2 / (self.mean * self.mean + _REL_EPS)))
+
+    def done(self, opt: _RenderSettings) -> bool:
+        """At least ``min_frames`` frames and the estimate at or under ``tol``."""
+        return self.frames >= opt.min_frames and self.est <= opt.tol
+
+    def stderr(self, shape) -> np.ndarray | None:
+        """Per-pixel standard error (None with fewer than two frames)."""
+        if self.frames < 2:
+            return None
+        return np.sqrt(self.m2 / (self.frames - 1) / self.frames).reshape(shape).astype(np.float32)
+
+
+def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Mean, bool]:
+    """Frames 0, 1, ... from ``source`` into the running mean until the
+    stopping rule or ``max_frames``; Ctrl-C stops after the current frame.
+    Returns the mean and whether it was interrupted."""
+    from tqdm.auto import tqdm
+
+    cam = opt.cam
+    acc = _Mean(np.zeros((cam.height * cam.width, 3)), np.zeros((cam.height * cam.width, 3)))
+    interrupted = False
+    bar = tqdm(total=opt.max_frames, disable=not progress, desc="display", unit="frame",
+               leave=False)
+    try:
+        for f in range(opt.max_frames):
+            acc.add(source.frame(f, opt.seed).astype(np.float64))
+            bar.update(1)
+            bar.set_postfix_str(f"est relMSE {acc.est:.2e}")
+            if acc.done(opt):
+                break
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        bar.close()
+        source.close()
+    return acc, interrupted
+
+
+def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) -> dict:
+    """Ray counts, VPLs, frames, the estimate and what was skipped."""
+    return {
+        "seconds": seconds,
+        "primary_rays": int(source.primary_rays),
+        "shadow_rays": int(source.shadow_rays),
+        "gather_rays": int(source.gather_rays),
+        "gather_per_frame": spec.gather_per_frame,
+        "vpls": int(acc.frames * sum(spec.sampler.counts)),
+        "vpl_split": [int(c) for c in spec.sampler.counts],
+        "vpl_pdf": spec.sampler.pdf,
+        "frames": int(acc.frames),
+        "est_rel_mse": acc.est,
+        "tol": opt.tol,
+        "eps": spec.eps,
+        "skipped": skipped,
+        "interrupted": interrupted,
+        "threads": opt.threads,
+    }
+
+
+def render(scene, sol, vpls_per_frame: int = 16, max_frames: int | None = None,
            tol: float | None = None, seed: int = 0, progress: bool = True,
-           threads: int | None = None, client=None, *, camera: Camera | None = None,
-           min_frames: int = 4, emitter_share: float | None = None, gather: int = 4,
-           vpl_pdf: str = "power") -> RenderResult:
+           threads: int | None = None, executor: FrameExecutor | None = None, *,
+           camera: Camera | None = None, tuning: RenderTuning | None = None) -> RenderResult:
     r"""Render ``scene`` from its camera using the voxel solution ``sol``.
 
-    Each pixel's primary ray (Embree) hits a point x with normal n, albedo ρ
-    and emission Le; its radiance is
+    Each pixel's primary ray (Embree) hits a point x; its radiance is
+    ``Le(x)`` plus the light reflected from the records of ``sol``, each a
+    virtual point light of radiance ``B/π`` (``docs/design.md`` §6):
 
-    .. math:: L(x) = L_e(x) + \int f(x, \omega_i, \omega_o)\, L(y)\,
-              \frac{\cos\theta_x \cos\theta_y}{r^2} V(x, y)\, dA(y),
-              \qquad L(y) = B(y) / \pi,
+    .. math:: L(x) = L_e(x) + \int f(x, \omega_i, \omega_o)\, \frac{B(y)}{\pi}\,
+              \frac{\cos\theta_x \cos\theta_y}{r^2 + \Delta A(y)/\pi} V(x, y)\, dA(y),
 
-    with f = ρ/π for a Lambertian surface (so the integral is (ρ/π)·E, E
-    the irradiance). Drawing n VPLs y from a set of records of total area TA
-    with probability ΔA(y)/TA, the area pdf is 1/TA per unit area, so
-
-    .. math:: E(x) \approx \frac{TA}{n} \sum_y \frac{B(y)}{\pi}\,
-              \frac{\cos\theta_x \cos\theta_y}{r^2 + \Delta A(y)/\pi} V(x, y),
-
-    summed over the two sets (emitters and the rest) with their own TA and
-    n. So the pixel is ``Le + (ρ/π²)·Σ_sets (TA/n) Σ B G V``; the paper's
-    printed factor 1/(2π) is not this and fails the furnace. (voxgi draws by
-    default with probability ∝ ΔA·B instead, ``vpl_pdf="power"``: the area
-    density is then p(y) = lum(B_y)/Σ ΔA lum(B) and TA/n becomes 1/(n p(y)).) Check: inside a
-    sphere of radius R, ``cos θx cos θy / r² = 1/(4R²)`` for every pair and
-    TA = 4πR², so each VPL gives exactly ``E = B``; with ``B = π Le/(1−ρ)``
-    the pixel is ``Le + ρ Le/(1−ρ) = Le/(1−ρ)``, which the tests assert.
-
-    The geometry term is bounded: a VPL stands for a disc of area ΔA, and on
-    the axis of a disc ``cos θx cos θy / (r² + ΔA/π)`` is exact; it is the
-    point formula far away and has no 1/r² spike in corners (a small loss of
-    energy within about √ΔA of contact). Back-facing VPLs give nothing and
-    cost no shadow ray. With a glossy material f is the Ashikhmin–Shirley
-    coupled diffuse + anisotropic Phong pair, lit by the same VPLs.
-
-    Near-field noise (``gather > 0``, the default): the bounded term removes
-    the singularity but not the variance of VPLs close to x (in corners a
-    VPL drawn at a few millimetres outshines the rest of the frame: measured
-    on the Cornell box, the estimated noise relMSE after 64 frames was 8.7e-3
-    with VPLs alone, 9.7e-4 with 4 gather rays per pixel and frame). So the
-    non-emitter set is also sampled by ``gather`` cosine-distributed rays per
-    pixel, whose hit points take their radiance ``B/π`` from the voxel record
-    there, and the two are combined by multiple importance sampling (balance
-    heuristic): each sample of either kind adds
-    ``f L cosθx cosθy / (r² n_v/TA + n_g cosθx cosθy/π)``, at most
-    ``π f L / n_g`` at contact, unbiased (no ΔA bound needed for that set).
-    Emitters stay VPLs only (small and bright: area sampling is right for
-    them). ``gather=0`` is the paper's pure VPL display.
+    estimated with a few VPLs per frame drawn in proportion to power (or
+    area), a geometry term bounded by the disc each VPL stands for, and
+    cosine-distributed gather rays MIS-combined with the non-emitter VPLs.
+    Frames are averaged until the estimated noise falls under ``tol``.
+    Inside a closed furnace (uniform ``Le`` and ``ρ``) every pixel is
+    ``Le / (1 − ρ)``.
 
     Parameters
     ----------
@@ -633,174 +914,59 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         At most this many frames (default 256).
     tol : float or None
         Stop once the estimated relMSE of the image's remaining noise,
-        ``mean(se² / (L² + 0.01))`` over pixels and channels, with ``se`` the
-        per-pixel standard error of the running mean from the spread between
-        frames, falls under ``tol`` (default 1e-3; the same metric as
-        :func:`voxgi.metrics.rel_mse`, so ``sqrt(tol)`` is the RMS relative
-        error). At least ``min_frames`` frames are run. 0 runs ``max_frames``.
+        ``mean(se² / (L² + 0.01))`` over pixels and channels, falls under
+        ``tol`` (default 1e-3; the metric of :func:`voxgi.metrics.rel_mse`).
+        At least ``tuning.min_frames`` frames are run. 0 runs ``max_frames``.
     seed : int
         Seeds the VPL sequence and the sub-pixel/lens sequence.
     progress : bool
         Show a tqdm progress bar.
     threads : int or None
         Worker threads (None: all cores).
-    client : dask.distributed.Client or None
-        Compute the frames on the client's workers (:mod:`voxgi.distributed`;
-        ``pip install "voxgi[dask]"``); the render loop, its accumulation and
-        stopping rule stay here, so the image equals the local one. Also
-        used by the solve when ``sol`` is None.
+    executor : FrameExecutor or None
+        Where the frames are computed (None: here). The accumulation and the
+        stopping rule stay here, so the image equals the local one.
     camera : Camera, optional
         Overrides ``scene.camera``.
-    min_frames : int
-        Frames before the stopping rule is trusted (>= 2).
-    emitter_share : float or None
-        Share of each frame's VPLs taken from emitters; None splits by power
-        (see :class:`VPLSampler`).
-    gather : int
-        Cosine-distributed gather rays per pixel and frame for the
-        non-emitter light, MIS-combined with its VPLs (0: VPLs only).
-    vpl_pdf : {"power", "area"}
-        VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
-        paper); see :class:`VPLSampler`.
+    tuning : RenderTuning or None
+        Expert settings (minimum frames, emitter share, gather rays, VPL pdf).
 
     Returns
     -------
     RenderResult
         ``image`` (H, W, 3) float32 linear radiance, ``image[0, 0]`` top-left;
         ``stderr`` (H, W, 3) float32; ``frames``; ``stats`` with ``seconds``
-        (voxelize, solve, setup, primary, shade, shadow, total),
-        ``primary_rays``, ``shadow_rays``, ``gather_rays``, ``vpls`` (per pixel),
-        ``vpl_split`` (emitters, others per frame), ``est_rel_mse``,
-        ``skipped`` and ``interrupted``. Ctrl-C stops after the current frame
-        and returns the image so far.
+        (setup, primary, shade, shadow, gather, total), ``primary_rays``,
+        ``shadow_rays``, ``gather_rays``, ``vpls`` (per pixel), ``vpl_split``
+        (emitters, others per frame), ``est_rel_mse``, ``skipped`` and
+        ``interrupted``. Ctrl-C stops after the current frame and returns
+        the image so far.
 
     Raises
     ------
     ValueError
-        No camera, a solution of another scene, bad numbers.
+        No camera, a solution of another scene, bad numbers, an image too
+        large for the memory available.
     TypeError
         Wrong argument types.
-    ImportError
-        ``client`` given without dask.distributed installed.
     """
     t_start = time.perf_counter()
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
-    scene.check_nonempty()
-    if sol is None:
-        raise TypeError("sol: expected a voxgi.Solution (voxgi.render, the pipeline's "
-                        "render, solves the scene first when given none)")
-    cam = camera if camera is not None else scene.camera
-    if cam is None:
-        raise ValueError("render: the scene has no camera (set scene.camera or pass camera=)")
-    if not isinstance(cam, Camera):
-        raise TypeError(f"camera: expected voxgi.Camera, got {type(cam).__name__}")
-    if client is not None:  # fail early: the extra missing (ImportError) or not a Client
-        from .distributed import check_client
-
-        check_client(client)
-    K = _validate.integer(vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16)
-    max_frames = _validate.integer(max_frames, "max_frames", low=1, allow_none=True) or 256
-    tol = _validate.real(tol, "tol", low=0.0, allow_none=True)
-    tol = 1e-3 if tol is None else tol
-    seed = _validate.integer(seed, "seed")
-    min_frames = _validate.integer(min_frames, "min_frames", low=2)
-    emitter_share = _validate.real(emitter_share, "emitter_share", low=0.0, high=1.0,
-                                   allow_none=True)
-    nthreads = _validate.threads(threads)
-    # Refuse an image that cannot fit before allocating anything: measured
-    # with tracemalloc, a render holds ~950 bytes per pixel (running mean and
-    # variance, hit records, frame buffers) plus ~30 MB of tile buffers.
-    from .voxels import _available_memory
-
-    need = 1000 * cam.width * cam.height + (32 << 20)
-    budget = _available_memory() // 2
-    if need > budget:
-        raise ValueError(f"render: a {cam.width}x{cam.height} image needs about {need:,} bytes "
-                         f"(~1000 bytes per pixel), over the budget of {budget:,} bytes (half "
-                         "the available memory); lower Camera.width/height")
-    seconds: dict[str, float] = {}
-    skipped: list[str] = []
-
+    opt = _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads,
+                        tuning)
+    executor = _check_executor(executor)
+    _check_image_memory(opt.cam)
     _check_solution(scene, sol)
-
     t0 = time.perf_counter()
-    tracer = _Tracer(scene, nthreads)
-    gather = _validate.integer(gather, "gather", low=0, high=4096)
-    sampler = VPLSampler(sol, K, seed, emitter_share, mis=gather > 0, pdf=vpl_pdf)
-    diag = float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
-    # Shadow-ray offsets: well above float32 rounding of the coordinates
-    # (~1e-7 relative) and well below any feature of a sensible scene.
-    eps = 1e-4 * diag
-    shader = _FrameShader(scene, cam, tracer, sampler, eps, nthreads, gather, seed)
-    seconds["setup"] = time.perf_counter() - t0
-    if not shader.mat_glossy.any():
-        skipped.append("glossy: no material has a specular layer")
-    if sampler.counts[0] == 0:
-        skipped.append("emitter VPLs: no emitting record with power")
-    if sampler.counts[1] == 0:
-        skipped.append("non-emitter VPLs: no reflecting record with power")
-    if sampler.skipped_records:
-        skipped.append(f"{sampler.skipped_records} records with zero radiosity or area "
-                       "(back records) are never VPLs")
-
-    if client is not None:  # the same loop below, its frames computed on Dask workers
-        from .distributed import DistributedFrames
-
-        shader = DistributedFrames(client, shader, max_frames)
-
-    H, W = cam.height, cam.width
-    mean = np.zeros((H * W, 3))
-    m2 = np.zeros((H * W, 3))
-    frames = 0
-    est = float("inf")
-    interrupted = False
-    from tqdm.auto import tqdm
-
-    bar = tqdm(total=max_frames, disable=not progress, desc="display", unit="frame", leave=False)
-    try:
-        for f in range(max_frames):
-            x = shader.frame(f, seed).astype(np.float64)
-            frames += 1
-            delta = x - mean  # Welford: running mean and sum of squared deviations
-            mean += delta / frames
-            m2 += delta * (x - mean)
-            if frames >= 2:
-                se2 = m2 / (frames - 1) / frames
-                est = float(np.mean(se2 / (mean * mean + _REL_EPS)))
-            bar.update(1)
-            bar.set_postfix_str(f"est relMSE {est:.2e}")
-            if frames >= min_frames and est <= tol:
-                break
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        bar.close()
-        tracer.close()
-        if client is not None:
-            shader.close()
-    image = mean.reshape(H, W, 3).astype(np.float32)
-    stderr = None
-    if frames >= 2:
-        stderr = np.sqrt(m2 / (frames - 1) / frames).reshape(H, W, 3).astype(np.float32)
-    seconds.update(shader.seconds)
+    spec = _shader_spec(scene, sol, opt)
+    source = executor.frames(spec, opt.max_frames, threads=opt.threads)
+    seconds = {"setup": time.perf_counter() - t0}
+    skipped = _skipped(spec)
+    acc, interrupted = _progressive_mean(source, opt, progress)
+    cam = opt.cam
+    image = acc.mean.reshape(cam.height, cam.width, 3).astype(np.float32)
+    seconds.update(source.seconds)
     seconds["total"] = time.perf_counter() - t_start
     seconds["display"] = seconds["total"]
-    stats = {
-        "seconds": seconds,
-        "primary_rays": int(shader.primary_rays),
-        "shadow_rays": int(shader.shadow_rays),
-        "gather_rays": int(shader.gather_rays),
-        "gather_per_frame": int(shader.gather),
-        "vpls": int(frames * sum(sampler.counts)),
-        "vpl_split": [int(c) for c in sampler.counts],
-        "vpl_pdf": sampler.pdf,
-        "frames": int(frames),
-        "est_rel_mse": est,
-        "tol": tol,
-        "eps": eps,
-        "skipped": skipped,
-        "interrupted": interrupted,
-        "threads": nthreads,
-    }
-    return RenderResult(image=image, frames=frames, stderr=stderr, stats=stats, solution=sol)
+    stats = _render_stats(spec, source, acc, opt, skipped, interrupted, seconds)
+    return RenderResult(image=image, frames=acc.frames, stderr=acc.stderr(image.shape),
+                        stats=stats, solution=sol)

@@ -1,10 +1,14 @@
 """Solve and render on a Dask cluster (``pip install "voxgi[dask]"``).
 
-Nothing here has a loop of its own over iterations or frames: :func:`voxgi.solve`
-and :func:`voxgi.render` run their usual loops and are handed, in place of
-their local engine, an object with the same methods that farms the work out.
+:class:`DaskExecutor` is an executor the stages accept
+(:class:`voxgi.radiosity.LineExecutor`, :class:`voxgi.display.FrameExecutor`):
+nothing here has a loop of its own over iterations or frames;
+:func:`voxgi.radiosity.solve` and :func:`voxgi.display.render` run their usual
+loops on the objects it hands them, which farm the work out.
+``voxgi.solve(..., client=c)`` and ``voxgi.render(..., client=c)`` wrap a
+``dask.distributed.Client`` with :func:`executor`.
 
-Solve (DESIGN-NOTES §8): :class:`DistributedLineSystem` stands in for
+Solve (``docs/design.md`` §8): :class:`DistributedLineSystem` stands in for
 :class:`voxgi._core.LineSystem`. The records (ijk, normal, surface point:
 36 bytes each) are scattered once to every worker (``broadcast=True``: a
 killed worker is survived, because another one still holds a copy, and
@@ -20,10 +24,10 @@ propagated (N × 3 float32) and returns N × 3 float64 partial sums.
 
 Render: :class:`DistributedFrames` stands in for the display's per-frame
 shader. Frames are independent (each has its own VPL subset, sub-pixel
-offset and gather-ray seed), so whole frames are the tasks: the scene and
-the VPL sampler go to every worker once, each worker builds its Embree scene
-once, frames are computed ahead on the workers and handed back to the
-render loop in frame order. The accumulation and the stopping rule stay in
+offset and gather-ray seed), so whole frames are the tasks: the
+:class:`voxgi.display.FrameShaderSpec` (scene, camera, VPL sampler) goes to
+every worker once, each worker builds its shader once, frames are computed
+ahead on the workers and handed back to the render loop in frame order. The accumulation and the stopping rule stay in
 :func:`voxgi.render`, so with the same seed the image is the local one.
 """
 
@@ -36,21 +40,29 @@ from collections import OrderedDict
 
 import numpy as np
 
-__all__ = ["DistributedFrames", "DistributedLineSystem", "estimate_worker_bytes"]
+from .display import FrameShaderSpec
+from .radiosity import LineRecords
+
+__all__ = [
+    "DaskExecutor",
+    "DistributedFrames",
+    "DistributedLineSystem",
+    "check_client",
+    "estimate_worker_bytes",
+    "executor",
+]
 
 _EXTRA_HINT = 'pip install "voxgi[dask]"'
 
 # Bytes a worker holds per record: the scattered copy of ijk, normal and
-# point (36) and what the worker's LineSystem and one call need, measured as
-# the growth of the peak resident set over building a LineSystem, one gather
-# (all 2991 R 22 families, with visibility) and one shoot (R 35) on the bunny
-# room at resolution 112 (146,892 records), one thread: 213 B for the system
+# point (36) and what the worker's LineSystem and one call need, the growth
+# of the peak resident set over building a LineSystem, one gather (R 22,
+# with visibility) and one shoot (R 35) on one thread: 213 B for the system
 # (three axis orders of order, X, Y, Z, normal, point and the packed 32-byte
-# line), 415 B after the gather (values in each axis order, the one-pass
-# walk's 64-byte record lines and global-order sums, float64 sums and
-# visibility out), 459 B after the shoot. 470 rounds it up. Each further
-# thread of the worker adds its own record lines and sums: 512 B after the
-# gather with 2 threads, so 100 B a thread.
+# line), the values in each axis order, the one-pass walk's 64-byte record
+# lines and global-order sums, float64 sums and visibility out; 470 bounds
+# it. Each further thread of the worker adds its own record lines and sums,
+# about 100 B.
 _BYTES_PER_RECORD = 36 + 470
 _BYTES_PER_RECORD_THREAD = 100
 
@@ -80,9 +92,53 @@ def check_client(client):
     """
     distributed = _require_distributed()
     if not isinstance(client, distributed.Client):
-        raise TypeError(f"client: expected a dask.distributed.Client or None, got "
+        raise TypeError(f"client: expected a dask.distributed.Client, an executor or None, got "
                         f"{type(client).__name__}")
     return client
+
+
+def executor(client):
+    """The executor for ``client=``: None for None, an executor as it is
+    (an object with ``line_system`` and ``frames`` methods), a
+    ``dask.distributed.Client`` wrapped in a :class:`DaskExecutor`.
+
+    >>> executor(None) is None
+    True
+
+    Raises
+    ------
+    ImportError
+        A Client-like argument while dask.distributed is not installed.
+    TypeError
+        Neither an executor nor a Client.
+    """
+    if client is None:
+        return None
+    if callable(getattr(client, "line_system", None)) and callable(getattr(client, "frames", None)):
+        return client
+    return DaskExecutor(check_client(client))
+
+
+class DaskExecutor:
+    """Solve passes and render frames on the workers of a Dask cluster.
+
+    Parameters
+    ----------
+    client : dask.distributed.Client
+    """
+
+    def __init__(self, client):
+        self.client = check_client(client)
+
+    def line_system(self, records: LineRecords, *, progress: bool = False):
+        """A :class:`DistributedLineSystem` of ``records`` (see
+        :class:`voxgi.radiosity.LineExecutor`)."""
+        return DistributedLineSystem(self.client, records, progress=progress)
+
+    def frames(self, spec: FrameShaderSpec, max_frames: int, *, threads: int = 1):
+        """A :class:`DistributedFrames` of ``spec`` (see
+        :class:`voxgi.display.FrameExecutor`; each task uses its worker's threads)."""
+        return DistributedFrames(self.client, spec, max_frames)
 
 
 def _workers(client) -> dict:
@@ -173,12 +229,8 @@ def _worker_threads() -> int:
         return 1
 
 
-def _system(records, key):
-    from . import _core
-
-    return _cached(("lines", key), lambda: _core.LineSystem(
-        records["ijk"], records["normal"], records["point"], epsilon=records["epsilon"],
-        history=records["history"]))
+def _system(records: LineRecords, key):
+    return _cached(("lines", key), records.build)
 
 
 def _task_gather(records, key, families, weights, values, want_vis, stand_in=None):
@@ -199,16 +251,8 @@ def _task_normalisation(records, key, families, weights):
     return _system(records, key).normalisation(families, weights, _worker_threads())
 
 
-def _task_frame(payload, key, f, seed):
-    from .display import _FrameShader, _Tracer
-
-    def build():
-        p = payload
-        tracer = _Tracer(p["scene"], _worker_threads())
-        return _FrameShader(p["scene"], p["camera"], tracer, p["sampler"], p["eps"],
-                            _worker_threads(), p["gather"], p["seed"])
-
-    shader = _cached(("frame", key), build)
+def _task_frame(spec: FrameShaderSpec, key, f, seed):
+    shader = _cached(("frame", key), lambda: spec.build(_worker_threads()))
     with _FRAME_LOCK:
         before = (shader.primary_rays, shader.shadow_rays, shader.gather_rays,
                   dict(shader.seconds))
@@ -307,12 +351,8 @@ class DistributedLineSystem(_Farm):
     Parameters
     ----------
     client : dask.distributed.Client
-    ijk : (N, 3) int32
-    normal : (N, 3) float32
-    point : (N, 3) float32
-        As for LineSystem (surface points in voxel units).
-    epsilon : float
-    history : int
+    records : voxgi.radiosity.LineRecords
+        What the workers build their LineSystem from (:func:`voxgi.radiosity.line_records`).
     progress : bool
         A tqdm bar over each call's tasks.
 
@@ -326,12 +366,12 @@ class DistributedLineSystem(_Farm):
         A worker's memory_limit is under :func:`estimate_worker_bytes`.
     """
 
-    def __init__(self, client, ijk, normal, point, *, epsilon: float = 0.05, history: int = 8,
-                 progress: bool = False):
+    def __init__(self, client, records: LineRecords, *, progress: bool = False):
         super().__init__(client, progress, "gather tasks")
-        ijk = np.ascontiguousarray(ijk, dtype=np.int32)
-        normal = np.ascontiguousarray(normal, dtype=np.float32)
-        point = np.ascontiguousarray(point, dtype=np.float32)
+        ijk = np.ascontiguousarray(records.ijk, dtype=np.int32)
+        normal = np.ascontiguousarray(records.normal, dtype=np.float32)
+        point = np.ascontiguousarray(records.point, dtype=np.float32)
+        epsilon, history = float(records.epsilon), int(records.history)
         self.size = len(ijk)
         box = ijk.max(axis=0) - ijk.min(axis=0) if len(ijk) else np.zeros(3)
         info = _workers(client)
@@ -339,11 +379,10 @@ class DistributedLineSystem(_Farm):
         self._check_memory(estimate_worker_bytes(self.size, box, threads),
                            f"a solve of {self.size} records")
         self.key = _token(ijk, normal, point, np.float32([epsilon, history]))
-        records = {"ijk": ijk, "normal": normal, "point": point, "epsilon": float(epsilon),
-                   "history": int(history)}
+        records = LineRecords(ijk, normal, point, epsilon, history)
         t = time.perf_counter()
         # once, to every worker: a killed worker's tasks find a copy elsewhere
-        # (in a list: a dict itself would be scattered value by value)
+        # (in a list: a container itself would be scattered value by value)
         self._records = client.scatter([records], broadcast=True, hash=False)[0]
         self.stats["seconds_scatter"] = time.perf_counter() - t
         self.stats["bytes_scattered"] = int(ijk.nbytes + normal.nbytes + point.nbytes)
@@ -454,28 +493,24 @@ class DistributedFrames(_Farm):
     Parameters
     ----------
     client : dask.distributed.Client
-    shader : voxgi.display._FrameShader
-        The local shader, whose scene, camera, VPL sampler and settings are
-        sent once to every worker.
+    spec : voxgi.display.FrameShaderSpec
+        Scene, camera, VPL sampler and settings, sent once to every worker.
     max_frames : int
         Frames the render may ask for (none is submitted past it).
     """
 
-    def __init__(self, client, shader, max_frames: int, progress: bool = False):
+    def __init__(self, client, spec: FrameShaderSpec, max_frames: int):
         super().__init__(client, False, "frames")
-        self.local = shader
-        s = shader.sampler
-        n = len(s.vox)
-        cam = shader.cam
-        # the sampler's arrays (~100 B a record), the scene's triangles, and
-        # one frame (H·W·3 float32) plus the shader's hit buffers (~100 B a pixel)
-        need = n * 100 + shader.tracer.tris.nbytes * 3 + cam.width * cam.height * 112
+        n = len(spec.sampler.vox)
+        cam = spec.camera
+        # the sampler's arrays (~100 B a record), the scene's triangles (72 B
+        # each in float64, three copies), and one frame (H·W·3 float32) plus
+        # the shader's hit buffers (~100 B a pixel)
+        need = n * 100 + spec.scene.n_triangles * 72 * 3 + cam.width * cam.height * 112
         self._check_memory(need, f"a {cam.width}x{cam.height} render of {n} records")
-        payload = {"scene": shader.scene, "camera": cam, "sampler": s, "eps": shader.eps,
-                   "gather": shader.gather, "seed": shader.seed}
         self.key = "frames-" + _uid()
         t = time.perf_counter()
-        self._payload = client.scatter([payload], broadcast=True, hash=False)[0]
+        self._payload = client.scatter([spec], broadcast=True, hash=False)[0]
         self.stats["seconds_scatter"] = time.perf_counter() - t
         slots = sum(int(v.get("nthreads", 1)) for v in _workers(client).values())
         self.ahead = max(2, 2 * slots)
@@ -483,11 +518,7 @@ class DistributedFrames(_Farm):
         self._futs: dict = {}
         self._next = 0
         self.primary_rays = self.shadow_rays = self.gather_rays = 0
-        self.seconds = {k: 0.0 for k in shader.seconds}
-
-    def __getattr__(self, name):
-        # settings the render reads (gather, mat_glossy, ...) are the local shader's
-        return getattr(self.__dict__["local"], name)
+        self.seconds = {k: 0.0 for k in ("primary", "shade", "shadow", "gather")}
 
     def _submit_upto(self, last: int, seed: int) -> None:
         while self._next <= min(last, self.max_frames - 1):
