@@ -963,9 +963,13 @@ def _gatherer(p: _Problem) -> _Gatherer:
     return _Gatherer(p.sysm, opt.threads, p.twins.stand_in, budget, passes)
 
 
-#: Iterations without a new lowest residual after which an iteration has
-#: stalled: the values sent along the lines are float32, so the residual
-#: cannot fall much below their rounding (about 1e-7).
+#: The float32 values sent along the lines round every record's radiosity
+#: to about 6e-8: a residual under this that makes no new low for
+#: :data:`_FLOOR_ITERATIONS` iterations is their rounding, not the iteration's.
+_FLOOR_RESIDUAL = 1e-6
+_FLOOR_ITERATIONS = 10
+#: Iterations without a new lowest residual after which the iteration has
+#: stalled for good.
 _STALL_ITERATIONS = 50
 
 
@@ -975,7 +979,7 @@ class _State:
 
     R: np.ndarray  # reflected radiosity B - E
     Hg: np.ndarray  # gathered irradiance
-    dk: np.ndarray  # the last bounce (progressive form)
+    dk: np.ndarray  # the last update R_k - R_{k-1}
     vis: np.ndarray | None = None
     it: int = 0
     gather_rays: int = 0
@@ -988,71 +992,76 @@ class _State:
 class _Iteration:
     """Gathering of the reflected radiosity ``R = B − E`` (``docs/design.md`` §5).
 
-    Jacobi: ``R_{k+1} = ρ (H_d + M R_k / S)``. With coarser later bounces
-    (``later_directions``) the bounce-by-bounce form instead,
-    ``ΔR_{k+1} = ρ M_k ΔR_k / S``: a fixed-point iteration would converge to
-    the coarse operator's answer. Either way the geometric tail is added
-    once the updates shrink steadily (:class:`_Extrapolator`).
+    Jacobi, ``R_{k+1} = ρ (H_d + M R_k / S)``, with the geometric tail added
+    once the updates shrink steadily (:class:`_Extrapolator`). The same
+    iteration in correction form, ``ΔR_{k+1} = ρ M ΔR_k / S``, propagates
+    only the last update, which float32 rounds relative to its own size: it
+    is used with coarser later bounces (a fixed-point iteration would
+    converge to the coarse operator's answer) and once the Jacobi residual
+    sits at the rounding of the values sent (albedos near 1). In correction
+    form the tail, once added, stands for every bounce left.
     """
 
     def __init__(self, p: _Problem, gather: _Gatherer, Hd: np.ndarray):
         self.p, self.gather, self.Hd = p, gather, Hd
         R = p.rho * Hd
         self.s = _State(R=R, Hg=np.zeros((p.n, 3)), dk=R.copy())
-        self.progressive = p.lds is not None
+        self.corrections = p.lds is not None
         self.extrap = _Extrapolator(p.area)
         rmax = float(p.rho.max())
         self.lam_bound = float(min(max(rmax, 0.5), 1 - 1e-6))
         self.best = (float("inf"), 0)  # lowest residual and its iteration
 
     def step(self) -> tuple:
-        """One gathering pass: (R_new, Hg_new, dk_new, residual), not yet kept."""
+        """One gathering pass: (R_new, Hg_new, update, residual, h_inc, use_later), not kept."""
         p, s = self.p, self.s
-        use_later = self.progressive and s.it >= p.opt.later_after
+        use_later = p.lds is not None and s.it >= p.opt.later_after
         ds = p.lds if use_later else p.gds
         S = p.S["later"] if use_later else p.S["gather"]
         fams = np.arange(len(ds.families), dtype=np.int64)
         t = time.perf_counter()
         want_vis = s.vis is None and not use_later
-        sums, v, nl = self.gather(ds, p.twins.send(s.dk if self.progressive else s.R), fams,
+        sums, v, nl = self.gather(ds, p.twins.send(s.dk if self.corrections else s.R), fams,
                                   want_vis)
         s.lines_walked += nl
         if want_vis:
             s.vis = v
-        if self.progressive:
-            # propagate only the last bounce, with this bounce's directions
-            h_inc = sums / S[:, None]
-            Hg, dk = s.Hg + h_inc, p.rho * h_inc
-            R_new = s.R + dk
-        else:
-            h_inc = None
-            Hg = sums / S[:, None]
-            dk, R_new = s.dk, p.rho * (self.Hd + Hg)
-        s.seconds += time.perf_counter() - t
-        s.gather_rays += p.n * len(ds.families)
-        Btot = np.sum(p.area[:, None] * np.abs(p.E + R_new))
-        d = R_new - s.R
-        res = float(np.sum(p.area[:, None] * np.abs(d)) / Btot) if Btot > 0 else 0.0
-        return R_new, Hg, dk, d, res, h_inc, use_later
+        with np.errstate(over="ignore", invalid="ignore"):  # run() checks finiteness
+            if self.corrections:
+                h_inc = sums / S[:, None]
+                Hg = s.Hg + h_inc
+                R_new = s.R + p.rho * h_inc
+            else:
+                h_inc = None
+                Hg = sums / S[:, None]
+                R_new = p.rho * (self.Hd + Hg)
+            s.seconds += time.perf_counter() - t
+            s.gather_rays += p.n * len(ds.families)
+            d = R_new - s.R
+            Btot = np.sum(p.area[:, None] * np.abs(p.E + R_new))
+            res = float(np.sum(p.area[:, None] * np.abs(d)) / Btot) if Btot > 0 else 0.0
+        return R_new, Hg, d, res, h_inc, use_later
 
     def run(self, bar) -> _State:
         """Iterate until the stopping rule, the iteration limit, a stall or a
         non-finite iterate; return the last finite state."""
         s = self.s
         while s.it < self.p.limit:
-            R_new, Hg, dk, d, res, h_inc, use_later = self.step()
+            R_new, Hg, d, res, h_inc, use_later = self.step()
             if not (np.all(np.isfinite(R_new)) and np.isfinite(res)):
                 s.stopped = f"iteration {s.it + 1} was not finite"
                 break
-            s.R, s.Hg, s.dk = R_new, Hg, dk
+            s.R, s.Hg, s.dk = R_new, Hg, (self.p.rho * h_inc if self.corrections else d)
             s.it += 1
             s.residuals.append(res)
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix(residual=f"{res:.2e}")
-            if self.converged(res) or self.stalled(res):
+            if self.converged(res):
                 break
-            if self.jump(d, h_inc, use_later):
+            if self.at_floor(res):
+                continue
+            if self.stalled(res) or self.jump(d, h_inc, use_later):
                 break
         return s
 
@@ -1061,11 +1070,23 @@ class _Iteration:
         with λ bounded by the largest albedo, is under ``tol``."""
         return res * self.lam_bound / (1 - self.lam_bound) < self.p.opt.tol
 
-    def stalled(self, res: float) -> bool:
-        """No new lowest residual for :data:`_STALL_ITERATIONS` iterations."""
+    def at_floor(self, res: float) -> bool:
+        """Switch Jacobi to the correction form when its residual sits at the
+        rounding of the values sent (True: switched, no jump this iteration)."""
         if res < self.best[0]:
             self.best = (res, self.s.it)
             return False
+        if (self.corrections or self.best[0] >= _FLOOR_RESIDUAL
+                or self.s.it - self.best[1] < _FLOOR_ITERATIONS):
+            return False
+        self.corrections = True
+        self.best = (float("inf"), self.s.it)
+        self.extrap.prev = self.extrap.lam_prev = None
+        self.p.stats["correction_form_after"] = self.s.it
+        return True
+
+    def stalled(self, res: float) -> bool:
+        """No new lowest residual for :data:`_STALL_ITERATIONS` iterations."""
         if self.s.it - self.best[1] >= _STALL_ITERATIONS:
             self.s.stopped = (f"the residual stalled at {self.best[0]:.3g} (its lowest, "
                               f"iteration {self.best[1]}) for {_STALL_ITERATIONS} iterations")
@@ -1074,8 +1095,8 @@ class _Iteration:
 
     def jump(self, d: np.ndarray, h_inc: np.ndarray | None, use_later: bool) -> bool:
         """Add the geometric tail when the updates shrink steadily; True when
-        that ends the progressive form (the tail stands for every bounce left)."""
-        if self.progressive and not use_later:
+        that ends the correction form (the tail stands for every bounce left)."""
+        if self.p.lds is not None and not use_later:
             return False
         tail = self.extrap(d)
         if tail is None:
@@ -1084,8 +1105,7 @@ class _Iteration:
         if not np.all(np.isfinite(R)):
             return False
         self.s.R = R
-        if self.progressive:
-            # the ambient term stands for all the remaining bounces: done
+        if self.corrections:
             self.s.Hg = self.s.Hg + h_inc * self.extrap.factor
             return True
         return False
