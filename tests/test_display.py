@@ -61,7 +61,7 @@ def test_furnace_sphere_analytic_radiosity(rho):
     # must give L = Le + (rho/pi) E = Le / (1 - rho) in every pixel. Inside a
     # closed enclosure the estimator is unbiased (∫ G dA = pi), so what is left
     # is VPL noise, shared by all pixels: after 32 frames × 16 VPLs it is
-    # ~0.3% per pixel at rho 0.9 (measured; est_rel_mse ~1e-6), plus the
+    # well under 1% per pixel at rho 0.9, plus the
     # bounded-G loss near contact (< 0.1% for these triangle areas).
     le = 1.0
     scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=le, width=32, height=32)
@@ -90,13 +90,13 @@ def test_furnace_sphere_voxel_records_analytic_radiosity(rho):
     out = voxgi.render(scene, Solution(vox=vox, radiosity=b.astype(np.float32)), progress=False,
                        max_frames=32, tol=0.0)
     err = np.abs(out.image * (1 - rho) - 1.0)
-    assert err.max() < 0.01, err.max()  # measured 0.4% (0.5) and 0.7% (0.9)
+    assert err.max() < 0.01, err.max()
 
 
 def test_cap_sphere_voxel_records_gather_lookup():
     # The cap sphere on real voxel records: the gather rays look up records
     # (front side, right object) in the voxel grid. Mean error over the
-    # non-cap pixels within 1% (measured 0.02%; max 2.0%, noise).
+    # non-cap pixels within 1% (the max is the display's noise).
     rho, le = 0.6, 2.0
     scene = voxgi.scenes.cap_sphere(albedo=rho, emission=le, cap_angle=70.0, subdivisions=4,
                                     width=24, height=24)
@@ -115,7 +115,7 @@ def test_cap_sphere_voxel_records_gather_lookup():
 
 def test_furnace_sphere_full_pipeline_coarse():
     # The whole pipeline (voxelize, solve, display) at a coarse setting that
-    # runs in seconds: rho 0.5 at resolution 16, R 6 measured max 0.76%.
+    # runs in seconds: rho 0.5 at resolution 16, R 6.
     scene = voxgi.scenes.furnace_sphere(albedo=0.5, emission=1.0, width=24, height=24)
     sol = real_solution(scene, resolution=16, directions=6)
     out = voxgi.render(scene, sol, progress=False, max_frames=32, tol=0.0)
@@ -126,10 +126,9 @@ def test_furnace_sphere_full_pipeline_coarse():
 @pytest.mark.slow
 @pytest.mark.parametrize("rho", [0.5, 0.9])
 def test_furnace_sphere_full_pipeline(rho):
-    # The issue's target with the real voxelizer and solver: within 1% in
-    # every pixel. Measured at resolution 32, R 8: max 0.40% (rho 0.5) and
-    # 0.90% (rho 0.9; mean -0.43%, the solver's share, which falls with
-    # resolution: -1.35% at 16, -0.80% at 24).
+    # With the real voxelizer and solver: within 1% in every pixel (at rho
+    # 0.9 the solver's share of the error, which falls with the resolution,
+    # is most of it).
     scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=1.0, width=24, height=24)
     sol = real_solution(scene, resolution=32, directions=8)
     out = voxgi.render(scene, sol, progress=False, max_frames=32, tol=0.0)
@@ -139,7 +138,7 @@ def test_furnace_sphere_full_pipeline(rho):
 
 def test_cap_sphere_nonuniform_emission():
     # Inside a sphere every pair has cos cos / (pi r²) = 1/A, so
-    # L(x) = Le(x) + rho Le_mean / (1 - rho) (DESIGN-NOTES §1): the cap
+    # L(x) = Le(x) + rho Le_mean / (1 - rho) (docs/design.md §1): the cap
     # pixels and the rest differ by exactly Le. This exercises both VPL sets
     # (emitters and non-emitters) and their split.
     rho, le = 0.6, 2.0
@@ -164,10 +163,9 @@ def test_cap_sphere_nonuniform_emission():
     obj = tr.obj[prim].reshape(24, 24)
     ref = np.where(obj == 0, le, 0.0) + rho * le_mean / (1 - rho)
     rel = np.abs(out.image[..., 0] / ref - 1.0)
-    # Away from the cap's border (AA mixes the two values there): 2%. Measured:
-    # mean error < 0.1% on both parts; max 2.3% after 48 frames, 1.1% after
-    # 192 (the gather rays' per-pixel noise; pure VPLs, gather=0, give 0.7%
-    # here because inside a sphere every VPL contributes the same).
+    # Away from the cap's border (AA mixes the two values there): 2%, the
+    # gather rays' per-pixel noise after 128 frames (inside a sphere every
+    # VPL contributes the same, so the VPLs add none).
     border = np.zeros_like(obj, bool)
     border[:-1] |= obj[:-1] != obj[1:]
     border[1:] |= obj[:-1] != obj[1:]
@@ -215,11 +213,10 @@ def test_antialiased_edge_matches_supersampled():
     ss = big.reshape(32, 16, 32, 16).mean(axis=(1, 3))
     edge = (ss > 0.02) & (ss < 0.98)
     assert edge.sum() > 40
-    # 64 stratified offsets estimate each pixel's coverage: measured max error
-    # 0.060 against a 32x32 supersampled render (0.042 with 128 frames), the
-    # 16x16 supersampling itself is off by up to ~1/32 at an edge.
+    # 64 stratified offsets estimate each pixel's coverage against a 32x32
+    # supersampled render, itself off by up to ~1/32 at an edge.
     assert np.abs(aa - ss).max() < 0.08
-    assert np.sqrt(np.mean((aa - ss) ** 2)) < 0.01  # measured 0.0059
+    assert np.sqrt(np.mean((aa - ss) ** 2)) < 0.01
     # One sample per pixel is a stair-step: 0 or 1 at the edge pixels.
     assert np.abs(one - ss)[edge].max() > 0.3
     assert set(np.unique(one)) <= {0.0, 1.0}
@@ -250,8 +247,8 @@ def test_depth_of_field_in_focus_sharp_out_of_focus_blurred():
     pin = energy(cam)
     f_near = energy(cam.replace(aperture=0.1, focus_distance=2.0))
     f_far = energy(cam.replace(aperture=0.1, focus_distance=4.0))
-    # In focus: as sharp as the pinhole (both see the box-filtered edges;
-    # measured ratio ~1.0). Out of focus: the 0.1 lens spreads a point over
+    # In focus: as sharp as the pinhole (both see the box-filtered edges).
+    # Out of focus: the 0.1 lens spreads a point over
     # ~0.05 units on the other plane, about half a cell: energy falls a lot.
     assert f_near[0] > 0.8 * pin[0]
     assert f_far[1] > 0.8 * pin[1]
@@ -474,9 +471,8 @@ def test_direct_light_matches_mitsuba_path_tracer():
     # against Mitsuba 3's path tracer limited to one bounce (max_depth=2) on
     # the Cornell box: an outside check of the display's normalisation,
     # camera, pixel filter and the one-sided light. Skipped without mitsuba
-    # (an optional benchmark dependency). Measured relMSE 7.5e-5 at 32x32
-    # against 1024 spp for voxel resolutions 16 to 128; here, against 256 spp,
-    # 2.9e-4 (Mitsuba's noise).
+    # (an optional benchmark dependency). Against 256 spp the bound is
+    # Mitsuba's noise.
     pytest.importorskip("mitsuba")
     from voxgi.mitsuba import import_mitsuba, to_mitsuba
 
@@ -491,7 +487,7 @@ def test_direct_light_matches_mitsuba_path_tracer():
     err = voxgi.metrics.rel_mse(out.image, ref)
     assert err < 1e-3, err
     # Mean radiance of the lit surfaces (the light itself left out: its edge
-    # pixels carry most of the antialiasing noise) within 1% (measured 0.4%).
+    # pixels carry most of the antialiasing noise) within 1%.
     lit = ref.max(axis=2) < 5.0
     assert abs(out.image[lit].mean() / ref[lit].mean() - 1) < 0.01
 
@@ -500,9 +496,7 @@ def test_shading_normals_approach_the_smooth_surface():
     # A coarse icosphere (80 faces) lit by a lamp, rendered flat and with
     # per-vertex shading normals (the true sphere's), against a fine one
     # (5120 faces, flat): the shading normals must bring the coarse sphere's
-    # shading near the fine one's. Measured (64x64, 24 frames; seeds 3, 5, 9
-    # and 96 frames agree to 1%): relMSE against the fine sphere 3.4e-2 flat,
-    # 7.6e-3 with shading normals (what is left: the facets lie inside the
+    # shading near the fine one's (what is left: the facets lie inside the
     # sphere, and the silhouette).
     from scipy.ndimage import binary_erosion
 

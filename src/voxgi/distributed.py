@@ -99,8 +99,9 @@ def check_client(client):
 
 def executor(client):
     """The executor for ``client=``: None for None, an executor as it is
-    (an object with ``line_system`` and ``frames`` methods), a
-    ``dask.distributed.Client`` wrapped in a :class:`DaskExecutor`.
+    (an object with a ``line_system`` or a ``frames`` method, see
+    :class:`voxgi.radiosity.LineExecutor` and :class:`voxgi.display.FrameExecutor`),
+    a ``dask.distributed.Client`` wrapped in a :class:`DaskExecutor`.
 
     >>> executor(None) is None
     True
@@ -114,7 +115,7 @@ def executor(client):
     """
     if client is None:
         return None
-    if callable(getattr(client, "line_system", None)) and callable(getattr(client, "frames", None)):
+    if any(callable(getattr(client, m, None)) for m in ("line_system", "frames")):
         return client
     return DaskExecutor(check_client(client))
 
