@@ -25,7 +25,8 @@ def small():
     s = voxgi.scenes.furnace_box(albedo=0.5, emission=1.0)
     s.camera = s.camera.replace(width=8, height=8)
     vox = voxgi.voxelize(s, resolution=8, progress=False)
-    sol = voxgi.solve(vox, directions=4, shoot_directions=4, progress=False)
+    sol = voxgi.solve(vox, directions=4, tuning=voxgi.SolveTuning(shoot_directions=4),
+                      progress=False)
     return s, vox, sol
 
 
@@ -322,11 +323,11 @@ def test_solve_corrupt_voxelset(small):
     ]
     for changes, exc, word in cases:
         with pytest.raises(exc, match=word):
-            voxgi.solve(_corrupt(vox, **changes), directions=4, shoot_directions=4,
-                        progress=False)
+            voxgi.solve(_corrupt(vox, **changes), directions=4, progress=False,
+                        tuning=voxgi.SolveTuning(shoot_directions=4))
     # the user's arrays are untouched by a failed and a successful call
     a0 = vox.area.copy()
-    voxgi.solve(vox, directions=4, shoot_directions=4, progress=False)
+    voxgi.solve(vox, directions=4, tuning=voxgi.SolveTuning(shoot_directions=4), progress=False)
     assert np.array_equal(vox.area, a0)
 
 
@@ -358,10 +359,17 @@ def test_render_bad_args(small):
                           ({"seed": 1.5}, TypeError, "seed"),
                           ({"seed": "x"}, TypeError, "seed"),
                           ({"threads": -1}, ValueError, "threads"),
-                          ({"emitter_share": 2.0}, ValueError, "emitter_share"),
-                          ({"vpl_pdf": "uniform"}, ValueError, "pdf")]:
+                          ({"tuning": {"gather": 4}}, TypeError, "tuning"),
+                          ({"tuning": voxgi.RenderTuning(min_frames=1)}, ValueError,
+                           "min_frames"),
+                          ({"tuning": voxgi.RenderTuning(emitter_share=2.0)}, ValueError,
+                           "emitter_share"),
+                          ({"tuning": voxgi.RenderTuning(vpl_pdf="uniform")}, ValueError, "pdf"),
+                          ({"client": 42}, TypeError, "client")]:
         with pytest.raises(exc, match=word):
             voxgi.render(s, sol, progress=False, **kw)
+    with pytest.raises(TypeError, match="executor"):
+        voxgi.display.render(s, sol, progress=False, executor=object())
 
 
 def _no_camera(s):

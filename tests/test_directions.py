@@ -1,4 +1,4 @@
-"""Discrete direction sets (voxgi.directions): DESIGN-NOTES §3."""
+"""Discrete direction sets (voxgi.directions): docs/design.md §3."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from voxgi.directions import direction_set, sphere
 
 @pytest.mark.parametrize(("radius", "count"), [(8, 762), (16, 3338), (22, 5982), (35, 15194)])
 def test_counts(radius, count):
-    # the counts measured in DESIGN-NOTES §3 (integer v with round(|v|) = R)
+    # the counts of docs/design.md §3 (integer v with round(|v|) = R)
     v = sphere(radius)
     assert v.shape == (count, 3)
     n = np.linalg.norm(v, axis=1)

@@ -135,7 +135,8 @@ def solved():
     s = voxgi.scenes.furnace_box(albedo=0.5, emission=1.0)
     s.camera = s.camera.replace(width=4, height=4)
     vox = voxgi.voxelize(s, resolution=4, progress=False)
-    sol = voxgi.solve(vox, directions=2, shoot_directions=2, progress=False)
+    sol = voxgi.solve(vox, directions=2, tuning=voxgi.SolveTuning(shoot_directions=2),
+                      progress=False)
     return s, vox, sol
 
 
@@ -162,7 +163,8 @@ def test_fuzz_api_arguments(solved):
                 elif which == 3:
                     mb = b if not isinstance(b, int) or b < 10 else 2
                     voxgi.solve(vox, directions=a if not isinstance(a, int) or a < 4 else 2,
-                                shoot_directions=2, max_bounces=mb, tol=c, progress=False)
+                                tuning=voxgi.SolveTuning(shoot_directions=2), max_bounces=mb,
+                                tol=c, progress=False)
                 elif which == 4:
                     k = a if not isinstance(a, int) or a < 64 else 4
                     f = b if not isinstance(b, int) or b < 4 else 2
