@@ -32,8 +32,7 @@ def main() -> int:
     vox = voxgi.voxelize(scene, resolution=voxgi.pipeline.RENDER_RESOLUTION)
     t1 = time.perf_counter()
     # exactly what voxgi.render(scene) and `voxgi render` run without a solution
-    sol = voxgi.solve(vox, directions=voxgi.pipeline.RENDER_DIRECTIONS,
-                      tol=voxgi.pipeline.RENDER_SOLVE_TOL, diagnostics=False, progress=False)
+    sol = voxgi.pipeline.solve_for_display(vox, progress=False)
     t2 = time.perf_counter()
     res = {"records": len(vox), "resolution": vox.resolution, "voxelize": t1 - t0,
            "solve": t2 - t1, "solve_stats_seconds": sol.stats.get("seconds"),

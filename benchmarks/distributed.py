@@ -1,4 +1,4 @@
-"""Local against Dask: the bunny-room solve and a 512x512 render (issue 7).
+"""Local against Dask: the bunny-room solve and a 512x512 render.
 
 Run on its own (never collected by pytest)::
 
@@ -69,15 +69,14 @@ def _rel(a, b) -> float:
 
 def _cost_terms(vox, directions: int, client) -> dict:
     """c (s per record x family, one core) and o (s per distributed call)."""
-    from voxgi import _core
     from voxgi.directions import direction_set
     from voxgi.distributed import DistributedLineSystem
-    from voxgi.radiosity import _check_vox
+    from voxgi.radiosity import line_records
 
-    a = _check_vox(vox)
+    records = line_records(vox)
     ds = direction_set(directions)
     n, nf = len(vox), len(ds.families)
-    local = _core.LineSystem(a["ijk"], a["normal"], a["point"], epsilon=0.02, history=16)
+    local = records.build()
     vals = np.random.default_rng(0).random((n, 3)).astype(np.float32)
     allf = np.arange(nf, dtype=np.int64)
     one = np.arange(1, dtype=np.int64)
@@ -90,8 +89,7 @@ def _cost_terms(vox, directions: int, client) -> dict:
     for _ in range(reps):
         local.gather(ds.families, ds.weights, vals, one, False, 1)
     t_one_local = (time.perf_counter() - t) / reps
-    dist = DistributedLineSystem(client, a["ijk"], a["normal"], a["point"], epsilon=0.02,
-                                 history=16)
+    dist = DistributedLineSystem(client, records)
     dist.gather(ds.families, ds.weights, vals, one)  # the workers build their systems
     t = time.perf_counter()
     for _ in range(reps):
@@ -125,8 +123,8 @@ def main(argv=None) -> int:
     t = time.perf_counter()
     vox = voxgi.voxelize(scene, resolution=args.resolution)
     t_vox = time.perf_counter() - t
-    skw = dict(directions=args.directions, shoot_directions=args.shoot_directions,
-               max_bounces=args.max_bounces, progress=False)
+    skw = dict(directions=args.directions, max_bounces=args.max_bounces, progress=False,
+               tuning=voxgi.SolveTuning(shoot_directions=args.shoot_directions))
     rkw = dict(max_frames=args.frames, tol=0.0, seed=1, progress=False)
     print(f"bunny room: {len(vox)} records (resolution {args.resolution}, voxelized in "
           f"{t_vox:.1f} s), R {args.directions}/{args.shoot_directions}, "
@@ -161,7 +159,7 @@ def main(argv=None) -> int:
             cluster.close()
         rows.append({"where": "dask", "workers": w, "solve_s": ts, "render_s": tr,
                      "startup_s": t_start, "solve_phases": dsol.stats["seconds"],
-                     "distributed": dsol.stats["distributed"],
+                     "distributed": dsol.stats["executor"],
                      "solve_rel_diff": _rel(dsol.radiosity, sol.radiosity),
                      "image_max_abs_diff": float(np.max(np.abs(dimg.image - img.image)))})
 

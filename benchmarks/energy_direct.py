@@ -31,8 +31,8 @@ def main() -> None:
             vox = voxgi.voxelize(scene, resolution=res)
             vox = dataclasses.replace(vox, albedo=np.zeros_like(vox.albedo))
             t = time.perf_counter()
-            sol = voxgi.solve(vox, directions=8, shoot_directions=16, progress=False, tol=1e-5,
-                              threads=args.threads, diagnostics=False)
+            sol = voxgi.solve(vox, directions=8, progress=False, tol=1e-5, threads=args.threads,
+                              tuning=voxgi.SolveTuning(shoot_directions=16, diagnostics=False))
             e = sol.stats["energy"]
             print(f"{'closed' if closed else 'open  '} black res {res:4d} records {len(vox):8d} "
                   f"imbalance {e['imbalance'][0]:+.5f}  "

@@ -82,8 +82,9 @@ def run_scene(key: str, args) -> dict:
     if args.quick:
         sr, lr = min(sr, 8), min(lr, 6)
     bounces = lpl - 1  # light path length = reflections + 1; the first is the shooting
-    sol = voxgi.solve(vox, directions=lr, shoot_directions=sr, max_bounces=bounces - 1,
-                      tol=1e-12, threads=args.threads, progress=False)
+    sol = voxgi.solve(vox, directions=lr, max_bounces=bounces - 1, tol=1e-12,
+                      threads=args.threads, progress=False,
+                      tuning=voxgi.SolveTuning(shoot_directions=sr))
     out = voxgi.render(scene, sol, threads=args.threads, progress=False,
                        max_frames=8 if args.quick else None)
     wall = time.perf_counter() - t0

@@ -14,7 +14,7 @@ memory); the even and the odd passes make two independent half-spp images,
 and their relMSE against each other is recorded: ``rel_mse(half1, half2)``
 is about twice the error of one half-spp image, so the full reference's own
 error (its noise, which adds to every relMSE measured against it) is about
-``rel_mse(half1, half2) / 4`` (DESIGN-NOTES §9: Mitsuba's error falls as
+``rel_mse(half1, half2) / 4`` (docs/design.md §9: Mitsuba's error falls as
 1/spp). The ``.json`` holds both ``half_vs_half_rel_mse`` and
 ``noise_rel_mse_est`` (= / 4).
 

@@ -121,7 +121,7 @@ def run_voxgi(size: int, resolution, directions, render_kw: dict, seed: int = 0,
     # solved as voxgi.render(scene) solves: to the display's tolerance, without
     # the diagnostic pass (library defaults, with --defaults: tol 1e-4 and it)
     fast = {} if resolution is None else {"tol": voxgi.pipeline.RENDER_SOLVE_TOL,
-                                          "diagnostics": False}
+                                          "tuning": voxgi.SolveTuning(diagnostics=False)}
     sol = voxgi.solve(vox, **({} if directions is None else {"directions": directions}),
                       progress=False, **fast)
     t2 = time.perf_counter()

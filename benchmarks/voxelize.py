@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 CASES = [("bunny", 128), ("bunny", 256), ("bunny", 512), ("bunny_1m", 512)]
-TARGETS = {("bunny", 256): 1.0, ("bunny_1m", 512): 20.0}  # seconds, issue 2
+TARGETS = {("bunny", 256): 1.0, ("bunny_1m", 512): 20.0}  # seconds
 
 
 def build_scene(name: str):
