@@ -289,8 +289,9 @@ def test_solve_bad_args(small):
                           ({"tol": NAN}, ValueError, "tol"),
                           ({"tol": "1e-3"}, TypeError, "tol"),
                           ({"threads": 0}, ValueError, "threads"),
-                          ({"method": "newton"}, ValueError, "method"),
-                          ({"epsilon": -1.0}, ValueError, "epsilon")]:
+                          ({"tuning": voxgi.SolveTuning(epsilon=-1.0)}, ValueError, "epsilon"),
+                          ({"tuning": voxgi.SolveTuning(history=0)}, ValueError, "history"),
+                          ({"tuning": "fast"}, TypeError, "tuning")]:
         with pytest.raises(exc, match=word):
             voxgi.solve(vox, progress=False, **kw)
 

@@ -85,7 +85,8 @@ class _Tracer:
         e1 = self.tris[:, 1] - self.tris[:, 0]
         e2 = self.tris[:, 2] - self.tris[:, 0]
         n = np.cross(e1, e2)
-        self.ng = n / np.linalg.norm(n, axis=1, keepdims=True)  # winding normals (DESIGN-NOTES §2)
+        # winding normals (docs/design.md §2)
+        self.ng = n / np.linalg.norm(n, axis=1, keepdims=True)
         # Per-corner shading normals where an object's mesh carried them.
         self.vn = None
         if any(o.vertex_normals is not None for o in scene.objects):
@@ -258,10 +259,10 @@ class VPLSampler:
     proportional to its power ``ΔA · B`` (luminance) instead of its area
     (``pdf="area"``, the paper's choice): the estimator weight is then
     ``B / (π n p(y))`` with the area density ``p(y) = lum(B_y) / Σ ΔA lum(B)``,
-    so every VPL carries the same power. Measured on the Cornell box: with
-    area sampling, the few bright records on top of the tall block (B ≈ 11×
-    the mean) are drawn in one frame of three and then light the ceiling
-    alone, a heavy-tailed error that the between-frame spread underestimates.
+    so every VPL carries the same power. With area sampling a few bright
+    records (on the Cornell box, those on top of the tall block, B ≈ 11× the
+    mean) are drawn in one frame of several and then light a wall alone: a
+    heavy-tailed error that the between-frame spread underestimates.
 
     Each frame draws its ``n_d`` emitter and ``n_i`` other VPLs stratified
     along the cumulative table, whose records are in Morton (Z-curve) order:
@@ -894,11 +895,10 @@ def render(scene, sol, vpls_per_frame: int = 16, max_frames: int | None = None,
     .. math:: L(x) = L_e(x) + \int f(x, \omega_i, \omega_o)\, \frac{B(y)}{\pi}\,
               \frac{\cos\theta_x \cos\theta_y}{r^2 + \Delta A(y)/\pi} V(x, y)\, dA(y),
 
-    estimated with a few VPLs per frame drawn in proportion to power (or
-    area), a geometry term bounded by the disc each VPL stands for, and
-    cosine-distributed gather rays MIS-combined with the non-emitter VPLs.
-    Frames are averaged until the estimated noise falls under ``tol``.
-    Inside a closed furnace (uniform ``Le`` and ``ρ``) every pixel is
+    estimated with a few VPLs per frame (drawn in proportion to power, the
+    geometry term bounded by the disc each VPL stands for) and gather rays
+    MIS-combined with the non-emitter VPLs, frames averaged until the
+    estimated noise falls under ``tol``. In a furnace every pixel is
     ``Le / (1 − ρ)``.
 
     Parameters
@@ -906,19 +906,17 @@ def render(scene, sol, vpls_per_frame: int = 16, max_frames: int | None = None,
     scene : Scene
         With a camera (``scene.camera``, or ``camera=``).
     sol : Solution
-        The voxel solution of ``scene`` (:func:`voxgi.solve`);
-        :func:`voxgi.pipeline.render` also takes None and solves first.
+        The voxel solution of ``scene`` (``voxgi.render`` also takes None).
     vpls_per_frame : int
-        VPLs per pixel per frame (>= 1), shared by all pixels.
+        VPLs per frame (>= 1), shared by all pixels.
     max_frames : int or None
         At most this many frames (default 256).
     tol : float or None
-        Stop once the estimated relMSE of the image's remaining noise,
-        ``mean(se² / (L² + 0.01))`` over pixels and channels, falls under
-        ``tol`` (default 1e-3; the metric of :func:`voxgi.metrics.rel_mse`).
-        At least ``tuning.min_frames`` frames are run. 0 runs ``max_frames``.
+        Stop once the estimated relMSE of the remaining noise falls under
+        ``tol`` (default 1e-3; :func:`voxgi.metrics.rel_mse`). 0 runs
+        ``max_frames``.
     seed : int
-        Seeds the VPL sequence and the sub-pixel/lens sequence.
+        Seeds the VPL, sub-pixel and lens sequences.
     progress : bool
         Show a tqdm progress bar.
     threads : int or None
@@ -929,26 +927,21 @@ def render(scene, sol, vpls_per_frame: int = 16, max_frames: int | None = None,
     camera : Camera, optional
         Overrides ``scene.camera``.
     tuning : RenderTuning or None
-        Expert settings (minimum frames, emitter share, gather rays, VPL pdf).
+        Expert settings (:class:`RenderTuning`).
 
     Returns
     -------
     RenderResult
         ``image`` (H, W, 3) float32 linear radiance, ``image[0, 0]`` top-left;
-        ``stderr`` (H, W, 3) float32; ``frames``; ``stats`` with ``seconds``
-        (setup, primary, shade, shadow, gather, total), ``primary_rays``,
-        ``shadow_rays``, ``gather_rays``, ``vpls`` (per pixel), ``vpl_split``
-        (emitters, others per frame), ``est_rel_mse``, ``skipped`` and
-        ``interrupted``. Ctrl-C stops after the current frame and returns
-        the image so far.
+        ``stderr``; ``frames``; ``stats`` with ``seconds`` per phase, ray
+        counts, ``vpls`` (per pixel), ``est_rel_mse``, ``skipped`` and
+        ``interrupted`` (Ctrl-C stops after the current frame).
 
     Raises
     ------
-    ValueError
-        No camera, a solution of another scene, bad numbers, an image too
-        large for the memory available.
-    TypeError
-        Wrong argument types.
+    ValueError, TypeError
+        No camera, a solution of another scene, bad numbers or types, an
+        image too large for the memory available.
     """
     t_start = time.perf_counter()
     opt = _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads,

@@ -177,7 +177,7 @@ def estimate_worker_bytes(n_records: int, box=(0, 0, 0), threads: int = 1) -> in
     -------
     int
         ``N × (506 + 100 × (threads - 1))`` bytes (scattered records, the
-        worker's LineSystem, one call's values and sums; measured, see
+        worker's LineSystem, one call's values and sums; see
         ``_BYTES_PER_RECORD``) plus the occupancy bitset, rounded up. The
         worker process itself (Python, numpy, Dask: ~100-150 MB) comes on top.
     """

@@ -1,7 +1,7 @@
 """Export a voxgi :class:`~voxgi.Scene` to a Mitsuba 3 scene dictionary.
 
 Used by the benchmarks to render the *same* scene with a path tracer
-(DESIGN-NOTES §9, §10). Mitsuba is imported lazily and is never a runtime
+(docs/design.md §9, §10). Mitsuba is imported lazily and is never a runtime
 dependency of voxgi (it is in the optional ``bench`` extra).
 
 The translation keeps voxgi's conventions:

@@ -731,7 +731,7 @@ def pair_table_bytes(n: int, families: np.ndarray) -> int:
 
     >>> from voxgi.directions import direction_set
     >>> pair_table_bytes(1000, direction_set(4).families)
-    192000
+    384000
     """
     fam = np.asarray(families)
     if len(fam) == 0:
@@ -841,7 +841,7 @@ class _Problem:
         return self.opt.max_iterations if mb is None else mb
 
 
-def _problem(vox, a, opt, t_start) -> _Problem:
+def _problem(vox, a, opt) -> _Problem:
     """Records, closed-object twins and the statistics every solve reports."""
     twins = _closed_twins(vox, a, opt.closed)
     E = np.pi * a["emission"].astype(np.float64)  # emitted radiosity
@@ -1225,17 +1225,9 @@ def _statistics(p: _Problem, gather: _Gatherer, s: _State, shoot_rays: int) -> N
             f"{gather.replayed} gathering passes replayed the recorded pairs")
 
 
-def solve(
-    vox: VoxelSet,
-    directions: int = 22,
-    max_bounces: int | None = None,
-    tol: float = 1e-4,
-    threads: int | None = None,
-    executor: LineExecutor | None = None,
-    *,
-    progress: bool = True,
-    tuning: SolveTuning | None = None,
-) -> Solution:
+def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, tol: float = 1e-4,
+          threads: int | None = None, executor: LineExecutor | None = None, *,
+          progress: bool = True, tuning: SolveTuning | None = None) -> Solution:
     """Solve the discrete radiosity equation on the records of ``vox``.
 
     Shooting from the emitter records first (direct light, radius
@@ -1251,13 +1243,12 @@ def solve(
     directions : int
         Radius R >= 1 of the gathering direction sphere (22: 5982 directions).
     max_bounces : int or None
-        At most this many gathering iterations (None: until converged, at
-        most ``tuning.max_iterations``). 0 gives direct light only.
+        At most this many gathering iterations (None: until converged).
+        0 gives direct light only.
     tol : float
-        Stop when the estimated remaining relative error of the iteration,
-        ``r λ / (1 − λ)`` with ``r = Σ area·|R_{k+1} − R_k| / Σ area·|B_{k+1}|``
-        (all channels; one entry of ``residuals`` per iteration) and ``λ`` the
-        largest albedo (at least 0.5), falls under it (> 0).
+        Stop when the estimated remaining relative error, ``r λ / (1 − λ)``
+        with ``r = Σ area·|R_{k+1} − R_k| / Σ area·|B_{k+1}|`` (``residuals``)
+        and ``λ`` the largest albedo (at least 0.5), falls under it (> 0).
     threads : int or None
         Threads (None: all hardware threads). Results do not depend on it.
     executor : LineExecutor or None
@@ -1266,41 +1257,29 @@ def solve(
     progress : bool
         Show a tqdm progress bar over iterations.
     tuning : SolveTuning or None
-        Expert settings (shooting radius, coarser later bounces, facing
-        margin, closed objects, pair cache, diagnostics).
+        Expert settings (:class:`SolveTuning`).
 
     Returns
     -------
     Solution
         ``radiosity`` (N, 3) float32, always finite; ``stats`` with ``rays``,
         ``shoot_rays``, ``gather_rays``, ``seconds`` (phase -> s),
-        ``directions``, ``S_spread``, ``lost_fraction`` (δ),
-        ``back_fraction`` and ``back_fraction_max``, ``energy`` (emitted,
-        absorbed, escaping power per channel), ``skipped`` and, when the
-        iteration stalled or went non-finite, ``stopped``.
+        ``directions``, ``lost_fraction`` (δ), ``back_fraction``, ``energy``
+        (emitted, absorbed, escaping power per channel), ``skipped`` and,
+        when the iteration stalled or went non-finite, ``stopped``.
 
     Raises
     ------
     TypeError, ValueError
         On a malformed VoxelSet or bad arguments.
     MemoryError
-        If the local solve's estimate (:func:`solve_memory`) exceeds the
-        memory available, or a worker's memory cannot hold the records.
+        If the estimate (:func:`solve_memory`) exceeds the memory available.
 
     Warns
     -----
     RuntimeWarning
-        No emitter; not converged within the iterations allowed; the
-        iteration stalled or produced a non-finite iterate (the last finite
-        one is returned).
-
-    Examples
-    --------
-    >>> import voxgi
-    >>> vox = voxgi.voxelize(voxgi.scenes.furnace_box(albedo=0.5), resolution=8, progress=False)
-    >>> sol = solve(vox, directions=4, progress=False, tuning=SolveTuning(shoot_directions=4))
-    >>> sol.radiosity.shape == (len(vox), 3)
-    True
+        No emitter; not converged; stalled or non-finite (the last finite
+        iterate is returned).
     """
     t_start = time.perf_counter()
     a = _check_vox(vox)
@@ -1308,7 +1287,7 @@ def solve(
     executor = _check_executor(executor)
     if isinstance(executor, LocalExecutor):
         _check_memory(vox, opt, tuning)
-    p = _problem(vox, a, opt, t_start)
+    p = _problem(vox, a, opt)
     if p.stats["emitters"] == 0:
         return _no_emitter(p)
     _open_backend(p, executor, progress)
@@ -1317,12 +1296,11 @@ def solve(
         Hd, shoot_escape, shoot_rays = _direct_light(p)
         gather = _gatherer(p)
         s = _iterate(p, gather, Hd, progress)
-        found = _lost_fraction(p, gather, s.vis)
+        p.stats["energy"] = _energy(p, Hd, s, _lost_fraction(p, gather, s.vis), shoot_escape)
         _back_fraction(p, gather)
     finally:
         if hasattr(p.sysm, "close"):
             p.sysm.close()
-    p.stats["energy"] = _energy(p, Hd, s, found, shoot_escape)
     p.seconds["total"] = time.perf_counter() - t_start
     _statistics(p, gather, s, shoot_rays)
     return Solution(vox=vox, radiosity=(p.E + s.R).astype(np.float32), bounces=s.it,

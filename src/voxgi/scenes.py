@@ -122,7 +122,7 @@ def cornell_box(width: int = 512, height: int = 512, light_offset: float = 0.01,
 
 def _inward(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     # A new mesh with reversed winding (trimesh's invert() may keep stale
-    # cached face normals; DESIGN-NOTES §2).
+    # cached face normals; docs/design.md §2).
     return trimesh.Trimesh(np.array(mesh.vertices), np.array(mesh.faces)[:, ::-1], process=False)
 
 
@@ -188,7 +188,7 @@ def cap_sphere(albedo=0.5, emission=1.0, cap_angle: float = 60.0, radius: float 
     Inside a sphere every pair of points has the same form-factor kernel
     ``cos θx cos θy / (π r²) = 1 / A``, so
     ``L(x) = Le(x) + rho * Le_mean / (1 - rho)`` with ``Le_mean`` the
-    area-weighted mean emission (DESIGN-NOTES §1). Triangles whose centroid
+    area-weighted mean emission (docs/design.md §1). Triangles whose centroid
     lies within ``cap_angle`` degrees of +y form the object ``cap``.
     """
     cap_angle = _validate.real(cap_angle, "cap_angle", low=0.0, high=180.0, low_open=True,
