@@ -123,8 +123,9 @@ def furnace(args) -> None:
         for rho in (0.3, 0.5, 0.9, 0.99):
             vox = voxgi.voxelize(make(rho), resolution=res)
             t = time.perf_counter()
-            sol = voxgi.solve(vox, directions=R, progress=False, tol=1e-6,
-                              tuning=SolveTuning(shoot_directions=R))
+            sol = voxgi.solve(
+                vox, directions=R, progress=False, tol=1e-6, tuning=SolveTuning(shoot_directions=R)
+            )
             dt = time.perf_counter() - t
             mean, mx = _front_err(sol, 1.0 / (1 - rho))
             # slivers: records holding under 5% of a voxel face (edges of the inner object)
@@ -197,8 +198,9 @@ def cap(args) -> None:
                 continue
             vox = voxs[res]
             t = time.perf_counter()
-            sol = voxgi.solve(vox, directions=R, progress=False, tol=1e-5,
-                              tuning=SolveTuning(shoot_directions=R))
+            sol = voxgi.solve(
+                vox, directions=R, progress=False, tol=1e-5, tuning=SolveTuning(shoot_directions=R)
+            )
             dt = time.perf_counter() - t
             mean, mx = _front_err(sol, _cap_exact(vox, rho))
             rows.append(
@@ -231,9 +233,11 @@ def cornell(args) -> None:
         return voxgi.scenes.cornell_box(width=32, height=32, blocks=blocks, closed=True)
 
     rows = []
-    cases = [("open", voxgi.scenes.cornell_box(width=32, height=32), False),
-             ("closed, albedo 0", closed(True), True),
-             ("closed, no blocks, albedo 0", closed(False), True)]
+    cases = [
+        ("open", voxgi.scenes.cornell_box(width=32, height=32), False),
+        ("closed, albedo 0", closed(True), True),
+        ("closed, no blocks, albedo 0", closed(False), True),
+    ]
     ress = (32, 64) if args.quick else (32, 64, 128)
     for name, scene, black in cases:
         for res in ress:
@@ -243,8 +247,9 @@ def cornell(args) -> None:
             if res == 128 and name != "open":
                 continue  # the trend is clear from 32 and 64
             t = time.perf_counter()
-            sol = voxgi.solve(vox, directions=8, progress=False, tol=1e-5,
-                              tuning=SolveTuning(shoot_directions=16))
+            sol = voxgi.solve(
+                vox, directions=8, progress=False, tol=1e-5, tuning=SolveTuning(shoot_directions=16)
+            )
             dt = time.perf_counter() - t
             e = sol.stats["energy"]
             em = np.array(e["emitted"])
@@ -288,8 +293,9 @@ def later(args) -> None:
     rows = []
     res = 48 if args.quick else 64
     vox = voxgi.voxelize(voxgi.scenes.cornell_box(width=32, height=32), resolution=res)
-    ref = voxgi.solve(vox, directions=22, progress=False, tol=1e-6,
-                      tuning=SolveTuning(shoot_directions=22))
+    ref = voxgi.solve(
+        vox, directions=22, progress=False, tol=1e-6, tuning=SolveTuning(shoot_directions=22)
+    )
     for R, Rl in ((22, None), (22, 22), (22, 11), (22, 8), (16, None), (11, None), (8, None)):
         t = time.perf_counter()
         sol = voxgi.solve(
@@ -421,12 +427,18 @@ def throughput(args) -> None:
         )
         print(rows[-1], flush=True)
         del tab
-    _table(rows, ["records", "threads", "algorithm", "seconds", "Mrays_s", "Mrays_s_per_thread",
-                  "table_GB"])
-    _write("throughput", rows, res=res,
-           note="one gathering iteration over all 2991 families (solve4: the record row plus "
-           "three times the replay row, over 4 iterations); a ray is one record meeting one "
-           "direction family in one iteration")
+    _table(
+        rows,
+        ["records", "threads", "algorithm", "seconds", "Mrays_s", "Mrays_s_per_thread", "table_GB"],
+    )
+    _write(
+        "throughput",
+        rows,
+        res=res,
+        note="one gathering iteration over all 2991 families (solve4: the record row plus "
+        "three times the replay row, over 4 iterations); a ray is one record meeting one "
+        "direction family in one iteration",
+    )
 
 
 def paper(args) -> None:
@@ -548,28 +560,50 @@ def energy(args) -> None:
         ratio = _send_ratio(vox, R, th) if res <= 128 else {}
         ratio = {names[int(k)]: v for k, v in ratio.items()}
         t = time.perf_counter()
-        sol = voxgi.solve(vox, directions=R, progress=False, tol=1e-5, threads=th,
-                          tuning=SolveTuning(shoot_directions=Rs, pair_cache=True))
+        sol = voxgi.solve(
+            vox,
+            directions=R,
+            progress=False,
+            tol=1e-5,
+            threads=th,
+            tuning=SolveTuning(shoot_directions=Rs, pair_cache=True),
+        )
         dt = time.perf_counter() - t
         e = sol.stats["energy"]
         em = np.array(e["emitted"])
-        rows.append({
-            "res": res,
-            "records": len(vox),
-            "R": R,
-            "Rs": Rs,
-            "iters": sol.bounces,
-            "imbalance_r": e["imbalance"][0],
-            "imbalance_g": e["imbalance"][1],
-            "imbalance_b": e["imbalance"][2],
-            "absorbed/emitted": float(e["absorbed"][0] / em[0]),
-            "escaping/emitted": float(e["escaping"][0] / em[0]),
-            "seconds": dt,
-            "send_ratio": ratio,
-        })
+        rows.append(
+            {
+                "res": res,
+                "records": len(vox),
+                "R": R,
+                "Rs": Rs,
+                "iters": sol.bounces,
+                "imbalance_r": e["imbalance"][0],
+                "imbalance_g": e["imbalance"][1],
+                "imbalance_b": e["imbalance"][2],
+                "absorbed/emitted": float(e["absorbed"][0] / em[0]),
+                "escaping/emitted": float(e["escaping"][0] / em[0]),
+                "seconds": dt,
+                "send_ratio": ratio,
+            }
+        )
         print(rows[-1], flush=True)
-    _table(rows, ["res", "records", "R", "Rs", "iters", "imbalance_r", "imbalance_g", "imbalance_b",
-                  "absorbed/emitted", "escaping/emitted", "seconds"])
+    _table(
+        rows,
+        [
+            "res",
+            "records",
+            "R",
+            "Rs",
+            "iters",
+            "imbalance_r",
+            "imbalance_g",
+            "imbalance_b",
+            "absorbed/emitted",
+            "escaping/emitted",
+            "seconds",
+        ],
+    )
     print("send ratio of the gathering (delivered / sent per unit radiosity; front records):")
     for r in rows:
         if r["send_ratio"]:
@@ -582,11 +616,17 @@ def energy(args) -> None:
     old = RESULTS / f"propagation_energy_R{R}.json"
     if old.exists() and not args.fresh:
         done = {r["res"] for r in rows}
-        rows = sorted([r for r in json.loads(old.read_text())["rows"] if r["res"] not in done] + rows,
-                      key=lambda r: r["res"])
-    _write(f"energy_R{R}", rows, threads=th,
-           note="open Cornell box; imbalance = (emitted - absorbed - escaping) / emitted, "
-           "escaping counted on the sender side")
+        rows = sorted(
+            [r for r in json.loads(old.read_text())["rows"] if r["res"] not in done] + rows,
+            key=lambda r: r["res"],
+        )
+    _write(
+        f"energy_R{R}",
+        rows,
+        threads=th,
+        note="open Cornell box; imbalance = (emitted - absorbed - escaping) / emitted, "
+        "escaping counted on the sender side",
+    )
 
 
 SECTIONS = {
@@ -606,13 +646,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sections", nargs="*", default=[], help=", ".join(SECTIONS))
     ap.add_argument("--quick", action="store_true", help="smaller cases")
-    ap.add_argument("--fresh", action="store_true",
-                    help="cap, energy: run every cell (default: keep the cells of earlier runs)")
+    ap.add_argument(
+        "--fresh",
+        action="store_true",
+        help="cap, energy: run every cell (default: keep the cells of earlier runs)",
+    )
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
-    ap.add_argument("--res", type=int, nargs="+",
-                    help="cap, energy: resolutions; furnace: the first one")
-    ap.add_argument("--radii", type=int, nargs="+",
-                    help="cap: direction radii; furnace: the first one; energy: R and Rs")
+    ap.add_argument(
+        "--res", type=int, nargs="+", help="cap, energy: resolutions; furnace: the first one"
+    )
+    ap.add_argument(
+        "--radii",
+        type=int,
+        nargs="+",
+        help="cap: direction radii; furnace: the first one; energy: R and Rs",
+    )
     args = ap.parse_args()
     bad = [s for s in args.sections if s not in SECTIONS and s not in EXTRA]
     if bad:

@@ -47,8 +47,9 @@ def local_solution(cornell_small):
 @pytest.fixture(scope="module")
 def client():
     distributed = pytest.importorskip("distributed")
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                       host="127.0.0.1", dashboard_address=_HTTP)
+    cluster = distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=_HTTP
+    )
     c = distributed.Client(cluster)
     yield c
     c.close()
@@ -59,8 +60,9 @@ def client():
 def client3():
     """Three thread workers in this process: a different worker count, cheap to start."""
     distributed = pytest.importorskip("distributed")
-    cluster = distributed.LocalCluster(n_workers=3, threads_per_worker=1, processes=False,
-                                       dashboard_address=_HTTP)
+    cluster = distributed.LocalCluster(
+        n_workers=3, threads_per_worker=1, processes=False, dashboard_address=_HTTP
+    )
     c = distributed.Client(cluster)
     yield c
     c.close()
@@ -104,9 +106,13 @@ def test_worker_memory_too_small_is_refused_before_work(cornell_small):
 
     need = estimate_worker_bytes(len(vox))
     # thread workers: the limit is only reported here, no nanny enforces it
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                       dashboard_address=_HTTP,
-                                       memory_limit=need // 2)
+    cluster = distributed.LocalCluster(
+        n_workers=1,
+        threads_per_worker=1,
+        processes=False,
+        dashboard_address=_HTTP,
+        memory_limit=need // 2,
+    )
     with distributed.Client(cluster) as c:
         with pytest.raises(MemoryError, match="memory_limit"):
             voxgi.solve(vox, directions=R, tuning=TUNED, progress=False, client=c)
@@ -133,8 +139,7 @@ def test_solve_equals_local(cornell_small, local_solution, client):
     assert d["bytes_scattered"] == 36 * len(vox)
 
 
-def test_solve_equals_local_three_workers_and_an_executor(cornell_small, local_solution,
-                                                          client3):
+def test_solve_equals_local_three_workers_and_an_executor(cornell_small, local_solution, client3):
     _, vox = cornell_small
     sol = voxgi.solve(vox, directions=R, tuning=TUNED, progress=False, client=client3)
     assert _rel(sol.radiosity, local_solution.radiosity) < 1e-6
@@ -233,8 +238,9 @@ def test_killed_worker_is_survived(cornell_small, local_solution, client):
 
 def test_render_equals_local(cornell_small, local_solution, client):
     scene, _ = cornell_small
-    kw = dict(max_frames=12, tol=2e-3, tuning=voxgi.RenderTuning(min_frames=2), seed=3,
-              progress=False)
+    kw = dict(
+        max_frames=12, tol=2e-3, tuning=voxgi.RenderTuning(min_frames=2), seed=3, progress=False
+    )
     ref = voxgi.render(scene, local_solution, threads=1, **kw)
     out = voxgi.render(scene, local_solution, client=client, **kw)
     # the same frames (same VPLs, offsets and gather seeds), accumulated in
@@ -248,8 +254,7 @@ def test_render_equals_local(cornell_small, local_solution, client):
 def test_progress_bar_counts_finished_tasks(cornell_small, client, capsys):
     """With progress=True the tasks of each distributed call feed a tqdm bar."""
     _, vox = cornell_small
-    voxgi.solve(vox, directions=R, tuning=TUNED, max_bounces=2, progress=True,
-                client=client)
+    voxgi.solve(vox, directions=R, tuning=TUNED, max_bounces=2, progress=True, client=client)
     err = capsys.readouterr().err
     # one task per worker (2) per call: the bar reaches 2/2 for the gather calls
     assert "gather tasks" in err

@@ -80,7 +80,7 @@ def find_cycle(edges: dict) -> list | None:
         stack.append(m)
         for n in sorted(edges.get(m, ())):
             if state.get(n) == 1:
-                return [*stack[stack.index(n):], n]
+                return [*stack[stack.index(n) :], n]
             if n not in state:
                 found = visit(n)
                 if found:
@@ -131,6 +131,8 @@ def test_a_cycle_is_found(tmp_path):
     (pkg / "a.py").write_text("from .b import thing\n_hidden = 1\n")
     (pkg / "b.py").write_text("def thing():\n    from . import a\n    from .a import _hidden\n")
     edges, private = import_graph(pkg)
-    assert find_cycle(edges) in (["voxgi.a", "voxgi.b", "voxgi.a"],
-                                 ["voxgi.b", "voxgi.a", "voxgi.b"])
+    assert find_cycle(edges) in (
+        ["voxgi.a", "voxgi.b", "voxgi.a"],
+        ["voxgi.b", "voxgi.a", "voxgi.b"],
+    )
     assert private == [("voxgi.b", 3, "voxgi.a._hidden")]

@@ -45,7 +45,9 @@ def test_furnace_sphere(sphere32, rho):
     # uniform Le = 1, albedo rho: L = 1 / (1 - rho) everywhere (back records aside);
     # the error grows like rho δ / (1 - rho), δ the lost fraction (docs/design.md §5).
     vox = voxelset(sphere32, albedo=rho)
-    sol = voxgi.solve(vox, directions=8, progress=False, tol=1e-6, tuning=SolveTuning(shoot_directions=8))
+    sol = voxgi.solve(
+        vox, directions=8, progress=False, tol=1e-6, tuning=SolveTuning(shoot_directions=8)
+    )
     front = ~vox.back
     err = np.abs(sol.radiance[front] * (1 - rho) - 1)
     assert err.mean() < {0.3: 1e-3, 0.9: 6e-3}[rho]
@@ -64,7 +66,9 @@ def test_cap_sphere_and_acceleration(sphere32):
     # extrapolation gets there in a few dozen
     rho = 0.99
     vox = voxelset(sphere32, albedo=rho, emit_mask=_cap(sphere32))
-    sol = voxgi.solve(vox, directions=8, progress=False, tol=1e-5, tuning=SolveTuning(shoot_directions=8))
+    sol = voxgi.solve(
+        vox, directions=8, progress=False, tol=1e-5, tuning=SolveTuning(shoot_directions=8)
+    )
     assert sol.bounces <= 25
     assert sol.residuals[-1] * 99 < 1e-5
     front = ~vox.back
@@ -82,8 +86,9 @@ def test_coarser_later_bounces(sphere32):
     vox = voxelset(sphere32, albedo=0.7, emit_mask=_cap(sphere32))
     kw = dict(progress=False, tol=1e-6)
     fine = voxgi.solve(vox, directions=8, tuning=SolveTuning(shoot_directions=8), **kw)
-    later = voxgi.solve(vox, directions=8, **kw,
-                        tuning=SolveTuning(shoot_directions=8, later_directions=3))
+    later = voxgi.solve(
+        vox, directions=8, **kw, tuning=SolveTuning(shoot_directions=8, later_directions=3)
+    )
     coarse = voxgi.solve(vox, directions=3, tuning=SolveTuning(shoot_directions=8), **kw)
     front = ~vox.back
     e_later = np.abs(later.radiosity[front] / fine.radiosity[front] - 1).mean()
@@ -96,8 +101,7 @@ def test_coarser_later_bounces(sphere32):
 
 def test_threads_do_not_change_the_answer(sphere32):
     vox = voxelset(sphere32, albedo=0.5, emit_mask=_cap(sphere32))
-    kw = dict(directions=5, tuning=SolveTuning(shoot_directions=5), progress=False,
-              max_bounces=3)
+    kw = dict(directions=5, tuning=SolveTuning(shoot_directions=5), progress=False, max_bounces=3)
     a = voxgi.solve(vox, threads=1, **kw)
     b = voxgi.solve(vox, threads=2, **kw)
     assert np.array_equal(a.radiosity, b.radiosity)
@@ -198,8 +202,9 @@ def test_open_box_energy_balance():
         & (np.abs(rec["point"][:, 2] - 10) < 3)
     )
     vox = voxelset(rec, albedo=0.7, emit_mask=lamp, emission=5.0)
-    sol = voxgi.solve(vox, directions=8, progress=False, tol=1e-7,
-                      tuning=SolveTuning(shoot_directions=8))
+    sol = voxgi.solve(
+        vox, directions=8, progress=False, tol=1e-7, tuning=SolveTuning(shoot_directions=8)
+    )
     e = sol.stats["energy"]
     assert e["escaping"][0] > 0.1 * e["emitted"][0]
     assert abs(e["imbalance"][0]) < 0.02
@@ -225,8 +230,9 @@ def test_direct_only_and_black_scene(sphere32):
 
 def test_save_load_roundtrip(tmp_path, sphere32):
     vox = voxelset(sphere32, albedo=0.5, emit_mask=_cap(sphere32))
-    sol = voxgi.solve(vox, directions=4, progress=False, max_bounces=2,
-                      tuning=SolveTuning(shoot_directions=4))
+    sol = voxgi.solve(
+        vox, directions=4, progress=False, max_bounces=2, tuning=SolveTuning(shoot_directions=4)
+    )
     p = sol.save(tmp_path / "sol")
     back = voxgi.Solution.load(p)
     assert np.array_equal(back.radiosity, sol.radiosity)
@@ -270,8 +276,9 @@ def test_bad_input(sphere32):
     before = vox.emission.copy()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        voxgi.solve(vox, directions=3, progress=False, max_bounces=1,
-                    tuning=SolveTuning(shoot_directions=3))
+        voxgi.solve(
+            vox, directions=3, progress=False, max_bounces=1, tuning=SolveTuning(shoot_directions=3)
+        )
     assert np.array_equal(before, vox.emission)
 
 
@@ -336,8 +343,9 @@ def test_cornell_box_energy_balance_converges():
     imb = []
     for res in (24, 48):
         vox = _voxelize(scene, res)
-        sol = voxgi.solve(vox, directions=6, progress=False, tol=1e-4,
-                          tuning=SolveTuning(shoot_directions=12))
+        sol = voxgi.solve(
+            vox, directions=6, progress=False, tol=1e-4, tuning=SolveTuning(shoot_directions=12)
+        )
         e = sol.stats["energy"]
         assert np.all(np.array(e["escaping"]) > 0)
         imb.append(e["imbalance"][0])
@@ -351,8 +359,9 @@ def test_cornell_box_energy_balance_to_1e3_at_res256():
     # Power emitted = absorbed + escaping through the open side, to 1e-3.
     scene = voxgi.scenes.cornell_box(width=32, height=32)
     vox = _voxelize(scene, 256)
-    sol = voxgi.solve(vox, directions=8, progress=False, tol=1e-5,
-                      tuning=SolveTuning(shoot_directions=16))
+    sol = voxgi.solve(
+        vox, directions=8, progress=False, tol=1e-5, tuning=SolveTuning(shoot_directions=16)
+    )
     e = sol.stats["energy"]
     assert np.all(np.array(e["escaping"]) > 0.2 * np.array(e["emitted"]))  # 25-36%
     assert np.all(np.abs(e["imbalance"]) < 1e-3)
@@ -377,8 +386,9 @@ def test_furnace_sphere_rho099_at_res96():
 @pytest.mark.parametrize("rho", [0.5])
 def test_furnace_box_with_inner_sphere(rho):
     vox = _voxelize(voxgi.scenes.furnace_box(albedo=rho, emission=1.0, inner=True), 32)
-    sol = voxgi.solve(vox, directions=8, progress=False, tol=1e-6,
-                      tuning=SolveTuning(shoot_directions=8))
+    sol = voxgi.solve(
+        vox, directions=8, progress=False, tol=1e-6, tuning=SolveTuning(shoot_directions=8)
+    )
     front = ~vox.back
     err = np.abs(sol.radiance[front] * (1 - rho) - 1)
     assert err.mean() < 5e-3
@@ -396,8 +406,13 @@ def test_furnace_box_closed_inner_sphere_rho09():
     assert vox.stats["closed_objects"] == [0, 1]  # both meshes found watertight
 
     def run(closed):
-        return voxgi.solve(vox, directions=8, progress=False, tol=1e-6,
-                           tuning=SolveTuning(shoot_directions=8, closed=closed))
+        return voxgi.solve(
+            vox,
+            directions=8,
+            progress=False,
+            tol=1e-6,
+            tuning=SolveTuning(shoot_directions=8, closed=closed),
+        )
 
     open_ = run(False)
     assert open_.stats["back_fraction"] > 1e-3  # the loss is visible in the stats
@@ -424,8 +439,9 @@ def test_furnace_sphere_closed_inner_box_edges_rho09():
     rho = 0.9
     vox = _voxelize(voxgi.scenes.furnace_sphere(albedo=rho, emission=1.0, inner=True), 32)
     assert vox.stats["closed_objects"] == [0, 1]
-    sol = voxgi.solve(vox, directions=8, progress=False, tol=1e-6,
-                      tuning=SolveTuning(shoot_directions=8))
+    sol = voxgi.solve(
+        vox, directions=8, progress=False, tol=1e-6, tuning=SolveTuning(shoot_directions=8)
+    )
     assert sol.stats["closed_back_records"] == int(vox.back.sum())
     front = ~vox.back
     err = sol.radiance[:, 0] * (1 - rho) - 1
@@ -494,8 +510,12 @@ class _PoisonedExecutor:
 
 def test_non_finite_iteration_stops_with_the_last_finite_iterate(sphere32):
     vox = voxelset(sphere32, albedo=0.9, emit_mask=_cap(sphere32))
-    kw = dict(directions=4, progress=False, tol=1e-8,
-              tuning=SolveTuning(shoot_directions=4, diagnostics=False))
+    kw = dict(
+        directions=4,
+        progress=False,
+        tol=1e-8,
+        tuning=SolveTuning(shoot_directions=4, diagnostics=False),
+    )
     clean = voxgi.radiosity.solve(vox, max_bounces=3, **kw)
     with pytest.warns(RuntimeWarning, match="not finite.*last finite iterate"):
         sol = voxgi.radiosity.solve(vox, executor=_PoisonedExecutor(at=4), **kw)
@@ -509,13 +529,15 @@ def test_memory_estimate_is_checked_before_the_solve(sphere32, monkeypatch):
     vox = voxelset(sphere32, albedo=0.5)
     est = voxgi.radiosity.solve_memory(vox, directions=4, threads=2)
     assert est["total"] == sum(v for k, v in est.items() if k != "total")
-    assert est["threads"] > 0 and est["records"] > 100 * len(vox)
+    assert est["threads"] > 0
+    assert est["records"] > 100 * len(vox)
     # more threads, more line tables
     assert voxgi.radiosity.solve_memory(vox, directions=4, threads=4)["threads"] > est["threads"]
     monkeypatch.setattr(voxgi.radiosity, "_available_memory", lambda: est["total"] // 2)
     with pytest.raises(MemoryError, match=r"need about [0-9.]+ GiB"):
-        voxgi.solve(vox, directions=4, threads=2, progress=False,
-                    tuning=SolveTuning(shoot_directions=4))
+        voxgi.solve(
+            vox, directions=4, threads=2, progress=False, tuning=SolveTuning(shoot_directions=4)
+        )
 
 
 def test_stand_ins_never_pair():
@@ -529,8 +551,9 @@ def test_stand_ins_never_pair():
     ijk = np.array([[0, 0, 0], [2, 0, 0], [3, 0, 0], [5, 0, 0]], np.int32)
     nsb = np.array([-0.2, 0.98, 0.0]) / np.hypot(0.2, 0.98)
     normal = np.array([[1, 0, 0], [1, 0, 0], nsb, [-1, 0, 0]], np.float32)
-    point = np.array([[0.5, 0.0, 0.5], [2.5, 0.9, 0.5], [3.5, 0.9, 0.5], [5.5, 0.5, 0.5]],
-                     np.float32)
+    point = np.array(
+        [[0.5, 0.0, 0.5], [2.5, 0.9, 0.5], [3.5, 0.9, 0.5], [5.5, 0.5, 0.5]], np.float32
+    )
     s = voxgi._core.LineSystem(ijk, normal, point, epsilon=0.02, history=16)
     fam, w, idx = np.array([[1, 0, 0]], np.int32), np.ones(1), np.zeros(1, np.int64)
     vals = np.zeros((4, 3), np.float32)

@@ -44,8 +44,10 @@ def test_high_albedo_box_furnace(rho):
     B = sol.radiosity[front]
     assert np.all(np.isfinite(sol.radiosity))
     err = float(np.abs(B * (1 - rho) / np.pi - 1).max())
-    print(f"box furnace rho={rho}: {sol.bounces} iterations, last residual "
-          f"{sol.residuals[-1] if sol.residuals else 0:.2e}, max rel error {err:.2e}")
+    print(
+        f"box furnace rho={rho}: {sol.bounces} iterations, last residual "
+        f"{sol.residuals[-1] if sol.residuals else 0:.2e}, max rel error {err:.2e}"
+    )
     assert err < 3e-4
     assert sol.bounces < 50  # converged, not stopped by max_iterations
     # the back side of a one-sided wall stays black: nothing leaks through
@@ -74,11 +76,17 @@ def test_high_albedo_sphere_converges_and_balances():
     e = sol.stats["energy"]
     imbalance = abs(e["imbalance"][0])
     front = ~vox.back
-    ratio = float((vox.area[front] * sol.radiosity[front, 0]).sum() / vox.area[front].sum()
-                  * (1 - rho) / np.pi)
-    print(f"sphere furnace rho=0.999: {sol.bounces} iterations, B/analytic {ratio:.3f}, "
-          f"escaping {e['escaping'][0] / e['emitted'][0]:.3f} of emitted, "
-          f"imbalance {imbalance:.2e}")
+    ratio = float(
+        (vox.area[front] * sol.radiosity[front, 0]).sum()
+        / vox.area[front].sum()
+        * (1 - rho)
+        / np.pi
+    )
+    print(
+        f"sphere furnace rho=0.999: {sol.bounces} iterations, B/analytic {ratio:.3f}, "
+        f"escaping {e['escaping'][0] / e['emitted'][0]:.3f} of emitted, "
+        f"imbalance {imbalance:.2e}"
+    )
     assert imbalance < 0.5
     assert 0.3 < ratio <= 1.0 + 1e-3  # energy is lost, never created
 
@@ -86,11 +94,18 @@ def test_high_albedo_sphere_converges_and_balances():
 # ------------------------------------------------------------ scale invariance
 def _scaled(scene, k):
     cam = scene.camera
-    out = voxgi.Scene(camera=cam.replace(eye=tuple(k * np.asarray(cam.eye)),
-                                         target=tuple(k * np.asarray(cam.target))))
+    out = voxgi.Scene(
+        camera=cam.replace(
+            eye=tuple(k * np.asarray(cam.eye)), target=tuple(k * np.asarray(cam.target))
+        )
+    )
     for o in scene.objects:
-        out.add(trimesh.Trimesh(o.vertices * k, o.faces, process=False), o.material, name=o.name,
-                two_sided=o.two_sided)
+        out.add(
+            trimesh.Trimesh(o.vertices * k, o.faces, process=False),
+            o.material,
+            name=o.name,
+            two_sided=o.two_sided,
+        )
     return out
 
 
@@ -149,8 +164,10 @@ def test_emission_twelve_orders_of_magnitude():
             continue
         drad = float(np.abs(sol.radiosity / le - ref[0]).max() / ref[0].max())
         dimg = float(np.abs(img / le - ref[1]).max() / ref[1].max())
-        print(f"Le={le:g} vs 1e-6: solution rel dev {drad:.2e}, image rel dev {dimg:.2e}, "
-              f"iterations {sol.bounces} vs {ref[2]}")
+        print(
+            f"Le={le:g} vs 1e-6: solution rel dev {drad:.2e}, image rel dev {dimg:.2e}, "
+            f"iterations {sol.bounces} vs {ref[2]}"
+        )
         assert drad < 1e-5
         assert dimg < 1e-5
 
@@ -159,8 +176,9 @@ def test_emitters_twelve_orders_apart_in_one_scene():
     """Two emitters 1e-6 and 1e6 in one scene: the dim one's own emission is
     still seen exactly in the image (it is added per hit, not through the
     float32 solution), and nothing overflows."""
-    s = voxgi.Scene(camera=voxgi.Camera(eye=(3, 0, 0), target=(0, 0, 0), width=16, height=16,
-                                         fov=60))
+    s = voxgi.Scene(
+        camera=voxgi.Camera(eye=(3, 0, 0), target=(0, 0, 0), width=16, height=16, fov=60)
+    )
     s.add(_quad(0.5, 1), voxgi.Material(albedo=0.5, emission=1e-6), name="dim")
     s.add(_quad(-0.5, 1), voxgi.Material(albedo=0.5, emission=1e6), name="bright")
     vox = voxgi.voxelize(s, resolution=16, progress=False)
@@ -250,9 +268,11 @@ def test_many_orientations_share_voxels():
     wall_err = float(np.abs(r[walls] - 1).max())
     w = vox.area[urchin]
     u_mean = float((w * r[urchin]).sum() / w.sum())
-    print(f"many orientations: {len(vox)} records, max {counts.max()} records in one voxel; "
-          f"walls max rel error {wall_err:.2e}; crowded records B/analytic {u_mean:.3f} "
-          f"(area-weighted), worst {r[urchin].min():.3f}")
+    print(
+        f"many orientations: {len(vox)} records, max {counts.max()} records in one voxel; "
+        f"walls max rel error {wall_err:.2e}; crowded records B/analytic {u_mean:.3f} "
+        f"(area-weighted), worst {r[urchin].min():.3f}"
+    )
     assert counts.max() >= 8
     assert wall_err < 0.02
     assert 0.6 < r[urchin].min()
@@ -280,8 +300,10 @@ def test_degenerate_duplicate_nonmanifold_triangles():
     # a duplicate of the box (every face twice, coincident)
     s.add(trimesh.Trimesh(o.vertices, o.faces, process=False), mat, name="dup")
     # a fin: three triangles sharing one edge (non-manifold), plus a degenerate one
-    v = np.array([[0, -0.3, 0], [0, 0.3, 0], [0.3, 0, 0.05], [-0.3, 0, 0.05], [0, 0, -0.3],
-                  [0.1, 0.1, 0.1]], float)
+    v = np.array(
+        [[0, -0.3, 0], [0, 0.3, 0], [0.3, 0, 0.05], [-0.3, 0, 0.05], [0, 0, -0.3], [0.1, 0.1, 0.1]],
+        float,
+    )
     f = np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4], [5, 5, 5]])
     with pytest.warns(UserWarning, match="degenerate"):
         s.add(trimesh.Trimesh(v, f, process=False), mat, name="fin", two_sided=True)
@@ -293,8 +315,10 @@ def test_degenerate_duplicate_nonmanifold_triangles():
     err = float(np.abs(r - 1).max())
     w = vox.area[front]
     mean_err = float(abs((w * r).sum() / w.sum() - 1))
-    print(f"degenerate+duplicate+non-manifold: {len(vox)} records, max rel error {err:.2e}, "
-          f"area-weighted {mean_err:.2e}")
+    print(
+        f"degenerate+duplicate+non-manifold: {len(vox)} records, max rel error {err:.2e}, "
+        f"area-weighted {mean_err:.2e}"
+    )
     assert np.all(np.isfinite(sol.radiosity))
     assert err < 0.06
     assert mean_err < 5e-3
@@ -327,10 +351,23 @@ def test_single_record():
     s = voxgi.scenes.furnace_box(albedo=0.5, emission=2.0)
     vox = voxgi.voxelize(s, resolution=4, progress=False)
     k = int(np.flatnonzero(~vox.back)[0])
-    one = dataclasses.replace(vox, **{f: getattr(vox, f)[k:k + 1] for f in
-                                      ("ijk", "normal", "area", "albedo", "emission", "centroid",
-                                       "object_id", "back")},
-                              side=None if vox.side is None else vox.side[k:k + 1])
+    one = dataclasses.replace(
+        vox,
+        **{
+            f: getattr(vox, f)[k : k + 1]
+            for f in (
+                "ijk",
+                "normal",
+                "area",
+                "albedo",
+                "emission",
+                "centroid",
+                "object_id",
+                "back",
+            )
+        },
+        side=None if vox.side is None else vox.side[k : k + 1],
+    )
     sol = voxgi.solve(one, **FAST)
     print(f"single record: B {sol.radiosity[0].tolist()} (pi Le = {2 * np.pi:.6f})")
     np.testing.assert_allclose(sol.radiosity[0], 2 * np.pi, rtol=1e-6)
@@ -360,8 +397,10 @@ def test_ten_million_records_memory_within_estimate():
         warnings.simplefilter("ignore")
         vox = voxgi.voxelize(s, resolution=res, progress=False)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 - rss0
-    print(f"10M records: {len(vox):,} records, peak RSS growth {peak / 2**30:.2f} GiB, "
-          f"estimate {est['bytes'] / 2**30:.2f} GiB, records bound {est['records']:,}")
+    print(
+        f"10M records: {len(vox):,} records, peak RSS growth {peak / 2**30:.2f} GiB, "
+        f"estimate {est['bytes'] / 2**30:.2f} GiB, records bound {est['records']:,}"
+    )
     assert len(vox) >= 10_000_000
     assert len(vox) <= est["records"]
     assert peak <= est["bytes"]

@@ -80,8 +80,8 @@ class _Tracer:
         from embreex.mesh_construction import TriangleMesh
 
         tri = scene.triangles()
-        self.tris = tri["triangles"]                       # (F, 3, 3) float64
-        self.obj = tri["object"]                           # (F,) int32
+        self.tris = tri["triangles"]  # (F, 3, 3) float64
+        self.obj = tri["object"]  # (F,) int32
         e1 = self.tris[:, 1] - self.tris[:, 0]
         e2 = self.tris[:, 2] - self.tris[:, 0]
         n = np.cross(e1, e2)
@@ -116,9 +116,11 @@ class _Tracer:
         n = len(org)
         if n == 0:
             return np.zeros(0, np.int32)
+
         def one(a, b):
             kw = {} if dists is None else {"dists": dists[a:b]}
             return np.asarray(self.embree.run(org[a:b], dirs[a:b], query=query, **kw))
+
         if self._pool is None or n < 4096:
             return one(0, n)
         cuts = np.linspace(0, n, self.threads + 1).astype(np.int64)
@@ -189,7 +191,7 @@ def frame_samples(frame: int, seed: int = 0) -> tuple[tuple[float, float], tuple
     s1, s2 = (int(x) for x in rng.integers(0, 1 << 32, size=2, dtype=np.uint64))
     rot = rng.random(2)
     i = int(frame)
-    off = ((_vdc2(i) ^ s1) / 2.0 ** 32, (_sobol2(i) ^ s2) / 2.0 ** 32)
+    off = ((_vdc2(i) ^ s1) / 2.0**32, (_sobol2(i) ^ s2) / 2.0**32)
     lu = (_radical_inverse(i + 1, 3) + rot[0]) % 1.0
     lv = (_radical_inverse(i + 1, 5) + rot[1]) % 1.0
     return off, _concentric_disc(lu, lv)
@@ -219,8 +221,11 @@ def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.nda
     aspect = cam.width / cam.height
     sx = (2.0 * (np.arange(cam.width) + offset[0]) / cam.width - 1.0) * th * aspect
     sy = (1.0 - 2.0 * (np.arange(cam.height) + offset[1]) / cam.height) * th
-    d = (fwd[None, None, :] + sx[None, :, None] * right[None, None, :]
-         + sy[:, None, None] * up[None, None, :]).reshape(-1, 3)
+    d = (
+        fwd[None, None, :]
+        + sx[None, :, None] * right[None, None, :]
+        + sy[:, None, None] * up[None, None, :]
+    ).reshape(-1, 3)
     if cam.aperture > 0.0:
         lo = eye + cam.aperture * (lens[0] * right + lens[1] * up)
         d = eye + cam.focus * d - lo  # d·fwd = 1, so eye + focus·d lies on the focal plane
@@ -236,6 +241,7 @@ def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.nda
 # --------------------------------------------------------------------------
 def _morton(ijk: np.ndarray) -> np.ndarray:
     """30-bit interleaved (Morton) keys of voxel coordinates (10 bits each)."""
+
     def spread(v):
         v = (v.astype(np.int64) - v.min()) & 0x3FF
         v = (v | (v << 16)) & 0x030000FF
@@ -243,6 +249,7 @@ def _morton(ijk: np.ndarray) -> np.ndarray:
         v = (v | (v << 4)) & 0x030C30C3
         v = (v | (v << 2)) & 0x09249249
         return v
+
     return spread(ijk[:, 0]) | (spread(ijk[:, 1]) << 1) | (spread(ijk[:, 2]) << 2)
 
 
@@ -288,8 +295,15 @@ class VPLSampler:
     pdf : {"power", "area"}
     """
 
-    def __init__(self, sol, vpls_per_frame: int = 16, seed: int = 0,
-                 emitter_share: float | None = None, mis: bool = False, pdf: str = "power"):
+    def __init__(
+        self,
+        sol,
+        vpls_per_frame: int = 16,
+        seed: int = 0,
+        emitter_share: float | None = None,
+        mis: bool = False,
+        pdf: str = "power",
+    ):
         if pdf not in ("power", "area"):
             raise ValueError(f"pdf: expected 'power' or 'area', got {pdf!r}")
         vox = sol.vox
@@ -336,8 +350,9 @@ class VPLSampler:
         self.mis = bool(mis) and self.counts[1] > 0
         #: (N,) float32 n_i p(y) of every record (0 outside the non-emitter set):
         #: the VPL side of the MIS weights, for VPLs and gather hits alike.
-        self.record_pa = (self.counts[1] * dens_i).astype(np.float32) if self.mis else \
-            np.zeros(n, np.float32)
+        self.record_pa = (
+            (self.counts[1] * dens_i).astype(np.float32) if self.mis else np.zeros(n, np.float32)
+        )
         self.pos = np.ascontiguousarray(vox.centroid, dtype=np.float64)
         self.normal = np.ascontiguousarray(vox.normal, dtype=np.float32)
         self.area32 = area.astype(np.float32)
@@ -384,8 +399,17 @@ class VPLSampler:
 class _FrameShader:
     """Everything a frame needs that does not change between frames."""
 
-    def __init__(self, scene: Scene, cam: Camera, tracer: _Tracer, sampler: VPLSampler,
-                 eps: float, threads: int, gather: int = 0, seed: int = 0):
+    def __init__(
+        self,
+        scene: Scene,
+        cam: Camera,
+        tracer: _Tracer,
+        sampler: VPLSampler,
+        eps: float,
+        threads: int,
+        gather: int = 0,
+        seed: int = 0,
+    ):
         self.scene, self.cam, self.tracer, self.sampler = scene, cam, tracer, sampler
         self.eps, self.threads = float(eps), int(threads)
         self.gather = int(gather) if sampler.mis else 0
@@ -408,9 +432,12 @@ class _FrameShader:
         self.seconds = {"primary": 0.0, "shade": 0.0, "shadow": 0.0, "gather": 0.0}
         if self.gather:
             self._grid = self._record_grid(sampler)
-            self._tri = {"tri_v": tracer.tris, "tri_object": tracer.obj,
-                         "obj_two_sided": self.two_sided.astype(np.uint8),
-                         "obj_emitter": np.array([o.material.is_emitter for o in objs], np.uint8)}
+            self._tri = {
+                "tri_v": tracer.tris,
+                "tri_object": tracer.obj,
+                "obj_two_sided": self.two_sided.astype(np.uint8),
+                "obj_emitter": np.array([o.material.is_emitter for o in objs], np.uint8),
+            }
 
     @staticmethod
     def _record_grid(sampler: VPLSampler) -> dict:
@@ -439,7 +466,8 @@ class _FrameShader:
             "rec_object": np.ascontiguousarray(vox.object_id, dtype=np.int32),
             "rec_radiance": np.ascontiguousarray(sampler.B / math.pi, dtype=np.float32),
             "rec_pa": sampler.record_pa,
-            "grid_dims": dims.astype(np.int64), "grid_lo": lo.astype(np.int64),
+            "grid_dims": dims.astype(np.int64),
+            "grid_lo": lo.astype(np.int64),
             "grid_origin": np.asarray(vox.origin, dtype=np.float64).reshape(3),
             "pitch": float(vox.pitch),
         }
@@ -490,8 +518,14 @@ class _FrameShader:
         ng_out = np.zeros((P, 3), np.float32)
         ng_out[hit] = ngf
         wo = np.ascontiguousarray(-dirs, dtype=np.float32)
-        return {"pos": pos, "normal": n_out, "ng": ng_out, "wo": wo, "material": mat,
-                "emission": le}
+        return {
+            "pos": pos,
+            "normal": n_out,
+            "ng": ng_out,
+            "wo": wo,
+            "material": mat,
+            "emission": le,
+        }
 
     def shade(self, h: dict, vpl: dict) -> np.ndarray:
         """(P, 3) float32 radiance: emission seen + VPL estimate of the reflected light."""
@@ -504,20 +538,43 @@ class _FrameShader:
         if self._buffers is None or len(self._buffers[1]) < cap:
             # Reused by every frame: fresh pages for ~40 bytes x P x K rays
             # each frame cost as much as the shading itself.
-            self._buffers = (np.zeros(self.tile, np.int64), np.zeros((cap, 3), np.float32),
-                             np.zeros((cap, 3), np.float32), np.zeros(cap, np.float32),
-                             np.zeros((cap, 3), np.float32))
+            self._buffers = (
+                np.zeros(self.tile, np.int64),
+                np.zeros((cap, 3), np.float32),
+                np.zeros((cap, 3), np.float32),
+                np.zeros(cap, np.float32),
+                np.zeros((cap, 3), np.float32),
+            )
         cnt_buf, org_buf, dir_buf, len_buf, con_buf = self._buffers
         for a in range(0, P, self.tile):
             b = min(P, a + self.tile)
             t0 = time.perf_counter()
             count = cnt_buf[: b - a]
             n = _core.vpl_prepare(
-                h["pos"][a:b], h["normal"][a:b], h["ng"][a:b], h["wo"][a:b], h["material"][a:b],
-                self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv, self.mat_glossy,
-                vpl["pos"], vpl["normal"], vpl["weight"], vpl["area"], vpl["pa"],
-                float(self.gather), self.eps,
-                count, org_buf, dir_buf, len_buf, con_buf, self.threads)
+                h["pos"][a:b],
+                h["normal"][a:b],
+                h["ng"][a:b],
+                h["wo"][a:b],
+                h["material"][a:b],
+                self.mat_albedo,
+                self.mat_rs,
+                self.mat_nu,
+                self.mat_nv,
+                self.mat_glossy,
+                vpl["pos"],
+                vpl["normal"],
+                vpl["weight"],
+                vpl["area"],
+                vpl["pa"],
+                float(self.gather),
+                self.eps,
+                count,
+                org_buf,
+                dir_buf,
+                len_buf,
+                con_buf,
+                self.threads,
+            )
             org, dirs, length, contrib = org_buf[:n], dir_buf[:n], len_buf[:n], con_buf[:n]
             t1 = time.perf_counter()
             occ = self.tracer.occluded(org, dirs, length)
@@ -536,21 +593,51 @@ class _FrameShader:
         t0 = time.perf_counter()
         cap = self.tile * self.gather
         if self._gbuffers is None:
-            self._gbuffers = (np.zeros(self.tile, np.int64), np.zeros((cap, 3), np.float32),
-                              np.zeros((cap, 3), np.float32))
+            self._gbuffers = (
+                np.zeros(self.tile, np.int64),
+                np.zeros((cap, 3), np.float32),
+                np.zeros((cap, 3), np.float32),
+            )
         cnt_buf, org_buf, dir_buf = self._gbuffers
         count = cnt_buf[: b - a]
         hh = {k: h[k][a:b] for k in ("pos", "normal", "ng", "wo", "material")}
-        n = _core.gather_rays(hh["pos"], hh["normal"], hh["ng"], hh["wo"], hh["material"],
-                              self.gather, self.seed, self._frame, self.eps, count, org_buf,
-                              dir_buf, self.threads)
+        n = _core.gather_rays(
+            hh["pos"],
+            hh["normal"],
+            hh["ng"],
+            hh["wo"],
+            hh["material"],
+            self.gather,
+            self.seed,
+            self._frame,
+            self.eps,
+            count,
+            org_buf,
+            dir_buf,
+            self.threads,
+        )
         prim = self.tracer.intersect(org_buf[:n], dir_buf[:n])
         self.gather_rays += n
-        _core.gather_shade(hh["pos"], hh["normal"], hh["ng"], hh["wo"], hh["material"],
-                           self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv,
-                           self.mat_glossy, float(self.gather),
-                           **self._tri, **self._grid, ray_count=count, ray_dir=dir_buf[:n],
-                           prim=prim, out=out[a:b], threads=self.threads)
+        _core.gather_shade(
+            hh["pos"],
+            hh["normal"],
+            hh["ng"],
+            hh["wo"],
+            hh["material"],
+            self.mat_albedo,
+            self.mat_rs,
+            self.mat_nu,
+            self.mat_nv,
+            self.mat_glossy,
+            float(self.gather),
+            **self._tri,
+            **self._grid,
+            ray_count=count,
+            ray_dir=dir_buf[:n],
+            prim=prim,
+            out=out[a:b],
+            threads=self.threads,
+        )
         self.seconds["gather"] += time.perf_counter() - t0
 
     def frame(self, f: int, seed: int) -> np.ndarray:
@@ -616,8 +703,9 @@ class FrameShaderSpec:
         ``primary_rays``, ``shadow_rays``, ``gather_rays``, ``seconds``, and
         ``close()``."""
         tracer = _Tracer(self.scene, threads)
-        return _FrameShader(self.scene, self.camera, tracer, self.sampler, self.eps, threads,
-                            self.gather, self.seed)
+        return _FrameShader(
+            self.scene, self.camera, tracer, self.sampler, self.eps, threads, self.gather, self.seed
+        )
 
 
 class FrameExecutor(Protocol):
@@ -704,15 +792,18 @@ def _available_memory() -> int:
         return 1 << 32
 
 
-def _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads,
-                  tuning) -> _RenderSettings:
+def _check_render(
+    scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads, tuning
+) -> _RenderSettings:
     """Image checks: scene, solution, camera and numbers; TypeError/ValueError naming them."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
     scene.check_nonempty()
     if sol is None:
-        raise TypeError("sol: expected a voxgi.Solution (voxgi.render, the pipeline's "
-                        "render, solves the scene first when given none)")
+        raise TypeError(
+            "sol: expected a voxgi.Solution (voxgi.render, the pipeline's "
+            "render, solves the scene first when given none)"
+        )
     cam = camera if camera is not None else scene.camera
     if cam is None:
         raise ValueError("render: the scene has no camera (set scene.camera or pass camera=)")
@@ -729,8 +820,9 @@ def _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, thr
         tol=1e-3 if tol is None else tol,
         seed=_validate.integer(seed, "seed"),
         min_frames=_validate.integer(t.min_frames, "min_frames", low=2),
-        emitter_share=_validate.real(t.emitter_share, "emitter_share", low=0.0, high=1.0,
-                                     allow_none=True),
+        emitter_share=_validate.real(
+            t.emitter_share, "emitter_share", low=0.0, high=1.0, allow_none=True
+        ),
         gather=_validate.integer(t.gather, "gather", low=0, high=4096),
         vpl_pdf=t.vpl_pdf,
         threads=_validate.threads(threads),
@@ -744,20 +836,25 @@ def _check_image_memory(cam: Camera) -> None:
     need = 1000 * cam.width * cam.height + (32 << 20)
     budget = _available_memory() // 2
     if need > budget:
-        raise ValueError(f"render: a {cam.width}x{cam.height} image needs about {need:,} bytes "
-                         f"(~1000 bytes per pixel), over the budget of {budget:,} bytes (half "
-                         "the available memory); lower Camera.width/height")
+        raise ValueError(
+            f"render: a {cam.width}x{cam.height} image needs about {need:,} bytes "
+            f"(~1000 bytes per pixel), over the budget of {budget:,} bytes (half "
+            "the available memory); lower Camera.width/height"
+        )
 
 
-def _check_solution(scene: Scene, sol) -> None:
-    """The solution is a :class:`Solution` of this scene, one radiosity per record."""
+def _check_solution(scene: Scene, sol, cam: Camera) -> None:
+    """The image fits in memory; the solution is a :class:`Solution` of this
+    scene, one radiosity per record."""
+    _check_image_memory(cam)
     if not isinstance(sol, Solution):
         raise TypeError(f"sol: expected voxgi.Solution or None, got {type(sol).__name__}")
     fp = getattr(sol.vox, "scene_fingerprint", "")
     if fp != scene.fingerprint():
         raise ValueError(
             f"sol: this solution was computed for another scene (fingerprint {fp!r}, this "
-            f"scene's is {scene.fingerprint()!r}); solve this scene or pass sol=None")
+            f"scene's is {scene.fingerprint()!r}); solve this scene or pass sol=None"
+        )
     n = len(sol.vox)
     r = np.asarray(sol.radiosity)
     if r.shape != (n, 3):
@@ -772,14 +869,16 @@ def _check_executor(executor) -> FrameExecutor:
         raise TypeError(
             f"executor: expected an object with a frames(spec, max_frames, threads=...) method "
             f"(voxgi.display.FrameExecutor) or None, got {type(executor).__name__}; "
-            "voxgi.render also takes a dask.distributed.Client as client=")
+            "voxgi.render also takes a dask.distributed.Client as client="
+        )
     return executor
 
 
 def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
     """The VPL sampler and the shadow-ray offset of this scene and solution."""
-    sampler = VPLSampler(sol, opt.K, opt.seed, opt.emitter_share, mis=opt.gather > 0,
-                         pdf=opt.vpl_pdf)
+    sampler = VPLSampler(
+        sol, opt.K, opt.seed, opt.emitter_share, mis=opt.gather > 0, pdf=opt.vpl_pdf
+    )
     diag = float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
     # Shadow-ray offsets: well above float32 rounding of the coordinates
     # (~1e-7 relative) and well below any feature of a sensible scene.
@@ -796,8 +895,10 @@ def _skipped(spec: FrameShaderSpec) -> list[str]:
     if sampler.counts[1] == 0:
         skipped.append("non-emitter VPLs: no reflecting record with power")
     if sampler.skipped_records:
-        skipped.append(f"{sampler.skipped_records} records with zero radiosity or area "
-                       "(back records) are never VPLs")
+        skipped.append(
+            f"{sampler.skipped_records} records with zero radiosity or area "
+            "(back records) are never VPLs"
+        )
     return skipped
 
 
@@ -844,8 +945,9 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
     cam = opt.cam
     acc = _Mean(np.zeros((cam.height * cam.width, 3)), np.zeros((cam.height * cam.width, 3)))
     interrupted = False
-    bar = tqdm(total=opt.max_frames, disable=not progress, desc="display", unit="frame",
-               leave=False)
+    bar = tqdm(
+        total=opt.max_frames, disable=not progress, desc="display", unit="frame", leave=False
+    )
     try:
         for f in range(opt.max_frames):
             acc.add(source.frame(f, opt.seed).astype(np.float64))
@@ -882,10 +984,20 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
     }
 
 
-def render(scene, sol, vpls_per_frame: int = 16, max_frames: int | None = None,
-           tol: float | None = None, seed: int = 0, progress: bool = True,
-           threads: int | None = None, executor: FrameExecutor | None = None, *,
-           camera: Camera | None = None, tuning: RenderTuning | None = None) -> RenderResult:
+def render(
+    scene,
+    sol,
+    vpls_per_frame: int = 16,
+    max_frames: int | None = None,
+    tol: float | None = None,
+    seed: int = 0,
+    progress: bool = True,
+    threads: int | None = None,
+    executor: FrameExecutor | None = None,
+    *,
+    camera: Camera | None = None,
+    tuning: RenderTuning | None = None,
+) -> RenderResult:
     r"""Render ``scene`` from its camera using the voxel solution ``sol``.
 
     Each pixel's primary ray (Embree) hits a point x; its radiance is
@@ -895,11 +1007,8 @@ def render(scene, sol, vpls_per_frame: int = 16, max_frames: int | None = None,
     .. math:: L(x) = L_e(x) + \int f(x, \omega_i, \omega_o)\, \frac{B(y)}{\pi}\,
               \frac{\cos\theta_x \cos\theta_y}{r^2 + \Delta A(y)/\pi} V(x, y)\, dA(y),
 
-    estimated with a few VPLs per frame (drawn in proportion to power, the
-    geometry term bounded by the disc each VPL stands for) and gather rays
-    MIS-combined with the non-emitter VPLs, frames averaged until the
-    estimated noise falls under ``tol``. In a furnace every pixel is
-    ``Le / (1 − ρ)``.
+    estimated with a few VPLs per frame and gather rays MIS-combined with
+    them, frames averaged until the estimated noise falls under ``tol``.
 
     Parameters
     ----------
@@ -912,18 +1021,14 @@ def render(scene, sol, vpls_per_frame: int = 16, max_frames: int | None = None,
     max_frames : int or None
         At most this many frames (default 256).
     tol : float or None
-        Stop once the estimated relMSE of the remaining noise falls under
-        ``tol`` (default 1e-3; :func:`voxgi.metrics.rel_mse`). 0 runs
-        ``max_frames``.
+        Bound on the estimated relMSE of the remaining noise (default 1e-3; 0:
+        run ``max_frames``).
     seed : int
         Seeds the VPL, sub-pixel and lens sequences.
-    progress : bool
-        Show a tqdm progress bar.
-    threads : int or None
-        Worker threads (None: all cores).
+    progress, threads
+        A tqdm progress bar; worker threads (None: all cores).
     executor : FrameExecutor or None
-        Where the frames are computed (None: here). The accumulation and the
-        stopping rule stay here, so the image equals the local one.
+        Where the frames are computed (None: here); the image is the local one.
     camera : Camera, optional
         Overrides ``scene.camera``.
     tuning : RenderTuning or None
@@ -933,33 +1038,29 @@ def render(scene, sol, vpls_per_frame: int = 16, max_frames: int | None = None,
     -------
     RenderResult
         ``image`` (H, W, 3) float32 linear radiance, ``image[0, 0]`` top-left;
-        ``stderr``; ``frames``; ``stats`` with ``seconds`` per phase, ray
-        counts, ``vpls`` (per pixel), ``est_rel_mse``, ``skipped`` and
-        ``interrupted`` (Ctrl-C stops after the current frame).
+        ``stderr``; ``frames``; ``stats`` (seconds, ray counts, ``est_rel_mse``,
+        ``skipped``, ``interrupted``: Ctrl-C stops after the current frame).
 
     Raises
     ------
     ValueError, TypeError
-        No camera, a solution of another scene, bad numbers or types, an
-        image too large for the memory available.
+        No camera, a solution of another scene, bad arguments, too large an image.
     """
     t_start = time.perf_counter()
-    opt = _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads,
-                        tuning)
+    opt = _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads, tuning)
     executor = _check_executor(executor)
-    _check_image_memory(opt.cam)
-    _check_solution(scene, sol)
+    _check_solution(scene, sol, opt.cam)
     t0 = time.perf_counter()
     spec = _shader_spec(scene, sol, opt)
     source = executor.frames(spec, opt.max_frames, threads=opt.threads)
     seconds = {"setup": time.perf_counter() - t0}
     skipped = _skipped(spec)
     acc, interrupted = _progressive_mean(source, opt, progress)
-    cam = opt.cam
-    image = acc.mean.reshape(cam.height, cam.width, 3).astype(np.float32)
+    image = acc.mean.reshape(opt.cam.height, opt.cam.width, 3).astype(np.float32)
     seconds.update(source.seconds)
     seconds["total"] = time.perf_counter() - t_start
     seconds["display"] = seconds["total"]
     stats = _render_stats(spec, source, acc, opt, skipped, interrupted, seconds)
-    return RenderResult(image=image, frames=acc.frames, stderr=acc.stderr(image.shape),
-                        stats=stats, solution=sol)
+    return RenderResult(
+        image=image, frames=acc.frames, stderr=acc.stderr(image.shape), stats=stats, solution=sol
+    )

@@ -27,8 +27,9 @@ shader. Frames are independent (each has its own VPL subset, sub-pixel
 offset and gather-ray seed), so whole frames are the tasks: the
 :class:`voxgi.display.FrameShaderSpec` (scene, camera, VPL sampler) goes to
 every worker once, each worker builds its shader once, frames are computed
-ahead on the workers and handed back to the render loop in frame order. The accumulation and the stopping rule stay in
-:func:`voxgi.render`, so with the same seed the image is the local one.
+ahead on the workers and handed back to the render loop in frame order. The
+accumulation and the stopping rule stay in :func:`voxgi.display.render`, so
+with the same seed the image is the local one.
 """
 
 from __future__ import annotations
@@ -74,7 +75,8 @@ def _require_distributed():
     except ImportError as exc:
         raise ImportError(
             "client=: distributed solving and rendering need Dask's distributed scheduler, "
-            f"which is not installed; install the extra with: {_EXTRA_HINT}") from exc
+            f"which is not installed; install the extra with: {_EXTRA_HINT}"
+        ) from exc
     return distributed
 
 
@@ -92,8 +94,10 @@ def check_client(client):
     """
     distributed = _require_distributed()
     if not isinstance(client, distributed.Client):
-        raise TypeError(f"client: expected a dask.distributed.Client, an executor or None, got "
-                        f"{type(client).__name__}")
+        raise TypeError(
+            f"client: expected a dask.distributed.Client, an executor or None, got "
+            f"{type(client).__name__}"
+        )
     return client
 
 
@@ -143,8 +147,9 @@ class DaskExecutor:
 
 
 def _workers(client) -> dict:
-    info = client.scheduler_info(n_workers=-1) if _takes_n_workers(client) else \
-        client.scheduler_info()
+    info = (
+        client.scheduler_info(n_workers=-1) if _takes_n_workers(client) else client.scheduler_info()
+    )
     workers = info.get("workers", {})
     if not workers:
         raise ValueError("client: the cluster has no worker (start some, or wait for them)")
@@ -237,15 +242,23 @@ def _system(records: LineRecords, key):
 def _task_gather(records, key, families, weights, values, want_vis, stand_in=None):
     s = _system(records, key)
     idx = np.arange(len(families), dtype=np.int64)
-    return s.gather(families, weights, values, idx, want_vis, _worker_threads(),
-                    stand_in=stand_in)
+    return s.gather(families, weights, values, idx, want_vis, _worker_threads(), stand_in=stand_in)
 
 
-def _task_shoot(records, key, emitters, coverage, families, weights, values, stand_in=None,
-                sil=None):
+def _task_shoot(
+    records, key, emitters, coverage, families, weights, values, stand_in=None, sil=None
+):
     s = _system(records, key)
-    return s.shoot(emitters, families, weights, values, _worker_threads(), coverage=coverage,
-                   stand_in=stand_in, **(sil or {}))
+    return s.shoot(
+        emitters,
+        families,
+        weights,
+        values,
+        _worker_threads(),
+        coverage=coverage,
+        stand_in=stand_in,
+        **(sil or {}),
+    )
 
 
 def _task_normalisation(records, key, families, weights):
@@ -255,11 +268,13 @@ def _task_normalisation(records, key, families, weights):
 def _task_frame(spec: FrameShaderSpec, key, f, seed):
     shader = _cached(("frame", key), lambda: spec.build(_worker_threads()))
     with _FRAME_LOCK:
-        before = (shader.primary_rays, shader.shadow_rays, shader.gather_rays,
-                  dict(shader.seconds))
+        before = (shader.primary_rays, shader.shadow_rays, shader.gather_rays, dict(shader.seconds))
         x = shader.frame(f, seed)
-        counts = (shader.primary_rays - before[0], shader.shadow_rays - before[1],
-                  shader.gather_rays - before[2])
+        counts = (
+            shader.primary_rays - before[0],
+            shader.shadow_rays - before[1],
+            shader.gather_rays - before[2],
+        )
         secs = {k: v - before[3].get(k, 0.0) for k, v in shader.seconds.items()}
     return x, counts, secs
 
@@ -275,8 +290,14 @@ class _Farm:
         self.workers = sorted(_workers(client))
         self.progress = bool(progress)
         self.desc = desc
-        self.stats = {"workers": len(self.workers), "tasks": 0, "bytes_scattered": 0,
-                      "bytes_sent": 0, "bytes_received": 0, "seconds_waiting": 0.0}
+        self.stats = {
+            "workers": len(self.workers),
+            "tasks": 0,
+            "bytes_scattered": 0,
+            "bytes_sent": 0,
+            "bytes_received": 0,
+            "seconds_waiting": 0.0,
+        }
 
     def _check_memory(self, need: int, what: str) -> None:
         """Refuse before any work when a worker's memory_limit is under ``need``.
@@ -297,7 +318,8 @@ class _Farm:
                     f"client: worker {addr} has memory_limit {limit / 2**20:.1f} MiB (it pauses "
                     f"at {frac:.0%} of it), but {what} needs about {need / 2**20:.1f} MiB on every "
                     "worker; give the workers more memory (memory_limit=...) or use a coarser "
-                    "resolution")
+                    "resolution"
+                )
         self.stats["bytes_per_worker_estimate"] = int(need)
 
     def _map(self, fn, chunks, *common, key_prefix: str):
@@ -308,9 +330,17 @@ class _Farm:
         futs = []
         for i, chunk in enumerate(chunks):
             w = self.workers[i % len(self.workers)]
-            futs.append(self.client.submit(fn, *common, *chunk, workers=[w],
-                                           allow_other_workers=True, pure=False,
-                                           key=f"{key_prefix}-{i}-{_uid()}"))
+            futs.append(
+                self.client.submit(
+                    fn,
+                    *common,
+                    *chunk,
+                    workers=[w],
+                    allow_other_workers=True,
+                    pure=False,
+                    key=f"{key_prefix}-{i}-{_uid()}",
+                )
+            )
         self.stats["tasks"] += len(futs)
         out = [None] * len(futs)
         where = {f.key: i for i, f in enumerate(futs)}
@@ -377,8 +407,9 @@ class DistributedLineSystem(_Farm):
         box = ijk.max(axis=0) - ijk.min(axis=0) if len(ijk) else np.zeros(3)
         info = _workers(client)
         threads = max((int(info[a].get("nthreads", 1) or 1) for a in self.workers), default=1)
-        self._check_memory(estimate_worker_bytes(self.size, box, threads),
-                           f"a solve of {self.size} records")
+        self._check_memory(
+            estimate_worker_bytes(self.size, box, threads), f"a solve of {self.size} records"
+        )
         self.key = _token(ijk, normal, point, np.float32([epsilon, history]))
         records = LineRecords(ijk, normal, point, epsilon, history)
         t = time.perf_counter()
@@ -404,8 +435,9 @@ class DistributedLineSystem(_Farm):
     def normalisation(self, families, weights, threads: int = 0) -> np.ndarray:
         """Raw S(n) per record, (N,) float64 (see LineSystem.normalisation)."""
         chunks = [(families[c], weights[c]) for c in self._chunks(len(families))]
-        parts = self._map(_task_normalisation, chunks, self._records, self.key,
-                          key_prefix="voxgi-normalisation")
+        parts = self._map(
+            _task_normalisation, chunks, self._records, self.key, key_prefix="voxgi-normalisation"
+        )
         out = np.zeros(self.size)
         for p in parts:  # fixed order: chunk order
             out += p
@@ -425,8 +457,9 @@ class DistributedLineSystem(_Farm):
             self._stand_in_cache = (tok, fut)
         return self._stand_in_cache[1]
 
-    def gather(self, families, weights, values, family_indices, want_vis=False, threads=0,
-               stand_in=None):
+    def gather(
+        self, families, weights, values, family_indices, want_vis=False, threads=0, stand_in=None
+    ):
         """Jacobi gathering over ``families[family_indices]``: (sums, vis, lines)."""
         sel = np.asarray(family_indices, dtype=np.int64)
         fams = np.ascontiguousarray(families[sel])
@@ -434,8 +467,7 @@ class DistributedLineSystem(_Farm):
         vfut = self._values(values)
         sfut = self._stand_in(stand_in)
         chunks = [(fams[c], wts[c], vfut, bool(want_vis), sfut) for c in self._chunks(len(sel))]
-        parts = self._map(_task_gather, chunks, self._records, self.key,
-                          key_prefix="voxgi-gather")
+        parts = self._map(_task_gather, chunks, self._records, self.key, key_prefix="voxgi-gather")
         sums = np.zeros((self.size, 3))
         vis = np.zeros(self.size) if want_vis else None
         lines = 0
@@ -447,8 +479,19 @@ class DistributedLineSystem(_Farm):
         self.stats["bytes_received"] += sum(p[0].nbytes for p in parts)
         return sums, vis, lines
 
-    def shoot(self, emitters, families, weights, values, threads=0, coverage=None,
-              stand_in=None, object=None, sil_area=None, back=None):
+    def shoot(
+        self,
+        emitters,
+        families,
+        weights,
+        values,
+        threads=0,
+        coverage=None,
+        stand_in=None,
+        object=None,
+        sil_area=None,
+        back=None,
+    ):
         """Shooting from ``emitters`` split by direction families: (hd, unfound, rays, steps)."""
         em = np.ascontiguousarray(emitters, dtype=np.int32)
         cov = None if coverage is None else np.ascontiguousarray(coverage, dtype=np.float64)
@@ -456,14 +499,18 @@ class DistributedLineSystem(_Farm):
         sfut = self._stand_in(stand_in)
         sil = None
         if object is not None:
-            sil = dict(object=np.ascontiguousarray(object, dtype=np.int32),
-                       sil_area=np.ascontiguousarray(sil_area, dtype=np.float64),
-                       back=np.ascontiguousarray(back, dtype=np.bool_))
-        chunks = [(np.ascontiguousarray(families[c]), np.ascontiguousarray(weights[c]), vfut, sfut,
-                   sil)
-                  for c in self._chunks(len(families))]
-        parts = self._map(_task_shoot, chunks, self._records, self.key, em, cov,
-                          key_prefix="voxgi-shoot")
+            sil = dict(
+                object=np.ascontiguousarray(object, dtype=np.int32),
+                sil_area=np.ascontiguousarray(sil_area, dtype=np.float64),
+                back=np.ascontiguousarray(back, dtype=np.bool_),
+            )
+        chunks = [
+            (np.ascontiguousarray(families[c]), np.ascontiguousarray(weights[c]), vfut, sfut, sil)
+            for c in self._chunks(len(families))
+        ]
+        parts = self._map(
+            _task_shoot, chunks, self._records, self.key, em, cov, key_prefix="voxgi-shoot"
+        )
         hd = np.zeros((self.size, 3))
         unfound = np.zeros(len(em))
         rays = steps = 0
@@ -525,9 +572,17 @@ class DistributedFrames(_Farm):
         while self._next <= min(last, self.max_frames - 1):
             f = self._next
             w = self.workers[f % len(self.workers)]
-            self._futs[f] = self.client.submit(_task_frame, self._payload, self.key, f, seed,
-                                               workers=[w], allow_other_workers=True, pure=False,
-                                               key=f"voxgi-frame-{f}-{_uid()}")
+            self._futs[f] = self.client.submit(
+                _task_frame,
+                self._payload,
+                self.key,
+                f,
+                seed,
+                workers=[w],
+                allow_other_workers=True,
+                pure=False,
+                key=f"voxgi-frame-{f}-{_uid()}",
+            )
             self.stats["tasks"] += 1
             self._next += 1
 
@@ -535,8 +590,15 @@ class DistributedFrames(_Farm):
         """(H*W, 3) float32 radiance of frame ``f`` (computed on a worker)."""
         self._submit_upto(f + self.ahead, seed)
         if f not in self._futs:  # asked out of order: compute it alone
-            self._futs[f] = self.client.submit(_task_frame, self._payload, self.key, f, seed,
-                                               pure=False, key=f"voxgi-frame-{f}-{_uid()}")
+            self._futs[f] = self.client.submit(
+                _task_frame,
+                self._payload,
+                self.key,
+                f,
+                seed,
+                pure=False,
+                key=f"voxgi-frame-{f}-{_uid()}",
+            )
         t = time.perf_counter()
         x, counts, secs = self._futs.pop(f).result()
         self.stats["seconds_waiting"] += time.perf_counter() - t

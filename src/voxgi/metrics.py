@@ -80,8 +80,15 @@ class ErrorTime:
 
     @classmethod
     def measure(cls, method: str, seconds: float, img, ref, **params) -> ErrorTime:
-        return cls(method=method, seconds=float(seconds), rel_mse=rel_mse(img, ref),
-                   rmse=rmse(img, ref), psnr=psnr(img, ref), ssim=ssim(img, ref), params=params)
+        return cls(
+            method=method,
+            seconds=float(seconds),
+            rel_mse=rel_mse(img, ref),
+            rmse=rmse(img, ref),
+            psnr=psnr(img, ref),
+            ssim=ssim(img, ref),
+            params=params,
+        )
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -41,9 +41,17 @@ RENDER_DIRECTIONS = 8
 RENDER_SOLVE_TOL = 1e-3
 
 
-def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None,
-          tol: float = 1e-4, threads: int | None = None, client=None, *,
-          progress: bool = True, tuning: SolveTuning | None = None) -> Solution:
+def solve(
+    vox: VoxelSet,
+    directions: int = 22,
+    max_bounces: int | None = None,
+    tol: float = 1e-4,
+    threads: int | None = None,
+    client=None,
+    *,
+    progress: bool = True,
+    tuning: SolveTuning | None = None,
+) -> Solution:
     """Solve the radiosity of ``vox``: :func:`voxgi.radiosity.solve`, whose
     arguments these are, with ``client`` a ``dask.distributed.Client`` or an
     executor (:mod:`voxgi.distributed`; ``pip install "voxgi[dask]"``) to
@@ -56,13 +64,26 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None,
     >>> bool(sol.radiosity.max() > 0)
     True
     """
-    return radiosity_solve(vox, directions, max_bounces, tol, threads,
-                           distributed.executor(client), progress=progress, tuning=tuning)
+    return radiosity_solve(
+        vox,
+        directions,
+        max_bounces,
+        tol,
+        threads,
+        distributed.executor(client),
+        progress=progress,
+        tuning=tuning,
+    )
 
 
-def solve_for_display(vox: VoxelSet, *, directions: int | None = None,
-                      threads: int | None = None, progress: bool = True,
-                      client=None) -> Solution:
+def solve_for_display(
+    vox: VoxelSet,
+    *,
+    directions: int | None = None,
+    threads: int | None = None,
+    progress: bool = True,
+    client=None,
+) -> Solution:
     """Solve ``vox`` as the display needs it: ``RENDER_SOLVE_TOL``, no diagnostic passes.
 
     Parameters
@@ -74,16 +95,33 @@ def solve_for_display(vox: VoxelSet, *, directions: int | None = None,
     threads, progress, client
         As for :func:`solve`.
     """
-    return solve(vox, directions=RENDER_DIRECTIONS if directions is None else directions,
-                 tol=RENDER_SOLVE_TOL, threads=threads, progress=progress, client=client,
-                 tuning=SolveTuning(diagnostics=False))
+    return solve(
+        vox,
+        directions=RENDER_DIRECTIONS if directions is None else directions,
+        tol=RENDER_SOLVE_TOL,
+        threads=threads,
+        progress=progress,
+        client=client,
+        tuning=SolveTuning(diagnostics=False),
+    )
 
 
-def render(scene: Scene, sol: Solution | None = None, vpls_per_frame: int = 16,
-           max_frames: int | None = None, tol: float | None = None, seed: int = 0,
-           progress: bool = True, threads: int | None = None, client=None, *,
-           camera: Camera | None = None, tuning: RenderTuning | None = None,
-           resolution: int | None = None, directions: int | None = None) -> RenderResult:
+def render(
+    scene: Scene,
+    sol: Solution | None = None,
+    vpls_per_frame: int = 16,
+    max_frames: int | None = None,
+    tol: float | None = None,
+    seed: int = 0,
+    progress: bool = True,
+    threads: int | None = None,
+    client=None,
+    *,
+    camera: Camera | None = None,
+    tuning: RenderTuning | None = None,
+    resolution: int | None = None,
+    directions: int | None = None,
+) -> RenderResult:
     """Render ``scene``; with ``sol=None``, voxelize and solve it first.
 
     Takes the arguments of :func:`voxgi.display.render`, with ``client`` a
@@ -102,11 +140,23 @@ def render(scene: Scene, sol: Solution | None = None, vpls_per_frame: int = 16,
         vox = voxelize(scene, resolution=RENDER_RESOLUTION if resolution is None else resolution)
         seconds["voxelize"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        sol = solve_for_display(vox, directions=directions, threads=threads, progress=progress,
-                                client=ex)
+        sol = solve_for_display(
+            vox, directions=directions, threads=threads, progress=progress, client=ex
+        )
         seconds["solve"] = time.perf_counter() - t0
-    out = display_render(scene, sol, vpls_per_frame, max_frames, tol, seed, progress, threads,
-                         ex, camera=camera, tuning=tuning)
+    out = display_render(
+        scene,
+        sol,
+        vpls_per_frame,
+        max_frames,
+        tol,
+        seed,
+        progress,
+        threads,
+        ex,
+        camera=camera,
+        tuning=tuning,
+    )
     if seconds:
         s = out.stats["seconds"]
         s.update(seconds)

@@ -177,7 +177,6 @@ class Solution:
             )
 
 
-
 def _flat_emitter_coverage(a: dict, vox: VoxelSet, emitters: np.ndarray) -> tuple[np.ndarray, list]:
     """Per record: its area in voxel units if it is a front record of a flat
     emitting object (every front record of the object has one normal and
@@ -304,8 +303,13 @@ class LineRecords:
 
     def build(self) -> _core.LineSystem:
         """The prepared :class:`voxgi._core.LineSystem` (orders, occupancy; O(N))."""
-        return _core.LineSystem(self.ijk, self.normal, self.point,
-                                epsilon=float(self.epsilon), history=int(self.history))
+        return _core.LineSystem(
+            self.ijk,
+            self.normal,
+            self.point,
+            epsilon=float(self.epsilon),
+            history=int(self.history),
+        )
 
 
 def line_records(vox: VoxelSet, *, epsilon: float = 0.02, history: int = 16) -> LineRecords:
@@ -495,8 +499,9 @@ def _settings(directions, max_bounces, tol, threads, tuning) -> _Settings:
     return _Settings(
         R=_validate.integer(directions, "directions", low=1, high=256),
         Rs=_validate.integer(t.shoot_directions, "shoot_directions", low=1, high=256),
-        Rl=_validate.integer(t.later_directions, "later_directions", low=1, high=256,
-                             allow_none=True),
+        Rl=_validate.integer(
+            t.later_directions, "later_directions", low=1, high=256, allow_none=True
+        ),
         later_after=_validate.integer(t.later_after, "later_after", low=1),
         max_bounces=_validate.integer(max_bounces, "max_bounces", low=0, allow_none=True),
         max_iterations=_validate.integer(t.max_iterations, "max_iterations", low=1),
@@ -507,20 +512,24 @@ def _settings(directions, max_bounces, tol, threads, tuning) -> _Settings:
         closed=t.closed,
         diagnostics=bool(t.diagnostics),
         pair_cache=t.pair_cache,
-        cache_cap=_validate.integer(t.max_cache_bytes, "max_cache_bytes", low=0,
-                                    allow_none=True),
+        cache_cap=_validate.integer(t.max_cache_bytes, "max_cache_bytes", low=0, allow_none=True),
     )
 
 
-def _check_executor(executor) -> LineExecutor:
-    """The executor given, or the local one for None."""
+def _check_executor(executor, vox: VoxelSet, opt: _Settings, tuning) -> LineExecutor:
+    """The executor given, or the local one for None (whose memory estimate
+    is checked here, before anything is allocated)."""
     if executor is None:
-        return LocalExecutor()
+        executor = LocalExecutor()
+    if isinstance(executor, LocalExecutor):
+        _check_memory(vox, opt, tuning)
+        return executor
     if not callable(getattr(executor, "line_system", None)):
         raise TypeError(
             f"executor: expected an object with a line_system(records, progress=...) method "
             f"(voxgi.radiosity.LineExecutor) or None, got {type(executor).__name__}; "
-            "voxgi.solve also takes a dask.distributed.Client as client=")
+            "voxgi.solve also takes a dask.distributed.Client as client="
+        )
     return executor
 
 
@@ -557,8 +566,13 @@ def _max_line_keys(families: np.ndarray, extent: np.ndarray) -> int:
     return int(np.max(nu * nw))
 
 
-def solve_memory(vox: VoxelSet, directions: int = 22, threads: int | None = None, *,
-                 tuning: SolveTuning | None = None) -> dict:
+def solve_memory(
+    vox: VoxelSet,
+    directions: int = 22,
+    threads: int | None = None,
+    *,
+    tuning: SolveTuning | None = None,
+) -> dict:
     """Bytes a local :func:`solve` of ``vox`` needs, by part, before it allocates.
 
     Parameters
@@ -619,7 +633,8 @@ def _check_memory(vox: VoxelSet, opt: _Settings, tuning) -> dict:
             f"solve: {len(vox):,} records at directions={opt.R} on {opt.threads} threads need "
             f"about {est['total'] / 2**30:.2f} GiB ({parts}), over the "
             f"{avail / 2**30:.2f} GiB available; use fewer threads or directions, a coarser "
-            "resolution, or SolveTuning(pair_cache=False)")
+            "resolution, or SolveTuning(pair_cache=False)"
+        )
     return est
 
 
@@ -804,9 +819,16 @@ class _Gatherer:
             return sums, vis, 0
         if tab is not None and defer_vis:
             want_vis = False
-        return self.sysm.gather(ds.families, ds.weights, values, sel, want_vis, self.nthreads,
-                                stand_in=self.stand_in,
-                                **({"record": tab} if tab is not None else {}))
+        return self.sysm.gather(
+            ds.families,
+            ds.weights,
+            values,
+            sel,
+            want_vis,
+            self.nthreads,
+            stand_in=self.stand_in,
+            **({"record": tab} if tab is not None else {}),
+        )
 
 
 @dataclass
@@ -852,16 +874,27 @@ def _problem(vox, a, opt) -> _Problem:
         "skipped": {},
         "closed_back_records": len(twins.back),
     }
-    return _Problem(vox=vox, a=a, opt=opt, twins=twins, area=a["area"],
-                    rho=a["albedo"].astype(np.float64), E=E, stats=stats, seconds={})
+    return _Problem(
+        vox=vox,
+        a=a,
+        opt=opt,
+        twins=twins,
+        area=a["area"],
+        rho=a["albedo"].astype(np.float64),
+        E=E,
+        stats=stats,
+        seconds={},
+    )
 
 
 def _no_emitter(p: _Problem) -> Solution:
     """The zero solution of a scene without emitters, with a warning."""
-    warnings.warn("solve: the scene has no emitter; the solution is zero", RuntimeWarning,
-                  stacklevel=3)
-    p.stats.update(rays=0, shoot_rays=0, gather_rays=0, seconds={"total": 0.0},
-                   skipped={"all": "no emitter"})
+    warnings.warn(
+        "solve: the scene has no emitter; the solution is zero", RuntimeWarning, stacklevel=3
+    )
+    p.stats.update(
+        rays=0, shoot_rays=0, gather_rays=0, seconds={"total": 0.0}, skipped={"all": "no emitter"}
+    )
     return Solution(vox=p.vox, radiosity=np.zeros((p.n, 3), np.float32), stats=p.stats)
 
 
@@ -897,13 +930,19 @@ def _normalise(p: _Problem) -> None:
     p.seconds["normalisation"] = time.perf_counter() - t
     d = {}
     for name, ds in (("gather", p.gds), ("shoot", p.sds)):
-        d[name] = {"radius": int(ds.radius), "count": len(ds), "families": len(ds.families),
-                   "non_primitive": ds.non_primitive}
+        d[name] = {
+            "radius": int(ds.radius),
+            "count": len(ds),
+            "families": len(ds.families),
+            "non_primitive": ds.non_primitive,
+        }
     if p.lds is not None:
         d["later"] = {"radius": opt.Rl, "count": len(p.lds), "after": opt.later_after}
     p.stats["directions"] = d
-    p.stats["S_spread"] = {"gather": [float(Sg.min()), float(Sg.max())],
-                           "shoot": [float(Ss.min()), float(Ss.max())]}
+    p.stats["S_spread"] = {
+        "gather": [float(Sg.min()), float(Sg.max())],
+        "shoot": [float(Ss.min()), float(Ss.max())],
+    }
 
 
 def _silhouettes(p: _Problem, emitters_send: np.ndarray) -> dict:
@@ -917,8 +956,9 @@ def _silhouettes(p: _Problem, emitters_send: np.ndarray) -> dict:
     # An emitting object's exit face shoots its whole line to the receivers
     # behind it: a carried remainder would count that part of the line twice.
     sil_area[np.isin(obj_id, np.unique(obj_id[emitters_send]))] = -1.0
-    return dict(object=obj_id, sil_area=sil_area,
-                back=np.ascontiguousarray(p.a["back"], dtype=np.bool_))
+    return dict(
+        object=obj_id, sil_area=sil_area, back=np.ascontiguousarray(p.a["back"], dtype=np.bool_)
+    )
 
 
 def _direct_light(p: _Problem):
@@ -933,8 +973,14 @@ def _direct_light(p: _Problem):
     p.stats["silhouettes"] = bool(sil)
     sds, Ss = p.sds, p.S["shoot"]
     hd_raw, unfound, shoot_rays, steps = p.sysm.shoot(
-        es, sds.families, sds.weights, E_send, p.opt.threads, coverage=cov,
-        stand_in=p.twins.stand_in, **sil,
+        es,
+        sds.families,
+        sds.weights,
+        E_send,
+        p.opt.threads,
+        coverage=cov,
+        stand_in=p.twins.stand_in,
+        **sil,
     )
     Hd = hd_raw / Ss[:, None]
     p.seconds["shoot"] = time.perf_counter() - t
@@ -1021,8 +1067,9 @@ class _Iteration:
         fams = np.arange(len(ds.families), dtype=np.int64)
         t = time.perf_counter()
         want_vis = s.vis is None and not use_later
-        sums, v, nl = self.gather(ds, p.twins.send(s.dk if self.corrections else s.R), fams,
-                                  want_vis)
+        sums, v, nl = self.gather(
+            ds, p.twins.send(s.dk if self.corrections else s.R), fams, want_vis
+        )
         s.lines_walked += nl
         if want_vis:
             s.vis = v
@@ -1076,8 +1123,11 @@ class _Iteration:
         if res < self.best[0]:
             self.best = (res, self.s.it)
             return False
-        if (self.corrections or self.best[0] >= _FLOOR_RESIDUAL
-                or self.s.it - self.best[1] < _FLOOR_ITERATIONS):
+        if (
+            self.corrections
+            or self.best[0] >= _FLOOR_RESIDUAL
+            or self.s.it - self.best[1] < _FLOOR_ITERATIONS
+        ):
             return False
         self.corrections = True
         self.best = (float("inf"), self.s.it)
@@ -1088,8 +1138,10 @@ class _Iteration:
     def stalled(self, res: float) -> bool:
         """No new lowest residual for :data:`_STALL_ITERATIONS` iterations."""
         if self.s.it - self.best[1] >= _STALL_ITERATIONS:
-            self.s.stopped = (f"the residual stalled at {self.best[0]:.3g} (its lowest, "
-                              f"iteration {self.best[1]}) for {_STALL_ITERATIONS} iterations")
+            self.s.stopped = (
+                f"the residual stalled at {self.best[0]:.3g} (its lowest, "
+                f"iteration {self.best[1]}) for {_STALL_ITERATIONS} iterations"
+            )
             return True
         return False
 
@@ -1131,12 +1183,22 @@ def _iterate(p: _Problem, gather: _Gatherer, Hd: np.ndarray, progress: bool) -> 
     p.stats["extrapolations"] = it.extrap.count
     if s.stopped is not None:
         p.stats["stopped"] = s.stopped
-        warnings.warn(f"solve: {s.stopped}; returning the last finite iterate (iteration "
-                      f"{s.it})", RuntimeWarning, stacklevel=3)
-    elif (limit > 0 and s.it == limit and (not s.residuals or s.residuals[-1] >= p.opt.tol)
-          and p.opt.max_bounces is None):
-        warnings.warn(f"solve: not converged after {s.it} iterations (residual "
-                      f"{s.residuals[-1]:.3g})", RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            f"solve: {s.stopped}; returning the last finite iterate (iteration {s.it})",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    elif (
+        limit > 0
+        and s.it == limit
+        and (not s.residuals or s.residuals[-1] >= p.opt.tol)
+        and p.opt.max_bounces is None
+    ):
+        warnings.warn(
+            f"solve: not converged after {s.it} iterations (residual {s.residuals[-1]:.3g})",
+            RuntimeWarning,
+            stacklevel=3,
+        )
     return s
 
 
@@ -1146,8 +1208,7 @@ def _lost_fraction(p: _Problem, gather: _Gatherer, vis) -> tuple:
     if vis is None:  # no gathering ran (or only a recording pass): one visibility pass
         t = time.perf_counter()
         all_fams = np.arange(len(p.gds.families), dtype=np.int64)
-        _, vis, _ = gather(p.gds, np.zeros((p.n, 3), np.float32), all_fams, True,
-                           defer_vis=False)
+        _, vis, _ = gather(p.gds, np.zeros((p.n, 3), np.float32), all_fams, True, defer_vis=False)
         p.seconds["visibility"] = time.perf_counter() - t
     found = vis / p.S["gather"]
     front = ~p.a["back"]
@@ -1213,8 +1274,7 @@ def _statistics(p: _Problem, gather: _Gatherer, s: _State, shoot_rays: int) -> N
         seconds=p.seconds,
         bounces=s.it,
         lines_walked=int(s.lines_walked),
-        pair_cache=p.stats.get("pair_cache",
-                               {**gather.info, "replayed_passes": gather.replayed}),
+        pair_cache=p.stats.get("pair_cache", {**gather.info, "replayed_passes": gather.replayed}),
         epsilon=p.opt.epsilon,
         history=p.opt.history,
     )
@@ -1222,19 +1282,27 @@ def _statistics(p: _Problem, gather: _Gatherer, s: _State, shoot_rays: int) -> N
         p.stats["skipped"]["finer_directions_after"] = p.opt.later_after
     if gather.replayed:
         p.stats["skipped"]["line_walks"] = (
-            f"{gather.replayed} gathering passes replayed the recorded pairs")
+            f"{gather.replayed} gathering passes replayed the recorded pairs"
+        )
 
 
-def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, tol: float = 1e-4,
-          threads: int | None = None, executor: LineExecutor | None = None, *,
-          progress: bool = True, tuning: SolveTuning | None = None) -> Solution:
+def solve(
+    vox: VoxelSet,
+    directions: int = 22,
+    max_bounces: int | None = None,
+    tol: float = 1e-4,
+    threads: int | None = None,
+    executor: LineExecutor | None = None,
+    *,
+    progress: bool = True,
+    tuning: SolveTuning | None = None,
+) -> Solution:
     """Solve the discrete radiosity equation on the records of ``vox``.
 
     Shooting from the emitter records first (direct light, radius
     ``tuning.shoot_directions``), then Jacobi gathering of the reflected
     light (radius ``directions``) with geometric-tail extrapolation, until
-    the estimated remaining error falls under ``tol`` or ``max_bounces``
-    iterations ran (``docs/design.md`` §5).
+    the estimated remaining error falls under ``tol`` (``docs/design.md`` §5).
 
     Parameters
     ----------
@@ -1243,17 +1311,14 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
     directions : int
         Radius R >= 1 of the gathering direction sphere (22: 5982 directions).
     max_bounces : int or None
-        At most this many gathering iterations (None: until converged).
-        0 gives direct light only.
+        At most this many gathering iterations (None: until converged; 0: direct light).
     tol : float
-        Stop when the estimated remaining relative error, ``r λ / (1 − λ)``
-        with ``r = Σ area·|R_{k+1} − R_k| / Σ area·|B_{k+1}|`` (``residuals``)
-        and ``λ`` the largest albedo (at least 0.5), falls under it (> 0).
+        Bound on the estimated remaining relative error ``r λ / (1 − λ)``, ``r``
+        the area-weighted residual (``residuals``), ``λ`` the largest albedo.
     threads : int or None
         Threads (None: all hardware threads). Results do not depend on it.
     executor : LineExecutor or None
-        Where the passes run (None: here; :mod:`voxgi.distributed` for a
-        Dask cluster; ``voxgi.solve`` takes a Client as ``client=``).
+        Where the passes run (None: here; ``voxgi.solve`` also takes a Client).
     progress : bool
         Show a tqdm progress bar over iterations.
     tuning : SolveTuning or None
@@ -1262,18 +1327,13 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
     Returns
     -------
     Solution
-        ``radiosity`` (N, 3) float32, always finite; ``stats`` with ``rays``,
-        ``shoot_rays``, ``gather_rays``, ``seconds`` (phase -> s),
-        ``directions``, ``lost_fraction`` (δ), ``back_fraction``, ``energy``
-        (emitted, absorbed, escaping power per channel), ``skipped`` and,
-        when the iteration stalled or went non-finite, ``stopped``.
+        ``radiosity`` (N, 3) float32, always finite; ``stats`` with ray counts,
+        ``seconds``, ``lost_fraction``, ``energy``, ``skipped`` and ``stopped``.
 
     Raises
     ------
-    TypeError, ValueError
-        On a malformed VoxelSet or bad arguments.
-    MemoryError
-        If the estimate (:func:`solve_memory`) exceeds the memory available.
+    TypeError, ValueError, MemoryError
+        Bad arguments; an estimate (:func:`solve_memory`) over the memory available.
 
     Warns
     -----
@@ -1284,9 +1344,7 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
     t_start = time.perf_counter()
     a = _check_vox(vox)
     opt = _settings(directions, max_bounces, tol, threads, tuning)
-    executor = _check_executor(executor)
-    if isinstance(executor, LocalExecutor):
-        _check_memory(vox, opt, tuning)
+    executor = _check_executor(executor, vox, opt, tuning)
     p = _problem(vox, a, opt)
     if p.stats["emitters"] == 0:
         return _no_emitter(p)
@@ -1303,5 +1361,5 @@ def solve(vox: VoxelSet, directions: int = 22, max_bounces: int | None = None, t
             p.sysm.close()
     p.seconds["total"] = time.perf_counter() - t_start
     _statistics(p, gather, s, shoot_rays)
-    return Solution(vox=vox, radiosity=(p.E + s.R).astype(np.float32), bounces=s.it,
-                    residuals=s.residuals, stats=p.stats)
+    B = (p.E + s.R).astype(np.float32)
+    return Solution(vox=vox, radiosity=B, bounces=s.it, residuals=s.residuals, stats=p.stats)
