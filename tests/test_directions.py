@@ -46,9 +46,8 @@ def test_no_two_vectors_share_a_direction(radius):
 
 @pytest.mark.parametrize(("radius", "spread"), [(8, 4e-3), (22, 6e-4)])
 def test_raw_hemisphere_sums(rng, radius, spread):
-    # S(n) = Σ_{n·σ>0} cos ΔΩ/π is near 1; measured over these normals (axis
-    # normals are the worst: their equator holds many directions):
-    # R=8 [0.99703, 1.00130], R=22 [0.99961, 1.00012]
+    # S(n) = Σ_{n·σ>0} cos ΔΩ/π is near 1 over these normals (axis normals
+    # are the worst: their equator holds many directions)
     ds = direction_set(radius)
     n = rng.normal(size=(4000, 3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)
