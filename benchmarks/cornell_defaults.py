@@ -32,14 +32,23 @@ def main() -> int:
     vox = voxgi.voxelize(scene, resolution=voxgi.pipeline.RENDER_RESOLUTION)
     t1 = time.perf_counter()
     # exactly what voxgi.render(scene) and `voxgi render` run without a solution
-    sol = voxgi.solve(vox, directions=voxgi.pipeline.RENDER_DIRECTIONS,
-                      tol=voxgi.pipeline.RENDER_SOLVE_TOL, diagnostics=False, progress=False)
+    sol = voxgi.pipeline.solve_for_display(vox, progress=False)
     t2 = time.perf_counter()
-    res = {"records": len(vox), "resolution": vox.resolution, "voxelize": t1 - t0,
-           "solve": t2 - t1, "solve_stats_seconds": sol.stats.get("seconds"),
-           "bounces": sol.bounces, "commit": git_commit(), "sizes": {}}
-    print(f"voxelize {t1 - t0:.2f} s ({len(vox)} records), solve {t2 - t1:.2f} s "
-          f"({sol.bounces} bounces)", flush=True)
+    res = {
+        "records": len(vox),
+        "resolution": vox.resolution,
+        "voxelize": t1 - t0,
+        "solve": t2 - t1,
+        "solve_stats_seconds": sol.stats.get("seconds"),
+        "bounces": sol.bounces,
+        "commit": git_commit(),
+        "sizes": {},
+    }
+    print(
+        f"voxelize {t1 - t0:.2f} s ({len(vox)} records), solve {t2 - t1:.2f} s "
+        f"({sol.bounces} bounces)",
+        flush=True,
+    )
     for size in (256, 512):
         ref = load_reference(size)
         sc = voxgi.scenes.cornell_box(width=size, height=size)
@@ -47,17 +56,28 @@ def main() -> int:
         out = voxgi.render(sc, sol, progress=False)
         secs = time.perf_counter() - t
         e = rel_mse(out.image, ref)
-        row = {"display": secs, "frames": out.frames, "rel_mse": e,
-               "est_noise_rel_mse": out.stats["est_rel_mse"],
-               "whole_pipeline": res["voxelize"] + res["solve"] + secs,
-               "phases": out.stats["seconds"]}
+        row = {
+            "display": secs,
+            "frames": out.frames,
+            "rel_mse": e,
+            "est_noise_rel_mse": out.stats["est_rel_mse"],
+            "whole_pipeline": res["voxelize"] + res["solve"] + secs,
+            "phases": out.stats["seconds"],
+        }
         res["sizes"][size] = row
-        diff_png(out.image, ref, RESULTS / f"cornell_diff_defaults_{size}.png",
-                 f"defaults ({row['whole_pipeline']:.0f} s, relMSE {e:.2e})")
+        diff_png(
+            out.image,
+            ref,
+            RESULTS / f"cornell_diff_defaults_{size}.png",
+            f"defaults ({row['whole_pipeline']:.0f} s, relMSE {e:.2e})",
+        )
         voxgi.io.write_png(RESULTS / f"cornell_voxgi_defaults_{size}.png", out.image)
-        print(f"{size}x{size}: display {secs:.2f} s ({out.frames} frames), relMSE {e:.2e} "
-              f"(noise estimate {out.stats['est_rel_mse']:.1e}), whole pipeline "
-              f"{row['whole_pipeline']:.1f} s", flush=True)
+        print(
+            f"{size}x{size}: display {secs:.2f} s ({out.frames} frames), relMSE {e:.2e} "
+            f"(noise estimate {out.stats['est_rel_mse']:.1e}), whole pipeline "
+            f"{row['whole_pipeline']:.1f} s",
+            flush=True,
+        )
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
         sol.save(Path(tmp) / "cornell.npz")
@@ -68,8 +88,10 @@ def main() -> int:
     out = voxgi.render(scene, sol2, camera=cam, progress=False)
     res["second_view"] = {"seconds": time.perf_counter() - t, "frames": out.frames}
     voxgi.io.write_png(RESULTS / "cornell_second_view_256.png", out.image)
-    print(f"saved + loaded the solution in {res['save_load']:.2f} s; second view (256x256, "
-          f"display only) {res['second_view']['seconds']:.2f} s ({out.frames} frames)")
+    print(
+        f"saved + loaded the solution in {res['save_load']:.2f} s; second view (256x256, "
+        f"display only) {res['second_view']['seconds']:.2f} s ({out.frames} frames)"
+    )
     (RESULTS / "cornell_defaults.json").write_text(json.dumps(res, indent=2, default=float))
     return 0
 

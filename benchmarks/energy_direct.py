@@ -31,13 +31,22 @@ def main() -> None:
             vox = voxgi.voxelize(scene, resolution=res)
             vox = dataclasses.replace(vox, albedo=np.zeros_like(vox.albedo))
             t = time.perf_counter()
-            sol = voxgi.solve(vox, directions=8, shoot_directions=16, progress=False, tol=1e-5,
-                              threads=args.threads, diagnostics=False)
+            sol = voxgi.solve(
+                vox,
+                directions=8,
+                progress=False,
+                tol=1e-5,
+                threads=args.threads,
+                tuning=voxgi.SolveTuning(shoot_directions=16, diagnostics=False),
+            )
             e = sol.stats["energy"]
-            print(f"{'closed' if closed else 'open  '} black res {res:4d} records {len(vox):8d} "
-                  f"imbalance {e['imbalance'][0]:+.5f}  "
-                  f"escaping/emitted {e['escaping'][0] / e['emitted'][0]:.4f}  "
-                  f"{time.perf_counter() - t:.1f}s", flush=True)
+            print(
+                f"{'closed' if closed else 'open  '} black res {res:4d} records {len(vox):8d} "
+                f"imbalance {e['imbalance'][0]:+.5f}  "
+                f"escaping/emitted {e['escaping'][0] / e['emitted'][0]:.4f}  "
+                f"{time.perf_counter() - t:.1f}s",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Furnace accuracy with and without a closed inner object (issue 3).
+"""Furnace accuracy with and without a closed inner object.
 
 Uniform furnaces (every surface Le = 1, albedo rho): the exact radiance is
 Le / (1 - rho) everywhere. Prints the mean and max relative error of the
@@ -26,7 +26,9 @@ def run(kind, inner, rho, res, R, closed=None):
     s = getattr(voxgi.scenes, kind)(albedo=rho, inner=inner)
     v = voxgi.voxelize(s, res)
     t = time.perf_counter()
-    sol = voxgi.solve(v, directions=R, shoot_directions=R, progress=False, closed=closed)
+    sol = voxgi.solve(
+        v, directions=R, progress=False, tuning=voxgi.SolveTuning(shoot_directions=R, closed=closed)
+    )
     dt = time.perf_counter() - t
     e = sol.radiance[:, 0] * (1 - rho) - 1
     f = ~v.back
@@ -60,7 +62,9 @@ def main():
     ap.add_argument("--rho", type=float, nargs="+", default=[0.5, 0.9, 0.99])
     ap.add_argument("--scenes", nargs="+", default=["furnace_sphere", "furnace_box"])
     ap.add_argument("--closed", action="store_true", help="solve(closed=True)")
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "furnace_inner.json"))
+    ap.add_argument(
+        "--out", default=str(Path(__file__).resolve().parent / "results" / "furnace_inner.json")
+    )
     a = ap.parse_args()
     out = []
     print(f"res {a.res} R {a.R} closed={a.closed}")

@@ -41,18 +41,114 @@ RESULTS = Path(__file__).resolve().parent / "results"
 # name: (voxgi scene, paper voxels, LPL, SR, LR, paper size, paper TT, ST, LT, RTT,
 #        SRays, LRays, CRays, DSR/s, DLR/s, CR/s)   -- Tables 1, 2, 4 of the paper
 PAPER = {
-    "labyrinth": ("labyrinth", 11803, 9, 35, 22, "512x512", 207, 12, 68, 124, 22e6, 183e6, 48.5e6,
-                  1_833_333, 2_691_176, 391_373),
-    "emission": ("emission", 36062, 4, 8, 22, "512x512", 112, 5, 50, 56, 3.7e6, 284e6, 8.7e6,
-                 670_556, 5_636_372, 154_896),
-    "shadow": ("shadow", 26547, 4, 22, 18, "512x512", 147, 4, 23, 119, 3.2e6, 141e6, 29.3e6,
-               703_332, 5_886_649, 246_006),
-    "geometric": ("geometric", 21074, 4, 28, 18, "512x512", 208, 11, 20, 176, 8.1e6, 109e6,
-                  43.5e6, 740_149, 5_453_033, 247_269),
-    "bunny": ("bunny-room", 146355, 5, 35, 22, "1024x768", 558, 93, 404, 52, 70.5e6, 807.6e6,
-              9.45e6, 758_064, 1_999_010, 150_105),
-    "sponza": ("sponza-atrium", 236754, 7, 35, 26, "1024x768", 29185, 274, 960, 27755, 211.4e6,
-               1181e6, 2030e6, 771_533, 1_230_208, 73_129),
+    "labyrinth": (
+        "labyrinth",
+        11803,
+        9,
+        35,
+        22,
+        "512x512",
+        207,
+        12,
+        68,
+        124,
+        22e6,
+        183e6,
+        48.5e6,
+        1_833_333,
+        2_691_176,
+        391_373,
+    ),
+    "emission": (
+        "emission",
+        36062,
+        4,
+        8,
+        22,
+        "512x512",
+        112,
+        5,
+        50,
+        56,
+        3.7e6,
+        284e6,
+        8.7e6,
+        670_556,
+        5_636_372,
+        154_896,
+    ),
+    "shadow": (
+        "shadow",
+        26547,
+        4,
+        22,
+        18,
+        "512x512",
+        147,
+        4,
+        23,
+        119,
+        3.2e6,
+        141e6,
+        29.3e6,
+        703_332,
+        5_886_649,
+        246_006,
+    ),
+    "geometric": (
+        "geometric",
+        21074,
+        4,
+        28,
+        18,
+        "512x512",
+        208,
+        11,
+        20,
+        176,
+        8.1e6,
+        109e6,
+        43.5e6,
+        740_149,
+        5_453_033,
+        247_269,
+    ),
+    "bunny": (
+        "bunny-room",
+        146355,
+        5,
+        35,
+        22,
+        "1024x768",
+        558,
+        93,
+        404,
+        52,
+        70.5e6,
+        807.6e6,
+        9.45e6,
+        758_064,
+        1_999_010,
+        150_105,
+    ),
+    "sponza": (
+        "sponza-atrium",
+        236754,
+        7,
+        35,
+        26,
+        "1024x768",
+        29185,
+        274,
+        960,
+        27755,
+        211.4e6,
+        1181e6,
+        2030e6,
+        771_533,
+        1_230_208,
+        73_129,
+    ),
 }
 
 
@@ -71,8 +167,24 @@ def _resolution_for(scene, target: int) -> tuple[int, voxgi.VoxelSet]:
 
 
 def run_scene(key: str, args) -> dict:
-    scene_name, vox_p, lpl, sr, lr, size_p, tt_p, st_p, lt_p, rtt_p, sr_p, lr_p, cr_p, dsr_p, dlr_p, \
-        cr_s_p = PAPER[key]
+    (
+        scene_name,
+        vox_p,
+        lpl,
+        sr,
+        lr,
+        size_p,
+        tt_p,
+        st_p,
+        lt_p,
+        rtt_p,
+        sr_p,
+        lr_p,
+        cr_p,
+        dsr_p,
+        dlr_p,
+        cr_s_p,
+    ) = PAPER[key]
     w, h = (128, 128) if args.quick else (512, 512)
     scene = voxgi.scenes.get(scene_name, width=w, height=h)
     target = vox_p // 8 if args.quick else vox_p
@@ -82,10 +194,18 @@ def run_scene(key: str, args) -> dict:
     if args.quick:
         sr, lr = min(sr, 8), min(lr, 6)
     bounces = lpl - 1  # light path length = reflections + 1; the first is the shooting
-    sol = voxgi.solve(vox, directions=lr, shoot_directions=sr, max_bounces=bounces - 1,
-                      tol=1e-12, threads=args.threads, progress=False)
-    out = voxgi.render(scene, sol, threads=args.threads, progress=False,
-                       max_frames=8 if args.quick else None)
+    sol = voxgi.solve(
+        vox,
+        directions=lr,
+        max_bounces=bounces - 1,
+        tol=1e-12,
+        threads=args.threads,
+        progress=False,
+        tuning=voxgi.SolveTuning(shoot_directions=sr),
+    )
+    out = voxgi.render(
+        scene, sol, threads=args.threads, progress=False, max_frames=8 if args.quick else None
+    )
     wall = time.perf_counter() - t0
     s = sol.stats
     st = s["seconds"].get("shoot", 0.0)
@@ -93,19 +213,43 @@ def run_scene(key: str, args) -> dict:
     rtt = out.stats["seconds"]["display"]
     crays = out.stats["primary_rays"] + out.stats["shadow_rays"] + out.stats.get("gather_rays", 0)
     row = {
-        "scene": key, "voxgi_scene": scene_name, "resolution": res,
-        "records": len(vox), "front_records": int((~vox.back).sum()),
-        "LPL": lpl, "SR": sr, "LR": lr, "size": f"{w}x{h}", "bounces": sol.bounces,
-        "voxelize_s": t_vox, "ST": st, "LT": lt, "RTT": rtt,
-        "TT": t_vox + s["seconds"]["total"] + rtt, "wall_s": wall,
-        "SRays": s["shoot_rays"], "LRays": s["gather_rays"], "CRays": crays,
+        "scene": key,
+        "voxgi_scene": scene_name,
+        "resolution": res,
+        "records": len(vox),
+        "front_records": int((~vox.back).sum()),
+        "LPL": lpl,
+        "SR": sr,
+        "LR": lr,
+        "size": f"{w}x{h}",
+        "bounces": sol.bounces,
+        "voxelize_s": t_vox,
+        "ST": st,
+        "LT": lt,
+        "RTT": rtt,
+        "TT": t_vox + s["seconds"]["total"] + rtt,
+        "wall_s": wall,
+        "SRays": s["shoot_rays"],
+        "LRays": s["gather_rays"],
+        "CRays": crays,
         "frames": out.frames,
         "DSR": s["shoot_rays"] / st if st > 0 else float("nan"),
         "DLR": s["gather_rays"] / lt if lt > 0 else float("nan"),
         "CR": crays / rtt if rtt > 0 else float("nan"),
-        "paper": {"voxels": vox_p, "size": size_p, "TT": tt_p, "ST": st_p, "LT": lt_p,
-                  "RTT": rtt_p, "SRays": sr_p, "LRays": lr_p, "CRays": cr_p, "DSR": dsr_p,
-                  "DLR": dlr_p, "CR": cr_s_p},
+        "paper": {
+            "voxels": vox_p,
+            "size": size_p,
+            "TT": tt_p,
+            "ST": st_p,
+            "LT": lt_p,
+            "RTT": rtt_p,
+            "SRays": sr_p,
+            "LRays": lr_p,
+            "CRays": cr_p,
+            "DSR": dsr_p,
+            "DLR": dlr_p,
+            "CR": cr_s_p,
+        },
     }
     return row
 
@@ -116,30 +260,41 @@ def _e(v) -> str:
 
 def print_tables(rows, threads) -> None:
     print("\nTable 1 (scene statistics)  -- voxgi | paper")
-    print(f"{'Scene':<10} {'records':>9} {'front':>8} {'paper vox':>9} {'LPL':>3} {'SR':>3} "
-          f"{'LR':>3} {'size':>8} {'TT s':>8} {'paper TT':>8}")
+    print(
+        f"{'Scene':<10} {'records':>9} {'front':>8} {'paper vox':>9} {'LPL':>3} {'SR':>3} "
+        f"{'LR':>3} {'size':>8} {'TT s':>8} {'paper TT':>8}"
+    )
     for r in rows:
         p = r["paper"]
-        print(f"{r['scene']:<10} {r['records']:9,d} {r['front_records']:8,d} {p['voxels']:9,d} "
-              f"{r['LPL']:3d} {r['SR']:3d} {r['LR']:3d} {r['size']:>8} {r['TT']:8.2f} "
-              f"{p['TT']:8d}")
+        print(
+            f"{r['scene']:<10} {r['records']:9,d} {r['front_records']:8,d} {p['voxels']:9,d} "
+            f"{r['LPL']:3d} {r['SR']:3d} {r['LR']:3d} {r['size']:>8} {r['TT']:8.2f} "
+            f"{p['TT']:8d}"
+        )
     print("\nTable 2 (seconds and rays per kind)  -- voxgi (paper)")
-    print(f"{'Scene':<10} {'ST':>14} {'LT':>14} {'RTT':>16} {'SRays':>18} {'LRays':>20} "
-          f"{'CRays':>20}")
+    print(
+        f"{'Scene':<10} {'ST':>14} {'LT':>14} {'RTT':>16} {'SRays':>18} {'LRays':>20} {'CRays':>20}"
+    )
     for r in rows:
         p = r["paper"]
-        print(f"{r['scene']:<10} {r['ST']:6.2f} ({p['ST']:5d}) {r['LT']:6.2f} ({p['LT']:5d}) "
-              f"{r['RTT']:7.2f} ({p['RTT']:5d}) {r['SRays']:8.3g} ({p['SRays']:7.3g}) "
-              f"{r['LRays']:9.3g} ({p['LRays']:8.3g}) {r['CRays']:9.3g} ({p['CRays']:8.3g})")
+        print(
+            f"{r['scene']:<10} {r['ST']:6.2f} ({p['ST']:5d}) {r['LT']:6.2f} ({p['LT']:5d}) "
+            f"{r['RTT']:7.2f} ({p['RTT']:5d}) {r['SRays']:8.3g} ({p['SRays']:7.3g}) "
+            f"{r['LRays']:9.3g} ({p['LRays']:8.3g}) {r['CRays']:9.3g} ({p['CRays']:8.3g})"
+        )
     print(f"\nTable 4 (rays per second; voxgi on {threads} thread(s), paper on one 1.86 GHz core)")
-    print(f"{'Scene':<10} {'DSR':>10} {'paper':>9} {'x':>6} {'DLR':>10} {'paper':>9} {'x':>6} "
-          f"{'CR':>9} {'paper':>8} {'x':>5} {'CR/DSR':>7} {'CR/DLR':>7}")
+    print(
+        f"{'Scene':<10} {'DSR':>10} {'paper':>9} {'x':>6} {'DLR':>10} {'paper':>9} {'x':>6} "
+        f"{'CR':>9} {'paper':>8} {'x':>5} {'CR/DSR':>7} {'CR/DLR':>7}"
+    )
     for r in rows:
         p = r["paper"]
-        print(f"{r['scene']:<10} {r['DSR']:10.3g} {p['DSR']:9.3g} {r['DSR'] / p['DSR']:6.0f} "
-              f"{r['DLR']:10.3g} {p['DLR']:9.3g} {r['DLR'] / p['DLR']:6.0f} {r['CR']:9.3g} "
-              f"{p['CR']:8.3g} {r['CR'] / p['CR']:5.1f} {100 * r['CR'] / r['DSR']:6.2f}% "
-              f"{100 * r['CR'] / r['DLR']:6.2f}%")
+        print(
+            f"{r['scene']:<10} {r['DSR']:10.3g} {p['DSR']:9.3g} {r['DSR'] / p['DSR']:6.0f} "
+            f"{r['DLR']:10.3g} {p['DLR']:9.3g} {r['DLR'] / p['DLR']:6.0f} {r['CR']:9.3g} "
+            f"{p['CR']:8.3g} {r['CR'] / p['CR']:5.1f} {100 * r['CR'] / r['DSR']:6.2f}% "
+            f"{100 * r['CR'] / r['DLR']:6.2f}%"
+        )
 
 
 def main() -> None:
@@ -147,9 +302,13 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="small sizes (a smoke run)")
     ap.add_argument("--threads", type=int, default=None, help="threads (default: all)")
     ap.add_argument("--scenes", nargs="+", default=list(PAPER), choices=list(PAPER))
-    ap.add_argument("--out", type=Path, default=None,
-                    help="JSON file (default results/paper_tables.json, or "
-                         "paper_tables_quick.json with --quick)")
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="JSON file (default results/paper_tables.json, or "
+        "paper_tables_quick.json with --quick)",
+    )
     args = ap.parse_args()
     rows = []
     for key in args.scenes:
@@ -158,9 +317,15 @@ def main() -> None:
     threads = args.threads or os.cpu_count()
     print_tables(rows, threads)
     RESULTS.mkdir(parents=True, exist_ok=True)
-    rec = {"name": "paper_tables", "voxgi": voxgi.__version__, "quick": args.quick,
-           "threads": threads, "cpu": platform.processor() or platform.machine(),
-           "load_avg": os.getloadavg(), "rows": rows}
+    rec = {
+        "name": "paper_tables",
+        "voxgi": voxgi.__version__,
+        "quick": args.quick,
+        "threads": threads,
+        "cpu": platform.processor() or platform.machine(),
+        "load_avg": os.getloadavg(),
+        "rows": rows,
+    }
     name = "paper_tables_quick.json" if args.quick else "paper_tables.json"
     out = args.out or RESULTS / name
     out.write_text(json.dumps(rec, indent=1, default=float))

@@ -1,4 +1,4 @@
-"""Benchmarks and acceptance figures of the discrete-line propagation (issue 3).
+"""Benchmarks and acceptance figures of the discrete-line propagation.
 
 Run on its own (never collected by pytest)::
 
@@ -13,8 +13,6 @@ Sections (all by default):
   resolutions).
 - ``cap``        emitting-cap sphere: mean / max error vs resolution (32, 64,
   128) and R (8, 16, 22); rho = 0.5.
-- ``accel``      rho = 0.99 on the cap sphere and the Cornell box (albedos
-  scaled to 0.99 max): iterations to tol with and without extrapolation.
 - ``cornell``    energy balance on the Cornell box vs resolution (32, 64, 128).
 - ``later``      coarser directions after the second bounce (2009 paper):
   time and error against the full set (later_R = R: the same bounce-by-bounce
@@ -35,7 +33,6 @@ Timings taken on a shared machine are noisy: the JSON records the CPU and load.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import platform
@@ -46,7 +43,9 @@ from pathlib import Path
 import numpy as np
 
 import voxgi
+from voxgi import SolveTuning
 from voxgi.directions import direction_set
+from voxgi.radiosity import line_records
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -124,7 +123,9 @@ def furnace(args) -> None:
         for rho in (0.3, 0.5, 0.9, 0.99):
             vox = voxgi.voxelize(make(rho), resolution=res)
             t = time.perf_counter()
-            sol = voxgi.solve(vox, directions=R, shoot_directions=R, progress=False, tol=1e-6)
+            sol = voxgi.solve(
+                vox, directions=R, progress=False, tol=1e-6, tuning=SolveTuning(shoot_directions=R)
+            )
             dt = time.perf_counter() - t
             mean, mx = _front_err(sol, 1.0 / (1 - rho))
             # slivers: records holding under 5% of a voxel face (edges of the inner object)
@@ -197,7 +198,9 @@ def cap(args) -> None:
                 continue
             vox = voxs[res]
             t = time.perf_counter()
-            sol = voxgi.solve(vox, directions=R, shoot_directions=R, progress=False, tol=1e-5)
+            sol = voxgi.solve(
+                vox, directions=R, progress=False, tol=1e-5, tuning=SolveTuning(shoot_directions=R)
+            )
             dt = time.perf_counter() - t
             mean, mx = _front_err(sol, _cap_exact(vox, rho))
             rows.append(
@@ -220,40 +223,47 @@ def cap(args) -> None:
     _table(rows, ["res", "R", "records", "iters", "mean_err", "max_err", "delta", "seconds"])
 
 
-def accel(args) -> None:
+def cornell(args) -> None:
+    # The open Cornell box as it is, then (albedo 0: direct light alone) the
+    # box closed by a fourth wall with and without its blocks: where the
+    # remaining imbalance comes from.
+    import dataclasses
+
+    def closed(blocks: bool) -> voxgi.Scene:
+        return voxgi.scenes.cornell_box(width=32, height=32, blocks=blocks, closed=True)
+
     rows = []
-    res = 32 if args.quick else 48
-    cases = [("cap_sphere", voxgi.voxelize(voxgi.scenes.cap_sphere(albedo=0.99), resolution=res))]
-    cb = voxgi.voxelize(voxgi.scenes.cornell_box(width=32, height=32), resolution=res)
-    alb = cb.albedo * np.float32(0.99 / cb.albedo.max())
-    cases.append(("cornell(0.99 max)", dataclasses.replace(cb, albedo=alb)))
-    for name, vox in cases:
-        ref = voxgi.solve(
-            vox, directions=8, shoot_directions=8, progress=False, tol=1e-8, max_iterations=2000
-        )
-        for acc in (True, False):
+    cases = [
+        ("open", voxgi.scenes.cornell_box(width=32, height=32), False),
+        ("closed, albedo 0", closed(True), True),
+        ("closed, no blocks, albedo 0", closed(False), True),
+    ]
+    ress = (32, 64) if args.quick else (32, 64, 128)
+    for name, scene, black in cases:
+        for res in ress:
+            vox = voxgi.voxelize(scene, resolution=res)
+            if black:
+                vox = dataclasses.replace(vox, albedo=np.zeros_like(vox.albedo))
+            if res == 128 and name != "open":
+                continue  # the trend is clear from 32 and 64
             t = time.perf_counter()
             sol = voxgi.solve(
-                vox,
-                directions=8,
-                shoot_directions=8,
-                progress=False,
-                tol=1e-4,
-                accelerate=acc,
-                max_iterations=300,
+                vox, directions=8, progress=False, tol=1e-5, tuning=SolveTuning(shoot_directions=16)
             )
             dt = time.perf_counter() - t
-            err = _err_vs(sol, ref, vox)
+            e = sol.stats["energy"]
+            em = np.array(e["emitted"])
             rows.append(
                 {
                     "scene": name,
-                    "extrapolate": acc,
+                    "res": res,
+                    "records": len(vox),
                     "iters": sol.bounces,
-                    "ref_iters": ref.bounces,
-                    "mean_err_vs_converged": float(err.mean()),
-                    "max_err_vs_converged": float(err.max()),
+                    "imbalance_r": e["imbalance"][0],
+                    "imbalance_g": e["imbalance"][1],
+                    "absorbed/emitted": float(e["absorbed"][0] / em[0]),
+                    "escaping/emitted": float(e["escaping"][0] / em[0]),
                     "seconds": dt,
-                    "extrapolations": sol.stats["extrapolations"],
                 }
             )
             print(rows[-1], flush=True)
@@ -261,76 +271,7 @@ def accel(args) -> None:
         rows,
         [
             "scene",
-            "extrapolate",
-            "iters",
-            "ref_iters",
-            "mean_err_vs_converged",
-            "max_err_vs_converged",
-            "seconds",
-        ],
-    )
-    _write(
-        "accel",
-        rows,
-        note="tol 1e-4 (error estimate), at most 300 iterations; reference: "
-        "tol 1e-8 with extrapolation",
-    )
-
-
-def cornell(args) -> None:
-    # The open Cornell box as it is, then (albedo 0: direct light alone) the
-    # box closed by a fourth wall with and without its blocks: where the
-    # remaining imbalance comes from. Each with the partial-coverage shooting
-    # and the silhouette rule (the defaults), with coverage alone, and with
-    # the paper's whole-line rule.
-    import dataclasses
-
-    def closed(blocks: bool) -> voxgi.Scene:
-        return voxgi.scenes.cornell_box(width=32, height=32, blocks=blocks, closed=True)
-
-    rows = []
-    cases = [("open", voxgi.scenes.cornell_box(width=32, height=32), False),
-             ("closed, albedo 0", closed(True), True),
-             ("closed, no blocks, albedo 0", closed(False), True)]
-    ress = (32, 64) if args.quick else (32, 64, 128)
-    for name, scene, black in cases:
-        for res in ress:
-            vox = voxgi.voxelize(scene, resolution=res)
-            if black:
-                vox = dataclasses.replace(vox, albedo=np.zeros_like(vox.albedo))
-            for cov, sil in ((True, True), (True, False), (False, False)):
-                if res == 128 and not (cov and name == "open"):
-                    continue  # the trend is clear from 32 and 64
-                R, Rs = 8, 16
-                t = time.perf_counter()
-                sol = voxgi.solve(vox, directions=R, shoot_directions=Rs, progress=False,
-                                  tol=1e-5, shoot_coverage=cov, shoot_silhouettes=sil)
-                dt = time.perf_counter() - t
-                e = sol.stats["energy"]
-                em = np.array(e["emitted"])
-                rows.append(
-                    {
-                        "scene": name,
-                        "res": res,
-                        "coverage": cov,
-                        "silhouettes": sil,
-                        "records": len(vox),
-                        "iters": sol.bounces,
-                        "imbalance_r": e["imbalance"][0],
-                        "imbalance_g": e["imbalance"][1],
-                        "absorbed/emitted": float(e["absorbed"][0] / em[0]),
-                        "escaping/emitted": float(e["escaping"][0] / em[0]),
-                        "seconds": dt,
-                    }
-                )
-                print(rows[-1], flush=True)
-    _table(
-        rows,
-        [
-            "scene",
             "res",
-            "coverage",
-            "silhouettes",
             "records",
             "iters",
             "imbalance_r",
@@ -352,17 +293,17 @@ def later(args) -> None:
     rows = []
     res = 48 if args.quick else 64
     vox = voxgi.voxelize(voxgi.scenes.cornell_box(width=32, height=32), resolution=res)
-    ref = voxgi.solve(vox, directions=22, shoot_directions=22, progress=False, tol=1e-6)
+    ref = voxgi.solve(
+        vox, directions=22, progress=False, tol=1e-6, tuning=SolveTuning(shoot_directions=22)
+    )
     for R, Rl in ((22, None), (22, 22), (22, 11), (22, 8), (16, None), (11, None), (8, None)):
         t = time.perf_counter()
         sol = voxgi.solve(
             vox,
             directions=R,
-            shoot_directions=22,
-            later_directions=Rl,
-            later_after=2,
             progress=False,
             tol=1e-6,
+            tuning=SolveTuning(shoot_directions=22, later_directions=Rl, later_after=2),
         )
         dt = time.perf_counter() - t
         err = _err_vs(sol, ref, vox)
@@ -486,12 +427,18 @@ def throughput(args) -> None:
         )
         print(rows[-1], flush=True)
         del tab
-    _table(rows, ["records", "threads", "algorithm", "seconds", "Mrays_s", "Mrays_s_per_thread",
-                  "table_GB"])
-    _write("throughput", rows, res=res,
-           note="one gathering iteration over all 2991 families (solve4: the record row plus "
-           "three times the replay row, over 4 iterations); a ray is one record meeting one "
-           "direction family in one iteration")
+    _table(
+        rows,
+        ["records", "threads", "algorithm", "seconds", "Mrays_s", "Mrays_s_per_thread", "table_GB"],
+    )
+    _write(
+        "throughput",
+        rows,
+        res=res,
+        note="one gathering iteration over all 2991 families (solve4: the record row plus "
+        "three times the replay row, over 4 iterations); a ray is one record meeting one "
+        "direction family in one iteration",
+    )
 
 
 def paper(args) -> None:
@@ -503,12 +450,10 @@ def paper(args) -> None:
         sol = voxgi.solve(
             vox,
             directions=22,
-            shoot_directions=35,
             max_bounces=4,
             threads=th,
             progress=False,
-            accelerate=False,
-            pair_cache=cache,
+            tuning=SolveTuning(shoot_directions=35, pair_cache=cache),
         )
         dt = time.perf_counter() - t
         sec = sol.stats["seconds"]
@@ -556,13 +501,13 @@ def dump(args) -> None:
     """Write the paper work unit's records for benchmarks/propagate_bench.cpp."""
     res = 64 if args.quick else 112
     vox = _bunny(res)
-    a = voxgi.radiosity._check_vox(vox)
+    rec = line_records(vox)
     emit = np.flatnonzero(vox.is_emitter).astype(np.int32)
-    vals = (np.pi * a["emission"] + 0.5 * a["albedo"]).astype(np.float32)
+    vals = (np.pi * vox.emission.astype(np.float32) + 0.5 * vox.albedo).astype(np.float32)
     path = RESULTS / f"bunny_room_{res}.bin"
     with open(path, "wb") as f:
         f.write(np.int64(len(vox)).tobytes())
-        for arr in (a["ijk"], a["normal"], a["point"], vals):
+        for arr in (rec.ijk, rec.normal, rec.point, vals):
             f.write(np.ascontiguousarray(arr).tobytes())
         f.write(np.int64(len(emit)).tobytes())
         f.write(emit.tobytes())
@@ -580,12 +525,9 @@ def _send_ratio(vox, R: int, threads: int) -> dict:
     power they send into the directions in which they found a partner
     (area x found share). 1 everywhere would make the gathering conserve
     energy; where it is not 1 is where the imbalance comes from."""
-    from voxgi import _core
-    from voxgi.radiosity import _check_vox
-
-    a = _check_vox(vox)
+    s = line_records(vox).build()
+    a = {"area": vox.area.astype(np.float64), "back": np.asarray(vox.back, bool)}
     n = len(vox)
-    s = _core.LineSystem(a["ijk"], a["normal"], a["point"], epsilon=0.02, history=16)
     ds = direction_set(R)
     fam = np.arange(len(ds.families), dtype=np.int64)
     S = s.normalisation(ds.families, ds.weights, threads)
@@ -602,7 +544,7 @@ def _send_ratio(vox, R: int, threads: int) -> dict:
 
 def energy(args) -> None:
     # The open Cornell box's energy balance against the resolution (the
-    # convergence study DESIGN-NOTES §10 asks the tolerance to come from):
+    # convergence study docs/design.md §10 asks the tolerance to come from):
     # R 8, shooting 16, tol 1e-5, the default rules; escaping counted on the
     # sender side. One thread (--threads: the first value) and the recorded
     # pairs (pair_cache=True: res 512 needs about 6 GB for them).
@@ -618,28 +560,50 @@ def energy(args) -> None:
         ratio = _send_ratio(vox, R, th) if res <= 128 else {}
         ratio = {names[int(k)]: v for k, v in ratio.items()}
         t = time.perf_counter()
-        sol = voxgi.solve(vox, directions=R, shoot_directions=Rs, progress=False, tol=1e-5,
-                          threads=th, pair_cache=True)
+        sol = voxgi.solve(
+            vox,
+            directions=R,
+            progress=False,
+            tol=1e-5,
+            threads=th,
+            tuning=SolveTuning(shoot_directions=Rs, pair_cache=True),
+        )
         dt = time.perf_counter() - t
         e = sol.stats["energy"]
         em = np.array(e["emitted"])
-        rows.append({
-            "res": res,
-            "records": len(vox),
-            "R": R,
-            "Rs": Rs,
-            "iters": sol.bounces,
-            "imbalance_r": e["imbalance"][0],
-            "imbalance_g": e["imbalance"][1],
-            "imbalance_b": e["imbalance"][2],
-            "absorbed/emitted": float(e["absorbed"][0] / em[0]),
-            "escaping/emitted": float(e["escaping"][0] / em[0]),
-            "seconds": dt,
-            "send_ratio": ratio,
-        })
+        rows.append(
+            {
+                "res": res,
+                "records": len(vox),
+                "R": R,
+                "Rs": Rs,
+                "iters": sol.bounces,
+                "imbalance_r": e["imbalance"][0],
+                "imbalance_g": e["imbalance"][1],
+                "imbalance_b": e["imbalance"][2],
+                "absorbed/emitted": float(e["absorbed"][0] / em[0]),
+                "escaping/emitted": float(e["escaping"][0] / em[0]),
+                "seconds": dt,
+                "send_ratio": ratio,
+            }
+        )
         print(rows[-1], flush=True)
-    _table(rows, ["res", "records", "R", "Rs", "iters", "imbalance_r", "imbalance_g", "imbalance_b",
-                  "absorbed/emitted", "escaping/emitted", "seconds"])
+    _table(
+        rows,
+        [
+            "res",
+            "records",
+            "R",
+            "Rs",
+            "iters",
+            "imbalance_r",
+            "imbalance_g",
+            "imbalance_b",
+            "absorbed/emitted",
+            "escaping/emitted",
+            "seconds",
+        ],
+    )
     print("send ratio of the gathering (delivered / sent per unit radiosity; front records):")
     for r in rows:
         if r["send_ratio"]:
@@ -652,17 +616,22 @@ def energy(args) -> None:
     old = RESULTS / f"propagation_energy_R{R}.json"
     if old.exists() and not args.fresh:
         done = {r["res"] for r in rows}
-        rows = sorted([r for r in json.loads(old.read_text())["rows"] if r["res"] not in done] + rows,
-                      key=lambda r: r["res"])
-    _write(f"energy_R{R}", rows, threads=th,
-           note="open Cornell box; imbalance = (emitted - absorbed - escaping) / emitted, "
-           "escaping counted on the sender side")
+        rows = sorted(
+            [r for r in json.loads(old.read_text())["rows"] if r["res"] not in done] + rows,
+            key=lambda r: r["res"],
+        )
+    _write(
+        f"energy_R{R}",
+        rows,
+        threads=th,
+        note="open Cornell box; imbalance = (emitted - absorbed - escaping) / emitted, "
+        "escaping counted on the sender side",
+    )
 
 
 SECTIONS = {
     "furnace": furnace,
     "cap": cap,
-    "accel": accel,
     "cornell": cornell,
     "energy": energy,
     "later": later,
@@ -677,13 +646,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sections", nargs="*", default=[], help=", ".join(SECTIONS))
     ap.add_argument("--quick", action="store_true", help="smaller cases")
-    ap.add_argument("--fresh", action="store_true",
-                    help="cap, energy: run every cell (default: keep the cells of earlier runs)")
+    ap.add_argument(
+        "--fresh",
+        action="store_true",
+        help="cap, energy: run every cell (default: keep the cells of earlier runs)",
+    )
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
-    ap.add_argument("--res", type=int, nargs="+",
-                    help="cap, energy: resolutions; furnace: the first one")
-    ap.add_argument("--radii", type=int, nargs="+",
-                    help="cap: direction radii; furnace: the first one; energy: R and Rs")
+    ap.add_argument(
+        "--res", type=int, nargs="+", help="cap, energy: resolutions; furnace: the first one"
+    )
+    ap.add_argument(
+        "--radii",
+        type=int,
+        nargs="+",
+        help="cap: direction radii; furnace: the first one; energy: R and Rs",
+    )
     args = ap.parse_args()
     bad = [s for s in args.sections if s not in SECTIONS and s not in EXTRA]
     if bad:

@@ -93,8 +93,9 @@ def output_stem(name: str, size: int) -> str:
 
 def git_commit() -> str:
     try:
-        return subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], text=True,
-                                       cwd=Path(__file__).parent).strip()
+        return subprocess.check_output(
+            ["git", "rev-parse", "--short", "HEAD"], text=True, cwd=Path(__file__).parent
+        ).strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
 
@@ -102,28 +103,39 @@ def git_commit() -> str:
 def load_reference(size: int, name: str = CORNELL) -> np.ndarray:
     path = RESULTS / f"{scene_tag(name)}_ref_{size}.exr"
     if not path.exists():
-        raise SystemExit(f"{path} missing: run python benchmarks/reference.py --scene {name} "
-                         f"--size {size}")
+        raise SystemExit(
+            f"{path} missing: run python benchmarks/reference.py --scene {name} --size {size}"
+        )
     meta = voxgi.io.read_exr_header(path)
     fp = voxgi.scenes.get(name).fingerprint()
     if meta.get("scene_fingerprint") not in (None, fp):
-        raise SystemExit(f"{path} was rendered from another {name} scene (fingerprint "
-                         f"{meta.get('scene_fingerprint')} != {fp}): rerun reference.py")
+        raise SystemExit(
+            f"{path} was rendered from another {name} scene (fingerprint "
+            f"{meta.get('scene_fingerprint')} != {fp}): rerun reference.py"
+        )
     return voxgi.io.read_exr(path)
 
 
-def run_voxgi(size: int, resolution, directions, render_kw: dict, seed: int = 0,
-              name: str = CORNELL):
+def run_voxgi(
+    size: int, resolution, directions, render_kw: dict, seed: int = 0, name: str = CORNELL
+):
     scene = make_scene(name, size)
     t0 = time.perf_counter()
     vox = voxgi.voxelize(scene, **({} if resolution is None else {"resolution": resolution}))
     t1 = time.perf_counter()
     # solved as voxgi.render(scene) solves: to the display's tolerance, without
     # the diagnostic pass (library defaults, with --defaults: tol 1e-4 and it)
-    fast = {} if resolution is None else {"tol": voxgi.pipeline.RENDER_SOLVE_TOL,
-                                          "diagnostics": False}
-    sol = voxgi.solve(vox, **({} if directions is None else {"directions": directions}),
-                      progress=False, **fast)
+    fast = (
+        {}
+        if resolution is None
+        else {
+            "tol": voxgi.pipeline.RENDER_SOLVE_TOL,
+            "tuning": voxgi.SolveTuning(diagnostics=False),
+        }
+    )
+    sol = voxgi.solve(
+        vox, **({} if directions is None else {"directions": directions}), progress=False, **fast
+    )
     t2 = time.perf_counter()
     out = voxgi.render(scene, sol, progress=False, seed=seed, **render_kw)
     t3 = time.perf_counter()
@@ -140,13 +152,15 @@ def second_camera(scene: voxgi.Scene, name: str):
     target = np.asarray(scene.camera.target, float)
     a = math.radians(25.0)
     d = eye - target
-    rot = np.array([d[0] * math.cos(a) + d[2] * math.sin(a), d[1],
-                    -d[0] * math.sin(a) + d[2] * math.cos(a)])
+    rot = np.array(
+        [d[0] * math.cos(a) + d[2] * math.sin(a), d[1], -d[0] * math.sin(a) + d[2] * math.cos(a)]
+    )
     return scene.camera.replace(eye=tuple(target + rot), target=tuple(target))
 
 
-def second_view(size: int, sol, render_kw: dict, tmp: Path, name: str = CORNELL,
-                out_dir: Path = RESULTS) -> dict:
+def second_view(
+    size: int, sol, render_kw: dict, tmp: Path, name: str = CORNELL, out_dir: Path = RESULTS
+) -> dict:
     """Time a new camera on a saved and reloaded solution (display only)."""
     scene = make_scene(name, size)
     cam = second_camera(scene, name)
@@ -179,8 +193,9 @@ def run_mitsuba(size: int, spps, variant=None, name: str = CORNELL) -> list[dict
     for spp in spps:
         t0 = time.perf_counter()
         img = np.array(mi.render(sc, spp=spp, seed=spp), dtype=np.float32)[..., :3]
-        rows.append({"spp": spp, "seconds": time.perf_counter() - t0, "image": img,
-                     "variant": mi.variant()})
+        rows.append(
+            {"spp": spp, "seconds": time.perf_counter() - t0, "image": img, "variant": mi.variant()}
+        )
     return rows
 
 
@@ -220,20 +235,29 @@ def diff_png(img: np.ndarray, ref: np.ndarray, path: Path, title: str) -> None:
     plt.close(fig)
 
 
-def plot(size: int, vrows: list[dict], mrows: list[dict], path: Path,
-         title: str = "Cornell box") -> None:
+def plot(
+    size: int, vrows: list[dict], mrows: list[dict], path: Path, title: str = "Cornell box"
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
-    ax.loglog([r["seconds"] for r in mrows], [r["rel_mse"] for r in mrows], "o-",
-              label=f"Mitsuba 3 path ({mrows[0]['variant']})")
+    ax.loglog(
+        [r["seconds"] for r in mrows],
+        [r["rel_mse"] for r in mrows],
+        "o-",
+        label=f"Mitsuba 3 path ({mrows[0]['variant']})",
+    )
     for r in mrows:
         ax.annotate(f"{r['spp']} spp", (r["seconds"], r["rel_mse"]), fontsize=7)
-    ax.loglog([r["seconds"] for r in vrows], [r["rel_mse"] for r in vrows], "s",
-              label="voxgi (voxelize + solve + display)")
+    ax.loglog(
+        [r["seconds"] for r in vrows],
+        [r["rel_mse"] for r in vrows],
+        "s",
+        label="voxgi (voxelize + solve + display)",
+    )
     for r in vrows:
         ax.annotate(r["label"], (r["seconds"], r["rel_mse"]), fontsize=7)
     ax.axhline(5e-3, color="grey", lw=0.8, ls="--")
@@ -247,37 +271,65 @@ def plot(size: int, vrows: list[dict], mrows: list[dict], path: Path,
     plt.close(fig)
 
 
-def split_error(size: int, default_img: np.ndarray, ref: np.ndarray, resolutions,
-                frames: int, directions=None, name: str = CORNELL) -> list[dict]:
+def split_error(
+    size: int,
+    default_img: np.ndarray,
+    ref: np.ndarray,
+    resolutions,
+    frames: int,
+    directions=None,
+    name: str = CORNELL,
+) -> list[dict]:
     """Near noise-free voxgi renders at rising resolution: the discretisation error."""
     rows = []
     for res in resolutions:
-        out, _, secs, _ = run_voxgi(size, res, directions, {"max_frames": frames, "tol": 0.0},
-                                    seed=7, name=name)
-        rows.append({"resolution": res, "frames": frames, "seconds": secs,
-                     "rel_mse_vs_ref": rel_mse(out.image, ref),
-                     "est_noise_rel_mse": out.stats["est_rel_mse"], "image": out.image})
+        out, _, secs, _ = run_voxgi(
+            size, res, directions, {"max_frames": frames, "tol": 0.0}, seed=7, name=name
+        )
+        rows.append(
+            {
+                "resolution": res,
+                "frames": frames,
+                "seconds": secs,
+                "rel_mse_vs_ref": rel_mse(out.image, ref),
+                "est_noise_rel_mse": out.stats["est_rel_mse"],
+                "image": out.image,
+            }
+        )
     return rows
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scene", default=CORNELL,
-                    help="built-in scene name (voxgi.scenes.names()); default cornell-box")
+    ap.add_argument(
+        "--scene",
+        default=CORNELL,
+        help="built-in scene name (voxgi.scenes.names()); default cornell-box",
+    )
     ap.add_argument("--size", type=int, nargs="+", default=[256])
     ap.add_argument("--spp", type=int, nargs="+", default=MITSUBA_SPP)
     ap.add_argument("--variant", default=None)
     ap.add_argument("--split", action="store_true", help="also split voxgi's error")
-    ap.add_argument("--defaults", action="store_true",
-                    help="also run voxgi with all its defaults (slow with the current solver)")
-    ap.add_argument("--high", action="store_true",
-                    help="also run voxgi at resolution 128, R 8, tol 1e-3")
-    ap.add_argument("--main", default="res64 R8 tol1e-3",
-                    help="setting used for the difference image, second view and split")
+    ap.add_argument(
+        "--defaults",
+        action="store_true",
+        help="also run voxgi with all its defaults (slow with the current solver)",
+    )
+    ap.add_argument(
+        "--high", action="store_true", help="also run voxgi at resolution 128, R 8, tol 1e-3"
+    )
+    ap.add_argument(
+        "--main",
+        default="res64 R8 tol1e-3",
+        help="setting used for the difference image, second view and split",
+    )
     ap.add_argument("--split-frames", type=int, default=128)
-    ap.add_argument("--seeds", type=int, default=3,
-                    help="voxgi displays per setting (seeds 0..N-1): relMSE and display time "
-                         "are their means")
+    ap.add_argument(
+        "--seeds",
+        type=int,
+        default=3,
+        help="voxgi displays per setting (seeds 0..N-1): relMSE and display time are their means",
+    )
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -288,8 +340,9 @@ def main(argv=None) -> int:
         load_start = os.getloadavg()
         vrows = []
         default = None
-        settings = (VOXGI_SETTINGS + ([HIGH] if args.high else [])
-                    + ([DEFAULTS] if args.defaults else []))
+        settings = (
+            VOXGI_SETTINGS + ([HIGH] if args.high else []) + ([DEFAULTS] if args.defaults else [])
+        )
         scene_s = make_scene(name, size)  # the extra seeds' displays
         for label, res, dirs, kw in settings:
             out, sol, secs, phases = run_voxgi(size, res, dirs, kw, name=name)
@@ -305,70 +358,118 @@ def main(argv=None) -> int:
                 errs.append(rel_mse(o2.image, ref))
             secs = phases["voxelize"] + phases["solve"] + float(np.mean(disp))
             phases = {**phases, "display": float(np.mean(disp))}
-            row = {"label": label, "resolution": sol.vox.resolution, "records": len(sol.vox),
-                   "directions": dirs, "render": kw, "frames": out.frames, "seconds": secs,
-                   "phases": phases, "rel_mse": float(np.mean(errs)), "rel_mse_seeds": errs,
-                   "est_noise_rel_mse": out.stats["est_rel_mse"],
-                   "shadow_rays": out.stats["shadow_rays"], "vpl_split": out.stats["vpl_split"]}
+            row = {
+                "label": label,
+                "resolution": sol.vox.resolution,
+                "records": len(sol.vox),
+                "directions": dirs,
+                "render": kw,
+                "frames": out.frames,
+                "seconds": secs,
+                "phases": phases,
+                "rel_mse": float(np.mean(errs)),
+                "rel_mse_seeds": errs,
+                "est_noise_rel_mse": out.stats["est_rel_mse"],
+                "shadow_rays": out.stats["shadow_rays"],
+                "vpl_split": out.stats["vpl_split"],
+            }
             vrows.append(row)
-            print(f"voxgi   {label:>20s}: {secs:7.2f} s  relMSE {row['rel_mse']:.2e} "
-                  f"(seeds {' '.join(f'{e:.1e}' for e in errs)})  "
-                  f"({out.frames} frames; vox {phases['voxelize']:.2f} solve "
-                  f"{phases['solve']:.2f} display {phases['display']:.2f})", flush=True)
+            print(
+                f"voxgi   {label:>20s}: {secs:7.2f} s  relMSE {row['rel_mse']:.2e} "
+                f"(seeds {' '.join(f'{e:.1e}' for e in errs)})  "
+                f"({out.frames} frames; vox {phases['voxelize']:.2f} solve "
+                f"{phases['solve']:.2f} display {phases['display']:.2f})",
+                flush=True,
+            )
             if label == args.main:
                 default = (out, sol, row)
         mrows = run_mitsuba(size, args.spp, args.variant, name=name)
         for r in mrows:
             r["rel_mse"] = rel_mse(r.pop("image"), ref)
-            print(f"mitsuba {r['spp']:>16d} spp: {r['seconds']:7.2f} s  relMSE {r['rel_mse']:.2e}",
-                  flush=True)
-        result = {"scene": name, "size": size, "voxgi": vrows, "mitsuba": mrows,
-                  "commit": git_commit(),
-                  "voxgi_version": voxgi.__version__, "cpu": platform.processor(),
-                  "threads": voxgi._core.hardware_threads(),
-                  # 1/5/15-minute load averages before the voxgi runs and after
-                  # Mitsuba's: tells a quiet run from a contended one.
-                  "loadavg": {"start": load_start, "after_mitsuba": os.getloadavg()}}
+            print(
+                f"mitsuba {r['spp']:>16d} spp: {r['seconds']:7.2f} s  relMSE {r['rel_mse']:.2e}",
+                flush=True,
+            )
+        result = {
+            "scene": name,
+            "size": size,
+            "voxgi": vrows,
+            "mitsuba": mrows,
+            "commit": git_commit(),
+            "voxgi_version": voxgi.__version__,
+            "cpu": platform.processor(),
+            "threads": voxgi._core.hardware_threads(),
+            # 1/5/15-minute load averages before the voxgi runs and after
+            # Mitsuba's: tells a quiet run from a contended one.
+            "loadavg": {"start": load_start, "after_mitsuba": os.getloadavg()},
+        }
         if default is not None:
             out, sol, row = default
-            diff_png(out.image, ref, args.out / f"{tag}_diff_{size}.png",
-                     f"{row['label']} ({row['seconds']:.1f} s, relMSE {row['rel_mse']:.2e})")
+            diff_png(
+                out.image,
+                ref,
+                args.out / f"{tag}_diff_{size}.png",
+                f"{row['label']} ({row['seconds']:.1f} s, relMSE {row['rel_mse']:.2e})",
+            )
             voxgi.io.write_png(args.out / f"{tag}_voxgi_{size}.png", out.image)
             import tempfile
 
             with tempfile.TemporaryDirectory() as tmp:
-                result["second_view"] = second_view(size, sol, row["render"], Path(tmp),
-                                                    name=name, out_dir=args.out)
-            print(f"second view (saved solution, display only): "
-                  f"{result['second_view']['seconds']:.2f} s", flush=True)
+                result["second_view"] = second_view(
+                    size, sol, row["render"], Path(tmp), name=name, out_dir=args.out
+                )
+            print(
+                f"second view (saved solution, display only): "
+                f"{result['second_view']['seconds']:.2f} s",
+                flush=True,
+            )
             if args.split:
-                rows = split_error(size, out.image, ref,
-                                   sorted({32, 48, sol.vox.resolution, 96}), args.split_frames,
-                                   directions=row["directions"], name=name)
+                rows = split_error(
+                    size,
+                    out.image,
+                    ref,
+                    sorted({32, 48, sol.vox.resolution, 96}),
+                    args.split_frames,
+                    directions=row["directions"],
+                    name=name,
+                )
                 same = [r for r in rows if r["resolution"] == sol.vox.resolution][-1]
                 noise = rel_mse(out.image, same["image"])
                 for r in rows:
                     r.pop("image")
-                    print(f"split: res {r['resolution']:4d}, {r['frames']} frames: relMSE vs "
-                          f"ref {r['rel_mse_vs_ref']:.2e} (noise est {r['est_noise_rel_mse']:.1e})")
-                print(f"split: {row['label']} vs {same['frames']}-frame render at the same resolution "
-                      f"(display noise) {noise:.2e}")
-                result["split"] = {"rows": rows, "display_noise_rel_mse": noise,
-                                   "defaults_rel_mse": row["rel_mse"]}
+                    print(
+                        f"split: res {r['resolution']:4d}, {r['frames']} frames: relMSE vs "
+                        f"ref {r['rel_mse_vs_ref']:.2e} (noise est {r['est_noise_rel_mse']:.1e})"
+                    )
+                print(
+                    f"split: {row['label']} vs {same['frames']}-frame render at the same resolution "
+                    f"(display noise) {noise:.2e}"
+                )
+                result["split"] = {
+                    "rows": rows,
+                    "display_noise_rel_mse": noise,
+                    "defaults_rel_mse": row["rel_mse"],
+                }
         for target in (5e-3, 1e-3):
             tv = min((r["seconds"] for r in vrows if r["rel_mse"] <= target), default=None)
             tm = time_to_error(mrows, target)
             result[f"time_to_{target:.0e}"] = {"voxgi_best": tv, "mitsuba": tm}
-            print(f"time to relMSE {target:.0e}: voxgi (fastest setting) "
-                  f"{'-' if tv is None else f'{tv:.2f} s'}, Mitsuba "
-                  f"{'-' if tm is None else f'{tm:.2f} s'}")
+            print(
+                f"time to relMSE {target:.0e}: voxgi (fastest setting) "
+                f"{'-' if tv is None else f'{tv:.2f} s'}, Mitsuba "
+                f"{'-' if tm is None else f'{tm:.2f} s'}"
+            )
         print("\n| method | setting | seconds | relMSE |\n|---|---|---|---|")
         for r in vrows:
-            print(f"| voxgi | {r['label']} ({r['records']} records, {r['frames']} frames) | "
-                  f"{r['seconds']:.2f} | {r['rel_mse']:.2e} |")
+            print(
+                f"| voxgi | {r['label']} ({r['records']} records, {r['frames']} frames) | "
+                f"{r['seconds']:.2f} | {r['rel_mse']:.2e} |"
+            )
         for r in mrows:
-            print(f"| Mitsuba {r['variant']} | {r['spp']} spp | {r['seconds']:.2f} | "
-                  f"{r['rel_mse']:.2e} |")
+            print(
+                f"| Mitsuba {r['variant']} | {r['spp']} spp | {r['seconds']:.2f} | "
+                f"{r['rel_mse']:.2e} |"
+            )
         stem = output_stem(name, size)
         (args.out / f"{stem}.json").write_text(json.dumps(result, indent=2, default=float))
         plot(size, vrows, mrows, args.out / f"{stem}.png", title=title)

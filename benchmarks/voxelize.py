@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 CASES = [("bunny", 128), ("bunny", 256), ("bunny", 512), ("bunny_1m", 512)]
-TARGETS = {("bunny", 256): 1.0, ("bunny_1m", 512): 20.0}  # seconds, issue 2
+TARGETS = {("bunny", 256): 1.0, ("bunny_1m", 512): 20.0}  # seconds
 
 
 def build_scene(name: str):
@@ -92,20 +92,35 @@ def run_one(name: str, resolution: int, repeats: int, threads: int | None) -> di
     rss1 = peak()
     st = vox.stats
     return {
-        "case": name, "resolution": resolution, "triangles": st["triangles"],
-        "records": len(vox), "cells": st["cells"], "pairs": st["pairs"],
-        "back_records": st["back_records"], "cut_records": st["cut_records"],
-        "median_s": statistics.median(times), "min_s": min(times), "repeats": repeats,
-        "phase_seconds": st["phase_seconds"], "threads": st["threads"],
-        "kernel_peak_bytes": st["peak_bytes"], "estimate_bytes": st["estimate_bytes"],
-        "rss_growth_bytes": max(0, rss1 - rss0), "rss_peak_bytes": rss1,
+        "case": name,
+        "resolution": resolution,
+        "triangles": st["triangles"],
+        "records": len(vox),
+        "cells": st["cells"],
+        "pairs": st["pairs"],
+        "back_records": st["back_records"],
+        "cut_records": st["cut_records"],
+        "median_s": statistics.median(times),
+        "min_s": min(times),
+        "repeats": repeats,
+        "phase_seconds": st["phase_seconds"],
+        "threads": st["threads"],
+        "kernel_peak_bytes": st["peak_bytes"],
+        "estimate_bytes": st["estimate_bytes"],
+        "rss_growth_bytes": max(0, rss1 - rss0),
+        "rss_peak_bytes": rss1,
     }
 
 
 def git_commit() -> str:
     try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                              cwd=Path(__file__).parent, check=True).stdout.strip()
+        return subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            cwd=Path(__file__).parent,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
 
@@ -149,20 +164,30 @@ def main() -> None:
         r["target_s"] = target
         r["meets_target"] = None if target is None else r["median_s"] <= target
 
-    hdr = (f"{'case':<10} {'res':>4} {'triangles':>10} {'records':>10} {'cells':>9} "
-           f"{'median s':>9} {'min s':>8} {'kernel MB':>10} {'RSS+ MB':>8} {'target':>7}")
+    hdr = (
+        f"{'case':<10} {'res':>4} {'triangles':>10} {'records':>10} {'cells':>9} "
+        f"{'median s':>9} {'min s':>8} {'kernel MB':>10} {'RSS+ MB':>8} {'target':>7}"
+    )
     print(hdr)
     print("-" * len(hdr))
     for r in rows:
         tgt = "" if r["target_s"] is None else f"<={r['target_s']:g}s"
-        print(f"{r['case']:<10} {r['resolution']:>4} {r['triangles']:>10,} {r['records']:>10,} "
-              f"{r['cells']:>9,} {r['median_s']:>9.3f} {r['min_s']:>8.3f} "
-              f"{r['kernel_peak_bytes'] / 2**20:>10.1f} {r['rss_growth_bytes'] / 2**20:>8.1f} "
-              f"{tgt:>7}")
-    meta = {"benchmark": "voxelize", "voxgi_version": voxgi.__version__, "git_commit": git_commit(),
-            "cpu": cpu_name(), "cpu_count": os.cpu_count(), "python": platform.python_version(),
-            "threads": rows[0]["threads"] if rows else None,
-            "time": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+        print(
+            f"{r['case']:<10} {r['resolution']:>4} {r['triangles']:>10,} {r['records']:>10,} "
+            f"{r['cells']:>9,} {r['median_s']:>9.3f} {r['min_s']:>8.3f} "
+            f"{r['kernel_peak_bytes'] / 2**20:>10.1f} {r['rss_growth_bytes'] / 2**20:>8.1f} "
+            f"{tgt:>7}"
+        )
+    meta = {
+        "benchmark": "voxelize",
+        "voxgi_version": voxgi.__version__,
+        "git_commit": git_commit(),
+        "cpu": cpu_name(),
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "threads": rows[0]["threads"] if rows else None,
+        "time": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
     path = Path(a.out)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps({**meta, "results": rows}, indent=2) + "\n")

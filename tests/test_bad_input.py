@@ -25,63 +25,74 @@ def small():
     s = voxgi.scenes.furnace_box(albedo=0.5, emission=1.0)
     s.camera = s.camera.replace(width=8, height=8)
     vox = voxgi.voxelize(s, resolution=8, progress=False)
-    sol = voxgi.solve(vox, directions=4, shoot_directions=4, progress=False)
+    sol = voxgi.solve(
+        vox, directions=4, tuning=voxgi.SolveTuning(shoot_directions=4), progress=False
+    )
     return s, vox, sol
 
 
 # ----------------------------------------------------------------- Material
-@pytest.mark.parametrize(("kw", "exc", "word"), [
-    ({"albedo": NAN}, ValueError, "albedo"),
-    ({"albedo": (0.5, INF, 0.5)}, ValueError, "albedo"),
-    ({"albedo": 1.0}, ValueError, "albedo"),          # albedo must be < 1
-    ({"albedo": -0.1}, ValueError, "albedo"),
-    ({"albedo": (0.5, 0.5)}, ValueError, "albedo"),
-    ({"albedo": "red"}, TypeError, "albedo"),
-    ({"albedo": True}, TypeError, "albedo"),
-    ({"albedo": None}, TypeError, "albedo"),
-    ({"emission": -1.0}, ValueError, "emission"),
-    ({"emission": (1, 1, NAN)}, ValueError, "emission"),
-    ({"emission": [[1, 1, 1]]}, ValueError, "emission"),
-    ({"specular": 0.5}, TypeError, "specular"),
-])
+@pytest.mark.parametrize(
+    ("kw", "exc", "word"),
+    [
+        ({"albedo": NAN}, ValueError, "albedo"),
+        ({"albedo": (0.5, INF, 0.5)}, ValueError, "albedo"),
+        ({"albedo": 1.0}, ValueError, "albedo"),  # albedo must be < 1
+        ({"albedo": -0.1}, ValueError, "albedo"),
+        ({"albedo": (0.5, 0.5)}, ValueError, "albedo"),
+        ({"albedo": "red"}, TypeError, "albedo"),
+        ({"albedo": True}, TypeError, "albedo"),
+        ({"albedo": None}, TypeError, "albedo"),
+        ({"emission": -1.0}, ValueError, "emission"),
+        ({"emission": (1, 1, NAN)}, ValueError, "emission"),
+        ({"emission": [[1, 1, 1]]}, ValueError, "emission"),
+        ({"specular": 0.5}, TypeError, "specular"),
+    ],
+)
 def test_material_bad(kw, exc, word):
     with pytest.raises(exc, match=word):
         voxgi.Material(**kw)
 
 
-@pytest.mark.parametrize(("kw", "exc", "word"), [
-    ({"rs": 1.5}, ValueError, "rs"),
-    ({"rs": (NAN, 0, 0)}, ValueError, "rs"),
-    ({"nu": 0.0}, ValueError, "nu"),
-    ({"nu": INF}, ValueError, "nu"),
-    ({"nv": -3.0}, ValueError, "nv"),
-    ({"nv": "10"}, TypeError, "nv"),
-])
+@pytest.mark.parametrize(
+    ("kw", "exc", "word"),
+    [
+        ({"rs": 1.5}, ValueError, "rs"),
+        ({"rs": (NAN, 0, 0)}, ValueError, "rs"),
+        ({"nu": 0.0}, ValueError, "nu"),
+        ({"nu": INF}, ValueError, "nu"),
+        ({"nv": -3.0}, ValueError, "nv"),
+        ({"nv": "10"}, TypeError, "nv"),
+    ],
+)
 def test_ashikhmin_shirley_bad(kw, exc, word):
     with pytest.raises(exc, match=word):
         voxgi.AshikhminShirley(**kw)
 
 
 # ----------------------------------------------------------------- Camera
-@pytest.mark.parametrize(("kw", "exc", "word"), [
-    ({"eye": (0, 0, NAN)}, ValueError, "eye"),
-    ({"target": (INF, 0, 0)}, ValueError, "target"),
-    ({"up": (0, NAN, 0)}, ValueError, "up"),
-    ({"eye": (0, 0)}, ValueError, "eye"),
-    ({"eye": "origin"}, TypeError, "eye"),
-    ({"eye": (0, 0, 0), "target": (0, 0, 0)}, ValueError, "coincide"),
-    ({"up": (0, 0, 1)}, ValueError, "up"),            # parallel to the view direction
-    ({"up": (0, 0, 0)}, ValueError, "up"),
-    ({"fov": 0.0}, ValueError, "fov"),
-    ({"fov": 180.0}, ValueError, "fov"),
-    ({"fov": NAN}, ValueError, "fov"),
-    ({"width": 0}, ValueError, "width"),
-    ({"width": 64.0}, TypeError, "width"),
-    ({"height": 1 << 20}, ValueError, "height"),
-    ({"aperture": -1.0}, ValueError, "aperture"),
-    ({"aperture": INF}, ValueError, "aperture"),
-    ({"focus_distance": 0.0}, ValueError, "focus_distance"),
-])
+@pytest.mark.parametrize(
+    ("kw", "exc", "word"),
+    [
+        ({"eye": (0, 0, NAN)}, ValueError, "eye"),
+        ({"target": (INF, 0, 0)}, ValueError, "target"),
+        ({"up": (0, NAN, 0)}, ValueError, "up"),
+        ({"eye": (0, 0)}, ValueError, "eye"),
+        ({"eye": "origin"}, TypeError, "eye"),
+        ({"eye": (0, 0, 0), "target": (0, 0, 0)}, ValueError, "coincide"),
+        ({"up": (0, 0, 1)}, ValueError, "up"),  # parallel to the view direction
+        ({"up": (0, 0, 0)}, ValueError, "up"),
+        ({"fov": 0.0}, ValueError, "fov"),
+        ({"fov": 180.0}, ValueError, "fov"),
+        ({"fov": NAN}, ValueError, "fov"),
+        ({"width": 0}, ValueError, "width"),
+        ({"width": 64.0}, TypeError, "width"),
+        ({"height": 1 << 20}, ValueError, "height"),
+        ({"aperture": -1.0}, ValueError, "aperture"),
+        ({"aperture": INF}, ValueError, "aperture"),
+        ({"focus_distance": 0.0}, ValueError, "focus_distance"),
+    ],
+)
 def test_camera_bad(kw, exc, word):
     with pytest.raises(exc, match=word):
         voxgi.Camera(**kw)
@@ -102,11 +113,14 @@ def test_scene_add_inf_vertex():
         voxgi.Scene().add(_tri([(0, 0, 0), (INF, 0, 0), (0, 1, 0)]))
 
 
-@pytest.mark.parametrize(("mesh", "exc", "word"), [
-    ("box.obj", TypeError, "trimesh"),
-    (np.zeros((3, 3)), TypeError, "trimesh"),
-    (None, TypeError, "trimesh"),
-])
+@pytest.mark.parametrize(
+    ("mesh", "exc", "word"),
+    [
+        ("box.obj", TypeError, "trimesh"),
+        (np.zeros((3, 3)), TypeError, "trimesh"),
+        (None, TypeError, "trimesh"),
+    ],
+)
 def test_scene_add_not_a_mesh(mesh, exc, word):
     with pytest.raises(exc, match=word):
         voxgi.Scene().add(mesh)
@@ -120,16 +134,21 @@ def test_scene_add_face_index_out_of_range():
 
 
 def test_scene_add_all_degenerate():
-    with (pytest.raises(ValueError, match="degenerate"),
-          pytest.warns(UserWarning, match="degenerate")):
+    with (
+        pytest.raises(ValueError, match="degenerate"),
+        pytest.warns(UserWarning, match="degenerate"),
+    ):
         voxgi.Scene().add(_tri([(0, 0, 0), (1, 0, 0), (2, 0, 0)]))
 
 
-@pytest.mark.parametrize(("kw", "exc", "word"), [
-    ({"material": "white"}, TypeError, "material"),
-    ({"name": 3}, TypeError, "name"),
-    ({"two_sided": "yes"}, TypeError, "two_sided"),
-])
+@pytest.mark.parametrize(
+    ("kw", "exc", "word"),
+    [
+        ({"material": "white"}, TypeError, "material"),
+        ({"name": 3}, TypeError, "name"),
+        ({"two_sided": "yes"}, TypeError, "two_sided"),
+    ],
+)
 def test_scene_add_bad_args(kw, exc, word):
     with pytest.raises(exc, match=word):
         voxgi.Scene().add(trimesh.creation.box(), **kw)
@@ -168,7 +187,7 @@ def test_load_missing_file(tmp_path):
 
 
 def test_load_malformed_toml_gives_line(tmp_path):
-    p = _write(tmp_path, '[camera]\neye = [0, 0, 1]\nfov = = 3\n')
+    p = _write(tmp_path, "[camera]\neye = [0, 0, 1]\nfov = = 3\n")
     with pytest.raises(ValueError, match=r"line 3"):
         voxgi.Scene.load(p)
 
@@ -185,29 +204,32 @@ def test_load_directory(tmp_path):
         voxgi.Scene.load(tmp_path)
 
 
-@pytest.mark.parametrize(("body", "words"), [
-    ('[[object]]\nmesh = "box.obj"\nalbedo = 1.5\n', ["object #0", "albedo"]),
-    ('[[object]]\nmesh = "box.obj"\nalbedo = "nan"\n', ["object #0", "albedo"]),
-    ('[[object]]\nmesh = "box.obj"\nemission = -1\n', ["object #0", "emission"]),
-    ('[[object]]\nmesh = "box.obj"\ncolour = 1\n', ["object #0", "colour"]),
-    ('[[object]]\nname = "x"\n', ["object #0", "mesh"]),
-    ('[[object]]\nmesh = "missing.obj"\n', ["object #0", "missing.obj"]),
-    ('[[object]]\nmesh = "box.obj"\nmaterial = "gold"\n', ["object #0", "gold"]),
-    ('[[object]]\nmesh = "box.obj"\nscale = 0\n', ["object #0", "scale"]),
-    ('[[object]]\nmesh = "box.obj"\nrotate = [90, 0, 0, 0]\n', ["object #0", "rotate"]),
-    ('[[object]]\nmesh = "box.obj"\nmatrix = [[1, 0], [0, 1]]\n', ["object #0", "matrix"]),
-    ('[[object]]\nmesh = "box.obj"\ntranslate = [0, 0]\n', ["object #0", "translate"]),
-    ('[[object]]\nmesh = "box.obj"\ntwo_sided = "no"\n', ["object #0", "two_sided"]),
-    ('[camera]\nfov = 200\n', ["camera", "fov"]),
-    ('[camera]\neye = [0, 0, 0]\ntarget = [0, 0, 0]\n', ["camera", "coincide"]),
-    ('[camera]\nlens = 3\n', ["camera", "lens"]),
-    ('[materials.w]\nalbedo = [0.5, 0.5]\n', ["materials.w", "albedo"]),
-    ('[materials.w]\nshiny = 1\n', ["materials.w", "shiny"]),
-    ('[materials.w]\nspecular = { rs = 0.1, nu = -1, nv = 10 }\n', ["materials.w", "nu"]),
-    ('lights = 3\n', ["lights"]),
-    ('object = 3\n', ["object"]),
-    ('camera = 3\n', ["camera"]),
-])
+@pytest.mark.parametrize(
+    ("body", "words"),
+    [
+        ('[[object]]\nmesh = "box.obj"\nalbedo = 1.5\n', ["object #0", "albedo"]),
+        ('[[object]]\nmesh = "box.obj"\nalbedo = "nan"\n', ["object #0", "albedo"]),
+        ('[[object]]\nmesh = "box.obj"\nemission = -1\n', ["object #0", "emission"]),
+        ('[[object]]\nmesh = "box.obj"\ncolour = 1\n', ["object #0", "colour"]),
+        ('[[object]]\nname = "x"\n', ["object #0", "mesh"]),
+        ('[[object]]\nmesh = "missing.obj"\n', ["object #0", "missing.obj"]),
+        ('[[object]]\nmesh = "box.obj"\nmaterial = "gold"\n', ["object #0", "gold"]),
+        ('[[object]]\nmesh = "box.obj"\nscale = 0\n', ["object #0", "scale"]),
+        ('[[object]]\nmesh = "box.obj"\nrotate = [90, 0, 0, 0]\n', ["object #0", "rotate"]),
+        ('[[object]]\nmesh = "box.obj"\nmatrix = [[1, 0], [0, 1]]\n', ["object #0", "matrix"]),
+        ('[[object]]\nmesh = "box.obj"\ntranslate = [0, 0]\n', ["object #0", "translate"]),
+        ('[[object]]\nmesh = "box.obj"\ntwo_sided = "no"\n', ["object #0", "two_sided"]),
+        ("[camera]\nfov = 200\n", ["camera", "fov"]),
+        ("[camera]\neye = [0, 0, 0]\ntarget = [0, 0, 0]\n", ["camera", "coincide"]),
+        ("[camera]\nlens = 3\n", ["camera", "lens"]),
+        ("[materials.w]\nalbedo = [0.5, 0.5]\n", ["materials.w", "albedo"]),
+        ("[materials.w]\nshiny = 1\n", ["materials.w", "shiny"]),
+        ("[materials.w]\nspecular = { rs = 0.1, nu = -1, nv = 10 }\n", ["materials.w", "nu"]),
+        ("lights = 3\n", ["lights"]),
+        ("object = 3\n", ["object"]),
+        ("camera = 3\n", ["camera"]),
+    ],
+)
 def test_load_bad_value_names_key(tmp_path, box_obj, body, words):
     p = _write(tmp_path, body)
     with pytest.raises(ValueError, match=r"s\.toml") as ei:
@@ -219,8 +241,11 @@ def test_load_bad_value_names_key(tmp_path, box_obj, body, words):
 
 def test_load_bad_value_gives_line(tmp_path, box_obj):
     """A bad value deep in the file is reported with its line number."""
-    p = _write(tmp_path, '[camera]\nwidth = 8\n\n[[object]]\nmesh = "box.obj"\n\n'
-                         '[[object]]\nmesh = "box.obj"\nalbedo = 2.0\n')
+    p = _write(
+        tmp_path,
+        '[camera]\nwidth = 8\n\n[[object]]\nmesh = "box.obj"\n\n'
+        '[[object]]\nmesh = "box.obj"\nalbedo = 2.0\n',
+    )
     with pytest.raises(ValueError, match=r"line 9.*albedo|albedo.*line 9"):
         voxgi.Scene.load(p)
 
@@ -246,8 +271,15 @@ def test_voxelize_bad(small):
         voxgi.voxelize("cornell-box")
     with pytest.raises(ValueError, match="empty"):
         voxgi.voxelize(voxgi.Scene())
-    for res, exc in [(1, ValueError), (0, ValueError), (-5, ValueError), (16.0, TypeError),
-                     ("16", TypeError), (None, TypeError), (True, TypeError)]:
+    for res, exc in [
+        (1, ValueError),
+        (0, ValueError),
+        (-5, ValueError),
+        (16.0, TypeError),
+        ("16", TypeError),
+        (None, TypeError),
+        (True, TypeError),
+    ]:
         with pytest.raises(exc, match="resolution"):
             voxgi.voxelize(s, resolution=res, progress=False)
     with pytest.raises(TypeError, match="threads"):
@@ -281,21 +313,25 @@ def test_solve_bad_args(small):
     _, vox, _ = small
     with pytest.raises(TypeError, match="VoxelSet"):
         voxgi.solve(np.zeros((3, 3)))
-    for kw, exc, word in [({"directions": 0}, ValueError, "direction"),
-                          ({"directions": 2.5}, TypeError, "direction"),
-                          ({"max_bounces": -1}, ValueError, "max_bounces"),
-                          ({"tol": 0.0}, ValueError, "tol"),
-                          ({"tol": NAN}, ValueError, "tol"),
-                          ({"tol": "1e-3"}, TypeError, "tol"),
-                          ({"threads": 0}, ValueError, "threads"),
-                          ({"method": "newton"}, ValueError, "method"),
-                          ({"epsilon": -1.0}, ValueError, "epsilon")]:
+    for kw, exc, word in [
+        ({"directions": 0}, ValueError, "direction"),
+        ({"directions": 2.5}, TypeError, "direction"),
+        ({"max_bounces": -1}, ValueError, "max_bounces"),
+        ({"tol": 0.0}, ValueError, "tol"),
+        ({"tol": NAN}, ValueError, "tol"),
+        ({"tol": "1e-3"}, TypeError, "tol"),
+        ({"threads": 0}, ValueError, "threads"),
+        ({"tuning": voxgi.SolveTuning(epsilon=-1.0)}, ValueError, "epsilon"),
+        ({"tuning": voxgi.SolveTuning(history=0)}, ValueError, "history"),
+        ({"tuning": "fast"}, TypeError, "tuning"),
+    ]:
         with pytest.raises(exc, match=word):
             voxgi.solve(vox, progress=False, **kw)
 
 
 def _corrupt(vox, **changes):
     import dataclasses
+
     return dataclasses.replace(vox, **changes)
 
 
@@ -322,18 +358,29 @@ def test_solve_corrupt_voxelset(small):
     ]
     for changes, exc, word in cases:
         with pytest.raises(exc, match=word):
-            voxgi.solve(_corrupt(vox, **changes), directions=4, shoot_directions=4,
-                        progress=False)
+            voxgi.solve(
+                _corrupt(vox, **changes),
+                directions=4,
+                progress=False,
+                tuning=voxgi.SolveTuning(shoot_directions=4),
+            )
     # the user's arrays are untouched by a failed and a successful call
     a0 = vox.area.copy()
-    voxgi.solve(vox, directions=4, shoot_directions=4, progress=False)
+    voxgi.solve(vox, directions=4, tuning=voxgi.SolveTuning(shoot_directions=4), progress=False)
     assert np.array_equal(vox.area, a0)
 
 
 def test_solve_empty_voxelset(small):
     _, vox, _ = small
-    empty = _corrupt(vox, ijk=vox.ijk[:0], normal=vox.normal[:0], area=vox.area[:0],
-                     albedo=vox.albedo[:0], emission=vox.emission[:0], centroid=vox.centroid[:0])
+    empty = _corrupt(
+        vox,
+        ijk=vox.ijk[:0],
+        normal=vox.normal[:0],
+        area=vox.area[:0],
+        albedo=vox.albedo[:0],
+        emission=vox.emission[:0],
+        centroid=vox.centroid[:0],
+    )
     with pytest.raises(ValueError, match="no records"):
         voxgi.solve(empty, progress=False)
 
@@ -346,22 +393,30 @@ def test_render_bad_args(small):
     with pytest.raises(TypeError, match="sol"):
         voxgi.render(s, sol=vox, progress=False)
     with pytest.raises(ValueError, match="camera"):
-        voxgi.render(voxgi.scenes.furnace_box().__class__(), progress=False) if False else \
-            voxgi.render(_no_camera(s), sol, progress=False)
+        voxgi.render(
+            voxgi.scenes.furnace_box().__class__(), progress=False
+        ) if False else voxgi.render(_no_camera(s), sol, progress=False)
     with pytest.raises(TypeError, match="camera"):
         voxgi.render(s, sol, camera=(0, 0, 1), progress=False)
-    for kw, exc, word in [({"vpls_per_frame": 0}, ValueError, "vpls_per_frame"),
-                          ({"vpls_per_frame": 1.5}, TypeError, "vpls_per_frame"),
-                          ({"max_frames": 0}, ValueError, "max_frames"),
-                          ({"tol": -1.0}, ValueError, "tol"),
-                          ({"tol": NAN}, ValueError, "tol"),
-                          ({"seed": 1.5}, TypeError, "seed"),
-                          ({"seed": "x"}, TypeError, "seed"),
-                          ({"threads": -1}, ValueError, "threads"),
-                          ({"emitter_share": 2.0}, ValueError, "emitter_share"),
-                          ({"vpl_pdf": "uniform"}, ValueError, "pdf")]:
+    for kw, exc, word in [
+        ({"vpls_per_frame": 0}, ValueError, "vpls_per_frame"),
+        ({"vpls_per_frame": 1.5}, TypeError, "vpls_per_frame"),
+        ({"max_frames": 0}, ValueError, "max_frames"),
+        ({"tol": -1.0}, ValueError, "tol"),
+        ({"tol": NAN}, ValueError, "tol"),
+        ({"seed": 1.5}, TypeError, "seed"),
+        ({"seed": "x"}, TypeError, "seed"),
+        ({"threads": -1}, ValueError, "threads"),
+        ({"tuning": {"gather": 4}}, TypeError, "tuning"),
+        ({"tuning": voxgi.RenderTuning(min_frames=1)}, ValueError, "min_frames"),
+        ({"tuning": voxgi.RenderTuning(emitter_share=2.0)}, ValueError, "emitter_share"),
+        ({"tuning": voxgi.RenderTuning(vpl_pdf="uniform")}, ValueError, "pdf"),
+        ({"client": 42}, TypeError, "client"),
+    ]:
         with pytest.raises(exc, match=word):
             voxgi.render(s, sol, progress=False, **kw)
+    with pytest.raises(TypeError, match="executor"):
+        voxgi.display.render(s, sol, progress=False, executor=object())
 
 
 def _no_camera(s):
@@ -380,17 +435,23 @@ def test_render_solution_of_other_scene(small):
 
 def test_render_corrupt_solution(small):
     import dataclasses
+
     s, _, sol = small
     bad = sol.radiosity.copy()
     bad[0, 0] = np.nan
     with pytest.raises(ValueError, match="non-finite"):
         voxgi.render(s, dataclasses.replace(sol, radiosity=bad), progress=False, max_frames=2)
     with pytest.raises(ValueError, match="radiosity"):
-        voxgi.render(s, dataclasses.replace(sol, radiosity=sol.radiosity[:, :2]),
-                     progress=False, max_frames=2)
+        voxgi.render(
+            s,
+            dataclasses.replace(sol, radiosity=sol.radiosity[:, :2]),
+            progress=False,
+            max_frames=2,
+        )
     with pytest.raises(ValueError, match=">= 0"):
-        voxgi.render(s, dataclasses.replace(sol, radiosity=-sol.radiosity), progress=False,
-                     max_frames=2)
+        voxgi.render(
+            s, dataclasses.replace(sol, radiosity=-sol.radiosity), progress=False, max_frames=2
+        )
 
 
 # ----------------------------------------------------------------- Solution.load
@@ -418,9 +479,14 @@ def test_solution_load_bad_files(tmp_path, small):
 # ----------------------------------------------------------------- io
 def test_io_bad(tmp_path):
     from voxgi import io
-    for img, exc in [(np.zeros((4, 4, 4)), ValueError), (np.zeros((0, 4, 3)), ValueError),
-                     (np.zeros(5), ValueError), ([["a"]], TypeError),
-                     (np.zeros((2, 2, 3), dtype=object), TypeError)]:
+
+    for img, exc in [
+        (np.zeros((4, 4, 4)), ValueError),
+        (np.zeros((0, 4, 3)), ValueError),
+        (np.zeros(5), ValueError),
+        ([["a"]], TypeError),
+        (np.zeros((2, 2, 3), dtype=object), TypeError),
+    ]:
         with pytest.raises(exc, match="image"):
             io.write_exr(tmp_path / "a.exr", img)
         with pytest.raises(exc, match="image"):
@@ -439,6 +505,7 @@ def test_io_bad(tmp_path):
 def test_io_nan_pixels_written_not_crash(tmp_path):
     """NaN in an image is data, not an error, for EXR (it round-trips); PNG maps it to 0."""
     from voxgi import io
+
     img = np.zeros((2, 2, 3), np.float32)
     img[0, 0] = np.nan
     back = io.read_exr(io.write_exr(tmp_path / "n.exr", img))
@@ -467,17 +534,21 @@ def test_metrics_bad(fn):
 
 
 # ----------------------------------------------------------------- cli
-@pytest.mark.parametrize(("argv", "word"), [
-    (["render", "no-such-scene"], "no-such-scene"),
-    (["render", "cornell-box", "--resolution", "1"], "resolution"),
-    (["render", "cornell-box", "--resolution", "abc"], "resolution"),
-    (["render", "cornell-box", "--width", "0"], "width"),
-    (["render", "cornell-box", "--frames", "-1"], "frames"),
-    (["frobnicate"], "frobnicate"),
-    ([], ""),
-])
+@pytest.mark.parametrize(
+    ("argv", "word"),
+    [
+        (["render", "no-such-scene"], "no-such-scene"),
+        (["render", "cornell-box", "--resolution", "1"], "resolution"),
+        (["render", "cornell-box", "--resolution", "abc"], "resolution"),
+        (["render", "cornell-box", "--width", "0"], "width"),
+        (["render", "cornell-box", "--frames", "-1"], "frames"),
+        (["frobnicate"], "frobnicate"),
+        ([], ""),
+    ],
+)
 def test_cli_bad(argv, word, tmp_path, capsys):
     from voxgi.cli import main
+
     with pytest.raises(SystemExit) as ei:
         main([*argv, "-o", str(tmp_path / "o.exr"), "-q"] if argv[:1] == ["render"] else argv)
     assert ei.value.code not in (0, None)
@@ -487,6 +558,7 @@ def test_cli_bad(argv, word, tmp_path, capsys):
 
 def test_cli_malformed_scene_file(tmp_path, capsys):
     from voxgi.cli import main
+
     p = _write(tmp_path, "[camera\n")
     with pytest.raises(SystemExit) as ei:
         main(["render", str(p), "-o", str(tmp_path / "o.exr"), "-q"])
@@ -504,10 +576,10 @@ def _ls_arrays(n=4):
 def test_core_linesystem_bad_arrays():
     ijk, normal, point = _ls_arrays()
     bad = [
-        (ijk.astype(np.int64), normal, point),          # dtype
+        (ijk.astype(np.int64), normal, point),  # dtype
         (ijk.astype(np.float32), normal, point),
-        (ijk[:, :2].copy(), normal, point),              # shape
-        (ijk, normal[:3].copy(), point),                 # length mismatch
+        (ijk[:, :2].copy(), normal, point),  # shape
+        (ijk, normal[:3].copy(), point),  # length mismatch
         (np.asfortranarray(np.repeat(ijk, 2, 0))[::2], normal, point),  # not contiguous
         (ijk, normal, point.astype(np.float64)),
         (ijk.ravel(), normal, point),
@@ -521,6 +593,7 @@ def test_core_linesystem_out_of_range_indices():
     ijk, normal, point = _ls_arrays()
     ls = _core.LineSystem(ijk, normal, point)
     from voxgi.directions import direction_set
+
     ds = direction_set(2)
     fam, w = ds.families, ds.weights
     vals = np.ones((4, 3), np.float32)
@@ -544,15 +617,22 @@ def test_core_linesystem_out_of_range_indices():
 
 def test_core_voxelize_bad_arrays():
     tri = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float64)
-    good = dict(triangles=tri, tri_object=np.zeros(1, np.int32), two_sided=np.zeros(1, bool),
-                albedo=np.full((1, 3), 0.5, np.float32), emission=np.zeros((1, 3), np.float32),
-                origin=np.array([-0.1, -0.1, -0.1]), pitch=0.25, dims=np.array([6, 6, 2], np.int32))
+    good = dict(
+        triangles=tri,
+        tri_object=np.zeros(1, np.int32),
+        two_sided=np.zeros(1, bool),
+        albedo=np.full((1, 3), 0.5, np.float32),
+        emission=np.zeros((1, 3), np.float32),
+        origin=np.array([-0.1, -0.1, -0.1]),
+        pitch=0.25,
+        dims=np.array([6, 6, 2], np.int32),
+    )
     res = _core.voxelize(**good)  # sanity: the good call works
     assert res is not None
     bad = [
         {"triangles": tri.astype(np.float32)},
         {"triangles": tri[:, :2].copy()},
-        {"tri_object": np.array([3], np.int32)},       # object index out of range
+        {"tri_object": np.array([3], np.int32)},  # object index out of range
         {"tri_object": np.array([-1], np.int32)},
         {"tri_object": np.zeros(2, np.int32)},
         {"albedo": np.full((1, 2), 0.5, np.float32)},
@@ -582,9 +662,9 @@ def test_core_display_bad_arrays():
     out = _core.shade_brdf(alb, rs, nu, nu, glossy, m, n, k, k)
     assert out.shape == (4, 3)
     for args in [
-        (alb, rs, nu, nu, glossy, m + 5, n, k, k),           # material index out of range
+        (alb, rs, nu, nu, glossy, m + 5, n, k, k),  # material index out of range
         (alb, rs, nu, nu, glossy, m - 1, n, k, k),
-        (alb, rs, nu, nu, glossy, m, n[:3].copy(), k, k),    # length mismatch
+        (alb, rs, nu, nu, glossy, m, n[:3].copy(), k, k),  # length mismatch
         (alb, rs, nu, nu, glossy, m, n.astype(np.float64), k, k),
         (alb[:, :2].copy(), rs, nu, nu, glossy, m, n, k, k),
         (alb, rs, nu[:0], nu, glossy, m, n, k, k),
@@ -595,10 +675,12 @@ def test_core_display_bad_arrays():
     contrib = np.ones((4, 3), np.float32)
     occ = np.zeros(4, np.uint8)
     assert _core.vpl_accumulate(cnt, contrib, occ).shape == (2, 3)
-    for args in [(np.array([2, 3], np.int64), contrib, occ),    # counts exceed the rays
-                 (np.array([-1, 5], np.int64), contrib, occ),
-                 (cnt, contrib, occ[:3].copy()),
-                 (cnt.astype(np.int32), contrib, occ)]:
+    for args in [
+        (np.array([2, 3], np.int64), contrib, occ),  # counts exceed the rays
+        (np.array([-1, 5], np.int64), contrib, occ),
+        (cnt, contrib, occ[:3].copy()),
+        (cnt.astype(np.int32), contrib, occ),
+    ]:
         with pytest.raises((TypeError, ValueError)):
             _core.vpl_accumulate(*args)
 
@@ -606,17 +688,20 @@ def test_core_display_bad_arrays():
 def test_core_gather_families_bad_indices():
     ijk, normal, point = _ls_arrays()
     from voxgi.directions import direction_set
+
     ds = direction_set(2)
     vals = np.ones((4, 3), np.float32)
-    ok = _core.gather_families(ijk, normal, point, ds.families, ds.weights, vals,
-                               np.array([0], np.int64))
+    ok = _core.gather_families(
+        ijk, normal, point, ds.families, ds.weights, vals, np.array([0], np.int64)
+    )
     assert np.all(np.isfinite(ok))
     for fi in (np.array([len(ds.families)], np.int64), np.array([-3], np.int64)):
         with pytest.raises((ValueError, IndexError)):
             _core.gather_families(ijk, normal, point, ds.families, ds.weights, vals, fi)
     with pytest.raises((ValueError, TypeError)):
-        _core.gather_families(ijk, normal, point, ds.families, ds.weights, vals[:1].copy(),
-                              np.array([0], np.int64))
+        _core.gather_families(
+            ijk, normal, point, ds.families, ds.weights, vals[:1].copy(), np.array([0], np.int64)
+        )
 
 
 def test_render_memory_limit_refused_before_allocating(small):
@@ -629,6 +714,7 @@ def test_render_memory_limit_refused_before_allocating(small):
 
 def test_read_exr_header_bad(tmp_path):
     from voxgi import io
+
     with pytest.raises(FileNotFoundError):
         io.read_exr_header(tmp_path / "missing.exr")
     (tmp_path / "junk.exr").write_bytes(b"not an exr")
@@ -636,15 +722,18 @@ def test_read_exr_header_bad(tmp_path):
         io.read_exr_header(tmp_path / "junk.exr")
 
 
-@pytest.mark.parametrize(("call", "word"), [
-    (lambda: voxgi.scenes.furnace_box(albedo=1.5), "albedo"),
-    (lambda: voxgi.scenes.furnace_sphere(emission=-1.0), "emission"),
-    (lambda: voxgi.scenes.furnace_sphere(subdivisions=-1), "subdivisions"),
-    (lambda: voxgi.scenes.furnace_sphere(radius=NAN), "radius"),
-    (lambda: voxgi.scenes.cornell_box(width=0), "width"),
-    (lambda: voxgi.scenes.labyrinth(cells=0), "cells"),
-    (lambda: voxgi.scenes.get("nope"), "nope"),
-])
+@pytest.mark.parametrize(
+    ("call", "word"),
+    [
+        (lambda: voxgi.scenes.furnace_box(albedo=1.5), "albedo"),
+        (lambda: voxgi.scenes.furnace_sphere(emission=-1.0), "emission"),
+        (lambda: voxgi.scenes.furnace_sphere(subdivisions=-1), "subdivisions"),
+        (lambda: voxgi.scenes.furnace_sphere(radius=NAN), "radius"),
+        (lambda: voxgi.scenes.cornell_box(width=0), "width"),
+        (lambda: voxgi.scenes.labyrinth(cells=0), "cells"),
+        (lambda: voxgi.scenes.get("nope"), "nope"),
+    ],
+)
 def test_builtin_scenes_bad(call, word):
     with pytest.raises((ValueError, TypeError), match=word):
         call()

@@ -1,4 +1,4 @@
-"""Discrete direction sets (voxgi.directions): DESIGN-NOTES §3."""
+"""Discrete direction sets (voxgi.directions): docs/design.md §3."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from voxgi.directions import direction_set, sphere
 
 @pytest.mark.parametrize(("radius", "count"), [(8, 762), (16, 3338), (22, 5982), (35, 15194)])
 def test_counts(radius, count):
-    # the counts measured in DESIGN-NOTES §3 (integer v with round(|v|) = R)
+    # the counts of docs/design.md §3 (integer v with round(|v|) = R)
     v = sphere(radius)
     assert v.shape == (count, 3)
     n = np.linalg.norm(v, axis=1)
@@ -46,9 +46,8 @@ def test_no_two_vectors_share_a_direction(radius):
 
 @pytest.mark.parametrize(("radius", "spread"), [(8, 4e-3), (22, 6e-4)])
 def test_raw_hemisphere_sums(rng, radius, spread):
-    # S(n) = Σ_{n·σ>0} cos ΔΩ/π is near 1; measured over these normals (axis
-    # normals are the worst: their equator holds many directions):
-    # R=8 [0.99703, 1.00130], R=22 [0.99961, 1.00012]
+    # S(n) = Σ_{n·σ>0} cos ΔΩ/π is near 1 over these normals (axis normals
+    # are the worst: their equator holds many directions)
     ds = direction_set(radius)
     n = rng.normal(size=(4000, 3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)

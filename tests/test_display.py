@@ -40,11 +40,20 @@ def triangle_solution(scene: voxgi.Scene, radiosity) -> Solution:
     # voxel or a neighbour, where the gather rays' record lookup searches.
     edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max()
     pitch = float(max(np.ptp(scene.bounds, axis=0).max() / 64, edges))
-    vox = VoxelSet(ijk=np.floor((c - lo) / pitch).astype(np.int32), normal=n.astype(np.float32),
-                   area=area.astype(np.float32), albedo=t["albedo"][obj],
-                   emission=t["emission"][obj], centroid=c, object_id=obj,
-                   back=np.zeros(len(c), bool), pitch=pitch, origin=lo, resolution=64,
-                   scene_fingerprint=scene.fingerprint())
+    vox = VoxelSet(
+        ijk=np.floor((c - lo) / pitch).astype(np.int32),
+        normal=n.astype(np.float32),
+        area=area.astype(np.float32),
+        albedo=t["albedo"][obj],
+        emission=t["emission"][obj],
+        centroid=c,
+        object_id=obj,
+        back=np.zeros(len(c), bool),
+        pitch=pitch,
+        origin=lo,
+        resolution=64,
+        scene_fingerprint=scene.fingerprint(),
+    )
     return Solution(vox=vox, radiosity=np.asarray(radiosity(vox), np.float32))
 
 
@@ -61,7 +70,7 @@ def test_furnace_sphere_analytic_radiosity(rho):
     # must give L = Le + (rho/pi) E = Le / (1 - rho) in every pixel. Inside a
     # closed enclosure the estimator is unbiased (∫ G dA = pi), so what is left
     # is VPL noise, shared by all pixels: after 32 frames × 16 VPLs it is
-    # ~0.3% per pixel at rho 0.9 (measured; est_rel_mse ~1e-6), plus the
+    # well under 1% per pixel at rho 0.9, plus the
     # bounded-G loss near contact (< 0.1% for these triangle areas).
     le = 1.0
     scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=le, width=32, height=32)
@@ -76,7 +85,7 @@ def test_furnace_sphere_analytic_radiosity(rho):
     assert out.stderr is not None and out.stderr.shape == out.image.shape
     # The estimated error must be of the size of the actual one (within 3x).
     rms_rel = float(np.sqrt(np.mean((out.image / expect - 1.0) ** 2)))
-    est_rel = float(np.sqrt(np.mean(out.stderr ** 2)) / expect)
+    est_rel = float(np.sqrt(np.mean(out.stderr**2)) / expect)
     assert est_rel / 3 < rms_rel < 3 * est_rel + 1e-4
 
 
@@ -87,26 +96,37 @@ def test_furnace_sphere_voxel_records_analytic_radiosity(rho):
     scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=1.0, width=24, height=24)
     vox = voxgi.voxelize(scene, resolution=32)
     b = np.where(vox.back[:, None], 0.0, math.pi / (1 - rho)) * np.ones((1, 3))
-    out = voxgi.render(scene, Solution(vox=vox, radiosity=b.astype(np.float32)), progress=False,
-                       max_frames=32, tol=0.0)
+    out = voxgi.render(
+        scene,
+        Solution(vox=vox, radiosity=b.astype(np.float32)),
+        progress=False,
+        max_frames=32,
+        tol=0.0,
+    )
     err = np.abs(out.image * (1 - rho) - 1.0)
-    assert err.max() < 0.01, err.max()  # measured 0.4% (0.5) and 0.7% (0.9)
+    assert err.max() < 0.01, err.max()
 
 
 def test_cap_sphere_voxel_records_gather_lookup():
     # The cap sphere on real voxel records: the gather rays look up records
     # (front side, right object) in the voxel grid. Mean error over the
-    # non-cap pixels within 1% (measured 0.02%; max 2.0%, noise).
+    # non-cap pixels within 1% (the max is the display's noise).
     rho, le = 0.6, 2.0
-    scene = voxgi.scenes.cap_sphere(albedo=rho, emission=le, cap_angle=70.0, subdivisions=4,
-                                    width=24, height=24)
+    scene = voxgi.scenes.cap_sphere(
+        albedo=rho, emission=le, cap_angle=70.0, subdivisions=4, width=24, height=24
+    )
     scene.camera = scene.camera.replace(target=(0.0, -1.0, -0.5), fov=60.0)  # the rest only
     vox = voxgi.voxelize(scene, resolution=32)
     le_mean = float(np.sum(vox.area * vox.emission[:, 0]) / np.sum(vox.area[~vox.back]))
     b = math.pi * (vox.emission.astype(np.float64) + rho * le_mean / (1 - rho))
     b[vox.back] = 0.0
-    out = voxgi.render(scene, Solution(vox=vox, radiosity=b.astype(np.float32)), progress=False,
-                       max_frames=32, tol=0.0)
+    out = voxgi.render(
+        scene,
+        Solution(vox=vox, radiosity=b.astype(np.float32)),
+        progress=False,
+        max_frames=32,
+        tol=0.0,
+    )
     assert out.stats["gather_rays"] > 0
     rel = out.image[..., 0] / (rho * le_mean / (1 - rho)) - 1.0
     assert abs(rel.mean()) < 0.01, rel.mean()
@@ -115,7 +135,7 @@ def test_cap_sphere_voxel_records_gather_lookup():
 
 def test_furnace_sphere_full_pipeline_coarse():
     # The whole pipeline (voxelize, solve, display) at a coarse setting that
-    # runs in seconds: rho 0.5 at resolution 16, R 6 measured max 0.76%.
+    # runs in seconds: rho 0.5 at resolution 16, R 6.
     scene = voxgi.scenes.furnace_sphere(albedo=0.5, emission=1.0, width=24, height=24)
     sol = real_solution(scene, resolution=16, directions=6)
     out = voxgi.render(scene, sol, progress=False, max_frames=32, tol=0.0)
@@ -126,10 +146,9 @@ def test_furnace_sphere_full_pipeline_coarse():
 @pytest.mark.slow
 @pytest.mark.parametrize("rho", [0.5, 0.9])
 def test_furnace_sphere_full_pipeline(rho):
-    # The issue's target with the real voxelizer and solver: within 1% in
-    # every pixel. Measured at resolution 32, R 8: max 0.40% (rho 0.5) and
-    # 0.90% (rho 0.9; mean -0.43%, the solver's share, which falls with
-    # resolution: -1.35% at 16, -0.80% at 24).
+    # With the real voxelizer and solver: within 1% in every pixel (at rho
+    # 0.9 the solver's share of the error, which falls with the resolution,
+    # is most of it).
     scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=1.0, width=24, height=24)
     sol = real_solution(scene, resolution=32, directions=8)
     out = voxgi.render(scene, sol, progress=False, max_frames=32, tol=0.0)
@@ -139,19 +158,25 @@ def test_furnace_sphere_full_pipeline(rho):
 
 def test_cap_sphere_nonuniform_emission():
     # Inside a sphere every pair has cos cos / (pi r²) = 1/A, so
-    # L(x) = Le(x) + rho Le_mean / (1 - rho) (DESIGN-NOTES §1): the cap
+    # L(x) = Le(x) + rho Le_mean / (1 - rho) (docs/design.md §1): the cap
     # pixels and the rest differ by exactly Le. This exercises both VPL sets
     # (emitters and non-emitters) and their split.
     rho, le = 0.6, 2.0
-    scene = voxgi.scenes.cap_sphere(albedo=rho, emission=le, cap_angle=70.0, subdivisions=4,
-                                    width=24, height=24)
+    scene = voxgi.scenes.cap_sphere(
+        albedo=rho, emission=le, cap_angle=70.0, subdivisions=4, width=24, height=24
+    )
     scene.camera = scene.camera.replace(target=(0.0, 1.0, -0.5), fov=120.0)  # see cap and rest
     t = scene.triangles()
-    a = 0.5 * np.linalg.norm(np.cross(t["triangles"][:, 1] - t["triangles"][:, 0],
-                                      t["triangles"][:, 2] - t["triangles"][:, 0]), axis=1)
+    a = 0.5 * np.linalg.norm(
+        np.cross(
+            t["triangles"][:, 1] - t["triangles"][:, 0], t["triangles"][:, 2] - t["triangles"][:, 0]
+        ),
+        axis=1,
+    )
     le_mean = float(np.sum(a * t["emission"][t["object"], 0]) / a.sum())
     sol = triangle_solution(
-        scene, lambda v: math.pi * (v.emission.astype(np.float64) + rho * le_mean / (1 - rho)))
+        scene, lambda v: math.pi * (v.emission.astype(np.float64) + rho * le_mean / (1 - rho))
+    )
     out = voxgi.render(scene, sol, progress=False, max_frames=128, tol=0.0)
     assert out.stats["vpl_split"][0] >= 1 and out.stats["vpl_split"][1] >= 1
     # Which object each pixel sees (centre rays of the pinhole camera).
@@ -164,10 +189,9 @@ def test_cap_sphere_nonuniform_emission():
     obj = tr.obj[prim].reshape(24, 24)
     ref = np.where(obj == 0, le, 0.0) + rho * le_mean / (1 - rho)
     rel = np.abs(out.image[..., 0] / ref - 1.0)
-    # Away from the cap's border (AA mixes the two values there): 2%. Measured:
-    # mean error < 0.1% on both parts; max 2.3% after 48 frames, 1.1% after
-    # 192 (the gather rays' per-pixel noise; pure VPLs, gather=0, give 0.7%
-    # here because inside a sphere every VPL contributes the same).
+    # Away from the cap's border (AA mixes the two values there): 2%, the
+    # gather rays' per-pixel noise after 128 frames (inside a sphere every
+    # VPL contributes the same, so the VPLs add none).
     border = np.zeros_like(obj, bool)
     border[:-1] |= obj[:-1] != obj[1:]
     border[1:] |= obj[:-1] != obj[1:]
@@ -187,8 +211,11 @@ def _emitter_scene(quads_z: list[tuple[float, np.ndarray]], cam: voxgi.Camera) -
             h = size / 2
             v += [[x - h, y - h, z], [x + h, y - h, z], [x + h, y + h, z], [x - h, y + h, z]]
             f += [[4 * i, 4 * i + 1, 4 * i + 2], [4 * i, 4 * i + 2, 4 * i + 3]]  # normal +z
-        s.add(trimesh.Trimesh(np.array(v, float), np.array(f), process=False),
-              voxgi.Material(albedo=0.0, emission=1.0), name=f"layer{k}")
+        s.add(
+            trimesh.Trimesh(np.array(v, float), np.array(f), process=False),
+            voxgi.Material(albedo=0.0, emission=1.0),
+            name=f"layer{k}",
+        )
     return s
 
 
@@ -205,21 +232,24 @@ def test_antialiased_edge_matches_supersampled():
     v = (rot[:3, :3] @ sq.T).T
     cam = voxgi.Camera(eye=(0, 0, 2), target=(0, 0, 0), fov=40.0, width=32, height=32)
     s = voxgi.Scene(cam)
-    s.add(trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], process=False),
-          voxgi.Material(albedo=0.0, emission=1.0), name="square")
+    s.add(
+        trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], process=False),
+        voxgi.Material(albedo=0.0, emission=1.0),
+        name="square",
+    )
     sol = _emission_solution(s)
     aa = voxgi.render(s, sol, progress=False, max_frames=64, tol=0.0).image[..., 0]
     one = voxgi.render(s, sol, progress=False, max_frames=1).image[..., 0]
-    big = voxgi.render(s, sol, progress=False, max_frames=1,
-                       camera=cam.replace(width=512, height=512)).image[..., 0]
+    big = voxgi.render(
+        s, sol, progress=False, max_frames=1, camera=cam.replace(width=512, height=512)
+    ).image[..., 0]
     ss = big.reshape(32, 16, 32, 16).mean(axis=(1, 3))
     edge = (ss > 0.02) & (ss < 0.98)
     assert edge.sum() > 40
-    # 64 stratified offsets estimate each pixel's coverage: measured max error
-    # 0.060 against a 32x32 supersampled render (0.042 with 128 frames), the
-    # 16x16 supersampling itself is off by up to ~1/32 at an edge.
+    # 64 stratified offsets estimate each pixel's coverage against a 32x32
+    # supersampled render, itself off by up to ~1/32 at an edge.
     assert np.abs(aa - ss).max() < 0.08
-    assert np.sqrt(np.mean((aa - ss) ** 2)) < 0.01  # measured 0.0059
+    assert np.sqrt(np.mean((aa - ss) ** 2)) < 0.01
     # One sample per pixel is a stair-step: 0 or 1 at the edge pixels.
     assert np.abs(one - ss)[edge].max() > 0.3
     assert set(np.unique(one)) <= {0.0, 1.0}
@@ -227,15 +257,19 @@ def test_antialiased_edge_matches_supersampled():
 
 def _gradient_energy(img: np.ndarray) -> float:
     gx, gy = np.diff(img, axis=1), np.diff(img, axis=0)
-    return float(np.sum(gx ** 2) + np.sum(gy ** 2))
+    return float(np.sum(gx**2) + np.sum(gy**2))
 
 
 def test_depth_of_field_in_focus_sharp_out_of_focus_blurred():
     # Two checkerboards of emitters, at distance 2 and 4 from the eye; the
     # thin lens focused at 2 keeps the near one as sharp as a pinhole and
     # blurs the far one (gradient energy), and the other way round.
-    cells = [(x, y) for x in np.arange(-3, 4) * 0.1 for y in np.arange(-3, 4) * 0.1
-             if (round(x * 10) + round(y * 10)) % 2 == 0]
+    cells = [
+        (x, y)
+        for x in np.arange(-3, 4) * 0.1
+        for y in np.arange(-3, 4) * 0.1
+        if (round(x * 10) + round(y * 10)) % 2 == 0
+    ]
     near = [(x - 0.5, y) for x, y in cells]
     far = [(2 * x + 1.0, 2 * y) for x, y in cells]
     cam = voxgi.Camera(eye=(0, 0, 2), target=(0, 0, 0), fov=60.0, width=48, height=48)
@@ -250,8 +284,8 @@ def test_depth_of_field_in_focus_sharp_out_of_focus_blurred():
     pin = energy(cam)
     f_near = energy(cam.replace(aperture=0.1, focus_distance=2.0))
     f_far = energy(cam.replace(aperture=0.1, focus_distance=4.0))
-    # In focus: as sharp as the pinhole (both see the box-filtered edges;
-    # measured ratio ~1.0). Out of focus: the 0.1 lens spreads a point over
+    # In focus: as sharp as the pinhole (both see the box-filtered edges).
+    # Out of focus: the 0.1 lens spreads a point over
     # ~0.05 units on the other plane, about half a cell: energy falls a lot.
     assert f_near[0] > 0.8 * pin[0]
     assert f_far[1] > 0.8 * pin[1]
@@ -268,21 +302,21 @@ def test_frame_samples_stratified_and_in_range():
     # points in each cell of an 8x8 grid, and of its first 16 in a 4x4 grid.
     for n, k in ((64, 8), (16, 4)):
         cells = np.floor(offs[:n] * k).astype(int)
-        assert np.array_equal(np.bincount(cells[:, 0] * k + cells[:, 1], minlength=k * k),
-                              np.ones(k * k, int))
+        assert np.array_equal(
+            np.bincount(cells[:, 0] * k + cells[:, 1], minlength=k * k), np.ones(k * k, int)
+        )
     # Also in 1D (0,1)-elementary intervals of 1/64 x 1.
     assert len(np.unique(np.floor(offs[:, 0] * 64))) == 64
 
 
 def test_camera_rays_conventions():
-    cam = voxgi.Camera(eye=(0, 0, 0), target=(0, 0, -1), up=(0, 1, 0), fov=90.0, width=4,
-                       height=2)
+    cam = voxgi.Camera(eye=(0, 0, 0), target=(0, 0, -1), up=(0, 1, 0), fov=90.0, width=4, height=2)
     org, d = camera_rays(cam)
     d = d.reshape(2, 4, 3)
     right, up, fwd = cam.frame()
     assert np.allclose(np.linalg.norm(d, axis=2), 1.0)
-    assert d[0, 0] @ right < 0 and d[0, 0] @ up > 0       # top-left
-    assert d[1, 3] @ right > 0 and d[1, 3] @ up < 0       # bottom-right
+    assert d[0, 0] @ right < 0 and d[0, 0] @ up > 0  # top-left
+    assert d[1, 3] @ right > 0 and d[1, 3] @ up < 0  # bottom-right
     # fov: the top edge of the image is 45° above the axis.
     _, dtop = camera_rays(cam, offset=(0.5, 0.0))
     t = dtop.reshape(2, 4, 3)[0, 1]
@@ -307,8 +341,9 @@ def test_vpl_sampler_probability_proportional_to_area():
     # The same sequence every time (shared by all views): deterministic per seed.
     again = VPLSampler(sol, vpls_per_frame=16, seed=5, pdf="area")
     assert np.array_equal(again.frame(7)["index"], sampler.frame(7)["index"])
-    assert not np.array_equal(VPLSampler(sol, 16, seed=6, pdf="area").frame(7)["index"],
-                              sampler.frame(7)["index"])
+    assert not np.array_equal(
+        VPLSampler(sol, 16, seed=6, pdf="area").frame(7)["index"], sampler.frame(7)["index"]
+    )
     # Estimator weights: (1/n) / p(y) with p = 1/TA per unit area.
     fr = sampler.frame(3)
     np.testing.assert_allclose(fr["weight"][:, 0], v.area.sum() / 16 * 1.0 / math.pi, rtol=1e-6)
@@ -358,13 +393,25 @@ def test_glossy_highlight_and_skipped_when_absent():
     def scene(spec):
         cam = voxgi.Camera(eye=(0, 1, 2), target=(0, 0, 0), fov=50.0, width=32, height=32)
         s = voxgi.Scene(cam)
-        s.add(trimesh.Trimesh([[-2, 0, -2], [2, 0, -2], [2, 0, 2], [-2, 0, 2]],
-                              [[0, 2, 1], [0, 3, 2]], process=False),
-              voxgi.Material(albedo=0.5, specular=spec), name="floor")
+        s.add(
+            trimesh.Trimesh(
+                [[-2, 0, -2], [2, 0, -2], [2, 0, 2], [-2, 0, 2]],
+                [[0, 2, 1], [0, 3, 2]],
+                process=False,
+            ),
+            voxgi.Material(albedo=0.5, specular=spec),
+            name="floor",
+        )
         y, h = 1.0, 0.1
-        s.add(trimesh.Trimesh([[-h, y, -2 - h], [h, y, -2 - h], [h, y, -2 + h], [-h, y, -2 + h]],
-                              [[0, 1, 2], [0, 2, 3]], process=False),
-              voxgi.Material(albedo=0.0, emission=50.0), name="light")
+        s.add(
+            trimesh.Trimesh(
+                [[-h, y, -2 - h], [h, y, -2 - h], [h, y, -2 + h], [-h, y, -2 + h]],
+                [[0, 1, 2], [0, 2, 3]],
+                process=False,
+            ),
+            voxgi.Material(albedo=0.0, emission=50.0),
+            name="light",
+        )
         return s
 
     base = scene(None)
@@ -378,8 +425,18 @@ def test_glossy_highlight_and_skipped_when_absent():
 
 
 # -- bad input, edge cases ----------------------------------------------------------------
-@pytest.mark.parametrize("kw", [{"width": 0}, {"height": 0}, {"width": -3}, {"fov": 0.0},
-                                {"fov": 180.0}, {"fov": 200.0}, {"fov": -10.0}])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"width": 0},
+        {"height": 0},
+        {"width": -3},
+        {"fov": 0.0},
+        {"fov": 180.0},
+        {"fov": 200.0},
+        {"fov": -10.0},
+    ],
+)
 def test_bad_camera_is_a_clear_error(kw):
     cam = voxgi.Camera(width=8, height=8)
     with pytest.raises(ValueError, match="Camera"):
@@ -474,24 +531,26 @@ def test_direct_light_matches_mitsuba_path_tracer():
     # against Mitsuba 3's path tracer limited to one bounce (max_depth=2) on
     # the Cornell box: an outside check of the display's normalisation,
     # camera, pixel filter and the one-sided light. Skipped without mitsuba
-    # (an optional benchmark dependency). Measured relMSE 7.5e-5 at 32x32
-    # against 1024 spp for voxel resolutions 16 to 128; here, against 256 spp,
-    # 2.9e-4 (Mitsuba's noise).
+    # (an optional benchmark dependency). Against 256 spp the bound is
+    # Mitsuba's noise.
     pytest.importorskip("mitsuba")
     from voxgi.mitsuba import import_mitsuba, to_mitsuba
 
     scene = voxgi.scenes.cornell_box(width=32, height=32)
     vox = voxgi.voxelize(scene, resolution=32)
     b = (math.pi * vox.emission.astype(np.float64)).astype(np.float32)
-    out = voxgi.render(scene, Solution(vox=vox, radiosity=b), progress=False, max_frames=32,
-                       tol=0.0)
+    out = voxgi.render(
+        scene, Solution(vox=vox, radiosity=b), progress=False, max_frames=32, tol=0.0
+    )
     mi = import_mitsuba()
-    ref = np.array(mi.render(mi.load_dict(to_mitsuba(scene, spp=256, max_depth=2)), spp=256,
-                             seed=1), dtype=np.float32)[..., :3]
+    ref = np.array(
+        mi.render(mi.load_dict(to_mitsuba(scene, spp=256, max_depth=2)), spp=256, seed=1),
+        dtype=np.float32,
+    )[..., :3]
     err = voxgi.metrics.rel_mse(out.image, ref)
     assert err < 1e-3, err
     # Mean radiance of the lit surfaces (the light itself left out: its edge
-    # pixels carry most of the antialiasing noise) within 1% (measured 0.4%).
+    # pixels carry most of the antialiasing noise) within 1%.
     lit = ref.max(axis=2) < 5.0
     assert abs(out.image[lit].mean() / ref[lit].mean() - 1) < 0.01
 
@@ -500,22 +559,29 @@ def test_shading_normals_approach_the_smooth_surface():
     # A coarse icosphere (80 faces) lit by a lamp, rendered flat and with
     # per-vertex shading normals (the true sphere's), against a fine one
     # (5120 faces, flat): the shading normals must bring the coarse sphere's
-    # shading near the fine one's. Measured (64x64, 24 frames; seeds 3, 5, 9
-    # and 96 frames agree to 1%): relMSE against the fine sphere 3.4e-2 flat,
-    # 7.6e-3 with shading normals (what is left: the facets lie inside the
+    # shading near the fine one's (what is left: the facets lie inside the
     # sphere, and the silhouette).
     from scipy.ndimage import binary_erosion
 
     def scene(sub, smooth):
-        s = voxgi.Scene(voxgi.Camera(eye=(0, 0, 3.2), target=(0, 0, 0), up=(0, 1, 0), fov=45,
-                                     width=64, height=64))
+        s = voxgi.Scene(
+            voxgi.Camera(
+                eye=(0, 0, 3.2), target=(0, 0, 0), up=(0, 1, 0), fov=45, width=64, height=64
+            )
+        )
         ico = trimesh.creation.icosphere(subdivisions=sub)
         v, f = np.array(ico.vertices), np.array(ico.faces)
         vn = v / np.linalg.norm(v, axis=1, keepdims=True) if smooth else None
-        s.add(trimesh.Trimesh(v, f, vertex_normals=vn, process=False),
-              voxgi.Material(albedo=0.6), name="sphere")
-        lamp = trimesh.Trimesh([[-0.5, 2.0, 0.5], [0.5, 2.0, 0.5], [0.5, 2.0, 1.5],
-                                [-0.5, 2.0, 1.5]], [[0, 1, 2], [0, 2, 3]], process=False)
+        s.add(
+            trimesh.Trimesh(v, f, vertex_normals=vn, process=False),
+            voxgi.Material(albedo=0.6),
+            name="sphere",
+        )
+        lamp = trimesh.Trimesh(
+            [[-0.5, 2.0, 0.5], [0.5, 2.0, 0.5], [0.5, 2.0, 1.5], [-0.5, 2.0, 1.5]],
+            [[0, 1, 2], [0, 2, 3]],
+            process=False,
+        )
         s.add(lamp, voxgi.Material(albedo=0.0, emission=5.0), name="lamp")
         return s
 
@@ -529,6 +595,8 @@ def test_shading_normals_approach_the_smooth_surface():
     ref = image(hi)
     lit = binary_erosion(ref[..., 0] > 0.02, iterations=3)
     assert lit.sum() > 200
-    err = {k: float(np.mean(((image(s) - ref)[lit]) ** 2 / (ref[lit] ** 2 + 0.01)))
-           for k, s in (("flat", lo_flat), ("smooth", lo_smooth))}
+    err = {
+        k: float(np.mean(((image(s) - ref)[lit]) ** 2 / (ref[lit] ** 2 + 0.01)))
+        for k, s in (("flat", lo_flat), ("smooth", lo_smooth))
+    }
     assert err["smooth"] < 0.35 * err["flat"]

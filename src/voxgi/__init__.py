@@ -8,8 +8,10 @@ Malgouyres, "Affichage non aliasé pour l'illumination globale par voxels").
 >>> import voxgi
 >>> scene = voxgi.scenes.cornell_box(width=64, height=64)
 >>> vox = voxgi.voxelize(scene, resolution=32)
->>> sol = voxgi.solve(vox)                                  # doctest: +SKIP
->>> out = voxgi.render(scene, sol, progress=False)         # doctest: +SKIP
+>>> sol = voxgi.solve(vox, directions=4, progress=False)
+>>> out = voxgi.render(scene, sol, max_frames=2, progress=False)
+>>> out.image.shape
+(64, 64, 3)
 """
 
 from __future__ import annotations
@@ -17,9 +19,9 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 
 from . import _core, io, metrics, scenes
-from .display import RenderResult
-from .pipeline import render
-from .radiosity import Solution, solve
+from .display import RenderResult, RenderTuning
+from .pipeline import render, solve
+from .radiosity import Solution, SolveTuning
 from .scene import AshikhminShirley, Camera, Material, Scene, SceneObject
 from .voxels import VoxelSet, voxelize
 
@@ -33,9 +35,11 @@ __all__ = [
     "Camera",
     "Material",
     "RenderResult",
+    "RenderTuning",
     "Scene",
     "SceneObject",
     "Solution",
+    "SolveTuning",
     "VoxelSet",
     "__version__",
     "io",

@@ -1,4 +1,4 @@
-"""Discrete direction sets: the integer sphere of radius R (DESIGN-NOTES §3).
+"""Discrete direction sets: the integer sphere of radius R (docs/design.md §3).
 
 The directions of radius ``R`` are the integer vectors ``v`` with
 ``round(|v|) = R`` (R = 8: 762 of them; 16: 3338; 22: 5982; 35: 15194).

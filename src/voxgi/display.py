@@ -10,17 +10,31 @@ depends on the camera: a new view of a solved scene costs only the display.
 
 from __future__ import annotations
 
+import itertools
 import math
+import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from . import _core, _validate
+from .radiosity import Solution
 from .scene import Camera, Scene
 
-__all__ = ["RenderResult", "render"]
+__all__ = [
+    "FrameExecutor",
+    "FrameShaderSpec",
+    "LocalFrames",
+    "RenderResult",
+    "RenderTuning",
+    "VPLSampler",
+    "camera_rays",
+    "frame_samples",
+    "render",
+]
 
 #: relMSE's epsilon (voxgi.metrics.rel_mse), used by the stopping rule too.
 _REL_EPS = 0.01
@@ -66,12 +80,13 @@ class _Tracer:
         from embreex.mesh_construction import TriangleMesh
 
         tri = scene.triangles()
-        self.tris = tri["triangles"]                       # (F, 3, 3) float64
-        self.obj = tri["object"]                           # (F,) int32
+        self.tris = tri["triangles"]  # (F, 3, 3) float64
+        self.obj = tri["object"]  # (F,) int32
         e1 = self.tris[:, 1] - self.tris[:, 0]
         e2 = self.tris[:, 2] - self.tris[:, 0]
         n = np.cross(e1, e2)
-        self.ng = n / np.linalg.norm(n, axis=1, keepdims=True)  # winding normals (DESIGN-NOTES §2)
+        # winding normals (docs/design.md §2)
+        self.ng = n / np.linalg.norm(n, axis=1, keepdims=True)
         # Per-corner shading normals where an object's mesh carried them.
         self.vn = None
         if any(o.vertex_normals is not None for o in scene.objects):
@@ -101,13 +116,15 @@ class _Tracer:
         n = len(org)
         if n == 0:
             return np.zeros(0, np.int32)
+
         def one(a, b):
             kw = {} if dists is None else {"dists": dists[a:b]}
             return np.asarray(self.embree.run(org[a:b], dirs[a:b], query=query, **kw))
+
         if self._pool is None or n < 4096:
             return one(0, n)
         cuts = np.linspace(0, n, self.threads + 1).astype(np.int64)
-        futs = [self._pool.submit(one, int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:])]
+        futs = [self._pool.submit(one, int(a), int(b)) for a, b in itertools.pairwise(cuts)]
         return np.concatenate([f.result() for f in futs])
 
     def intersect(self, org: np.ndarray, dirs: np.ndarray) -> np.ndarray:
@@ -174,7 +191,7 @@ def frame_samples(frame: int, seed: int = 0) -> tuple[tuple[float, float], tuple
     s1, s2 = (int(x) for x in rng.integers(0, 1 << 32, size=2, dtype=np.uint64))
     rot = rng.random(2)
     i = int(frame)
-    off = ((_vdc2(i) ^ s1) / 2.0 ** 32, (_sobol2(i) ^ s2) / 2.0 ** 32)
+    off = ((_vdc2(i) ^ s1) / 2.0**32, (_sobol2(i) ^ s2) / 2.0**32)
     lu = (_radical_inverse(i + 1, 3) + rot[0]) % 1.0
     lv = (_radical_inverse(i + 1, 5) + rot[1]) % 1.0
     return off, _concentric_disc(lu, lv)
@@ -204,8 +221,11 @@ def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.nda
     aspect = cam.width / cam.height
     sx = (2.0 * (np.arange(cam.width) + offset[0]) / cam.width - 1.0) * th * aspect
     sy = (1.0 - 2.0 * (np.arange(cam.height) + offset[1]) / cam.height) * th
-    d = (fwd[None, None, :] + sx[None, :, None] * right[None, None, :]
-         + sy[:, None, None] * up[None, None, :]).reshape(-1, 3)
+    d = (
+        fwd[None, None, :]
+        + sx[None, :, None] * right[None, None, :]
+        + sy[:, None, None] * up[None, None, :]
+    ).reshape(-1, 3)
     if cam.aperture > 0.0:
         lo = eye + cam.aperture * (lens[0] * right + lens[1] * up)
         d = eye + cam.focus * d - lo  # d·fwd = 1, so eye + focus·d lies on the focal plane
@@ -221,6 +241,7 @@ def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.nda
 # --------------------------------------------------------------------------
 def _morton(ijk: np.ndarray) -> np.ndarray:
     """30-bit interleaved (Morton) keys of voxel coordinates (10 bits each)."""
+
     def spread(v):
         v = (v.astype(np.int64) - v.min()) & 0x3FF
         v = (v | (v << 16)) & 0x030000FF
@@ -228,6 +249,7 @@ def _morton(ijk: np.ndarray) -> np.ndarray:
         v = (v | (v << 4)) & 0x030C30C3
         v = (v | (v << 2)) & 0x09249249
         return v
+
     return spread(ijk[:, 0]) | (spread(ijk[:, 1]) << 1) | (spread(ijk[:, 2]) << 2)
 
 
@@ -244,10 +266,10 @@ class VPLSampler:
     proportional to its power ``ΔA · B`` (luminance) instead of its area
     (``pdf="area"``, the paper's choice): the estimator weight is then
     ``B / (π n p(y))`` with the area density ``p(y) = lum(B_y) / Σ ΔA lum(B)``,
-    so every VPL carries the same power. Measured on the Cornell box: with
-    area sampling, the few bright records on top of the tall block (B ≈ 11×
-    the mean) are drawn in one frame of three and then light the ceiling
-    alone, a heavy-tailed error that the between-frame spread underestimates.
+    so every VPL carries the same power. With area sampling a few bright
+    records (on the Cornell box, those on top of the tall block, B ≈ 11× the
+    mean) are drawn in one frame of several and then light a wall alone: a
+    heavy-tailed error that the between-frame spread underestimates.
 
     Each frame draws its ``n_d`` emitter and ``n_i`` other VPLs stratified
     along the cumulative table, whose records are in Morton (Z-curve) order:
@@ -273,8 +295,15 @@ class VPLSampler:
     pdf : {"power", "area"}
     """
 
-    def __init__(self, sol, vpls_per_frame: int = 16, seed: int = 0,
-                 emitter_share: float | None = None, mis: bool = False, pdf: str = "power"):
+    def __init__(
+        self,
+        sol,
+        vpls_per_frame: int = 16,
+        seed: int = 0,
+        emitter_share: float | None = None,
+        mis: bool = False,
+        pdf: str = "power",
+    ):
         if pdf not in ("power", "area"):
             raise ValueError(f"pdf: expected 'power' or 'area', got {pdf!r}")
         vox = sol.vox
@@ -321,8 +350,9 @@ class VPLSampler:
         self.mis = bool(mis) and self.counts[1] > 0
         #: (N,) float32 n_i p(y) of every record (0 outside the non-emitter set):
         #: the VPL side of the MIS weights, for VPLs and gather hits alike.
-        self.record_pa = (self.counts[1] * dens_i).astype(np.float32) if self.mis else \
-            np.zeros(n, np.float32)
+        self.record_pa = (
+            (self.counts[1] * dens_i).astype(np.float32) if self.mis else np.zeros(n, np.float32)
+        )
         self.pos = np.ascontiguousarray(vox.centroid, dtype=np.float64)
         self.normal = np.ascontiguousarray(vox.normal, dtype=np.float32)
         self.area32 = area.astype(np.float32)
@@ -337,7 +367,7 @@ class VPLSampler:
         """The VPLs of frame ``f``: the same for every pixel and every view."""
         rng = np.random.default_rng([self.seed, int(f), 0x1B1])
         idx_all, w_all, pa_all = [], [], []
-        for s, ((idx, cum, _, dens), k) in enumerate(zip(self.sets, self.counts)):
+        for s, ((idx, cum, _, dens), k) in enumerate(zip(self.sets, self.counts, strict=True)):
             if k == 0:
                 continue
             u = (np.arange(k) + rng.random(k)) / k * float(cum[-1])  # stratified along the table
@@ -369,8 +399,17 @@ class VPLSampler:
 class _FrameShader:
     """Everything a frame needs that does not change between frames."""
 
-    def __init__(self, scene: Scene, cam: Camera, tracer: _Tracer, sampler: VPLSampler,
-                 eps: float, threads: int, gather: int = 0, seed: int = 0):
+    def __init__(
+        self,
+        scene: Scene,
+        cam: Camera,
+        tracer: _Tracer,
+        sampler: VPLSampler,
+        eps: float,
+        threads: int,
+        gather: int = 0,
+        seed: int = 0,
+    ):
         self.scene, self.cam, self.tracer, self.sampler = scene, cam, tracer, sampler
         self.eps, self.threads = float(eps), int(threads)
         self.gather = int(gather) if sampler.mis else 0
@@ -393,9 +432,12 @@ class _FrameShader:
         self.seconds = {"primary": 0.0, "shade": 0.0, "shadow": 0.0, "gather": 0.0}
         if self.gather:
             self._grid = self._record_grid(sampler)
-            self._tri = {"tri_v": tracer.tris, "tri_object": tracer.obj,
-                         "obj_two_sided": self.two_sided.astype(np.uint8),
-                         "obj_emitter": np.array([o.material.is_emitter for o in objs], np.uint8)}
+            self._tri = {
+                "tri_v": tracer.tris,
+                "tri_object": tracer.obj,
+                "obj_two_sided": self.two_sided.astype(np.uint8),
+                "obj_emitter": np.array([o.material.is_emitter for o in objs], np.uint8),
+            }
 
     @staticmethod
     def _record_grid(sampler: VPLSampler) -> dict:
@@ -424,7 +466,8 @@ class _FrameShader:
             "rec_object": np.ascontiguousarray(vox.object_id, dtype=np.int32),
             "rec_radiance": np.ascontiguousarray(sampler.B / math.pi, dtype=np.float32),
             "rec_pa": sampler.record_pa,
-            "grid_dims": dims.astype(np.int64), "grid_lo": lo.astype(np.int64),
+            "grid_dims": dims.astype(np.int64),
+            "grid_lo": lo.astype(np.int64),
             "grid_origin": np.asarray(vox.origin, dtype=np.float64).reshape(3),
             "pitch": float(vox.pitch),
         }
@@ -475,8 +518,14 @@ class _FrameShader:
         ng_out = np.zeros((P, 3), np.float32)
         ng_out[hit] = ngf
         wo = np.ascontiguousarray(-dirs, dtype=np.float32)
-        return {"pos": pos, "normal": n_out, "ng": ng_out, "wo": wo, "material": mat,
-                "emission": le}
+        return {
+            "pos": pos,
+            "normal": n_out,
+            "ng": ng_out,
+            "wo": wo,
+            "material": mat,
+            "emission": le,
+        }
 
     def shade(self, h: dict, vpl: dict) -> np.ndarray:
         """(P, 3) float32 radiance: emission seen + VPL estimate of the reflected light."""
@@ -489,20 +538,43 @@ class _FrameShader:
         if self._buffers is None or len(self._buffers[1]) < cap:
             # Reused by every frame: fresh pages for ~40 bytes x P x K rays
             # each frame cost as much as the shading itself.
-            self._buffers = (np.zeros(self.tile, np.int64), np.zeros((cap, 3), np.float32),
-                             np.zeros((cap, 3), np.float32), np.zeros(cap, np.float32),
-                             np.zeros((cap, 3), np.float32))
+            self._buffers = (
+                np.zeros(self.tile, np.int64),
+                np.zeros((cap, 3), np.float32),
+                np.zeros((cap, 3), np.float32),
+                np.zeros(cap, np.float32),
+                np.zeros((cap, 3), np.float32),
+            )
         cnt_buf, org_buf, dir_buf, len_buf, con_buf = self._buffers
         for a in range(0, P, self.tile):
             b = min(P, a + self.tile)
             t0 = time.perf_counter()
             count = cnt_buf[: b - a]
             n = _core.vpl_prepare(
-                h["pos"][a:b], h["normal"][a:b], h["ng"][a:b], h["wo"][a:b], h["material"][a:b],
-                self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv, self.mat_glossy,
-                vpl["pos"], vpl["normal"], vpl["weight"], vpl["area"], vpl["pa"],
-                float(self.gather), self.eps,
-                count, org_buf, dir_buf, len_buf, con_buf, self.threads)
+                h["pos"][a:b],
+                h["normal"][a:b],
+                h["ng"][a:b],
+                h["wo"][a:b],
+                h["material"][a:b],
+                self.mat_albedo,
+                self.mat_rs,
+                self.mat_nu,
+                self.mat_nv,
+                self.mat_glossy,
+                vpl["pos"],
+                vpl["normal"],
+                vpl["weight"],
+                vpl["area"],
+                vpl["pa"],
+                float(self.gather),
+                self.eps,
+                count,
+                org_buf,
+                dir_buf,
+                len_buf,
+                con_buf,
+                self.threads,
+            )
             org, dirs, length, contrib = org_buf[:n], dir_buf[:n], len_buf[:n], con_buf[:n]
             t1 = time.perf_counter()
             occ = self.tracer.occluded(org, dirs, length)
@@ -521,21 +593,51 @@ class _FrameShader:
         t0 = time.perf_counter()
         cap = self.tile * self.gather
         if self._gbuffers is None:
-            self._gbuffers = (np.zeros(self.tile, np.int64), np.zeros((cap, 3), np.float32),
-                              np.zeros((cap, 3), np.float32))
+            self._gbuffers = (
+                np.zeros(self.tile, np.int64),
+                np.zeros((cap, 3), np.float32),
+                np.zeros((cap, 3), np.float32),
+            )
         cnt_buf, org_buf, dir_buf = self._gbuffers
         count = cnt_buf[: b - a]
         hh = {k: h[k][a:b] for k in ("pos", "normal", "ng", "wo", "material")}
-        n = _core.gather_rays(hh["pos"], hh["normal"], hh["ng"], hh["wo"], hh["material"],
-                              self.gather, self.seed, self._frame, self.eps, count, org_buf,
-                              dir_buf, self.threads)
+        n = _core.gather_rays(
+            hh["pos"],
+            hh["normal"],
+            hh["ng"],
+            hh["wo"],
+            hh["material"],
+            self.gather,
+            self.seed,
+            self._frame,
+            self.eps,
+            count,
+            org_buf,
+            dir_buf,
+            self.threads,
+        )
         prim = self.tracer.intersect(org_buf[:n], dir_buf[:n])
         self.gather_rays += n
-        _core.gather_shade(hh["pos"], hh["normal"], hh["ng"], hh["wo"], hh["material"],
-                           self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv,
-                           self.mat_glossy, float(self.gather),
-                           **self._tri, **self._grid, ray_count=count, ray_dir=dir_buf[:n],
-                           prim=prim, out=out[a:b], threads=self.threads)
+        _core.gather_shade(
+            hh["pos"],
+            hh["normal"],
+            hh["ng"],
+            hh["wo"],
+            hh["material"],
+            self.mat_albedo,
+            self.mat_rs,
+            self.mat_nu,
+            self.mat_nv,
+            self.mat_glossy,
+            float(self.gather),
+            **self._tri,
+            **self._grid,
+            ray_count=count,
+            ray_dir=dir_buf[:n],
+            prim=prim,
+            out=out[a:b],
+            threads=self.threads,
+        )
         self.seconds["gather"] += time.perf_counter() - t0
 
     def frame(self, f: int, seed: int) -> np.ndarray:
@@ -549,108 +651,93 @@ class _FrameShader:
         vpl = None if self.sampler.empty else self.sampler.frame(f)
         return self.shade(h, vpl)
 
+    def close(self) -> None:
+        """Release the tracer's threads."""
+        self.tracer.close()
+
+
+# --------------------------------------------------------------------------
+# Frame sources: the spec of a frame shader and where it runs
+# --------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class FrameShaderSpec:
+    """What a frame shader is built from; picklable, so an executor can ship it.
+
+    Frames are independent (each has its own VPLs, sub-pixel offset and
+    gather-ray seed), so a shader built from the same spec anywhere returns
+    the same frame ``f``.
+
+    Attributes
+    ----------
+    scene : Scene
+    camera : Camera
+    sampler : VPLSampler
+    eps : float
+        Shadow-ray offset (scene units).
+    gather : int
+        Gather rays per pixel and frame for the non-emitter light (0: VPLs only).
+    seed : int
+    """
+
+    scene: Scene
+    camera: Camera
+    sampler: VPLSampler
+    eps: float
+    gather: int
+    seed: int
+
+    @property
+    def gather_per_frame(self) -> int:
+        """Gather rays per pixel and frame the shader will trace."""
+        return int(self.gather) if self.sampler.mis else 0
+
+    @property
+    def glossy(self) -> bool:
+        """Whether any material has a specular layer."""
+        return any(o.material.specular is not None for o in self.scene.objects)
+
+    def build(self, threads: int = 1) -> _FrameShader:
+        """The shader (Embree scene, material tables, buffers) on ``threads`` threads.
+
+        It has ``frame(f, seed)`` -> (H*W, 3) float32, the counters
+        ``primary_rays``, ``shadow_rays``, ``gather_rays``, ``seconds``, and
+        ``close()``."""
+        tracer = _Tracer(self.scene, threads)
+        return _FrameShader(
+            self.scene, self.camera, tracer, self.sampler, self.eps, threads, self.gather, self.seed
+        )
+
+
+class FrameExecutor(Protocol):
+    """Where a render's frames are computed (``docs/design.md`` §8).
+
+    ``frames(spec, max_frames, threads=...)`` returns a frame source with
+    the interface of :meth:`FrameShaderSpec.build`'s shader: ``frame(f,
+    seed)`` must return frame ``f`` as the local shader would, whatever
+    the order of computation; the render loop asks for frames 0, 1, ... and
+    stops after at most ``max_frames``.
+    """
+
+    def frames(self, spec: FrameShaderSpec, max_frames: int, *, threads: int = 1): ...
+
+
+class LocalFrames:
+    """The default frame executor: every frame in this process."""
+
+    def frames(self, spec: FrameShaderSpec, max_frames: int, *, threads: int = 1):
+        """The shader built here."""
+        return spec.build(threads)
+
 
 # --------------------------------------------------------------------------
 # render
 # --------------------------------------------------------------------------
-def _check_solution(scene: Scene, sol) -> None:
-    from .radiosity import Solution
+@dataclass(frozen=True)
+class RenderTuning:
+    """Expert settings of :func:`render`, for studies and benchmarks.
 
-    if not isinstance(sol, Solution):
-        raise TypeError(f"sol: expected voxgi.Solution or None, got {type(sol).__name__}")
-    fp = getattr(sol.vox, "scene_fingerprint", "")
-    if fp != scene.fingerprint():
-        raise ValueError(
-            f"sol: this solution was computed for another scene (fingerprint {fp!r}, this "
-            f"scene's is {scene.fingerprint()!r}); solve this scene or pass sol=None")
-    n = len(sol.vox)
-    r = np.asarray(sol.radiosity)
-    if r.shape != (n, 3):
-        raise ValueError(f"sol.radiosity: expected shape ({n}, 3), got {r.shape}")
-
-
-def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = None,
-           tol: float | None = None, seed: int = 0, progress: bool = True,
-           threads: int | None = None, client=None, *, camera: Camera | None = None,
-           min_frames: int = 4, emitter_share: float | None = None, gather: int = 4,
-           vpl_pdf: str = "power") -> RenderResult:
-    r"""Render ``scene`` from its camera using the voxel solution ``sol``.
-
-    Each pixel's primary ray (Embree) hits a point x with normal n, albedo ρ
-    and emission Le; its radiance is
-
-    .. math:: L(x) = L_e(x) + \int f(x, \omega_i, \omega_o)\, L(y)\,
-              \frac{\cos\theta_x \cos\theta_y}{r^2} V(x, y)\, dA(y),
-              \qquad L(y) = B(y) / \pi,
-
-    with f = ρ/π for a Lambertian surface (so the integral is (ρ/π)·E, E
-    the irradiance). Drawing n VPLs y from a set of records of total area TA
-    with probability ΔA(y)/TA, the area pdf is 1/TA per unit area, so
-
-    .. math:: E(x) \approx \frac{TA}{n} \sum_y \frac{B(y)}{\pi}\,
-              \frac{\cos\theta_x \cos\theta_y}{r^2 + \Delta A(y)/\pi} V(x, y),
-
-    summed over the two sets (emitters and the rest) with their own TA and
-    n. So the pixel is ``Le + (ρ/π²)·Σ_sets (TA/n) Σ B G V``; the paper's
-    printed factor 1/(2π) is not this and fails the furnace. (voxgi draws by
-    default with probability ∝ ΔA·B instead, ``vpl_pdf="power"``: the area
-    density is then p(y) = lum(B_y)/Σ ΔA lum(B) and TA/n becomes 1/(n p(y)).) Check: inside a
-    sphere of radius R, ``cos θx cos θy / r² = 1/(4R²)`` for every pair and
-    TA = 4πR², so each VPL gives exactly ``E = B``; with ``B = π Le/(1−ρ)``
-    the pixel is ``Le + ρ Le/(1−ρ) = Le/(1−ρ)``, which the tests assert.
-
-    The geometry term is bounded: a VPL stands for a disc of area ΔA, and on
-    the axis of a disc ``cos θx cos θy / (r² + ΔA/π)`` is exact; it is the
-    point formula far away and has no 1/r² spike in corners (a small loss of
-    energy within about √ΔA of contact). Back-facing VPLs give nothing and
-    cost no shadow ray. With a glossy material f is the Ashikhmin–Shirley
-    coupled diffuse + anisotropic Phong pair, lit by the same VPLs.
-
-    Near-field noise (``gather > 0``, the default): the bounded term removes
-    the singularity but not the variance of VPLs close to x (in corners a
-    VPL drawn at a few millimetres outshines the rest of the frame: measured
-    on the Cornell box, the estimated noise relMSE after 64 frames was 8.7e-3
-    with VPLs alone, 9.7e-4 with 4 gather rays per pixel and frame). So the
-    non-emitter set is also sampled by ``gather`` cosine-distributed rays per
-    pixel, whose hit points take their radiance ``B/π`` from the voxel record
-    there, and the two are combined by multiple importance sampling (balance
-    heuristic): each sample of either kind adds
-    ``f L cosθx cosθy / (r² n_v/TA + n_g cosθx cosθy/π)``, at most
-    ``π f L / n_g`` at contact, unbiased (no ΔA bound needed for that set).
-    Emitters stay VPLs only (small and bright: area sampling is right for
-    them). ``gather=0`` is the paper's pure VPL display.
-
-    Parameters
+    Attributes
     ----------
-    scene : Scene
-        With a camera (``scene.camera``, or ``camera=``).
-    sol : Solution
-        The voxel solution of ``scene`` (:func:`voxgi.solve`);
-        :func:`voxgi.pipeline.render` also takes None and solves first.
-    vpls_per_frame : int
-        VPLs per pixel per frame (>= 1), shared by all pixels.
-    max_frames : int or None
-        At most this many frames (default 256).
-    tol : float or None
-        Stop once the estimated relMSE of the image's remaining noise,
-        ``mean(se² / (L² + 0.01))`` over pixels and channels, with ``se`` the
-        per-pixel standard error of the running mean from the spread between
-        frames, falls under ``tol`` (default 1e-3; the same metric as
-        :func:`voxgi.metrics.rel_mse`, so ``sqrt(tol)`` is the RMS relative
-        error). At least ``min_frames`` frames are run. 0 runs ``max_frames``.
-    seed : int
-        Seeds the VPL sequence and the sub-pixel/lens sequence.
-    progress : bool
-        Show a tqdm progress bar.
-    threads : int or None
-        Worker threads (None: all cores).
-    client : dask.distributed.Client or None
-        Compute the frames on the client's workers (:mod:`voxgi.distributed`;
-        ``pip install "voxgi[dask]"``); the render loop, its accumulation and
-        stopping rule stay here, so the image equals the local one. Also
-        used by the solve when ``sol`` is None.
-    camera : Camera, optional
-        Overrides ``scene.camera``.
     min_frames : int
         Frames before the stopping rule is trusted (>= 2).
     emitter_share : float or None
@@ -658,149 +745,322 @@ def render(scene, sol=None, vpls_per_frame: int = 16, max_frames: int | None = N
         (see :class:`VPLSampler`).
     gather : int
         Cosine-distributed gather rays per pixel and frame for the
-        non-emitter light, MIS-combined with its VPLs (0: VPLs only).
+        non-emitter light, MIS-combined with its VPLs (0: VPLs only, the
+        paper's display).
     vpl_pdf : {"power", "area"}
         VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
         paper); see :class:`VPLSampler`.
 
-    Returns
-    -------
-    RenderResult
-        ``image`` (H, W, 3) float32 linear radiance, ``image[0, 0]`` top-left;
-        ``stderr`` (H, W, 3) float32; ``frames``; ``stats`` with ``seconds``
-        (voxelize, solve, setup, primary, shade, shadow, total),
-        ``primary_rays``, ``shadow_rays``, ``gather_rays``, ``vpls`` (per pixel),
-        ``vpl_split`` (emitters, others per frame), ``est_rel_mse``,
-        ``skipped`` and ``interrupted``. Ctrl-C stops after the current frame
-        and returns the image so far.
-
-    Raises
-    ------
-    ValueError
-        No camera, a solution of another scene, bad numbers.
-    TypeError
-        Wrong argument types.
-    ImportError
-        ``client`` given without dask.distributed installed.
+    >>> RenderTuning(gather=0).min_frames
+    4
     """
-    t_start = time.perf_counter()
+
+    min_frames: int = 4
+    emitter_share: float | None = None
+    gather: int = 4
+    vpl_pdf: str = "power"
+
+
+@dataclass(frozen=True)
+class _RenderSettings:
+    """The validated arguments of one render."""
+
+    cam: Camera
+    K: int
+    max_frames: int
+    tol: float
+    seed: int
+    min_frames: int
+    emitter_share: float | None
+    gather: int
+    vpl_pdf: str
+    threads: int
+
+
+def _available_memory() -> int:
+    """Bytes of memory available now (MemAvailable, else free physical pages)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:  # pragma: no cover - not Linux
+        pass
+    try:  # pragma: no cover - not Linux
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover
+        return 1 << 32
+
+
+def _check_render(
+    scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads, tuning
+) -> _RenderSettings:
+    """Image checks: scene, solution, camera and numbers; TypeError/ValueError naming them."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
     scene.check_nonempty()
     if sol is None:
-        raise TypeError("sol: expected a voxgi.Solution (voxgi.render, the pipeline's "
-                        "render, solves the scene first when given none)")
+        raise TypeError(
+            "sol: expected a voxgi.Solution (voxgi.render, the pipeline's "
+            "render, solves the scene first when given none)"
+        )
     cam = camera if camera is not None else scene.camera
     if cam is None:
         raise ValueError("render: the scene has no camera (set scene.camera or pass camera=)")
     if not isinstance(cam, Camera):
         raise TypeError(f"camera: expected voxgi.Camera, got {type(cam).__name__}")
-    if client is not None:  # fail early: the extra missing (ImportError) or not a Client
-        from .distributed import check_client
-
-        check_client(client)
-    K = _validate.integer(vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16)
-    max_frames = _validate.integer(max_frames, "max_frames", low=1, allow_none=True) or 256
+    t = RenderTuning() if tuning is None else tuning
+    if not isinstance(t, RenderTuning):
+        raise TypeError(f"tuning: expected voxgi.RenderTuning or None, got {type(t).__name__}")
     tol = _validate.real(tol, "tol", low=0.0, allow_none=True)
-    tol = 1e-3 if tol is None else tol
-    seed = _validate.integer(seed, "seed")
-    min_frames = _validate.integer(min_frames, "min_frames", low=2)
-    emitter_share = _validate.real(emitter_share, "emitter_share", low=0.0, high=1.0,
-                                   allow_none=True)
-    nthreads = _validate.threads(threads)
-    # Refuse an image that cannot fit before allocating anything: measured
-    # with tracemalloc, a render holds ~950 bytes per pixel (running mean and
-    # variance, hit records, frame buffers) plus ~30 MB of tile buffers.
-    from .voxels import _available_memory
+    return _RenderSettings(
+        cam=cam,
+        K=_validate.integer(vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16),
+        max_frames=_validate.integer(max_frames, "max_frames", low=1, allow_none=True) or 256,
+        tol=1e-3 if tol is None else tol,
+        seed=_validate.integer(seed, "seed"),
+        min_frames=_validate.integer(t.min_frames, "min_frames", low=2),
+        emitter_share=_validate.real(
+            t.emitter_share, "emitter_share", low=0.0, high=1.0, allow_none=True
+        ),
+        gather=_validate.integer(t.gather, "gather", low=0, high=4096),
+        vpl_pdf=t.vpl_pdf,
+        threads=_validate.threads(threads),
+    )
 
+
+def _check_image_memory(cam: Camera) -> None:
+    """Refuse an image that cannot fit before allocating anything: a render
+    holds about 950 bytes per pixel (running mean and variance, hit records,
+    frame buffers) plus about 30 MB of tile buffers."""
     need = 1000 * cam.width * cam.height + (32 << 20)
     budget = _available_memory() // 2
     if need > budget:
-        raise ValueError(f"render: a {cam.width}x{cam.height} image needs about {need:,} bytes "
-                         f"(~1000 bytes per pixel), over the budget of {budget:,} bytes (half "
-                         "the available memory); lower Camera.width/height")
-    seconds: dict[str, float] = {}
-    skipped: list[str] = []
+        raise ValueError(
+            f"render: a {cam.width}x{cam.height} image needs about {need:,} bytes "
+            f"(~1000 bytes per pixel), over the budget of {budget:,} bytes (half "
+            "the available memory); lower Camera.width/height"
+        )
 
-    _check_solution(scene, sol)
 
-    t0 = time.perf_counter()
-    tracer = _Tracer(scene, nthreads)
-    gather = _validate.integer(gather, "gather", low=0, high=4096)
-    sampler = VPLSampler(sol, K, seed, emitter_share, mis=gather > 0, pdf=vpl_pdf)
+def _check_solution(scene: Scene, sol, cam: Camera) -> None:
+    """The image fits in memory; the solution is a :class:`Solution` of this
+    scene, one radiosity per record."""
+    _check_image_memory(cam)
+    if not isinstance(sol, Solution):
+        raise TypeError(f"sol: expected voxgi.Solution or None, got {type(sol).__name__}")
+    fp = getattr(sol.vox, "scene_fingerprint", "")
+    if fp != scene.fingerprint():
+        raise ValueError(
+            f"sol: this solution was computed for another scene (fingerprint {fp!r}, this "
+            f"scene's is {scene.fingerprint()!r}); solve this scene or pass sol=None"
+        )
+    n = len(sol.vox)
+    r = np.asarray(sol.radiosity)
+    if r.shape != (n, 3):
+        raise ValueError(f"sol.radiosity: expected shape ({n}, 3), got {r.shape}")
+
+
+def _check_executor(executor) -> FrameExecutor:
+    """The executor given, or the local one for None."""
+    if executor is None:
+        return LocalFrames()
+    if not callable(getattr(executor, "frames", None)):
+        raise TypeError(
+            f"executor: expected an object with a frames(spec, max_frames, threads=...) method "
+            f"(voxgi.display.FrameExecutor) or None, got {type(executor).__name__}; "
+            "voxgi.render also takes a dask.distributed.Client as client="
+        )
+    return executor
+
+
+def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
+    """The VPL sampler and the shadow-ray offset of this scene and solution."""
+    sampler = VPLSampler(
+        sol, opt.K, opt.seed, opt.emitter_share, mis=opt.gather > 0, pdf=opt.vpl_pdf
+    )
     diag = float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
     # Shadow-ray offsets: well above float32 rounding of the coordinates
     # (~1e-7 relative) and well below any feature of a sensible scene.
-    eps = 1e-4 * diag
-    shader = _FrameShader(scene, cam, tracer, sampler, eps, nthreads, gather, seed)
-    seconds["setup"] = time.perf_counter() - t0
-    if not shader.mat_glossy.any():
+    return FrameShaderSpec(scene, opt.cam, sampler, 1e-4 * diag, opt.gather, opt.seed)
+
+
+def _skipped(spec: FrameShaderSpec) -> list[str]:
+    """What this render leaves out, and why."""
+    sampler, skipped = spec.sampler, []
+    if not spec.glossy:
         skipped.append("glossy: no material has a specular layer")
     if sampler.counts[0] == 0:
         skipped.append("emitter VPLs: no emitting record with power")
     if sampler.counts[1] == 0:
         skipped.append("non-emitter VPLs: no reflecting record with power")
     if sampler.skipped_records:
-        skipped.append(f"{sampler.skipped_records} records with zero radiosity or area "
-                       "(back records) are never VPLs")
+        skipped.append(
+            f"{sampler.skipped_records} records with zero radiosity or area "
+            "(back records) are never VPLs"
+        )
+    return skipped
 
-    if client is not None:  # the same loop below, its frames computed on Dask workers
-        from .distributed import DistributedFrames
 
-        shader = DistributedFrames(client, shader, max_frames)
+@dataclass
+class _Mean:
+    """The progressive mean of the frames (Welford) and its stopping rule.
 
-    H, W = cam.height, cam.width
-    mean = np.zeros((H * W, 3))
-    m2 = np.zeros((H * W, 3))
-    frames = 0
-    est = float("inf")
-    interrupted = False
+    The estimated relMSE of the remaining noise is ``mean(se² / (L² + 0.01))``
+    over pixels and channels, ``se`` the standard error of the running mean
+    from the spread between frames (``docs/design.md`` §6)."""
+
+    mean: np.ndarray
+    m2: np.ndarray
+    frames: int = 0
+    est: float = float("inf")
+
+    def add(self, x: np.ndarray) -> None:
+        """Fold one frame in and update the estimate."""
+        self.frames += 1
+        delta = x - self.mean
+        self.mean += delta / self.frames
+        self.m2 += delta * (x - self.mean)
+        if self.frames >= 2:
+            se2 = self.m2 / (self.frames - 1) / self.frames
+            self.est = float(np.mean(se2 / (self.mean * self.mean + _REL_EPS)))
+
+    def done(self, opt: _RenderSettings) -> bool:
+        """At least ``min_frames`` frames and the estimate at or under ``tol``."""
+        return self.frames >= opt.min_frames and self.est <= opt.tol
+
+    def stderr(self, shape) -> np.ndarray | None:
+        """Per-pixel standard error (None with fewer than two frames)."""
+        if self.frames < 2:
+            return None
+        return np.sqrt(self.m2 / (self.frames - 1) / self.frames).reshape(shape).astype(np.float32)
+
+
+def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Mean, bool]:
+    """Frames 0, 1, ... from ``source`` into the running mean until the
+    stopping rule or ``max_frames``; Ctrl-C stops after the current frame.
+    Returns the mean and whether it was interrupted."""
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=max_frames, disable=not progress, desc="display", unit="frame", leave=False)
+    cam = opt.cam
+    acc = _Mean(np.zeros((cam.height * cam.width, 3)), np.zeros((cam.height * cam.width, 3)))
+    interrupted = False
+    bar = tqdm(
+        total=opt.max_frames, disable=not progress, desc="display", unit="frame", leave=False
+    )
     try:
-        for f in range(max_frames):
-            x = shader.frame(f, seed).astype(np.float64)
-            frames += 1
-            delta = x - mean  # Welford: running mean and sum of squared deviations
-            mean += delta / frames
-            m2 += delta * (x - mean)
-            if frames >= 2:
-                se2 = m2 / (frames - 1) / frames
-                est = float(np.mean(se2 / (mean * mean + _REL_EPS)))
+        for f in range(opt.max_frames):
+            acc.add(source.frame(f, opt.seed).astype(np.float64))
             bar.update(1)
-            bar.set_postfix_str(f"est relMSE {est:.2e}")
-            if frames >= min_frames and est <= tol:
+            bar.set_postfix_str(f"est relMSE {acc.est:.2e}")
+            if acc.done(opt):
                 break
     except KeyboardInterrupt:
         interrupted = True
     finally:
         bar.close()
-        tracer.close()
-        if client is not None:
-            shader.close()
-    image = mean.reshape(H, W, 3).astype(np.float32)
-    stderr = None
-    if frames >= 2:
-        stderr = np.sqrt(m2 / (frames - 1) / frames).reshape(H, W, 3).astype(np.float32)
-    seconds.update(shader.seconds)
-    seconds["total"] = time.perf_counter() - t_start
-    seconds["display"] = seconds["total"]
-    stats = {
+        source.close()
+    return acc, interrupted
+
+
+def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) -> dict:
+    """Ray counts, VPLs, frames, the estimate and what was skipped."""
+    return {
         "seconds": seconds,
-        "primary_rays": int(shader.primary_rays),
-        "shadow_rays": int(shader.shadow_rays),
-        "gather_rays": int(shader.gather_rays),
-        "gather_per_frame": int(shader.gather),
-        "vpls": int(frames * sum(sampler.counts)),
-        "vpl_split": [int(c) for c in sampler.counts],
-        "vpl_pdf": sampler.pdf,
-        "frames": int(frames),
-        "est_rel_mse": est,
-        "tol": tol,
-        "eps": eps,
+        "primary_rays": int(source.primary_rays),
+        "shadow_rays": int(source.shadow_rays),
+        "gather_rays": int(source.gather_rays),
+        "gather_per_frame": spec.gather_per_frame,
+        "vpls": int(acc.frames * sum(spec.sampler.counts)),
+        "vpl_split": [int(c) for c in spec.sampler.counts],
+        "vpl_pdf": spec.sampler.pdf,
+        "frames": int(acc.frames),
+        "est_rel_mse": acc.est,
+        "tol": opt.tol,
+        "eps": spec.eps,
         "skipped": skipped,
         "interrupted": interrupted,
-        "threads": nthreads,
+        "threads": opt.threads,
     }
-    return RenderResult(image=image, frames=frames, stderr=stderr, stats=stats, solution=sol)
+
+
+def render(
+    scene,
+    sol,
+    vpls_per_frame: int = 16,
+    max_frames: int | None = None,
+    tol: float | None = None,
+    seed: int = 0,
+    progress: bool = True,
+    threads: int | None = None,
+    executor: FrameExecutor | None = None,
+    *,
+    camera: Camera | None = None,
+    tuning: RenderTuning | None = None,
+) -> RenderResult:
+    r"""Render ``scene`` from its camera using the voxel solution ``sol``.
+
+    Each pixel's primary ray (Embree) hits a point x; its radiance is
+    ``Le(x)`` plus the light reflected from the records of ``sol``, each a
+    virtual point light of radiance ``B/π`` (``docs/design.md`` §6):
+
+    .. math:: L(x) = L_e(x) + \int f(x, \omega_i, \omega_o)\, \frac{B(y)}{\pi}\,
+              \frac{\cos\theta_x \cos\theta_y}{r^2 + \Delta A(y)/\pi} V(x, y)\, dA(y),
+
+    estimated with a few VPLs per frame and gather rays MIS-combined with
+    them, frames averaged until the estimated noise falls under ``tol``.
+
+    Parameters
+    ----------
+    scene : Scene
+        With a camera (``scene.camera``, or ``camera=``).
+    sol : Solution
+        The voxel solution of ``scene`` (``voxgi.render`` also takes None).
+    vpls_per_frame : int
+        VPLs per frame (>= 1), shared by all pixels.
+    max_frames : int or None
+        At most this many frames (default 256).
+    tol : float or None
+        Bound on the estimated relMSE of the remaining noise (default 1e-3; 0:
+        run ``max_frames``).
+    seed : int
+        Seeds the VPL, sub-pixel and lens sequences.
+    progress, threads
+        A tqdm progress bar; worker threads (None: all cores).
+    executor : FrameExecutor or None
+        Where the frames are computed (None: here); the image is the local one.
+    camera : Camera, optional
+        Overrides ``scene.camera``.
+    tuning : RenderTuning or None
+        Expert settings (:class:`RenderTuning`).
+
+    Returns
+    -------
+    RenderResult
+        ``image`` (H, W, 3) float32 linear radiance, ``image[0, 0]`` top-left;
+        ``stderr``; ``frames``; ``stats`` (seconds, ray counts, ``est_rel_mse``,
+        ``skipped``, ``interrupted``: Ctrl-C stops after the current frame).
+
+    Raises
+    ------
+    ValueError, TypeError
+        No camera, a solution of another scene, bad arguments, too large an image.
+    """
+    t_start = time.perf_counter()
+    opt = _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads, tuning)
+    executor = _check_executor(executor)
+    _check_solution(scene, sol, opt.cam)
+    t0 = time.perf_counter()
+    spec = _shader_spec(scene, sol, opt)
+    source = executor.frames(spec, opt.max_frames, threads=opt.threads)
+    seconds = {"setup": time.perf_counter() - t0}
+    skipped = _skipped(spec)
+    acc, interrupted = _progressive_mean(source, opt, progress)
+    image = acc.mean.reshape(opt.cam.height, opt.cam.width, 3).astype(np.float32)
+    seconds.update(source.seconds)
+    seconds["total"] = time.perf_counter() - t_start
+    seconds["display"] = seconds["total"]
+    stats = _render_stats(spec, source, acc, opt, skipped, interrupted, seconds)
+    return RenderResult(
+        image=image, frames=acc.frames, stderr=acc.stderr(image.shape), stats=stats, solution=sol
+    )

@@ -1,10 +1,14 @@
 """Solve and render on a Dask cluster (``pip install "voxgi[dask]"``).
 
-Nothing here has a loop of its own over iterations or frames: :func:`voxgi.solve`
-and :func:`voxgi.render` run their usual loops and are handed, in place of
-their local engine, an object with the same methods that farms the work out.
+:class:`DaskExecutor` is an executor the stages accept
+(:class:`voxgi.radiosity.LineExecutor`, :class:`voxgi.display.FrameExecutor`):
+nothing here has a loop of its own over iterations or frames;
+:func:`voxgi.radiosity.solve` and :func:`voxgi.display.render` run their usual
+loops on the objects it hands them, which farm the work out.
+``voxgi.solve(..., client=c)`` and ``voxgi.render(..., client=c)`` wrap a
+``dask.distributed.Client`` with :func:`executor`.
 
-Solve (DESIGN-NOTES §8): :class:`DistributedLineSystem` stands in for
+Solve (``docs/design.md`` §8): :class:`DistributedLineSystem` stands in for
 :class:`voxgi._core.LineSystem`. The records (ijk, normal, surface point:
 36 bytes each) are scattered once to every worker (``broadcast=True``: a
 killed worker is survived, because another one still holds a copy, and
@@ -20,11 +24,12 @@ propagated (N × 3 float32) and returns N × 3 float64 partial sums.
 
 Render: :class:`DistributedFrames` stands in for the display's per-frame
 shader. Frames are independent (each has its own VPL subset, sub-pixel
-offset and gather-ray seed), so whole frames are the tasks: the scene and
-the VPL sampler go to every worker once, each worker builds its Embree scene
-once, frames are computed ahead on the workers and handed back to the
-render loop in frame order. The accumulation and the stopping rule stay in
-:func:`voxgi.render`, so with the same seed the image is the local one.
+offset and gather-ray seed), so whole frames are the tasks: the
+:class:`voxgi.display.FrameShaderSpec` (scene, camera, VPL sampler) goes to
+every worker once, each worker builds its shader once, frames are computed
+ahead on the workers and handed back to the render loop in frame order. The
+accumulation and the stopping rule stay in :func:`voxgi.display.render`, so
+with the same seed the image is the local one.
 """
 
 from __future__ import annotations
@@ -36,21 +41,29 @@ from collections import OrderedDict
 
 import numpy as np
 
-__all__ = ["DistributedFrames", "DistributedLineSystem", "estimate_worker_bytes"]
+from .display import FrameShaderSpec
+from .radiosity import LineRecords
+
+__all__ = [
+    "DaskExecutor",
+    "DistributedFrames",
+    "DistributedLineSystem",
+    "check_client",
+    "estimate_worker_bytes",
+    "executor",
+]
 
 _EXTRA_HINT = 'pip install "voxgi[dask]"'
 
 # Bytes a worker holds per record: the scattered copy of ijk, normal and
-# point (36) and what the worker's LineSystem and one call need, measured as
-# the growth of the peak resident set over building a LineSystem, one gather
-# (all 2991 R 22 families, with visibility) and one shoot (R 35) on the bunny
-# room at resolution 112 (146,892 records), one thread: 213 B for the system
+# point (36) and what the worker's LineSystem and one call need, the growth
+# of the peak resident set over building a LineSystem, one gather (R 22,
+# with visibility) and one shoot (R 35) on one thread: 213 B for the system
 # (three axis orders of order, X, Y, Z, normal, point and the packed 32-byte
-# line), 415 B after the gather (values in each axis order, the one-pass
-# walk's 64-byte record lines and global-order sums, float64 sums and
-# visibility out), 459 B after the shoot. 470 rounds it up. Each further
-# thread of the worker adds its own record lines and sums: 512 B after the
-# gather with 2 threads, so 100 B a thread.
+# line), the values in each axis order, the one-pass walk's 64-byte record
+# lines and global-order sums, float64 sums and visibility out; 470 bounds
+# it. Each further thread of the worker adds its own record lines and sums,
+# about 100 B.
 _BYTES_PER_RECORD = 36 + 470
 _BYTES_PER_RECORD_THREAD = 100
 
@@ -62,7 +75,8 @@ def _require_distributed():
     except ImportError as exc:
         raise ImportError(
             "client=: distributed solving and rendering need Dask's distributed scheduler, "
-            f"which is not installed; install the extra with: {_EXTRA_HINT}") from exc
+            f"which is not installed; install the extra with: {_EXTRA_HINT}"
+        ) from exc
     return distributed
 
 
@@ -80,14 +94,62 @@ def check_client(client):
     """
     distributed = _require_distributed()
     if not isinstance(client, distributed.Client):
-        raise TypeError(f"client: expected a dask.distributed.Client or None, got "
-                        f"{type(client).__name__}")
+        raise TypeError(
+            f"client: expected a dask.distributed.Client, an executor or None, got "
+            f"{type(client).__name__}"
+        )
     return client
 
 
+def executor(client):
+    """The executor for ``client=``: None for None, an executor as it is
+    (an object with a ``line_system`` or a ``frames`` method, see
+    :class:`voxgi.radiosity.LineExecutor` and :class:`voxgi.display.FrameExecutor`),
+    a ``dask.distributed.Client`` wrapped in a :class:`DaskExecutor`.
+
+    >>> executor(None) is None
+    True
+
+    Raises
+    ------
+    ImportError
+        A Client-like argument while dask.distributed is not installed.
+    TypeError
+        Neither an executor nor a Client.
+    """
+    if client is None:
+        return None
+    if any(callable(getattr(client, m, None)) for m in ("line_system", "frames")):
+        return client
+    return DaskExecutor(check_client(client))
+
+
+class DaskExecutor:
+    """Solve passes and render frames on the workers of a Dask cluster.
+
+    Parameters
+    ----------
+    client : dask.distributed.Client
+    """
+
+    def __init__(self, client):
+        self.client = check_client(client)
+
+    def line_system(self, records: LineRecords, *, progress: bool = False):
+        """A :class:`DistributedLineSystem` of ``records`` (see
+        :class:`voxgi.radiosity.LineExecutor`)."""
+        return DistributedLineSystem(self.client, records, progress=progress)
+
+    def frames(self, spec: FrameShaderSpec, max_frames: int, *, threads: int = 1):
+        """A :class:`DistributedFrames` of ``spec`` (see
+        :class:`voxgi.display.FrameExecutor`; each task uses its worker's threads)."""
+        return DistributedFrames(self.client, spec, max_frames)
+
+
 def _workers(client) -> dict:
-    info = client.scheduler_info(n_workers=-1) if _takes_n_workers(client) else \
-        client.scheduler_info()
+    info = (
+        client.scheduler_info(n_workers=-1) if _takes_n_workers(client) else client.scheduler_info()
+    )
     workers = info.get("workers", {})
     if not workers:
         raise ValueError("client: the cluster has no worker (start some, or wait for them)")
@@ -120,7 +182,7 @@ def estimate_worker_bytes(n_records: int, box=(0, 0, 0), threads: int = 1) -> in
     -------
     int
         ``N × (506 + 100 × (threads - 1))`` bytes (scattered records, the
-        worker's LineSystem, one call's values and sums; measured, see
+        worker's LineSystem, one call's values and sums; see
         ``_BYTES_PER_RECORD``) plus the occupancy bitset, rounded up. The
         worker process itself (Python, numpy, Dask: ~100-150 MB) comes on top.
     """
@@ -173,48 +235,46 @@ def _worker_threads() -> int:
         return 1
 
 
-def _system(records, key):
-    from . import _core
-
-    return _cached(("lines", key), lambda: _core.LineSystem(
-        records["ijk"], records["normal"], records["point"], epsilon=records["epsilon"],
-        history=records["history"]))
+def _system(records: LineRecords, key):
+    return _cached(("lines", key), records.build)
 
 
 def _task_gather(records, key, families, weights, values, want_vis, stand_in=None):
     s = _system(records, key)
     idx = np.arange(len(families), dtype=np.int64)
-    return s.gather(families, weights, values, idx, want_vis, _worker_threads(),
-                    stand_in=stand_in)
+    return s.gather(families, weights, values, idx, want_vis, _worker_threads(), stand_in=stand_in)
 
 
-def _task_shoot(records, key, emitters, coverage, families, weights, values, stand_in=None,
-                sil=None):
+def _task_shoot(
+    records, key, emitters, coverage, families, weights, values, stand_in=None, sil=None
+):
     s = _system(records, key)
-    return s.shoot(emitters, families, weights, values, _worker_threads(), coverage=coverage,
-                   stand_in=stand_in, **(sil or {}))
+    return s.shoot(
+        emitters,
+        families,
+        weights,
+        values,
+        _worker_threads(),
+        coverage=coverage,
+        stand_in=stand_in,
+        **(sil or {}),
+    )
 
 
 def _task_normalisation(records, key, families, weights):
     return _system(records, key).normalisation(families, weights, _worker_threads())
 
 
-def _task_frame(payload, key, f, seed):
-    from .display import _FrameShader, _Tracer
-
-    def build():
-        p = payload
-        tracer = _Tracer(p["scene"], _worker_threads())
-        return _FrameShader(p["scene"], p["camera"], tracer, p["sampler"], p["eps"],
-                            _worker_threads(), p["gather"], p["seed"])
-
-    shader = _cached(("frame", key), build)
+def _task_frame(spec: FrameShaderSpec, key, f, seed):
+    shader = _cached(("frame", key), lambda: spec.build(_worker_threads()))
     with _FRAME_LOCK:
-        before = (shader.primary_rays, shader.shadow_rays, shader.gather_rays,
-                  dict(shader.seconds))
+        before = (shader.primary_rays, shader.shadow_rays, shader.gather_rays, dict(shader.seconds))
         x = shader.frame(f, seed)
-        counts = (shader.primary_rays - before[0], shader.shadow_rays - before[1],
-                  shader.gather_rays - before[2])
+        counts = (
+            shader.primary_rays - before[0],
+            shader.shadow_rays - before[1],
+            shader.gather_rays - before[2],
+        )
         secs = {k: v - before[3].get(k, 0.0) for k, v in shader.seconds.items()}
     return x, counts, secs
 
@@ -230,8 +290,14 @@ class _Farm:
         self.workers = sorted(_workers(client))
         self.progress = bool(progress)
         self.desc = desc
-        self.stats = {"workers": len(self.workers), "tasks": 0, "bytes_scattered": 0,
-                      "bytes_sent": 0, "bytes_received": 0, "seconds_waiting": 0.0}
+        self.stats = {
+            "workers": len(self.workers),
+            "tasks": 0,
+            "bytes_scattered": 0,
+            "bytes_sent": 0,
+            "bytes_received": 0,
+            "seconds_waiting": 0.0,
+        }
 
     def _check_memory(self, need: int, what: str) -> None:
         """Refuse before any work when a worker's memory_limit is under ``need``.
@@ -252,7 +318,8 @@ class _Farm:
                     f"client: worker {addr} has memory_limit {limit / 2**20:.1f} MiB (it pauses "
                     f"at {frac:.0%} of it), but {what} needs about {need / 2**20:.1f} MiB on every "
                     "worker; give the workers more memory (memory_limit=...) or use a coarser "
-                    "resolution")
+                    "resolution"
+                )
         self.stats["bytes_per_worker_estimate"] = int(need)
 
     def _map(self, fn, chunks, *common, key_prefix: str):
@@ -263,9 +330,17 @@ class _Farm:
         futs = []
         for i, chunk in enumerate(chunks):
             w = self.workers[i % len(self.workers)]
-            futs.append(self.client.submit(fn, *common, *chunk, workers=[w],
-                                           allow_other_workers=True, pure=False,
-                                           key=f"{key_prefix}-{i}-{_uid()}"))
+            futs.append(
+                self.client.submit(
+                    fn,
+                    *common,
+                    *chunk,
+                    workers=[w],
+                    allow_other_workers=True,
+                    pure=False,
+                    key=f"{key_prefix}-{i}-{_uid()}",
+                )
+            )
         self.stats["tasks"] += len(futs)
         out = [None] * len(futs)
         where = {f.key: i for i, f in enumerate(futs)}
@@ -307,12 +382,8 @@ class DistributedLineSystem(_Farm):
     Parameters
     ----------
     client : dask.distributed.Client
-    ijk : (N, 3) int32
-    normal : (N, 3) float32
-    point : (N, 3) float32
-        As for LineSystem (surface points in voxel units).
-    epsilon : float
-    history : int
+    records : voxgi.radiosity.LineRecords
+        What the workers build their LineSystem from (:func:`voxgi.radiosity.line_records`).
     progress : bool
         A tqdm bar over each call's tasks.
 
@@ -326,24 +397,24 @@ class DistributedLineSystem(_Farm):
         A worker's memory_limit is under :func:`estimate_worker_bytes`.
     """
 
-    def __init__(self, client, ijk, normal, point, *, epsilon: float = 0.05, history: int = 8,
-                 progress: bool = False):
+    def __init__(self, client, records: LineRecords, *, progress: bool = False):
         super().__init__(client, progress, "gather tasks")
-        ijk = np.ascontiguousarray(ijk, dtype=np.int32)
-        normal = np.ascontiguousarray(normal, dtype=np.float32)
-        point = np.ascontiguousarray(point, dtype=np.float32)
+        ijk = np.ascontiguousarray(records.ijk, dtype=np.int32)
+        normal = np.ascontiguousarray(records.normal, dtype=np.float32)
+        point = np.ascontiguousarray(records.point, dtype=np.float32)
+        epsilon, history = float(records.epsilon), int(records.history)
         self.size = len(ijk)
         box = ijk.max(axis=0) - ijk.min(axis=0) if len(ijk) else np.zeros(3)
         info = _workers(client)
         threads = max((int(info[a].get("nthreads", 1) or 1) for a in self.workers), default=1)
-        self._check_memory(estimate_worker_bytes(self.size, box, threads),
-                           f"a solve of {self.size} records")
+        self._check_memory(
+            estimate_worker_bytes(self.size, box, threads), f"a solve of {self.size} records"
+        )
         self.key = _token(ijk, normal, point, np.float32([epsilon, history]))
-        records = {"ijk": ijk, "normal": normal, "point": point, "epsilon": float(epsilon),
-                   "history": int(history)}
+        records = LineRecords(ijk, normal, point, epsilon, history)
         t = time.perf_counter()
         # once, to every worker: a killed worker's tasks find a copy elsewhere
-        # (in a list: a dict itself would be scattered value by value)
+        # (in a list: a container itself would be scattered value by value)
         self._records = client.scatter([records], broadcast=True, hash=False)[0]
         self.stats["seconds_scatter"] = time.perf_counter() - t
         self.stats["bytes_scattered"] = int(ijk.nbytes + normal.nbytes + point.nbytes)
@@ -364,8 +435,9 @@ class DistributedLineSystem(_Farm):
     def normalisation(self, families, weights, threads: int = 0) -> np.ndarray:
         """Raw S(n) per record, (N,) float64 (see LineSystem.normalisation)."""
         chunks = [(families[c], weights[c]) for c in self._chunks(len(families))]
-        parts = self._map(_task_normalisation, chunks, self._records, self.key,
-                          key_prefix="voxgi-normalisation")
+        parts = self._map(
+            _task_normalisation, chunks, self._records, self.key, key_prefix="voxgi-normalisation"
+        )
         out = np.zeros(self.size)
         for p in parts:  # fixed order: chunk order
             out += p
@@ -385,8 +457,9 @@ class DistributedLineSystem(_Farm):
             self._stand_in_cache = (tok, fut)
         return self._stand_in_cache[1]
 
-    def gather(self, families, weights, values, family_indices, want_vis=False, threads=0,
-               stand_in=None):
+    def gather(
+        self, families, weights, values, family_indices, want_vis=False, threads=0, stand_in=None
+    ):
         """Jacobi gathering over ``families[family_indices]``: (sums, vis, lines)."""
         sel = np.asarray(family_indices, dtype=np.int64)
         fams = np.ascontiguousarray(families[sel])
@@ -394,8 +467,7 @@ class DistributedLineSystem(_Farm):
         vfut = self._values(values)
         sfut = self._stand_in(stand_in)
         chunks = [(fams[c], wts[c], vfut, bool(want_vis), sfut) for c in self._chunks(len(sel))]
-        parts = self._map(_task_gather, chunks, self._records, self.key,
-                          key_prefix="voxgi-gather")
+        parts = self._map(_task_gather, chunks, self._records, self.key, key_prefix="voxgi-gather")
         sums = np.zeros((self.size, 3))
         vis = np.zeros(self.size) if want_vis else None
         lines = 0
@@ -407,8 +479,19 @@ class DistributedLineSystem(_Farm):
         self.stats["bytes_received"] += sum(p[0].nbytes for p in parts)
         return sums, vis, lines
 
-    def shoot(self, emitters, families, weights, values, threads=0, coverage=None,
-              stand_in=None, object=None, sil_area=None, back=None):
+    def shoot(
+        self,
+        emitters,
+        families,
+        weights,
+        values,
+        threads=0,
+        coverage=None,
+        stand_in=None,
+        object=None,
+        sil_area=None,
+        back=None,
+    ):
         """Shooting from ``emitters`` split by direction families: (hd, unfound, rays, steps)."""
         em = np.ascontiguousarray(emitters, dtype=np.int32)
         cov = None if coverage is None else np.ascontiguousarray(coverage, dtype=np.float64)
@@ -416,14 +499,18 @@ class DistributedLineSystem(_Farm):
         sfut = self._stand_in(stand_in)
         sil = None
         if object is not None:
-            sil = dict(object=np.ascontiguousarray(object, dtype=np.int32),
-                       sil_area=np.ascontiguousarray(sil_area, dtype=np.float64),
-                       back=np.ascontiguousarray(back, dtype=np.bool_))
-        chunks = [(np.ascontiguousarray(families[c]), np.ascontiguousarray(weights[c]), vfut, sfut,
-                   sil)
-                  for c in self._chunks(len(families))]
-        parts = self._map(_task_shoot, chunks, self._records, self.key, em, cov,
-                          key_prefix="voxgi-shoot")
+            sil = dict(
+                object=np.ascontiguousarray(object, dtype=np.int32),
+                sil_area=np.ascontiguousarray(sil_area, dtype=np.float64),
+                back=np.ascontiguousarray(back, dtype=np.bool_),
+            )
+        chunks = [
+            (np.ascontiguousarray(families[c]), np.ascontiguousarray(weights[c]), vfut, sfut, sil)
+            for c in self._chunks(len(families))
+        ]
+        parts = self._map(
+            _task_shoot, chunks, self._records, self.key, em, cov, key_prefix="voxgi-shoot"
+        )
         hd = np.zeros((self.size, 3))
         unfound = np.zeros(len(em))
         rays = steps = 0
@@ -454,28 +541,24 @@ class DistributedFrames(_Farm):
     Parameters
     ----------
     client : dask.distributed.Client
-    shader : voxgi.display._FrameShader
-        The local shader, whose scene, camera, VPL sampler and settings are
-        sent once to every worker.
+    spec : voxgi.display.FrameShaderSpec
+        Scene, camera, VPL sampler and settings, sent once to every worker.
     max_frames : int
         Frames the render may ask for (none is submitted past it).
     """
 
-    def __init__(self, client, shader, max_frames: int, progress: bool = False):
+    def __init__(self, client, spec: FrameShaderSpec, max_frames: int):
         super().__init__(client, False, "frames")
-        self.local = shader
-        s = shader.sampler
-        n = len(s.vox)
-        cam = shader.cam
-        # the sampler's arrays (~100 B a record), the scene's triangles, and
-        # one frame (H·W·3 float32) plus the shader's hit buffers (~100 B a pixel)
-        need = n * 100 + shader.tracer.tris.nbytes * 3 + cam.width * cam.height * 112
+        n = len(spec.sampler.vox)
+        cam = spec.camera
+        # the sampler's arrays (~100 B a record), the scene's triangles (72 B
+        # each in float64, three copies), and one frame (H·W·3 float32) plus
+        # the shader's hit buffers (~100 B a pixel)
+        need = n * 100 + spec.scene.n_triangles * 72 * 3 + cam.width * cam.height * 112
         self._check_memory(need, f"a {cam.width}x{cam.height} render of {n} records")
-        payload = {"scene": shader.scene, "camera": cam, "sampler": s, "eps": shader.eps,
-                   "gather": shader.gather, "seed": shader.seed}
         self.key = "frames-" + _uid()
         t = time.perf_counter()
-        self._payload = client.scatter([payload], broadcast=True, hash=False)[0]
+        self._payload = client.scatter([spec], broadcast=True, hash=False)[0]
         self.stats["seconds_scatter"] = time.perf_counter() - t
         slots = sum(int(v.get("nthreads", 1)) for v in _workers(client).values())
         self.ahead = max(2, 2 * slots)
@@ -483,19 +566,23 @@ class DistributedFrames(_Farm):
         self._futs: dict = {}
         self._next = 0
         self.primary_rays = self.shadow_rays = self.gather_rays = 0
-        self.seconds = {k: 0.0 for k in shader.seconds}
-
-    def __getattr__(self, name):
-        # settings the render reads (gather, mat_glossy, ...) are the local shader's
-        return getattr(self.__dict__["local"], name)
+        self.seconds = {k: 0.0 for k in ("primary", "shade", "shadow", "gather")}
 
     def _submit_upto(self, last: int, seed: int) -> None:
         while self._next <= min(last, self.max_frames - 1):
             f = self._next
             w = self.workers[f % len(self.workers)]
-            self._futs[f] = self.client.submit(_task_frame, self._payload, self.key, f, seed,
-                                               workers=[w], allow_other_workers=True, pure=False,
-                                               key=f"voxgi-frame-{f}-{_uid()}")
+            self._futs[f] = self.client.submit(
+                _task_frame,
+                self._payload,
+                self.key,
+                f,
+                seed,
+                workers=[w],
+                allow_other_workers=True,
+                pure=False,
+                key=f"voxgi-frame-{f}-{_uid()}",
+            )
             self.stats["tasks"] += 1
             self._next += 1
 
@@ -503,8 +590,15 @@ class DistributedFrames(_Farm):
         """(H*W, 3) float32 radiance of frame ``f`` (computed on a worker)."""
         self._submit_upto(f + self.ahead, seed)
         if f not in self._futs:  # asked out of order: compute it alone
-            self._futs[f] = self.client.submit(_task_frame, self._payload, self.key, f, seed,
-                                               pure=False, key=f"voxgi-frame-{f}-{_uid()}")
+            self._futs[f] = self.client.submit(
+                _task_frame,
+                self._payload,
+                self.key,
+                f,
+                seed,
+                pure=False,
+                key=f"voxgi-frame-{f}-{_uid()}",
+            )
         t = time.perf_counter()
         x, counts, secs = self._futs.pop(f).result()
         self.stats["seconds_waiting"] += time.perf_counter() - t

@@ -25,7 +25,7 @@ def _pair(img, ref) -> tuple[np.ndarray, np.ndarray]:
 def rel_mse(img, ref, *, eps: float = 0.01) -> float:
     """Relative MSE: mean over pixels and channels of ``(x - r)² / (r² + eps)``.
 
-    ``eps = 0.01`` as in the issue tracker and DESIGN-NOTES §9.
+    ``eps = 0.01`` as in ``docs/design.md`` §9.
     """
     a, b = _pair(img, ref)
     return float(np.mean((a - b) ** 2 / (b * b + eps)))
@@ -80,8 +80,15 @@ class ErrorTime:
 
     @classmethod
     def measure(cls, method: str, seconds: float, img, ref, **params) -> ErrorTime:
-        return cls(method=method, seconds=float(seconds), rel_mse=rel_mse(img, ref),
-                   rmse=rmse(img, ref), psnr=psnr(img, ref), ssim=ssim(img, ref), params=params)
+        return cls(
+            method=method,
+            seconds=float(seconds),
+            rel_mse=rel_mse(img, ref),
+            rmse=rmse(img, ref),
+            psnr=psnr(img, ref),
+            ssim=ssim(img, ref),
+            params=params,
+        )
 
     def to_dict(self) -> dict:
         return asdict(self)

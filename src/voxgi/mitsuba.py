@@ -1,7 +1,7 @@
 """Export a voxgi :class:`~voxgi.Scene` to a Mitsuba 3 scene dictionary.
 
 Used by the benchmarks to render the *same* scene with a path tracer
-(DESIGN-NOTES §9, §10). Mitsuba is imported lazily and is never a runtime
+(docs/design.md §9, §10). Mitsuba is imported lazily and is never a runtime
 dependency of voxgi (it is in the optional ``bench`` extra).
 
 The translation keeps voxgi's conventions:
@@ -58,8 +58,10 @@ def import_mitsuba(variant: str | None = None):
     try:
         import mitsuba as mi
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError("Mitsuba 3 is needed for reference renders: pip install "
-                          "'voxgi[bench]' (or pip install mitsuba)") from exc
+        raise ImportError(
+            "Mitsuba 3 is needed for reference renders: pip install "
+            "'voxgi[bench]' (or pip install mitsuba)"
+        ) from exc
     if variant is not None:
         mi.set_variant(variant)
         return mi
@@ -82,8 +84,14 @@ def _mesh(mi, name: str, vertices: np.ndarray, faces: np.ndarray, bsdf, emitter=
     props["bsdf"] = bsdf
     if emitter is not None:
         props["emitter"] = emitter
-    mesh = mi.Mesh(name, len(vertices), len(faces), props=props, has_vertex_normals=False,
-                   has_vertex_texcoords=False)
+    mesh = mi.Mesh(
+        name,
+        len(vertices),
+        len(faces),
+        props=props,
+        has_vertex_normals=False,
+        has_vertex_texcoords=False,
+    )
     params = mi.traverse(mesh)
     params["vertex_positions"] = np.ascontiguousarray(vertices, np.float32).ravel()
     params["faces"] = np.ascontiguousarray(faces, np.uint32).ravel()
@@ -91,8 +99,15 @@ def _mesh(mi, name: str, vertices: np.ndarray, faces: np.ndarray, bsdf, emitter=
     return mesh
 
 
-def to_mitsuba(scene: Scene, *, spp: int = 64, camera: Camera | None = None,
-               max_depth: int = -1, sampler: str = "independent", seed: int = 0) -> dict:
+def to_mitsuba(
+    scene: Scene,
+    *,
+    spp: int = 64,
+    camera: Camera | None = None,
+    max_depth: int = -1,
+    sampler: str = "independent",
+    seed: int = 0,
+) -> dict:
     """A Mitsuba 3 scene dictionary for ``scene`` (call ``mi.load_dict`` on it).
 
     Parameters
@@ -121,45 +136,74 @@ def to_mitsuba(scene: Scene, *, spp: int = 64, camera: Camera | None = None,
     cam = camera if camera is not None else scene.camera
     if cam is None:
         raise ValueError("to_mitsuba: the scene has no camera")
+    d = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": int(max_depth)},
+        "sensor": _sensor(mi, scene, cam, spp, sampler, seed),
+    }
+    for i, o in enumerate(scene.objects):
+        d.update(_shape(mi, i, o))
+    return d
+
+
+def _sensor(mi, scene: Scene, cam: Camera, spp: int, sampler: str, seed: int) -> dict:
+    """The Mitsuba sensor of ``cam``: pinhole or thin lens, box-filtered RGB film."""
     sensor = {
         "type": "thinlens" if cam.aperture > 0 else "perspective",
         "fov": float(cam.fov),
         "fov_axis": "y",
         "near_clip": 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0))),
-        "to_world": mi.ScalarTransform4f().look_at(origin=list(cam.eye), target=list(cam.target),
-                                                   up=list(cam.up)),
+        "to_world": mi.ScalarTransform4f().look_at(
+            origin=list(cam.eye), target=list(cam.target), up=list(cam.up)
+        ),
         "sampler": {"type": sampler, "sample_count": int(spp), "seed": int(seed)},
-        "film": {"type": "hdrfilm", "width": int(cam.width), "height": int(cam.height),
-                 "rfilter": {"type": "box"}, "pixel_format": "rgb",
-                 "component_format": "float32"},
+        "film": {
+            "type": "hdrfilm",
+            "width": int(cam.width),
+            "height": int(cam.height),
+            "rfilter": {"type": "box"},
+            "pixel_format": "rgb",
+            "component_format": "float32",
+        },
     }
     if cam.aperture > 0:
         sensor["aperture_radius"] = float(cam.aperture)
         sensor["focus_distance"] = float(cam.focus)
-    d = {"type": "scene", "integrator": {"type": "path", "max_depth": int(max_depth)},
-         "sensor": sensor}
-    for i, o in enumerate(scene.objects):
-        m = o.material
-        bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(m.albedo)}}
-        if o.two_sided:
-            bsdf = {"type": "twosided", "bsdf": bsdf}
-        bsdf_obj = mi.load_dict(bsdf)
-        key = f"obj{i:03d}_{o.name}".replace(" ", "_")
-        emitter = None
-        if m.is_emitter:
-            emitter = mi.load_dict({"type": "area",
-                                    "radiance": {"type": "rgb", "value": list(m.emission)}})
-        d[key] = _mesh(mi, key, o.vertices, o.faces, bsdf_obj, emitter)
-        if m.is_emitter and o.two_sided:
-            back = mi.load_dict({"type": "area",
-                                 "radiance": {"type": "rgb", "value": list(m.emission)}})
-            d[key + "_back"] = _mesh(mi, key + "_back", o.vertices, o.faces[:, ::-1],
-                                     mi.load_dict(bsdf), back)
-    return d
+    return sensor
 
 
-def render_mitsuba(scene: Scene, spp: int, *, camera: Camera | None = None, seed: int = 0,
-                   variant: str | None = None) -> np.ndarray:
+def _shape(mi, i: int, o) -> dict:
+    """The Mitsuba mesh (or, for a two-sided emitter, meshes) of object ``i``."""
+    m = o.material
+    bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(m.albedo)}}
+    if o.two_sided:
+        bsdf = {"type": "twosided", "bsdf": bsdf}
+    bsdf_obj = mi.load_dict(bsdf)
+    key = f"obj{i:03d}_{o.name}".replace(" ", "_")
+    emitter = None
+    if m.is_emitter:
+        emitter = mi.load_dict(
+            {"type": "area", "radiance": {"type": "rgb", "value": list(m.emission)}}
+        )
+    out = {key: _mesh(mi, key, o.vertices, o.faces, bsdf_obj, emitter)}
+    if m.is_emitter and o.two_sided:
+        back = mi.load_dict(
+            {"type": "area", "radiance": {"type": "rgb", "value": list(m.emission)}}
+        )
+        out[key + "_back"] = _mesh(
+            mi, key + "_back", o.vertices, o.faces[:, ::-1], mi.load_dict(bsdf), back
+        )
+    return out
+
+
+def render_mitsuba(
+    scene: Scene,
+    spp: int,
+    *,
+    camera: Camera | None = None,
+    seed: int = 0,
+    variant: str | None = None,
+) -> np.ndarray:
     """Render ``scene`` with Mitsuba's path tracer; returns (H, W, 3) float32
     linear radiance, ``image[0, 0]`` top-left (as voxgi's images)."""
     mi = import_mitsuba(variant)

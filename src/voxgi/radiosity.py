@@ -1,6 +1,6 @@
 """Radiosity on voxels: discrete-line propagation (shooting, then gathering).
 
-The discretised radiosity equation (DESIGN-NOTES §1, eq. 1)
+The discretised radiosity equation (``docs/design.md`` §1)
 
     B(x) = E(x) + ρ(x) Σ_σ B(I(x,σ)) (n_x·σ̂) ΔΩ(σ) / (π S(n_x))
 
@@ -8,9 +8,9 @@ is solved on the records of a :class:`~voxgi.VoxelSet`, ``I(x,σ)`` the first
 record seen from ``x`` along the discrete line of direction σ (found for all
 records at once in O(N) per direction family, :class:`voxgi._core.LineSystem`)
 and ``S(n)`` the raw cos-weighted hemisphere sum of the direction set, so that
-every record gathers exactly one hemisphere (DESIGN-NOTES §3).
+every record gathers exactly one hemisphere (``docs/design.md`` §3).
 
-Bookkeeping (DESIGN-NOTES §5): *shooting* gives every record its direct
+Bookkeeping (``docs/design.md`` §5): *shooting* gives every record its direct
 irradiance ``H_d`` from the emitters with the finer radius (default 35);
 *gathering* (default 22) then propagates only the reflected radiosity
 ``R = B − E``, so that ``B = E + ρ (H_d + H_gathered)`` and direct light is not
@@ -19,24 +19,45 @@ counted twice.
 Ray counts (``Solution.stats``): a *gathering ray* is one record meeting one
 direction family (both of its directions) in one iteration; a *shooting ray*
 is one emitter record and one direction it faces.
+
+Where the passes run is an *executor*'s choice (``docs/design.md`` §8): any
+object with a ``line_system(records, *, progress)`` method returning an object
+with the :class:`voxgi._core.LineSystem` methods ``size``, ``normalisation``,
+``gather`` and ``shoot`` (:class:`LineExecutor`). The default runs them here;
+:mod:`voxgi.distributed` runs them on a Dask cluster.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import time
 import warnings
 import zipfile
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
 from . import _core, _validate
-from .directions import direction_set
-from .voxels import VoxelSet, _available_memory
+from .directions import DirectionSet, direction_set
+from .voxels import VoxelSet
 
-__all__ = ["Solution", "gather_partial", "line_system", "pair_table_bytes", "solve"]
+__all__ = [
+    "LineExecutor",
+    "LineRecords",
+    "LocalExecutor",
+    "Solution",
+    "SolveTuning",
+    "gather_partial",
+    "line_records",
+    "line_system",
+    "pair_table_bytes",
+    "solve",
+    "solve_memory",
+]
 
 
 @dataclass
@@ -230,6 +251,21 @@ def _json_default(o):
     raise TypeError(f"cannot store {type(o).__name__} in Solution stats")
 
 
+def _available_memory() -> int:
+    """Bytes of memory available now (MemAvailable, else free physical pages)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:  # pragma: no cover - not Linux
+        pass
+    try:  # pragma: no cover - not Linux
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover
+        return 1 << 32
+
+
 # ----------------------------------------------------------------------------- inputs
 
 
@@ -276,6 +312,61 @@ def _check_vox(vox) -> dict:
     return out
 
 
+# ----------------------------------------------------------------------------- line systems
+
+
+@dataclass(frozen=True, eq=False)
+class LineRecords:
+    """What a line system is built from; picklable, so an executor can ship it.
+
+    Attributes
+    ----------
+    ijk : (N, 3) int32
+        Voxel coordinates.
+    normal : (N, 3) float32
+        Unit normals.
+    point : (N, 3) float32
+        Surface points in voxel units (voxel ``ijk`` spans ``[ijk, ijk + 1]``).
+    epsilon : float
+        Facing-rule margin, in voxels (``docs/design.md`` §4).
+    history : int
+        F records remembered per line (1..32).
+    """
+
+    ijk: np.ndarray
+    normal: np.ndarray
+    point: np.ndarray
+    epsilon: float = 0.02
+    history: int = 16
+
+    def __len__(self) -> int:
+        return len(self.ijk)
+
+    def build(self) -> _core.LineSystem:
+        """The prepared :class:`voxgi._core.LineSystem` (orders, occupancy; O(N))."""
+        return _core.LineSystem(
+            self.ijk,
+            self.normal,
+            self.point,
+            epsilon=float(self.epsilon),
+            history=int(self.history),
+        )
+
+
+def line_records(vox: VoxelSet, *, epsilon: float = 0.02, history: int = 16) -> LineRecords:
+    """The :class:`LineRecords` of a VoxelSet (validated, C-contiguous).
+
+    >>> import voxgi
+    >>> vox = voxgi.voxelize(voxgi.scenes.furnace_box(), resolution=8, progress=False)
+    >>> len(line_records(vox)) == len(vox)
+    True
+    """
+    a = _check_vox(vox)
+    eps = _validate.real(epsilon, "epsilon", low=0.0)
+    hist = _validate.integer(history, "history", low=1, high=32)
+    return LineRecords(a["ijk"], a["normal"], a["point"], eps, hist)
+
+
 def line_system(vox: VoxelSet, *, epsilon: float = 0.02, history: int = 16) -> _core.LineSystem:
     """The prepared line system of a VoxelSet (orders, occupancy; O(N) once).
 
@@ -284,14 +375,36 @@ def line_system(vox: VoxelSet, *, epsilon: float = 0.02, history: int = 16) -> _
     vox : VoxelSet
         Records.
     epsilon : float
-        Facing-rule margin, in voxels (DESIGN-NOTES §4).
+        Facing-rule margin, in voxels (``docs/design.md`` §4).
     history : int
         F records remembered per line (1..32).
     """
-    a = _check_vox(vox)
-    return _core.LineSystem(
-        a["ijk"], a["normal"], a["point"], epsilon=float(epsilon), history=int(history)
-    )
+    return line_records(vox, epsilon=epsilon, history=history).build()
+
+
+class LineExecutor(Protocol):
+    """Where a solve's passes run (``docs/design.md`` §8).
+
+    ``line_system(records, progress=...)`` returns an object with the
+    :class:`voxgi._core.LineSystem` interface that :func:`solve` uses:
+    ``size``, ``normalisation``, ``gather`` and ``shoot`` (and, to record
+    and replay the pairs of a direction set, ``make_pair_table`` and
+    ``gather_recorded``). Results must be the local ones to float rounding.
+    """
+
+    def line_system(self, records: LineRecords, *, progress: bool = False): ...
+
+
+class LocalExecutor:
+    """The default executor: every pass in this process, on ``threads`` threads.
+
+    >>> LocalExecutor().line_system  # doctest: +ELLIPSIS
+    <bound method LocalExecutor.line_system of <...LocalExecutor object at ...>>
+    """
+
+    def line_system(self, records: LineRecords, *, progress: bool = False) -> _core.LineSystem:
+        """Build the line system here (``progress`` has no bar to drive)."""
+        return records.build()
 
 
 def gather_partial(
@@ -307,8 +420,7 @@ def gather_partial(
 ) -> np.ndarray:
     """One Jacobi gathering pass over a subset of the direction families.
 
-    The unit of work a distributed solver hands to a worker: partial sums
-    over disjoint subsets of families add up to the full pass.
+    Partial sums over disjoint subsets of families add up to the full pass.
 
     Parameters
     ----------
@@ -341,7 +453,286 @@ def gather_partial(
     return sums
 
 
+# ----------------------------------------------------------------------------- settings
+
+
+@dataclass(frozen=True)
+class SolveTuning:
+    """Expert settings of :func:`solve`, for studies and benchmarks.
+
+    Attributes
+    ----------
+    shoot_directions : int
+        Radius of the shooting direction sphere (35: 15194 directions).
+    later_directions : int or None
+        Radius for the bounces after the first ``later_after`` ones (later
+        bounces are smooth; Piwowar & Malgouyres 2009). The solver then
+        propagates each bounce's increment and ends with the geometric-tail
+        term once the ratio of successive bounces is steady. None: every
+        bounce with ``directions``.
+    later_after : int
+        Bounces gathered with ``directions`` before ``later_directions``.
+    epsilon : float
+        Facing-rule margin in voxels (``docs/design.md`` §4).
+    history : int
+        F records remembered per line (1..32).
+    max_iterations : int
+        Bound on the iterations when ``max_bounces`` is None.
+    closed : bool, sequence of int or None
+        Objects (ids into ``vox.object_id``; True: all; False: none) whose
+        meshes are closed: their back records send their front twin's
+        radiosity instead of black (``docs/design.md`` §5). None: the objects
+        :func:`voxgi.voxelize` found watertight (``vox.stats["closed_objects"]``).
+    diagnostics : bool
+        Run the extra gathering pass behind ``stats["back_fraction"]``.
+    pair_cache : bool or None
+        Record the pairs of the first gathering pass over a direction set and
+        replay them in later passes over it (3 bytes per record and family;
+        :func:`pair_table_bytes`). None: when they fit in ``max_cache_bytes``;
+        True: the same with no default budget; False: walk every pass.
+    max_cache_bytes : int or None
+        Budget for the recorded pairs; None: a quarter of the memory available
+        when the solve starts (``pair_cache=None``), no limit (True).
+
+    >>> SolveTuning(shoot_directions=8).later_after
+    2
+    """
+
+    shoot_directions: int = 35
+    later_directions: int | None = None
+    later_after: int = 2
+    epsilon: float = 0.02
+    history: int = 16
+    max_iterations: int = 10000
+    closed: bool | Sequence[int] | None = None
+    diagnostics: bool = True
+    pair_cache: bool | None = None
+    max_cache_bytes: int | None = None
+
+
+@dataclass(frozen=True)
+class _Settings:
+    """The validated arguments of one solve."""
+
+    R: int
+    Rs: int
+    Rl: int | None
+    later_after: int
+    max_bounces: int | None
+    max_iterations: int
+    tol: float
+    threads: int
+    epsilon: float
+    history: int
+    closed: object
+    diagnostics: bool
+    pair_cache: bool | None
+    cache_cap: int | None
+
+
+def _settings(directions, max_bounces, tol, threads, tuning) -> _Settings:
+    """Check the arguments and the tuning; raise TypeError/ValueError naming the bad one."""
+    t = SolveTuning() if tuning is None else tuning
+    if not isinstance(t, SolveTuning):
+        raise TypeError(f"tuning: expected voxgi.SolveTuning or None, got {type(t).__name__}")
+    if t.pair_cache is not None and not isinstance(t.pair_cache, (bool, np.bool_)):
+        raise TypeError(f"pair_cache: expected True, False or None, got {t.pair_cache!r}")
+    return _Settings(
+        R=_validate.integer(directions, "directions", low=1, high=256),
+        Rs=_validate.integer(t.shoot_directions, "shoot_directions", low=1, high=256),
+        Rl=_validate.integer(
+            t.later_directions, "later_directions", low=1, high=256, allow_none=True
+        ),
+        later_after=_validate.integer(t.later_after, "later_after", low=1),
+        max_bounces=_validate.integer(max_bounces, "max_bounces", low=0, allow_none=True),
+        max_iterations=_validate.integer(t.max_iterations, "max_iterations", low=1),
+        tol=_validate.real(tol, "tol", low=0.0, low_open=True),
+        threads=_validate.threads(threads),
+        epsilon=_validate.real(t.epsilon, "epsilon", low=0.0),
+        history=_validate.integer(t.history, "history", low=1, high=32),
+        closed=t.closed,
+        diagnostics=bool(t.diagnostics),
+        pair_cache=t.pair_cache,
+        cache_cap=_validate.integer(t.max_cache_bytes, "max_cache_bytes", low=0, allow_none=True),
+    )
+
+
+def _check_executor(executor, vox: VoxelSet, opt: _Settings, tuning) -> LineExecutor:
+    """The executor given, or the local one for None (whose memory estimate
+    is checked here, before anything is allocated)."""
+    if executor is None:
+        executor = LocalExecutor()
+    if isinstance(executor, LocalExecutor):
+        _check_memory(vox, opt, tuning)
+        return executor
+    if not callable(getattr(executor, "line_system", None)):
+        raise TypeError(
+            f"executor: expected an object with a line_system(records, progress=...) method "
+            f"(voxgi.radiosity.LineExecutor) or None, got {type(executor).__name__}; "
+            "voxgi.solve also takes a dask.distributed.Client as client="
+        )
+    return executor
+
+
+# ----------------------------------------------------------------------------- memory
+
+#: Bytes per record held once by a local solve: the line system's three axis
+#: orders (213), the records' arrays as the kernels take them (73) and the
+#: solver's float64 (N, 3) arrays (E, ρ, H_d, H_g, R, the update and its
+#: temporaries: 14 of 24 bytes).
+_RECORD_BYTES = 213 + 73 + 14 * 24
+#: Bytes per record and thread of a pass: the gathering walk's 64-byte
+#: records, queued B records (12), line links (4), float64 sums of the axes
+#: left (24) and the shooting's float64 sums (24).
+_THREAD_RECORD_BYTES = 64 + 12 + 4 + 24 + 24
+#: Bytes per line key and thread: the walk's line table (stamp, last F).
+_LINE_KEY_BYTES = 8
+
+
+def _max_line_keys(families: np.ndarray, extent: np.ndarray) -> int:
+    """The most lines (``nu · nw`` keys) of one family over the records' box
+    (the line frame of ``docs/design.md`` §4, as the kernels compute it)."""
+    v = np.abs(np.asarray(families, dtype=np.int64))
+    if len(v) == 0:
+        return 0
+    i = np.arange(len(v))
+    m = np.argmax(v, axis=1)
+    o1 = np.where(m == 0, 1, 0)
+    o2 = np.where(m == 2, 1, 2)
+    A, B, C = v[i, m], v[i, o1], v[i, o2]
+    ext = np.asarray(extent, dtype=np.int64)
+    xma = -(-ext[m] // A) * A
+    nu = (A * ext[o1] + B * xma + A // 2) // A + 1
+    nw = (A * ext[o2] + C * xma + A // 2) // A + 1
+    return int(np.max(nu * nw))
+
+
+def solve_memory(
+    vox: VoxelSet,
+    directions: int = 22,
+    threads: int | None = None,
+    *,
+    tuning: SolveTuning | None = None,
+) -> dict:
+    """Bytes a local :func:`solve` of ``vox`` needs, by part, before it allocates.
+
+    Parameters
+    ----------
+    vox : VoxelSet
+    directions, threads, tuning
+        As for :func:`solve`.
+
+    Returns
+    -------
+    dict
+        ``records`` (line system, arrays, solver state), ``threads`` (each
+        thread's walk records, line tables and sums), ``directions`` (the
+        direction sets and their ``S(n)``), ``pair_cache`` (the recorded
+        pairs the solve would keep, within their budget) and ``total``.
+
+    >>> import voxgi
+    >>> vox = voxgi.voxelize(voxgi.scenes.furnace_box(), resolution=8, progress=False)
+    >>> est = solve_memory(vox, directions=4, threads=1)
+    >>> est["total"] == sum(v for k, v in est.items() if k != "total")
+    True
+    """
+    opt = _settings(directions, None, 1.0, threads, tuning)
+    ijk = _validate.as_c_array(vox.ijk, np.int32, (-1, 3), "vox.ijk")
+    n = len(ijk)
+    extent = ijk.max(axis=0).astype(np.int64) - ijk.min(axis=0) if n else np.zeros(3, np.int64)
+    radii = {opt.R, opt.Rs} | ({opt.Rl} if opt.Rl is not None else set())
+    sets = [direction_set(r) for r in sorted(radii)]
+    keys = max(_max_line_keys(ds.families, extent) for ds in sets)
+    per_thread = n * _THREAD_RECORD_BYTES + keys * _LINE_KEY_BYTES
+    cells = int(np.prod(extent + 1))
+    pairs = 0
+    if opt.pair_cache is not False and n <= _core.PairTable.MAX_RECORDS:
+        want = sum(pair_table_bytes(n, direction_set(r).families) for r in {opt.R, opt.Rl} - {None})
+        cap = opt.cache_cap
+        if cap is None and opt.pair_cache is None:
+            cap = _available_memory() // 4
+        pairs = want if cap is None else min(want, cap)
+        # recording: each thread fills one tile of 16 columns of 4 bytes
+        per_thread += 16 * 4 * n
+    out = {
+        "records": n * _RECORD_BYTES + cells // 8,
+        "threads": opt.threads * per_thread,
+        "directions": sum(ds.families.nbytes * 4 + 8 * n for ds in sets),
+        "pair_cache": int(pairs),
+    }
+    out["total"] = int(sum(out.values()))
+    return out
+
+
+def _check_memory(vox: VoxelSet, opt: _Settings, tuning) -> dict:
+    """Refuse a local solve whose estimate exceeds the memory available now."""
+    est = solve_memory(vox, opt.R, opt.threads, tuning=tuning)
+    avail = _available_memory()
+    if est["total"] > avail:
+        parts = ", ".join(f"{k} {v / 2**30:.2f} GiB" for k, v in est.items() if k != "total")
+        raise MemoryError(
+            f"solve: {len(vox):,} records at directions={opt.R} on {opt.threads} threads need "
+            f"about {est['total'] / 2**30:.2f} GiB ({parts}), over the "
+            f"{avail / 2**30:.2f} GiB available; use fewer threads or directions, a coarser "
+            "resolution, or SolveTuning(pair_cache=False)"
+        )
+    return est
+
+
 # ----------------------------------------------------------------------------- solve
+
+
+@dataclass
+class _Twins:
+    """Back records of closed objects and their front twins (``docs/design.md`` §5).
+
+    A back record of a closed object sends its front twin's value along the
+    lines (it stays black itself), and two such stand-ins never pair: their
+    exchange is the inside of the object, which no front record sees.
+    """
+
+    back: np.ndarray
+    front: np.ndarray
+    stand_in: np.ndarray | None
+
+    def send(self, x) -> np.ndarray:
+        """What records send along the lines: float32, stand-ins their twin's value."""
+        if len(self.back) == 0:
+            return np.ascontiguousarray(x, dtype=np.float32)
+        y = np.array(x, dtype=np.float32, copy=True)
+        y[self.back] = y[self.front]
+        return y
+
+
+def _closed_twins(vox: VoxelSet, a: dict, closed) -> _Twins:
+    """Pair each back record of a closed object with its front twin (the
+    voxelizer writes it right before; checked here)."""
+    n = len(a["ijk"])
+    twin_b = twin_f = np.zeros(0, np.int64)
+    if closed is None:
+        closed = list(getattr(vox, "stats", {}).get("closed_objects", [])) or False
+    if closed is not False:
+        obj = _validate.as_c_array(vox.object_id, np.int32, (n,), "vox.object_id")
+        if closed is True:
+            sel_obj = np.ones(len(a["back"]), bool)
+        else:
+            ids = _validate.as_c_array(np.atleast_1d(closed), np.int32, (-1,), "closed")
+            sel_obj = np.isin(obj, ids)
+        b = np.flatnonzero(a["back"] & sel_obj)
+        b = b[b > 0]
+        f_ = b - 1
+        ok = (
+            ~a["back"][f_]
+            & np.all(a["ijk"][f_] == a["ijk"][b], axis=1)
+            & (obj[f_] == obj[b])
+            & (np.einsum("ij,ij->i", a["normal"][f_], a["normal"][b]) < -0.99)
+        )
+        twin_b, twin_f = b[ok], f_[ok]
+    stand_in = None
+    if len(twin_b):
+        stand_in = np.zeros(n, np.bool_)
+        stand_in[twin_b] = True
+    return _Twins(twin_b, twin_f, stand_in)
 
 
 class _Extrapolator:
@@ -350,7 +741,7 @@ class _Extrapolator:
     Once successive updates ``d_k = R_{k+1} − R_k`` shrink by a steady ratio
     λ (per channel, from ``<d_k, d_{k-1}> / <d_{k-1}, d_{k-1}>``), the rest of
     the series is ``d_k λ / (1 − λ)`` (the ambient term of progressive
-    radiosity; Aitken's Δ²), added at once. DESIGN-NOTES §5.
+    radiosity; Aitken's Δ²), added at once (``docs/design.md`` §5).
     """
 
     def __init__(self, weights: np.ndarray, rel_tol: float = 0.02):
@@ -359,6 +750,7 @@ class _Extrapolator:
         self.lam_prev = None
         self.rel_tol = rel_tol
         self.count = 0
+        self.factor = None
 
     def __call__(self, d: np.ndarray) -> np.ndarray | None:
         """Given the latest update d (N, 3), return the tail to add, or None."""
@@ -367,7 +759,7 @@ class _Extrapolator:
             return None
         den = np.sum(self.w * prev * prev, axis=0)
         num = np.sum(self.w * d * prev, axis=0)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             lam = np.where(den > 0, num / den, 0.0)
         lam_prev, self.lam_prev = self.lam_prev, lam
         if lam_prev is None:
@@ -379,14 +771,24 @@ class _Extrapolator:
         # after a jump the next differences start a new geometric run
         self.prev = None
         self.lam_prev = None
+        with np.errstate(over="ignore", invalid="ignore"):
+            factor = np.where(active, lam / (1 - lam), 0.0)
+            tail = d * factor
+        if not np.all(np.isfinite(tail)):
+            return None  # a ratio too close to 1 for the float range: no jump
         self.count += 1
-        self.factor = np.where(active, lam / (1 - lam), 0.0)
-        return d * self.factor
+        self.factor = factor
+        return tail
 
 
 def pair_table_bytes(n: int, families: np.ndarray) -> int:
     """Bytes of the recorded pairs of ``n`` records over ``families``: 3 per
-    record and family, each main axis's families padded to tiles of 16."""
+    record and family, each main axis's families padded to tiles of 16.
+
+    >>> from voxgi.directions import direction_set
+    >>> pair_table_bytes(1000, direction_set(4).families)
+    384000
+    """
     fam = np.asarray(families)
     if len(fam) == 0:
         return 0
@@ -414,6 +816,16 @@ class _Gatherer:
         self.info: dict = {"bytes": 0, "sets": []}
         self.replayed = 0
 
+    def _why_not(self, ds, need: int) -> str | None:
+        """Why the pairs of ``ds`` are not recorded (None: they are)."""
+        if self.sysm.size > _core.PairTable.MAX_RECORDS:
+            return f"more than {_core.PairTable.MAX_RECORDS} records"
+        if self.passes.get(id(ds), 0) < 2:
+            return "one pass only"
+        if self.used + need > self.budget:
+            return f"needs {need / 2**30:.2f} GiB, budget {self.budget / 2**30:.2f} GiB"
+        return None
+
     def _table(self, ds):
         key = id(ds)
         if key in self.tables:
@@ -421,17 +833,12 @@ class _Gatherer:
         tab = None
         need = pair_table_bytes(self.sysm.size, ds.families)
         entry = {"radius": int(ds.radius), "bytes": need}
+        why = None if self.budget is None else self._why_not(ds, need)
         if self.budget is None:
             entry["recorded"] = False
-        elif self.sysm.size > _core.PairTable.MAX_RECORDS:
+        elif why is not None:
             entry["recorded"] = False
-            entry["reason"] = f"more than {_core.PairTable.MAX_RECORDS} records"
-        elif self.passes.get(key, 0) < 2:
-            entry["recorded"] = False
-            entry["reason"] = "one pass only"
-        elif self.used + need > self.budget:
-            entry["recorded"] = False
-            entry["reason"] = f"needs {need / 2**30:.2f} GiB, budget {self.budget / 2**30:.2f} GiB"
+            entry["reason"] = why
         else:
             tab = self.sysm.make_pair_table(ds.families, ds.weights, self.stand_in is not None)
             self.used += need
@@ -445,8 +852,7 @@ class _Gatherer:
         """(sums, vis, lines walked) of one pass over ``ds.families[sel]``.
 
         With ``defer_vis``, a pass that records leaves ``vis`` (None) to the
-        next pass, which replays and sums it at no cost (the walk pays about
-        10% for it)."""
+        next pass, which replays and sums it at no cost."""
         tab = self._table(ds)
         if tab is not None and np.all(tab.recorded_mask[sel]):
             sums, vis = self.sysm.gather_recorded(tab, values, sel, want_vis, self.nthreads)
@@ -454,9 +860,471 @@ class _Gatherer:
             return sums, vis, 0
         if tab is not None and defer_vis:
             want_vis = False
-        return self.sysm.gather(ds.families, ds.weights, values, sel, want_vis, self.nthreads,
-                                stand_in=self.stand_in,
-                                **({"record": tab} if tab is not None else {}))
+        return self.sysm.gather(
+            ds.families,
+            ds.weights,
+            values,
+            sel,
+            want_vis,
+            self.nthreads,
+            stand_in=self.stand_in,
+            **({"record": tab} if tab is not None else {}),
+        )
+
+
+@dataclass
+class _Problem:
+    """One solve's records, settings, line system and direction sets."""
+
+    vox: VoxelSet
+    a: dict
+    opt: _Settings
+    twins: _Twins
+    area: np.ndarray
+    rho: np.ndarray
+    E: np.ndarray
+    stats: dict
+    seconds: dict
+    sysm: object = None
+    gds: DirectionSet | None = None
+    sds: DirectionSet | None = None
+    lds: DirectionSet | None = None
+    S: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return len(self.area)
+
+    @property
+    def limit(self) -> int:
+        """Iterations allowed: ``max_bounces``, else ``max_iterations``; 0 if all albedos are 0."""
+        if not np.any(self.rho > 0):
+            return 0
+        mb = self.opt.max_bounces
+        return self.opt.max_iterations if mb is None else mb
+
+
+def _problem(vox, a, opt) -> _Problem:
+    """Records, closed-object twins and the statistics every solve reports."""
+    twins = _closed_twins(vox, a, opt.closed)
+    E = np.pi * a["emission"].astype(np.float64)  # emitted radiosity
+    stats: dict = {
+        "records": len(a["ijk"]),
+        "emitters": int(np.count_nonzero(np.any(a["emission"] > 0, axis=1))),
+        "threads": opt.threads,
+        "skipped": {},
+        "closed_back_records": len(twins.back),
+    }
+    return _Problem(
+        vox=vox,
+        a=a,
+        opt=opt,
+        twins=twins,
+        area=a["area"],
+        rho=a["albedo"].astype(np.float64),
+        E=E,
+        stats=stats,
+        seconds={},
+    )
+
+
+def _no_emitter(p: _Problem) -> Solution:
+    """The zero solution of a scene without emitters, with a warning."""
+    warnings.warn(
+        "solve: the scene has no emitter; the solution is zero", RuntimeWarning, stacklevel=3
+    )
+    p.stats.update(
+        rays=0, shoot_rays=0, gather_rays=0, seconds={"total": 0.0}, skipped={"all": "no emitter"}
+    )
+    return Solution(vox=p.vox, radiosity=np.zeros((p.n, 3), np.float32), stats=p.stats)
+
+
+def _open_backend(p: _Problem, executor, progress: bool) -> None:
+    """The line system (the executor's) and the direction sets."""
+    t = time.perf_counter()
+    opt, a = p.opt, p.a
+    records = LineRecords(a["ijk"], a["normal"], a["point"], opt.epsilon, opt.history)
+    p.sysm = executor.line_system(records, progress=progress)
+    if hasattr(p.sysm, "stats"):
+        p.stats["executor"] = p.sysm.stats
+    p.gds = direction_set(opt.R)
+    p.sds = direction_set(opt.Rs)
+    p.lds = direction_set(opt.Rl) if opt.Rl is not None else None
+    p.seconds["setup"] = time.perf_counter() - t
+
+
+def _normalise(p: _Problem) -> None:
+    """Per-record normalisation S(n) of every direction set (``docs/design.md`` §3)."""
+    t = time.perf_counter()
+    opt, nt = p.opt, p.opt.threads
+    Sg = p.sysm.normalisation(p.gds.families, p.gds.weights, nt)
+    Ss = Sg if opt.Rs == opt.R else p.sysm.normalisation(p.sds.families, p.sds.weights, nt)
+    Sl = None
+    if p.lds is not None:
+        if opt.Rl == opt.R:
+            Sl = Sg
+        elif opt.Rl == opt.Rs:
+            Sl = Ss
+        else:
+            Sl = p.sysm.normalisation(p.lds.families, p.lds.weights, nt)
+    p.S = {"gather": Sg, "shoot": Ss, "later": Sl}
+    p.seconds["normalisation"] = time.perf_counter() - t
+    d = {}
+    for name, ds in (("gather", p.gds), ("shoot", p.sds)):
+        d[name] = {
+            "radius": int(ds.radius),
+            "count": len(ds),
+            "families": len(ds.families),
+            "non_primitive": ds.non_primitive,
+        }
+    if p.lds is not None:
+        d["later"] = {"radius": opt.Rl, "count": len(p.lds), "after": opt.later_after}
+    p.stats["directions"] = d
+    p.stats["S_spread"] = {
+        "gather": [float(Sg.min()), float(Sg.max())],
+        "shoot": [float(Ss.min()), float(Ss.max())],
+    }
+
+
+def _silhouettes(p: _Problem, emitters_send: np.ndarray) -> dict:
+    """The shooting's silhouette inputs (``docs/design.md`` §5): records'
+    objects, areas in voxel units (-1 for objects that send in this pass)
+    and back flags; empty without object ids."""
+    if getattr(p.vox, "object_id", None) is None:
+        return {}
+    obj_id = _validate.as_c_array(p.vox.object_id, np.int32, (p.n,), "vox.object_id")
+    sil_area = np.ascontiguousarray(p.area / p.a["pitch"] ** 2, dtype=np.float64)
+    # An emitting object's exit face shoots its whole line to the receivers
+    # behind it: a carried remainder would count that part of the line twice.
+    sil_area[np.isin(obj_id, np.unique(obj_id[emitters_send]))] = -1.0
+    return dict(
+        object=obj_id, sil_area=sil_area, back=np.ascontiguousarray(p.a["back"], dtype=np.bool_)
+    )
+
+
+def _direct_light(p: _Problem):
+    """Shooting: direct irradiance H_d from the emitters, the power that
+    escapes on the way (sender side) and the shooting rays."""
+    t = time.perf_counter()
+    E_send = p.twins.send(p.E)
+    es = np.flatnonzero(np.any(E_send > 0, axis=1)).astype(np.int32)
+    cov, flat = _flat_emitter_coverage(p.a, p.vox, es)
+    p.stats["flat_emitter_objects"] = flat
+    sil = _silhouettes(p, es)
+    p.stats["silhouettes"] = bool(sil)
+    sds, Ss = p.sds, p.S["shoot"]
+    hd_raw, unfound, shoot_rays, steps = p.sysm.shoot(
+        es,
+        sds.families,
+        sds.weights,
+        E_send,
+        p.opt.threads,
+        coverage=cov,
+        stand_in=p.twins.stand_in,
+        **sil,
+    )
+    Hd = hd_raw / Ss[:, None]
+    p.seconds["shoot"] = time.perf_counter() - t
+    # stand-in back emitters have E = 0: they add nothing to the escape
+    shoot_escape = (p.E[es] * (p.area[es] * unfound / Ss[es])[:, None]).sum(axis=0)
+    p.stats["shoot_steps"] = int(steps)
+    return Hd, shoot_escape, int(shoot_rays)
+
+
+def _gatherer(p: _Problem) -> _Gatherer:
+    """The gathering passes, with the pair cache's budget and expected passes."""
+    opt = p.opt
+    if not hasattr(p.sysm, "make_pair_table") or opt.pair_cache is False:
+        budget = None
+        why = "pair_cache=False" if opt.pair_cache is False else "the executor walks the lines"
+        p.stats["pair_cache"] = {"recorded": False, "reason": why}
+    elif opt.cache_cap is not None:
+        budget = opt.cache_cap
+    else:
+        budget = _available_memory() // 4 if opt.pair_cache is None else 1 << 62
+    limit, la = p.limit, opt.later_after
+    extra = 1 if opt.diagnostics else 0
+    passes = {id(p.gds): (min(limit, la) if p.lds is not None else limit) + extra}
+    if p.lds is not None:  # (the same object as gds when later_directions == directions)
+        passes[id(p.lds)] = passes.get(id(p.lds), 0) + max(0, limit - la)
+    return _Gatherer(p.sysm, opt.threads, p.twins.stand_in, budget, passes)
+
+
+#: The float32 values sent along the lines round every record's radiosity
+#: to about 6e-8: a residual under this that makes no new low for
+#: :data:`_FLOOR_ITERATIONS` iterations is their rounding, not the iteration's.
+_FLOOR_RESIDUAL = 1e-6
+_FLOOR_ITERATIONS = 10
+#: Iterations without a new lowest residual after which the iteration has
+#: stalled for good.
+_STALL_ITERATIONS = 50
+
+
+@dataclass
+class _State:
+    """The iterate and what the iteration has gathered so far."""
+
+    R: np.ndarray  # reflected radiosity B - E
+    Hg: np.ndarray  # gathered irradiance
+    dk: np.ndarray  # the last update R_k - R_{k-1}
+    vis: np.ndarray | None = None
+    it: int = 0
+    gather_rays: int = 0
+    lines_walked: int = 0
+    seconds: float = 0.0
+    residuals: list = field(default_factory=list)
+    stopped: str | None = None
+
+
+class _Iteration:
+    """Gathering of the reflected radiosity ``R = B − E`` (``docs/design.md`` §5).
+
+    Jacobi, ``R_{k+1} = ρ (H_d + M R_k / S)``, with the geometric tail added
+    once the updates shrink steadily (:class:`_Extrapolator`). The same
+    iteration in correction form, ``ΔR_{k+1} = ρ M ΔR_k / S``, propagates
+    only the last update, which float32 rounds relative to its own size: it
+    is used with coarser later bounces (a fixed-point iteration would
+    converge to the coarse operator's answer) and once the Jacobi residual
+    sits at the rounding of the values sent (albedos near 1). In correction
+    form the tail, once added, stands for every bounce left.
+    """
+
+    def __init__(self, p: _Problem, gather: _Gatherer, Hd: np.ndarray):
+        self.p, self.gather, self.Hd = p, gather, Hd
+        R = p.rho * Hd
+        self.s = _State(R=R, Hg=np.zeros((p.n, 3)), dk=R.copy())
+        self.corrections = p.lds is not None
+        self.extrap = _Extrapolator(p.area)
+        rmax = float(p.rho.max())
+        self.lam_bound = float(min(max(rmax, 0.5), 1 - 1e-6))
+        self.best = (float("inf"), 0)  # lowest residual and its iteration
+
+    def step(self) -> tuple:
+        """One gathering pass: (R_new, Hg_new, update, residual, h_inc, use_later), not kept."""
+        p, s = self.p, self.s
+        use_later = p.lds is not None and s.it >= p.opt.later_after
+        ds = p.lds if use_later else p.gds
+        S = p.S["later"] if use_later else p.S["gather"]
+        fams = np.arange(len(ds.families), dtype=np.int64)
+        t = time.perf_counter()
+        want_vis = s.vis is None and not use_later
+        sums, v, nl = self.gather(
+            ds, p.twins.send(s.dk if self.corrections else s.R), fams, want_vis
+        )
+        s.lines_walked += nl
+        if want_vis:
+            s.vis = v
+        with np.errstate(over="ignore", invalid="ignore"):  # run() checks finiteness
+            if self.corrections:
+                h_inc = sums / S[:, None]
+                Hg = s.Hg + h_inc
+                R_new = s.R + p.rho * h_inc
+            else:
+                h_inc = None
+                Hg = sums / S[:, None]
+                R_new = p.rho * (self.Hd + Hg)
+            s.seconds += time.perf_counter() - t
+            s.gather_rays += p.n * len(ds.families)
+            d = R_new - s.R
+            Btot = np.sum(p.area[:, None] * np.abs(p.E + R_new))
+            res = float(np.sum(p.area[:, None] * np.abs(d)) / Btot) if Btot > 0 else 0.0
+        return R_new, Hg, d, res, h_inc, use_later
+
+    def run(self, bar) -> _State:
+        """Iterate until the stopping rule, the iteration limit, a stall or a
+        non-finite iterate; return the last finite state."""
+        s = self.s
+        while s.it < self.p.limit:
+            R_new, Hg, d, res, h_inc, use_later = self.step()
+            if not (np.all(np.isfinite(R_new)) and np.isfinite(res)):
+                s.stopped = f"iteration {s.it + 1} was not finite"
+                break
+            s.R, s.Hg, s.dk = R_new, Hg, (self.p.rho * h_inc if self.corrections else d)
+            s.it += 1
+            s.residuals.append(res)
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(residual=f"{res:.2e}")
+            if self.converged(res):
+                break
+            if self.at_floor(res):
+                continue
+            if self.stalled(res) or self.jump(d, h_inc, use_later):
+                break
+        return s
+
+    def converged(self, res: float) -> bool:
+        """The estimated remaining error of the geometric tail, ``res λ / (1 − λ)``
+        with λ bounded by the largest albedo, is under ``tol``."""
+        return res * self.lam_bound / (1 - self.lam_bound) < self.p.opt.tol
+
+    def at_floor(self, res: float) -> bool:
+        """Switch Jacobi to the correction form when its residual sits at the
+        rounding of the values sent (True: switched, no jump this iteration)."""
+        if res < self.best[0]:
+            self.best = (res, self.s.it)
+            return False
+        if (
+            self.corrections
+            or self.best[0] >= _FLOOR_RESIDUAL
+            or self.s.it - self.best[1] < _FLOOR_ITERATIONS
+        ):
+            return False
+        self.corrections = True
+        self.best = (float("inf"), self.s.it)
+        self.extrap.prev = self.extrap.lam_prev = None
+        self.p.stats["correction_form_after"] = self.s.it
+        return True
+
+    def stalled(self, res: float) -> bool:
+        """No new lowest residual for :data:`_STALL_ITERATIONS` iterations."""
+        if self.s.it - self.best[1] >= _STALL_ITERATIONS:
+            self.s.stopped = (
+                f"the residual stalled at {self.best[0]:.3g} (its lowest, "
+                f"iteration {self.best[1]}) for {_STALL_ITERATIONS} iterations"
+            )
+            return True
+        return False
+
+    def jump(self, d: np.ndarray, h_inc: np.ndarray | None, use_later: bool) -> bool:
+        """Add the geometric tail when the updates shrink steadily; True when
+        that ends the correction form (the tail stands for every bounce left)."""
+        if self.p.lds is not None and not use_later:
+            return False
+        tail = self.extrap(d)
+        if tail is None:
+            return False
+        R = self.s.R + tail
+        if not np.all(np.isfinite(R)):
+            return False
+        self.s.R = R
+        if self.corrections:
+            self.s.Hg = self.s.Hg + h_inc * self.extrap.factor
+            return True
+        return False
+
+
+def _iterate(p: _Problem, gather: _Gatherer, Hd: np.ndarray, progress: bool) -> _State:
+    """Run :class:`_Iteration` with its progress bar; warn where it stopped short."""
+    limit = p.limit
+    if limit == 0 and not np.any(p.rho > 0):
+        p.stats["skipped"]["gathering"] = "all albedos are zero"
+    bar = None
+    if progress and limit > 0:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=p.opt.max_bounces, desc="gather", unit="it", leave=False)
+    it = _Iteration(p, gather, Hd)
+    try:
+        s = it.run(bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    p.seconds["gather"] = s.seconds
+    p.stats["extrapolations"] = it.extrap.count
+    if s.stopped is not None:
+        p.stats["stopped"] = s.stopped
+        warnings.warn(
+            f"solve: {s.stopped}; returning the last finite iterate (iteration {s.it})",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    elif (
+        limit > 0
+        and s.it == limit
+        and (not s.residuals or s.residuals[-1] >= p.opt.tol)
+        and p.opt.max_bounces is None
+    ):
+        warnings.warn(
+            f"solve: not converged after {s.it} iterations (residual {s.residuals[-1]:.3g})",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    return s
+
+
+def _lost_fraction(p: _Problem, gather: _Gatherer, vis) -> tuple:
+    """Per record the found share of its hemisphere, and the lost fraction δ
+    (area-weighted over front records; ``docs/design.md`` §5, §10)."""
+    if vis is None:  # no gathering ran (or only a recording pass): one visibility pass
+        t = time.perf_counter()
+        all_fams = np.arange(len(p.gds.families), dtype=np.int64)
+        _, vis, _ = gather(p.gds, np.zeros((p.n, 3), np.float32), all_fams, True, defer_vis=False)
+        p.seconds["visibility"] = time.perf_counter() - t
+    found = vis / p.S["gather"]
+    front = ~p.a["back"]
+    wa = p.area * front
+    delta = float(1 - np.sum(wa * found) / np.sum(wa)) if np.sum(wa) > 0 else 0.0
+    p.stats["lost_fraction"] = delta
+    p.stats["lost_fraction_max"] = float(np.max(np.where(front, 1 - found, 0.0)))
+    return found
+
+
+def _back_fraction(p: _Problem, gather: _Gatherer) -> None:
+    """Share of the front records' cos-weighted hemisphere that ends on black
+    back records (no albedo, no emission): in a closed scene, light lost
+    through occluders, which the lost fraction does not see."""
+    front = ~p.a["back"]
+    wa = p.area * front
+    dark = p.a["back"] & ~np.any(p.rho > 0, axis=1) & ~np.any(p.E > 0, axis=1)
+    dark[p.twins.back] = False  # stand-ins for their front twins: not a loss
+    bf = bf_max = 0.0
+    if not p.opt.diagnostics:
+        p.stats["skipped"]["back_fraction"] = "diagnostics=False"
+    elif np.any(dark) and np.sum(wa) > 0:
+        t = time.perf_counter()
+        ind = np.zeros((p.n, 3), np.float32)
+        ind[dark] = 1.0
+        all_fams = np.arange(len(p.gds.families), dtype=np.int64)
+        gb, _, _ = gather(p.gds, ind, all_fams, False)
+        p.seconds["back_fraction"] = time.perf_counter() - t
+        share = gb[:, 0] / p.S["gather"]
+        bf = float(np.sum(wa * share) / np.sum(wa))
+        bf_max = float(np.max(np.where(front, share, 0.0)))
+    else:
+        p.stats["skipped"]["back_fraction"] = "no black back records"
+    p.stats["back_fraction"] = bf
+    p.stats["back_fraction_max"] = bf_max
+
+
+def _energy(p: _Problem, Hd, s: _State, found, shoot_escape) -> dict:
+    """Emitted, absorbed and escaping power per channel and their imbalance
+    (escaping counted on the sender side; ``docs/design.md`` §5)."""
+    area = p.area
+    emitted = (p.E * area[:, None]).sum(axis=0)
+    absorbed = ((1 - p.rho) * (Hd + s.Hg) * area[:, None]).sum(axis=0)
+    gather_escape = (s.R * (area * (1 - found))[:, None]).sum(axis=0)
+    escaping = shoot_escape + gather_escape
+    with np.errstate(divide="ignore", invalid="ignore"):
+        imbalance = np.where(emitted > 0, (emitted - absorbed - escaping) / emitted, 0.0)
+    return {
+        "emitted": emitted.tolist(),
+        "absorbed": absorbed.tolist(),
+        "escaping": escaping.tolist(),
+        "escaping_shoot": shoot_escape.tolist(),
+        "imbalance": imbalance.tolist(),
+    }
+
+
+def _statistics(p: _Problem, gather: _Gatherer, s: _State, shoot_rays: int) -> None:
+    """Ray counts, phases, pair cache and what was skipped, into ``p.stats``."""
+    p.stats.update(
+        rays=int(shoot_rays + s.gather_rays),
+        shoot_rays=int(shoot_rays),
+        gather_rays=int(s.gather_rays),
+        seconds=p.seconds,
+        bounces=s.it,
+        lines_walked=int(s.lines_walked),
+        pair_cache=p.stats.get("pair_cache", {**gather.info, "replayed_passes": gather.replayed}),
+        epsilon=p.opt.epsilon,
+        history=p.opt.history,
+    )
+    if s.it and p.lds is not None:
+        p.stats["skipped"]["finer_directions_after"] = p.opt.later_after
+    if gather.replayed:
+        p.stats["skipped"]["line_walks"] = (
+            f"{gather.replayed} gathering passes replayed the recorded pairs"
+        )
 
 
 def solve(
@@ -465,31 +1333,17 @@ def solve(
     max_bounces: int | None = None,
     tol: float = 1e-4,
     threads: int | None = None,
-    client=None,
+    executor: LineExecutor | None = None,
     *,
-    shoot_directions: int = 35,
-    method: str = "jacobi",
     progress: bool = True,
-    accelerate: bool = True,
-    later_directions: int | None = None,
-    later_after: int = 2,
-    epsilon: float = 0.02,
-    history: int = 16,
-    gs_blocks: int = 8,
-    max_iterations: int = 10000,
-    closed=None,
-    shoot_coverage: bool = True,
-    shoot_silhouettes: bool = True,
-    diagnostics: bool = True,
-    pair_cache: bool | None = None,
-    max_cache_bytes: int | None = None,
+    tuning: SolveTuning | None = None,
 ) -> Solution:
     """Solve the discrete radiosity equation on the records of ``vox``.
 
     Shooting from the emitter records first (direct light, radius
-    ``shoot_directions``), then Jacobi or Gauss–Seidel gathering of the
-    reflected light (radius ``directions``) until the relative residual falls
-    under ``tol`` or ``max_bounces`` iterations ran.
+    ``tuning.shoot_directions``), then Jacobi gathering of the reflected
+    light (radius ``directions``) with geometric-tail extrapolation, until
+    the estimated remaining error falls under ``tol`` (``docs/design.md`` §5).
 
     Parameters
     ----------
@@ -498,495 +1352,55 @@ def solve(
     directions : int
         Radius R >= 1 of the gathering direction sphere (22: 5982 directions).
     max_bounces : int or None
-        At most this many gathering iterations (None: until converged, at
-        most ``max_iterations``). 0 gives direct light only.
+        At most this many gathering iterations (None: until converged; 0: direct light).
     tol : float
-        Stop when the estimated remaining relative error of the iteration,
-        ``r λ / (1 − λ)`` with ``r = Σ area·|R_{k+1} − R_k| / Σ area·|B_{k+1}|``
-        (all channels; one entry of ``residuals`` per iteration) and ``λ`` the
-        largest albedo (at least 0.5), falls under it (> 0). For albedos up
-        to 0.5 this is ``r < tol``; at 0.99 it asks ``r < tol / 99``.
+        Bound on the estimated remaining relative error ``r λ / (1 − λ)``, ``r``
+        the area-weighted residual (``residuals``), ``λ`` the largest albedo.
     threads : int or None
-        Threads (None: all hardware threads). Results do not depend on it
-        beyond float rounding.
-    client : dask.distributed.Client or None
-        Run the shooting and every gathering pass on the client's workers
-        (:mod:`voxgi.distributed`; ``pip install "voxgi[dask]"``): the records
-        are sent once, the direction families split over the workers and the
-        partial sums added in a fixed order, so the result equals the local
-        one to float rounding.
-    shoot_directions : int
-        Radius of the shooting direction sphere (35: 15194 directions).
-    method : {"jacobi", "gauss-seidel"}
-        Jacobi: every iteration gathers from the previous one. Gauss–Seidel:
-        the families are split into ``gs_blocks`` blocks and the radiosity is
-        updated in place after each block.
+        Threads (None: all hardware threads). Results do not depend on it.
+    executor : LineExecutor or None
+        Where the passes run (None: here; ``voxgi.solve`` also takes a Client).
     progress : bool
         Show a tqdm progress bar over iterations.
-    accelerate : bool
-        Geometric-tail extrapolation once the updates shrink steadily
-        (DESIGN-NOTES §5); ρ = 0.99 then converges in tens of iterations.
-    later_directions : int or None
-        Radius for the bounces after the first ``later_after`` ones
-        (Piwowar & Malgouyres 2009: later bounces are smooth). The solver then
-        propagates each bounce's increment (ΔR_{k+1} = ρ M_k ΔR_k, Jacobi
-        only) and ends with the geometric-tail term once the ratio of
-        successive bounces is steady. None: every bounce with ``directions``.
-    epsilon : float
-        Facing-rule margin in voxels (DESIGN-NOTES §4).
-    history : int
-        F records remembered per line (1..32).
-    gs_blocks : int
-        Blocks of families for ``method="gauss-seidel"``.
-    max_iterations : int
-        Bound on the iterations when ``max_bounces`` is None.
-    closed : bool or sequence of int, optional
-        Objects (ids into ``vox.object_id``; True: all; False: none) whose
-        meshes are closed. None (default): the objects :func:`voxgi.voxelize`
-        found watertight and consistently wound
-        (``vox.stats["closed_objects"]``). A naive line that clips a closed object's band in a voxel
-        holding only its near side reaches a black back record: in reality
-        it either hit the object's surface or missed it, never its inside
-        (measured: the furnace sphere with a closed inner box lost 2.6% at
-        rho = 0.9, 22% at 0.99). For these objects a back record sends its
-        front twin's radiosity and emission instead of black (it stays black
-        itself). The back of an open one-sided surface (a lamp quad) stays
-        black either way: its back can be seen.
-    shoot_coverage : bool
-        Direct light from flat emitters (lamp quads, discs: every record of
-        the object in one plane with one normal) by partial coverage
-        (default): a shooting ray of emitter record e stands for the share
-        ``ΔA_e |n_e·d| / |d_m|`` (voxel units) of its discrete line's
-        cross-section, and the rest of e's own plane does not occlude it.
-        Curved or closed emitters, and False, keep the paper's rule (each
-        ray covers its whole line): a thin lamp seen edge-on then sends as
-        if it were a voxel thick (measured on the Cornell box: 37% too much
-        power at resolution 32, 15% at 64).
-    shoot_silhouettes : bool
-        Shooting lines that graze an object's silhouette (default): where a
-        line's receivers on one object include a record at a convex edge
-        whose other face the line leaves (F along it), and the line then
-        leaves the object, the share of the line that those receivers do
-        not cover (``1 - Σ ΔA_r |n_r·d| / |d_m|``, voxel units, clamped at
-        0) goes on past that object (its F records and its back records) to
-        the receivers behind. Without it a line that clips a block's rim is
-        stopped whole by the block's far side: shadows a voxel too wide, and
-        that light lost (measured on the closed black Cornell box: direct
-        light imbalance +3.5% at resolution 32, +2.0% at 64; with it +0.3%,
-        +0.4%; ``benchmarks/energy_silhouette.py``). Walls, concave corners
-        and edges between two lit faces stay opaque.
-    diagnostics : bool
-        Run the extra gathering pass behind ``stats["back_fraction"]``
-        (default). False skips it (one pass of the ``directions`` set; the
-        statistics then say it was skipped); the energy balance and the lost
-        fraction come from passes the solve runs anyway.
-    pair_cache : bool or None
-        Record the pairs the first gathering pass over a direction set finds
-        (3 bytes per record and family, at most 16,777,214 records) and
-        replay them in the later passes over that set (visibility does not
-        change between iterations; the same sums to float rounding, about 4x
-        faster per pass; measured on 150k records at R 22, 1 thread: 270-300
-        M rays/s replayed, 72-77 M walked, 50 M while recording, which then
-        leaves the visibility sums to the first replay). Only for a set
-        gathered at least twice (iterations plus the diagnostics pass).
-        None (default): when the pairs fit in ``max_cache_bytes``; True: the
-        same with no default budget; False: walk the lines every pass. Never
-        with ``client`` (the workers walk). ``stats["pair_cache"]`` gives the
-        bytes, the sets recorded (or why not) and the passes replayed.
-    max_cache_bytes : int or None
-        Budget for the recorded pairs of all direction sets; None: a quarter
-        of the memory available when the solve starts (``pair_cache=None``),
-        no limit (``pair_cache=True``).
+    tuning : SolveTuning or None
+        Expert settings (:class:`SolveTuning`).
 
     Returns
     -------
     Solution
-        ``radiosity`` (N, 3) float32; ``stats`` with ``rays``, ``shoot_rays``,
-        ``gather_rays``, ``seconds`` (phase -> s), ``directions``,
-        ``S_spread``, ``lost_fraction`` (δ), ``back_fraction`` (area-weighted
-        mean share of the front records' cos-weighted hemisphere that ends on
-        black back records: in a closed scene, light lost through occluders)
-        and ``back_fraction_max``, ``energy`` (emitted, absorbed,
-        escaping power per channel; escaping counted on the sender side) and
-        ``skipped``.
+        ``radiosity`` (N, 3) float32, always finite; ``stats`` with ray counts,
+        ``seconds``, ``lost_fraction``, ``energy``, ``skipped`` and ``stopped``.
 
     Raises
     ------
-    TypeError, ValueError
-        On a malformed VoxelSet or bad arguments.
-    ImportError
-        If ``client`` is given and dask.distributed is not installed.
-    MemoryError
-        If a worker's memory_limit cannot hold the records (checked first).
+    TypeError, ValueError, MemoryError
+        Bad arguments; an estimate (:func:`solve_memory`) over the memory available.
+
+    Warns
+    -----
+    RuntimeWarning
+        No emitter; not converged; stalled or non-finite (the last finite
+        iterate is returned).
     """
-    t_all = time.perf_counter()
+    t_start = time.perf_counter()
     a = _check_vox(vox)
-    R = _validate.integer(directions, "directions", low=1, high=256)
-    Rs = _validate.integer(shoot_directions, "shoot_directions", low=1, high=256)
-    Rl = _validate.integer(later_directions, "later_directions", low=1, high=256, allow_none=True)
-    la = _validate.integer(later_after, "later_after", low=1)
-    mb = _validate.integer(max_bounces, "max_bounces", low=0, allow_none=True)
-    mi = _validate.integer(max_iterations, "max_iterations", low=1)
-    tol = _validate.real(tol, "tol", low=0.0, low_open=True)
-    nthreads = _validate.threads(threads)
-    eps = _validate.real(epsilon, "epsilon", low=0.0)
-    hist = _validate.integer(history, "history", low=1, high=32)
-    gsb = _validate.integer(gs_blocks, "gs_blocks", low=1)
-    if pair_cache is not None and not isinstance(pair_cache, (bool, np.bool_)):
-        raise TypeError(f"pair_cache: expected True, False or None, got {pair_cache!r}")
-    cache_cap = _validate.integer(max_cache_bytes, "max_cache_bytes", low=0, allow_none=True)
-    if not isinstance(method, str) or method.lower().replace("_", "-") not in (
-        "jacobi",
-        "gauss-seidel",
-    ):
-        raise ValueError(f"method: expected 'jacobi' or 'gauss-seidel', got {method!r}")
-    method = method.lower().replace("_", "-")
-    if later_directions is not None and method != "jacobi":
-        raise ValueError("later_directions: only with method='jacobi'")
-    if client is not None:  # fail early: the extra missing (ImportError) or not a Client
-        from .distributed import check_client
-
-        check_client(client)
-
-    n = len(a["ijk"])
-    area = a["area"]
-    rho = a["albedo"].astype(np.float64)
-    E = np.pi * a["emission"].astype(np.float64)  # emitted radiosity
-    # back records of closed objects and their front twins (the voxelizer
-    # writes each back record right after its front record; checked here)
-    twin_b = twin_f = np.zeros(0, np.int64)
-    if closed is None:
-        closed = list(getattr(vox, "stats", {}).get("closed_objects", [])) or False
-    if closed is not False:
-        obj = _validate.as_c_array(vox.object_id, np.int32, (n,), "vox.object_id")
-        if closed is True:
-            sel_obj = np.ones(len(a["back"]), bool)
-        else:
-            ids = _validate.as_c_array(np.atleast_1d(closed), np.int32, (-1,), "closed")
-            sel_obj = np.isin(obj, ids)
-        b = np.flatnonzero(a["back"] & sel_obj)
-        b = b[b > 0]
-        f_ = b - 1
-        ok = (
-            ~a["back"][f_]
-            & np.all(a["ijk"][f_] == a["ijk"][b], axis=1)
-            & (obj[f_] == obj[b])
-            & (np.einsum("ij,ij->i", a["normal"][f_], a["normal"][b]) < -0.99)
-        )
-        twin_b, twin_f = b[ok], f_[ok]
-    # the kernels' stand-in flags: two such back records never pair along a
-    # line (their exchange is the inside of a closed object, which no front
-    # record sees, and it would occlude the front records' own exchanges)
-    stand_in = None
-    if len(twin_b):
-        stand_in = np.zeros(n, np.bool_)
-        stand_in[twin_b] = True
-
-    def _send(x):
-        # what records send along the lines: back records of closed objects
-        # send their front twin's value
-        if len(twin_b) == 0:
-            return np.ascontiguousarray(x, dtype=np.float32)
-        y = np.array(x, dtype=np.float32, copy=True)
-        y[twin_b] = y[twin_f]
-        return y
-
-    E_send = _send(E)
-    emitters = np.flatnonzero(np.any(a["emission"] > 0, axis=1)).astype(np.int32)
-    emitters_send = np.flatnonzero(np.any(E_send > 0, axis=1)).astype(np.int32)
-    seconds: dict[str, float] = {}
-    stats: dict = {
-        "records": n,
-        "emitters": len(emitters),
-        "method": method,
-        "threads": nthreads,
-        "skipped": {},
-        "closed_back_records": len(twin_b),
-    }
-    if len(emitters) == 0:
-        warnings.warn(
-            "solve: the scene has no emitter; the solution is zero", RuntimeWarning, stacklevel=2
-        )
-        stats.update(
-            rays=0,
-            shoot_rays=0,
-            gather_rays=0,
-            seconds={"total": 0.0},
-            skipped={"all": "no emitter"},
-        )
-        return Solution(vox=vox, radiosity=np.zeros((n, 3), np.float32), stats=stats)
-
-    t = time.perf_counter()
-    if client is None:
-        sysm = _core.LineSystem(a["ijk"], a["normal"], a["point"], epsilon=float(eps), history=hist)
-    else:  # the same loop below, its gather/shoot calls split over Dask workers
-        from .distributed import DistributedLineSystem
-
-        sysm = DistributedLineSystem(client, a["ijk"], a["normal"], a["point"],
-                                     epsilon=float(eps), history=hist, progress=progress)
-        stats["distributed"] = sysm.stats
-    gds = direction_set(R)
-    sds = direction_set(Rs)
-    lds = direction_set(Rl) if Rl is not None else None
-    seconds["setup"] = time.perf_counter() - t
-
-    # per-record normalisation S(n) of every direction set (DESIGN-NOTES §3)
-    t = time.perf_counter()
-    Sg = sysm.normalisation(gds.families, gds.weights, nthreads)
-    Ss = Sg if Rs == R else sysm.normalisation(sds.families, sds.weights, nthreads)
-    Sl = None
-    if lds is not None:
-        Sl = (
-            Sg
-            if Rl == R
-            else (Ss if Rl == Rs else sysm.normalisation(lds.families, lds.weights, nthreads))
-        )
-    seconds["normalisation"] = time.perf_counter() - t
-    stats["directions"] = {
-        "gather": {
-            "radius": R,
-            "count": len(gds),
-            "families": len(gds.families),
-            "non_primitive": gds.non_primitive,
-        },
-        "shoot": {
-            "radius": Rs,
-            "count": len(sds),
-            "families": len(sds.families),
-            "non_primitive": sds.non_primitive,
-        },
-    }
-    if lds is not None:
-        stats["directions"]["later"] = {"radius": Rl, "count": len(lds), "after": la}
-    stats["S_spread"] = {
-        "gather": [float(Sg.min()), float(Sg.max())],
-        "shoot": [float(Ss.min()), float(Ss.max())],
-    }
-
-    # --- shooting: direct irradiance H_d from the emitters
-    t = time.perf_counter()
-    # receiver-side deposit: the exact transpose of gathering (see the
-    # kernel's `send_scale` for the sender-side alternative and its aliasing)
-    cov = None
-    if shoot_coverage:
-        cov, flat = _flat_emitter_coverage(a, vox, emitters_send)
-        stats["flat_emitter_objects"] = flat
-    sil = {}
-    if shoot_silhouettes and getattr(vox, "object_id", None) is not None:
-        obj_id = _validate.as_c_array(vox.object_id, np.int32, (n,), "vox.object_id")
-        sil_area = np.ascontiguousarray(area / a["pitch"] ** 2, dtype=np.float64)
-        # Only objects that send nothing in this pass: an emitting object's
-        # exit face shoots its whole line to the receivers behind it, and a
-        # carried remainder would count that part of the line twice
-        # (measured: furnace sphere with an inner box, rho 0.9, res 32: box
-        # mean error -0.3% -> +0.8%, sphere -0.3% -> +1.7%).
-        sil_area[np.isin(obj_id, np.unique(obj_id[emitters_send]))] = -1.0
-        sil = dict(object=obj_id, sil_area=sil_area,
-                   back=np.ascontiguousarray(a["back"], dtype=np.bool_))
-    stats["shoot_silhouettes"] = bool(sil)
-    hd_raw, unfound, shoot_rays, steps = sysm.shoot(
-        emitters_send, sds.families, sds.weights, E_send, nthreads, coverage=cov,
-        stand_in=stand_in, **sil,
-    )
-    Hd = hd_raw / Ss[:, None]
-    seconds["shoot"] = time.perf_counter() - t
-    # sender side: the share of each emitter's rays that met nobody
-    # (stand-in back emitters have E = 0: they add nothing to the escape)
-    es = emitters_send
-    shoot_escape = (E[es] * (area[es] * unfound / Ss[es])[:, None]).sum(axis=0)
-    stats["shoot_steps"] = int(steps)
-
-    # --- gathering of the reflected radiosity R = B - E
-    Rk = rho * Hd
-    residuals: list[float] = []
-    gather_rays = 0
-    vis = None
-    Hg = np.zeros((n, 3))
-    t_gather = 0.0
-    all_fams = np.arange(len(gds.families), dtype=np.int64)
-    parts, parts_ds = None, None  # Gauss-Seidel: the latest sums of every block
-    extrap = _Extrapolator(area) if accelerate else None
-    limit = mi if mb is None else mb
-    if not np.any(rho > 0):
-        stats["skipped"]["gathering"] = "all albedos are zero"
-        limit = 0
-    # recorded pairs (pair_cache): expected passes over each direction set
-    if client is not None or pair_cache is False:
-        budget = None
-        why = "distributed" if client is not None else "pair_cache=False"
-        stats["pair_cache"] = {"recorded": False, "reason": why}
-    else:
-        budget = cache_cap if cache_cap is not None else (
-            _available_memory() // 4 if pair_cache is None else 1 << 62)
-    extra = 1 if diagnostics else 0
-    passes = {id(gds): (min(limit, la) if lds is not None else limit) + extra}
-    if lds is not None:  # (the same object as gds when later_directions == directions)
-        passes[id(lds)] = passes.get(id(lds), 0) + max(0, limit - la)
-    gather = _Gatherer(sysm, nthreads, stand_in, budget, passes)
-    bar = None
-    if progress and limit > 0:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=mb, desc="gather", unit="it", leave=False)
-    lines_walked = 0
-    it = 0
-    # coarser later bounces need the bounce-by-bounce (progressive) form: a
-    # fixed-point iteration would converge to the coarse operator's answer
-    progressive = lds is not None
-    dk = Rk.copy()
-    Hg_acc = np.zeros((n, 3))
-    lam_bound = float(min(max(rho.max(), 0.5), 1 - 1e-6))
-    vis_S = Sg
+    opt = _settings(directions, max_bounces, tol, threads, tuning)
+    executor = _check_executor(executor, vox, opt, tuning)
+    p = _problem(vox, a, opt)
+    if p.stats["emitters"] == 0:
+        return _no_emitter(p)
+    _open_backend(p, executor, progress)
     try:
-        while it < limit:
-            use_later = lds is not None and it >= la
-            ds_it, S_it = (lds, Sl) if use_later else (gds, Sg)
-            fams = np.arange(len(ds_it.families), dtype=np.int64)
-            blk = np.array_split(fams, min(gsb, len(fams))) if method == "gauss-seidel" else [fams]
-            t = time.perf_counter()
-            want_vis = vis is None and not use_later
-            R_old = Rk
-            if progressive:
-                # propagate only the last bounce (its increment), with this
-                # bounce's directions: B = E + Σ_k ΔR_k, ΔR_{k+1} = ρ M_k ΔR_k
-                sums, v, nl = gather(ds_it, _send(dk), fams, want_vis)
-                lines_walked += nl
-                h_inc = sums / S_it[:, None]
-                Hg_acc += h_inc
-                dk = rho * h_inc
-                R_new = Rk + dk
-                if want_vis:
-                    vis = v
-            elif method == "jacobi":
-                sums, v, nl = gather(ds_it, _send(Rk), blk[0], want_vis)
-                lines_walked += nl
-                Hg = sums / S_it[:, None]
-                R_new = rho * (Hd + Hg)
-                if want_vis:
-                    vis = v
-            else:
-                # in place: block b gathers from the radiosity updated by blocks < b
-                if parts_ds is not ds_it:  # first sweep with this set: blocks not yet run count 0
-                    parts, parts_ds = [np.zeros((n, 3)) for _ in blk], ds_it
-                cur = Rk.copy()
-                vacc = np.zeros(n) if want_vis else None
-                for bi, sel in enumerate(blk):
-                    sums, v, nl = gather(ds_it, _send(cur), sel, want_vis)
-                    lines_walked += nl
-                    parts[bi] = sums
-                    if vacc is not None:
-                        # (None: a recording pass left it to the next sweep)
-                        vacc = vacc + v if v is not None else None
-                    Hg = sum(parts) / S_it[:, None]
-                    cur = rho * (Hd + Hg)
-                R_new = cur
-                if want_vis:
-                    vis = vacc
-            t_gather += time.perf_counter() - t
-            gather_rays += n * len(ds_it.families)
-            d = R_new - R_old
-            Btot = np.sum(area[:, None] * np.abs(E + R_new))
-            res = float(np.sum(area[:, None] * np.abs(d)) / Btot) if Btot > 0 else 0.0
-            Rk = R_new
-            it += 1
-            residuals.append(res)
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(residual=f"{res:.2e}")
-            # stop on the estimated remaining error of the geometric tail,
-            # res * lam / (1 - lam), lam <= max albedo (every record gathers at
-            # most one hemisphere): at rho 0.99 a residual of tol would still
-            # leave ~99 tol of error
-            if res * lam_bound / (1 - lam_bound) < tol:
-                break
-            if extrap is not None and (not progressive or use_later):
-                tail = extrap(d)
-                if tail is not None:
-                    Rk = Rk + tail
-                    if progressive:
-                        # the ambient term stands for all the remaining bounces: done
-                        Hg_acc += h_inc * extrap.factor
-                        break
+        _normalise(p)
+        Hd, shoot_escape, shoot_rays = _direct_light(p)
+        gather = _gatherer(p)
+        s = _iterate(p, gather, Hd, progress)
+        p.stats["energy"] = _energy(p, Hd, s, _lost_fraction(p, gather, s.vis), shoot_escape)
+        _back_fraction(p, gather)
     finally:
-        if bar is not None:
-            bar.close()
-    seconds["gather"] = t_gather
-    if limit > 0 and it == limit and (not residuals or residuals[-1] >= tol) and mb is None:
-        warnings.warn(
-            f"solve: not converged after {it} iterations (residual {residuals[-1]:.3g})",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-
-    if progressive:
-        Hg = Hg_acc
-    B = E + Rk
-    # --- diagnostics: lost fraction δ, energy balance (DESIGN-NOTES §5, §10)
-    if vis is None:  # no gathering ran (or only a recording pass): one visibility pass
-        t = time.perf_counter()
-        _, vis, _ = gather(gds, np.zeros((n, 3), np.float32), all_fams, True, defer_vis=False)
-        seconds["visibility"] = time.perf_counter() - t
-    found = vis / vis_S
-    front = ~a["back"]
-    wa = area * front
-    delta = float(1 - np.sum(wa * found) / np.sum(wa)) if np.sum(wa) > 0 else 0.0
-    # Share of the front records' cos-weighted hemisphere that ends on black
-    # back records (no albedo, no emission). In a closed scene no front
-    # record should see one: this is light lost through occluders (a line
-    # passing a closed object's near side), which lost_fraction does not see.
-    dark = a["back"] & ~np.any(rho > 0, axis=1) & ~np.any(E > 0, axis=1)
-    dark[twin_b] = False  # stand-ins for their front twins: not a loss
-    back_fraction = back_fraction_max = 0.0
-    if not diagnostics:
-        stats["skipped"]["back_fraction"] = "diagnostics=False"
-    elif np.any(dark) and np.sum(wa) > 0:
-        t = time.perf_counter()
-        ind = np.zeros((n, 3), np.float32)
-        ind[dark] = 1.0
-        gb, _, _ = gather(gds, ind, all_fams, False)
-        seconds["back_fraction"] = time.perf_counter() - t
-        share = gb[:, 0] / vis_S
-        back_fraction = float(np.sum(wa * share) / np.sum(wa))
-        back_fraction_max = float(np.max(np.where(front, share, 0.0)))
-    else:
-        stats["skipped"]["back_fraction"] = "no black back records"
-    H_tot = Hd + Hg
-    emitted = (E * area[:, None]).sum(axis=0)
-    absorbed = ((1 - rho) * H_tot * area[:, None]).sum(axis=0)
-    gather_escape = (Rk * (area * (1 - found))[:, None]).sum(axis=0)
-    escaping = shoot_escape + gather_escape
-    with np.errstate(divide="ignore", invalid="ignore"):
-        imbalance = np.where(emitted > 0, (emitted - absorbed - escaping) / emitted, 0.0)
-
-    seconds["total"] = time.perf_counter() - t_all
-    stats.update(
-        rays=int(shoot_rays + gather_rays),
-        shoot_rays=int(shoot_rays),
-        gather_rays=int(gather_rays),
-        seconds=seconds,
-        bounces=it,
-        lines_walked=int(lines_walked),
-        lost_fraction=delta,
-        lost_fraction_max=float(np.max(np.where(front, 1 - found, 0.0))),
-        back_fraction=back_fraction,
-        back_fraction_max=back_fraction_max,
-        energy={
-            "emitted": emitted.tolist(),
-            "absorbed": absorbed.tolist(),
-            "escaping": escaping.tolist(),
-            "escaping_shoot": shoot_escape.tolist(),
-            "imbalance": imbalance.tolist(),
-        },
-        extrapolations=extrap.count if extrap is not None else 0,
-        pair_cache=stats.get("pair_cache", {**gather.info, "replayed_passes": gather.replayed}),
-        epsilon=eps,
-        history=hist,
-    )
-    if it and lds is not None:
-        stats["skipped"]["finer_directions_after"] = la
-    if gather.replayed:
-        stats["skipped"]["line_walks"] = (
-            f"{gather.replayed} gathering passes replayed the recorded pairs")
-    return Solution(
-        vox=vox, radiosity=B.astype(np.float32), bounces=it, residuals=residuals, stats=stats
-    )
+        if hasattr(p.sysm, "close"):
+            p.sysm.close()
+    p.seconds["total"] = time.perf_counter() - t_start
+    _statistics(p, gather, s, shoot_rays)
+    B = (p.E + s.R).astype(np.float32)
+    return Solution(vox=vox, radiosity=B, bounces=s.it, residuals=s.residuals, stats=p.stats)

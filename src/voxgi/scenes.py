@@ -5,6 +5,7 @@ Every function returns a fresh :class:`voxgi.Scene` with a camera set.
 
 from __future__ import annotations
 
+import itertools
 import math
 from importlib import resources
 
@@ -14,8 +15,21 @@ import trimesh
 from . import _validate
 from .scene import Camera, Material, Scene
 
-__all__ = ["bunny_room", "cap_sphere", "cornell_box", "emission", "furnace_box", "furnace_sphere",
-           "geometric", "get", "labyrinth", "load_bunny", "names", "shadow", "sponza_atrium"]
+__all__ = [
+    "bunny_room",
+    "cap_sphere",
+    "cornell_box",
+    "emission",
+    "furnace_box",
+    "furnace_sphere",
+    "geometric",
+    "get",
+    "labyrinth",
+    "load_bunny",
+    "names",
+    "shadow",
+    "sponza_atrium",
+]
 
 # Cornell box reflectances and light radiance as in Mitsuba 3's
 # ``mi.cornell_box()`` (RGB fits of the measured spectra), so that the
@@ -26,8 +40,9 @@ CORNELL_RED = (0.570068, 0.0430135, 0.0443706)
 CORNELL_LIGHT = (18.387, 13.9873, 6.75357)
 
 
-def _oriented_quads(quads: np.ndarray, inside: np.ndarray | None = None,
-                    outside: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _oriented_quads(
+    quads: np.ndarray, inside: np.ndarray | None = None, outside: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Triangulate planar quads (Q, 4, 3), winding each so its normal points
     toward ``inside`` (a point) or away from ``outside``."""
     quads = np.asarray(quads, dtype=np.float64)
@@ -45,12 +60,55 @@ def _oriented_quads(quads: np.ndarray, inside: np.ndarray | None = None,
 
 
 def _mesh(quads, **kw) -> trimesh.Trimesh:
-    v, f = _oriented_quads(np.asarray(quads) * 1e-3, **{k: np.asarray(p) * 1e-3 for k, p in kw.items()})
+    v, f = _oriented_quads(
+        np.asarray(quads) * 1e-3, **{k: np.asarray(p) * 1e-3 for k, p in kw.items()}
+    )
     return trimesh.Trimesh(v, f, process=False)
 
 
-def cornell_box(width: int = 512, height: int = 512, light_offset: float = 0.01, *,
-                blocks: bool = True, closed: bool = False) -> Scene:
+#: The Cornell box's walls (mm): each a quad, in the order they join the scene.
+_CORNELL_CENTRE = np.array([278.0, 274.4, 279.6])
+_CORNELL_WALLS = {
+    "floor": [[552.8, 0, 0], [0, 0, 0], [0, 0, 559.2], [549.6, 0, 559.2]],
+    "ceiling": [[556.0, 548.8, 0], [556.0, 548.8, 559.2], [0, 548.8, 559.2], [0, 548.8, 0]],
+    "back": [[549.6, 0, 559.2], [0, 0, 559.2], [0, 548.8, 559.2], [556.0, 548.8, 559.2]],
+    "red": [[552.8, 0, 0], [549.6, 0, 559.2], [556.0, 548.8, 559.2], [556.0, 548.8, 0]],
+    "green": [[0, 0, 559.2], [0, 0, 0], [0, 548.8, 0], [0, 548.8, 559.2]],
+}
+_CORNELL_FRONT = [[0, 0, 0], [552.8, 0, 0], [556.0, 548.8, 0], [0, 548.8, 0]]
+#: The two blocks: their quads (mm) and a point inside each.
+_CORNELL_BLOCKS = {
+    "short_block": (
+        [
+            [[130, 165, 65], [82, 165, 225], [240, 165, 272], [290, 165, 114]],
+            [[290, 0, 114], [290, 165, 114], [240, 165, 272], [240, 0, 272]],
+            [[130, 0, 65], [130, 165, 65], [290, 165, 114], [290, 0, 114]],
+            [[82, 0, 225], [82, 165, 225], [130, 165, 65], [130, 0, 65]],
+            [[240, 0, 272], [240, 165, 272], [82, 165, 225], [82, 0, 225]],
+        ],
+        [186.0, 82.5, 169.0],
+    ),
+    "tall_block": (
+        [
+            [[423, 330, 247], [265, 330, 296], [314, 330, 456], [472, 330, 406]],
+            [[423, 0, 247], [423, 330, 247], [472, 330, 406], [472, 0, 406]],
+            [[472, 0, 406], [472, 330, 406], [314, 330, 456], [314, 0, 456]],
+            [[314, 0, 456], [314, 330, 456], [265, 330, 296], [265, 0, 296]],
+            [[265, 0, 296], [265, 330, 296], [423, 330, 247], [423, 0, 247]],
+        ],
+        [368.5, 165.0, 351.25],
+    ),
+}
+
+
+def cornell_box(
+    width: int = 512,
+    height: int = 512,
+    light_offset: float = 0.01,
+    *,
+    blocks: bool = True,
+    closed: bool = False,
+) -> Scene:
     """The Cornell box with its published dimensions, in metres.
 
     Geometry from the Cornell Program of Computer Graphics' measured data
@@ -78,62 +136,62 @@ def cornell_box(width: int = 512, height: int = 512, light_offset: float = 0.01,
         Objects ``floor``, ``ceiling``, ``back``, ``red`` (left), ``green``
         (right), ``short_block``, ``tall_block``, ``light``.
     """
-    centre = np.array([278.0, 274.4, 279.6])
-    s = Scene(Camera(eye=(0.278, 0.273, -0.800), target=(0.278, 0.273, 0.0), up=(0, 1, 0),
-                     fov=39.3, width=width, height=height))
+    s = Scene(
+        Camera(
+            eye=(0.278, 0.273, -0.800),
+            target=(0.278, 0.273, 0.0),
+            up=(0, 1, 0),
+            fov=39.3,
+            width=width,
+            height=height,
+        )
+    )
     white = Material(albedo=CORNELL_WHITE)
-    walls = {
-        "floor": [[552.8, 0, 0], [0, 0, 0], [0, 0, 559.2], [549.6, 0, 559.2]],
-        "ceiling": [[556.0, 548.8, 0], [556.0, 548.8, 559.2], [0, 548.8, 559.2], [0, 548.8, 0]],
-        "back": [[549.6, 0, 559.2], [0, 0, 559.2], [0, 548.8, 559.2], [556.0, 548.8, 559.2]],
-    }
-    for name, q in walls.items():
-        s.add(_mesh([q], inside=centre), white, name=name)
-    s.add(_mesh([[[552.8, 0, 0], [549.6, 0, 559.2], [556.0, 548.8, 559.2], [556.0, 548.8, 0]]],
-                inside=centre), Material(albedo=CORNELL_RED), name="red")
-    s.add(_mesh([[[0, 0, 559.2], [0, 0, 0], [0, 548.8, 0], [0, 548.8, 559.2]]], inside=centre),
-          Material(albedo=CORNELL_GREEN), name="green")
-    short = [
-        [[130, 165, 65], [82, 165, 225], [240, 165, 272], [290, 165, 114]],
-        [[290, 0, 114], [290, 165, 114], [240, 165, 272], [240, 0, 272]],
-        [[130, 0, 65], [130, 165, 65], [290, 165, 114], [290, 0, 114]],
-        [[82, 0, 225], [82, 165, 225], [130, 165, 65], [130, 0, 65]],
-        [[240, 0, 272], [240, 165, 272], [82, 165, 225], [82, 0, 225]],
-    ]
-    tall = [
-        [[423, 330, 247], [265, 330, 296], [314, 330, 456], [472, 330, 406]],
-        [[423, 0, 247], [423, 330, 247], [472, 330, 406], [472, 0, 406]],
-        [[472, 0, 406], [472, 330, 406], [314, 330, 456], [314, 0, 456]],
-        [[314, 0, 456], [314, 330, 456], [265, 330, 296], [265, 0, 296]],
-        [[265, 0, 296], [265, 330, 296], [423, 330, 247], [423, 0, 247]],
-    ]
+    colour = {"red": Material(albedo=CORNELL_RED), "green": Material(albedo=CORNELL_GREEN)}
+    for name, q in _CORNELL_WALLS.items():
+        s.add(_mesh([q], inside=_CORNELL_CENTRE), colour.get(name, white), name=name)
     if blocks:
-        s.add(_mesh(short, outside=np.array([186.0, 82.5, 169.0])), white, name="short_block")
-        s.add(_mesh(tall, outside=np.array([368.5, 165.0, 351.25])), white, name="tall_block")
+        for name, (quads, centre) in _CORNELL_BLOCKS.items():
+            s.add(_mesh(quads, outside=np.array(centre)), white, name=name)
     if closed:
-        s.add(_mesh([[[0, 0, 0], [552.8, 0, 0], [556.0, 548.8, 0], [0, 548.8, 0]]],
-                    inside=centre), white, name="front")
+        s.add(_mesh([_CORNELL_FRONT], inside=_CORNELL_CENTRE), white, name="front")
     y = 548.8 - light_offset * 1e3
     light = [[[343.0, y, 227.0], [343.0, y, 332.0], [213.0, y, 332.0], [213.0, y, 227.0]]]
-    s.add(_mesh(light, inside=np.array([278.0, 0.0, 279.5])),
-          Material(albedo=0.0, emission=CORNELL_LIGHT), name="light")
+    s.add(
+        _mesh(light, inside=np.array([278.0, 0.0, 279.5])),
+        Material(albedo=0.0, emission=CORNELL_LIGHT),
+        name="light",
+    )
     return s
 
 
 def _inward(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     # A new mesh with reversed winding (trimesh's invert() may keep stale
-    # cached face normals; DESIGN-NOTES §2).
+    # cached face normals; docs/design.md §2).
     return trimesh.Trimesh(np.array(mesh.vertices), np.array(mesh.faces)[:, ::-1], process=False)
 
 
 def _furnace_camera(width: int, height: int, eye=(0.0, 0.0, 0.0)) -> Camera:
     eye = np.asarray(eye, dtype=np.float64)
-    return Camera(eye=tuple(eye), target=tuple(eye + [0.3, -0.2, -1.0]), up=(0, 1, 0), fov=90.0,
-                  width=width, height=height)
+    return Camera(
+        eye=tuple(eye),
+        target=tuple(eye + [0.3, -0.2, -1.0]),
+        up=(0, 1, 0),
+        fov=90.0,
+        width=width,
+        height=height,
+    )
 
 
-def furnace_sphere(albedo=0.5, emission=1.0, radius: float = 1.0, subdivisions: int = 4,
-                   inner: bool = False, width: int = 64, height: int = 64) -> Scene:
+def furnace_sphere(
+    albedo=0.5,
+    emission=1.0,
+    radius: float = 1.0,
+    subdivisions: int = 4,
+    inner: bool = False,
+    width: int = 64,
+    height: int = 64,
+) -> Scene:
     """A closed sphere seen from inside, uniform emission and albedo.
 
     Every point has radiance ``Le / (1 - rho)`` (the furnace test).
@@ -153,8 +211,11 @@ def furnace_sphere(albedo=0.5, emission=1.0, radius: float = 1.0, subdivisions: 
     radius = _validate.real(radius, "radius", low=0.0, low_open=True)
     mat = Material(albedo=albedo, emission=emission)
     s = Scene(_furnace_camera(width, height, eye=(0.0, 0.0, 0.55 * radius if inner else 0.0)))
-    s.add(_inward(trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)), mat,
-          name="sphere")
+    s.add(
+        _inward(trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)),
+        mat,
+        name="sphere",
+    )
     if inner:
         box = trimesh.creation.box(extents=[0.5 * radius, 0.35 * radius, 0.4 * radius])
         box.apply_transform(trimesh.transformations.rotation_matrix(0.4, [1, 1, 0.3]))
@@ -163,8 +224,14 @@ def furnace_sphere(albedo=0.5, emission=1.0, radius: float = 1.0, subdivisions: 
     return s
 
 
-def furnace_box(albedo=0.5, emission=1.0, size: float = 1.0, inner: bool = False,
-                width: int = 64, height: int = 64) -> Scene:
+def furnace_box(
+    albedo=0.5,
+    emission=1.0,
+    size: float = 1.0,
+    inner: bool = False,
+    width: int = 64,
+    height: int = 64,
+) -> Scene:
     """A closed cube seen from inside, uniform emission and albedo.
 
     Every point has radiance ``Le / (1 - rho)``. With ``inner=True`` a closed
@@ -181,24 +248,34 @@ def furnace_box(albedo=0.5, emission=1.0, size: float = 1.0, inner: bool = False
     return s
 
 
-def cap_sphere(albedo=0.5, emission=1.0, cap_angle: float = 60.0, radius: float = 1.0,
-               subdivisions: int = 5, width: int = 64, height: int = 64) -> Scene:
+def cap_sphere(
+    albedo=0.5,
+    emission=1.0,
+    cap_angle: float = 60.0,
+    radius: float = 1.0,
+    subdivisions: int = 5,
+    width: int = 64,
+    height: int = 64,
+) -> Scene:
     """A closed sphere seen from inside whose polar cap alone emits.
 
     Inside a sphere every pair of points has the same form-factor kernel
     ``cos θx cos θy / (π r²) = 1 / A``, so
     ``L(x) = Le(x) + rho * Le_mean / (1 - rho)`` with ``Le_mean`` the
-    area-weighted mean emission (DESIGN-NOTES §1). Triangles whose centroid
+    area-weighted mean emission (docs/design.md §1). Triangles whose centroid
     lies within ``cap_angle`` degrees of +y form the object ``cap``.
     """
-    cap_angle = _validate.real(cap_angle, "cap_angle", low=0.0, high=180.0, low_open=True,
-                               high_open=True)
+    cap_angle = _validate.real(
+        cap_angle, "cap_angle", low=0.0, high=180.0, low_open=True, high_open=True
+    )
     sph = _inward(trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius))
     c = sph.triangles_center
     in_cap = c[:, 1] / np.linalg.norm(c, axis=1) > math.cos(math.radians(cap_angle))
     s = Scene(_furnace_camera(width, height))
-    for name, sel, mat in (("cap", in_cap, Material(albedo=albedo, emission=emission)),
-                           ("rest", ~in_cap, Material(albedo=albedo))):
+    for name, sel, mat in (
+        ("cap", in_cap, Material(albedo=albedo, emission=emission)),
+        ("rest", ~in_cap, Material(albedo=albedo)),
+    ):
         s.add(trimesh.Trimesh(sph.vertices, sph.faces[sel], process=False), mat, name=name)
     return s
 
@@ -210,15 +287,28 @@ def load_bunny() -> trimesh.Trimesh:
         return trimesh.load(p, force="mesh", process=False)
 
 
-def bunny_room(width: int = 512, height: int = 512, bunny_albedo=0.75, room_albedo=0.7,
-               light_radiance=(12.0, 12.0, 12.0)) -> Scene:
+def bunny_room(
+    width: int = 512,
+    height: int = 512,
+    bunny_albedo=0.75,
+    room_albedo=0.7,
+    light_radiance=(12.0, 12.0, 12.0),
+) -> Scene:
     """The Stanford bunny on the floor of a closed room lit by a ceiling light.
 
     A 4 × 3 × 4 room (scene units), normals inward; the bunny is 1.8 units
     wide; a one-sided 1 × 1 area light hangs 0.01 under the ceiling.
     """
-    s = Scene(Camera(eye=(0.0, 1.5, 1.9), target=(0.0, 0.6, 0.0), up=(0, 1, 0), fov=50.0,
-                     width=width, height=height))
+    s = Scene(
+        Camera(
+            eye=(0.0, 1.5, 1.9),
+            target=(0.0, 0.6, 0.0),
+            up=(0, 1, 0),
+            fov=50.0,
+            width=width,
+            height=height,
+        )
+    )
     room = trimesh.creation.box(extents=[4.0, 3.0, 4.0])
     room.apply_translation([0.0, 1.5, 0.0])
     s.add(_inward(room), Material(albedo=room_albedo), name="room")
@@ -226,11 +316,15 @@ def bunny_room(width: int = 512, height: int = 512, bunny_albedo=0.75, room_albe
     lo, hi = bunny.bounds
     scale = 1.8 / (hi - lo)[0]
     v = (np.asarray(bunny.vertices) - [(lo[0] + hi[0]) / 2, lo[1], (lo[2] + hi[2]) / 2]) * scale
-    s.add(trimesh.Trimesh(v, bunny.faces, process=False), Material(albedo=bunny_albedo),
-          name="bunny")
+    s.add(
+        trimesh.Trimesh(v, bunny.faces, process=False), Material(albedo=bunny_albedo), name="bunny"
+    )
     y = 2.99
-    light = trimesh.Trimesh([[-0.5, y, -0.5], [0.5, y, -0.5], [0.5, y, 0.5], [-0.5, y, 0.5]],
-                            [[0, 1, 2], [0, 2, 3]], process=False)  # normal -y
+    light = trimesh.Trimesh(
+        [[-0.5, y, -0.5], [0.5, y, -0.5], [0.5, y, 0.5], [-0.5, y, 0.5]],
+        [[0, 1, 2], [0, 2, 3]],
+        process=False,
+    )  # normal -y
     s.add(light, Material(albedo=0.0, emission=light_radiance), name="light")
     return s
 
@@ -246,15 +340,16 @@ def bunny_room(width: int = 512, height: int = 512, bunny_albedo=0.75, room_albe
 def _box(extents, centre, rotate_y_deg: float = 0.0) -> trimesh.Trimesh:
     b = trimesh.creation.box(extents=extents)
     if rotate_y_deg:
-        b.apply_transform(trimesh.transformations.rotation_matrix(math.radians(rotate_y_deg),
-                                                                  [0, 1, 0]))
+        b.apply_transform(
+            trimesh.transformations.rotation_matrix(math.radians(rotate_y_deg), [0, 1, 0])
+        )
     b.apply_translation(centre)
     return trimesh.Trimesh(b.vertices, b.faces, process=False)
 
 
 def _room(size, albedo, open_top: bool = False) -> tuple[trimesh.Trimesh, np.ndarray]:
     """A closed (or roofless) box room with inward normals, floor at y = 0."""
-    sx, sy, sz = size
+    _, sy, _ = size
     room = trimesh.creation.box(extents=size)
     room.apply_translation([0.0, sy / 2, 0.0])
     room = _inward(room)
@@ -266,8 +361,12 @@ def _room(size, albedo, open_top: bool = False) -> tuple[trimesh.Trimesh, np.nda
 
 def _ceiling_light(cx, cz, w, d, y) -> trimesh.Trimesh:
     """A one-sided quad light facing down (-y)."""
-    v = [[cx - w / 2, y, cz - d / 2], [cx + w / 2, y, cz - d / 2], [cx + w / 2, y, cz + d / 2],
-         [cx - w / 2, y, cz + d / 2]]
+    v = [
+        [cx - w / 2, y, cz - d / 2],
+        [cx + w / 2, y, cz - d / 2],
+        [cx + w / 2, y, cz + d / 2],
+        [cx - w / 2, y, cz + d / 2],
+    ]
     return trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], process=False)
 
 
@@ -283,20 +382,31 @@ def labyrinth(width: int = 512, height: int = 512, cells: int = 6, seed: int = 3
     rng = np.random.default_rng(seed)
     n, size, wall_h, t = cells, 6.0, 1.0, 0.06
     c = size / n
-    s = Scene(Camera(eye=(2.8, 1.35, 2.8), target=(-1.0, 0.0, -1.0), up=(0, 1, 0), fov=75.0,
-                     width=width, height=height))
+    s = Scene(
+        Camera(
+            eye=(2.8, 1.35, 2.8),
+            target=(-1.0, 0.0, -1.0),
+            up=(0, 1, 0),
+            fov=75.0,
+            width=width,
+            height=height,
+        )
+    )
     room, _ = _room((size, wall_h * 1.4, size), 0.7)
     s.add(room, Material(albedo=0.7), name="room")
     # Perfect maze by randomized depth-first search over cells.
-    east = np.ones((n, n), bool)   # wall on the +x side of cell (i, j)
+    east = np.ones((n, n), bool)  # wall on the +x side of cell (i, j)
     south = np.ones((n, n), bool)  # wall on the +z side
     seen = np.zeros((n, n), bool)
     stack = [(0, 0)]
     seen[0, 0] = True
     while stack:
         i, j = stack[-1]
-        nb = [(i + di, j + dj) for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))
-              if 0 <= i + di < n and 0 <= j + dj < n and not seen[i + di, j + dj]]
+        nb = [
+            (i + di, j + dj)
+            for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))
+            if 0 <= i + di < n and 0 <= j + dj < n and not seen[i + di, j + dj]
+        ]
         if not nb:
             stack.pop()
             continue
@@ -323,8 +433,11 @@ def labyrinth(width: int = 512, height: int = 512, cells: int = 6, seed: int = 3
                 ln, mid = span(i)
                 walls.append(_box([ln, wall_h, t], [mid, wall_h / 2, x0 + (j + 1) * c]))
     s.add(trimesh.util.concatenate(walls), Material(albedo=0.75), name="walls")
-    s.add(_ceiling_light(x0 + c / 2, x0 + c / 2, 0.5 * c, 0.5 * c, wall_h * 1.4 - 0.005),
-          Material(albedo=0.0, emission=60.0), name="light")
+    s.add(
+        _ceiling_light(x0 + c / 2, x0 + c / 2, 0.5 * c, 0.5 * c, wall_h * 1.4 - 0.005),
+        Material(albedo=0.0, emission=60.0),
+        name="light",
+    )
     return s
 
 
@@ -335,14 +448,28 @@ def emission(width: int = 512, height: int = 512) -> Scene:
     (emission tests of Smits & Jensen): the display must sample small bright
     emitters without fireflies.
     """
-    s = Scene(Camera(eye=(0.0, 1.2, 2.7), target=(0.0, 0.8, 0.0), up=(0, 1, 0), fov=55.0,
-                     width=width, height=height))
+    s = Scene(
+        Camera(
+            eye=(0.0, 1.2, 2.7),
+            target=(0.0, 0.8, 0.0),
+            up=(0, 1, 0),
+            fov=55.0,
+            width=width,
+            height=height,
+        )
+    )
     room, _ = _room((4.0, 2.5, 6.0), 0.7)
     s.add(room, Material(albedo=0.7), name="room")
-    s.add(_ceiling_light(-1.0, -1.0, 0.2, 0.2, 2.49), Material(albedo=0.0, emission=(200, 180, 150)),
-          name="small_light")
-    panel = trimesh.Trimesh([[1.99, 0.6, -2.0], [1.99, 0.6, -0.5], [1.99, 1.6, -0.5],
-                             [1.99, 1.6, -2.0]], [[0, 2, 1], [0, 3, 2]], process=False)  # faces -x
+    s.add(
+        _ceiling_light(-1.0, -1.0, 0.2, 0.2, 2.49),
+        Material(albedo=0.0, emission=(200, 180, 150)),
+        name="small_light",
+    )
+    panel = trimesh.Trimesh(
+        [[1.99, 0.6, -2.0], [1.99, 0.6, -0.5], [1.99, 1.6, -0.5], [1.99, 1.6, -2.0]],
+        [[0, 2, 1], [0, 3, 2]],
+        process=False,
+    )  # faces -x
     s.add(panel, Material(albedo=0.0, emission=(0.5, 1.5, 3.0)), name="panel_light")
     ball = trimesh.creation.icosphere(subdivisions=3, radius=0.25)
     ball.apply_translation([-0.6, 0.25, -1.2])
@@ -357,14 +484,25 @@ def shadow(width: int = 512, height: int = 512) -> Scene:
     Thin plates and a sphere hang above the floor of a closed room; the
     shadows' penumbrae widen with the gap, which the display must resolve.
     """
-    s = Scene(Camera(eye=(0.0, 2.2, 2.4), target=(0.0, 0.2, 0.0), up=(0, 1, 0), fov=50.0,
-                     width=width, height=height))
+    s = Scene(
+        Camera(
+            eye=(0.0, 2.2, 2.4),
+            target=(0.0, 0.2, 0.0),
+            up=(0, 1, 0),
+            fov=50.0,
+            width=width,
+            height=height,
+        )
+    )
     room, _ = _room((5.0, 3.0, 5.0), 0.75)
     s.add(room, Material(albedo=0.75), name="room")
-    s.add(_ceiling_light(0.0, 0.0, 0.8, 0.8, 2.99), Material(albedo=0.0, emission=25.0),
-          name="light")
-    plates = [_box([0.5, 0.02, 0.5], [x, y, z]) for x, y, z in
-              ((-1.2, 0.15, 0.3), (0.0, 0.6, 0.3), (1.2, 1.2, 0.3))]
+    s.add(
+        _ceiling_light(0.0, 0.0, 0.8, 0.8, 2.99), Material(albedo=0.0, emission=25.0), name="light"
+    )
+    plates = [
+        _box([0.5, 0.02, 0.5], [x, y, z])
+        for x, y, z in ((-1.2, 0.15, 0.3), (0.0, 0.6, 0.3), (1.2, 1.2, 0.3))
+    ]
     s.add(trimesh.util.concatenate(plates), Material(albedo=(0.8, 0.3, 0.3)), name="plates")
     ball = trimesh.creation.icosphere(subdivisions=3, radius=0.3)
     ball.apply_translation([0.0, 0.9, -1.0])
@@ -378,14 +516,24 @@ def geometric(width: int = 512, height: int = 512) -> Scene:
     A torus, a cylinder, a cone, a thin slab leaning on a wall, a concave
     open box and a cluster of small cubes, under a ceiling light.
     """
-    s = Scene(Camera(eye=(0.0, 1.8, 2.8), target=(0.0, 0.5, 0.0), up=(0, 1, 0), fov=55.0,
-                     width=width, height=height))
+    s = Scene(
+        Camera(
+            eye=(0.0, 1.8, 2.8),
+            target=(0.0, 0.5, 0.0),
+            up=(0, 1, 0),
+            fov=55.0,
+            width=width,
+            height=height,
+        )
+    )
     room, _ = _room((5.0, 3.0, 6.0), 0.7)
     s.add(room, Material(albedo=0.7), name="room")
-    s.add(_ceiling_light(0.0, 0.0, 1.0, 1.0, 2.99), Material(albedo=0.0, emission=18.0),
-          name="light")
-    torus = trimesh.creation.torus(major_radius=0.45, minor_radius=0.15, major_sections=48,
-                                   minor_sections=24)
+    s.add(
+        _ceiling_light(0.0, 0.0, 1.0, 1.0, 2.99), Material(albedo=0.0, emission=18.0), name="light"
+    )
+    torus = trimesh.creation.torus(
+        major_radius=0.45, minor_radius=0.15, major_sections=48, minor_sections=24
+    )
     torus.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [1, 0, 0]))
     torus.apply_translation([-1.3, 0.15, -0.5])
     s.add(torus, Material(albedo=(0.8, 0.6, 0.2)), name="torus")
@@ -398,21 +546,33 @@ def geometric(width: int = 512, height: int = 512) -> Scene:
     cone.apply_translation([1.2, 0.0, -0.6])
     s.add(cone, Material(albedo=(0.3, 0.4, 0.8)), name="cone")
     slab = _box([1.2, 1.6, 0.04], [1.6, 0.82, -2.6], 0)
-    slab.apply_transform(trimesh.transformations.rotation_matrix(0.25, [1, 0, 0],
-                                                                 point=[1.6, 0.0, -2.6]))
+    slab.apply_transform(
+        trimesh.transformations.rotation_matrix(0.25, [1, 0, 0], point=[1.6, 0.0, -2.6])
+    )
     s.add(slab, Material(albedo=0.85), name="thin_slab")
-    cup = [_box([0.8, 0.04, 0.8], [-0.4, 0.02, 0.8]), _box([0.04, 0.5, 0.8], [-0.8, 0.25, 0.8]),
-           _box([0.04, 0.5, 0.8], [0.0, 0.25, 0.8]), _box([0.8, 0.5, 0.04], [-0.4, 0.25, 0.4])]
+    cup = [
+        _box([0.8, 0.04, 0.8], [-0.4, 0.02, 0.8]),
+        _box([0.04, 0.5, 0.8], [-0.8, 0.25, 0.8]),
+        _box([0.04, 0.5, 0.8], [0.0, 0.25, 0.8]),
+        _box([0.8, 0.5, 0.04], [-0.4, 0.25, 0.4]),
+    ]
     s.add(trimesh.util.concatenate(cup), Material(albedo=0.6), name="open_box")
     rng = np.random.default_rng(7)
-    cubes = [_box([0.08] * 3, [0.7 + 0.2 * (k % 4), 0.04 + 0.08 * (k // 8), 0.7 + 0.2 * (k // 4 % 2)],
-                  float(rng.uniform(0, 90))) for k in range(16)]
+    cubes = [
+        _box(
+            [0.08] * 3,
+            [0.7 + 0.2 * (k % 4), 0.04 + 0.08 * (k // 8), 0.7 + 0.2 * (k // 4 % 2)],
+            float(rng.uniform(0, 90)),
+        )
+        for k in range(16)
+    ]
     s.add(trimesh.util.concatenate(cubes), Material(albedo=(0.9, 0.9, 0.5)), name="small_cubes")
     return s
 
 
-def sponza_atrium(width: int = 512, height: int = 512, columns_per_side: int = 7,
-                  sections: int = 24) -> Scene:
+def sponza_atrium(
+    width: int = 512, height: int = 512, columns_per_side: int = 7, sections: int = 24
+) -> Scene:
     """A Sponza-like atrium: a two-storey arcade round an open courtyard.
 
     Columns (cylinders) carry arches (segmented half-rings) on two storeys
@@ -422,8 +582,16 @@ def sponza_atrium(width: int = 512, height: int = 512, columns_per_side: int = 7
     _validate.integer(columns_per_side, "columns_per_side", low=2, high=40)
     _validate.integer(sections, "sections", low=6, high=128)
     L, W, storey = 14.0, 6.0, 3.0
-    s = Scene(Camera(eye=(-6.2, 1.6, 0.0), target=(3.0, 2.8, 0.0), up=(0, 1, 0), fov=65.0,
-                     width=width, height=height))
+    s = Scene(
+        Camera(
+            eye=(-6.2, 1.6, 0.0),
+            target=(3.0, 2.8, 0.0),
+            up=(0, 1, 0),
+            fov=65.0,
+            width=width,
+            height=height,
+        )
+    )
     hall, _ = _room((L, 2 * storey, W), 0.7, open_top=True)
     s.add(hall, Material(albedo=(0.75, 0.7, 0.62)), name="hall")
     parts = []
@@ -433,13 +601,14 @@ def sponza_atrium(width: int = 512, height: int = 512, columns_per_side: int = 7
             z = side * (W / 2 - 1.0)
             xs = np.linspace(-L / 2 + 1.5, L / 2 - 1.5, columns_per_side)
             for x in xs:
-                col = trimesh.creation.cylinder(radius=0.18, height=storey * 0.62,
-                                                sections=sections)
+                col = trimesh.creation.cylinder(
+                    radius=0.18, height=storey * 0.62, sections=sections
+                )
                 col.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [1, 0, 0]))
                 col.apply_translation([x, y0 + storey * 0.31, z])
                 parts.append(col)
             span = xs[1] - xs[0]
-            for a, b in zip(xs[:-1], xs[1:]):  # an arch of 8 voussoir blocks
+            for a, b in itertools.pairwise(xs):  # an arch of 8 voussoir blocks
                 r = span / 2
                 for k in range(8):
                     t0, t1 = math.pi * k / 8, math.pi * (k + 1) / 8
@@ -447,8 +616,9 @@ def sponza_atrium(width: int = 512, height: int = 512, columns_per_side: int = 7
                     cx = (a + b) / 2 - r * math.cos(tm)
                     cy = y0 + storey * 0.62 + r * math.sin(tm) * 0.5
                     blk = _box([r * (t1 - t0) * 1.05, 0.25, 0.3], [0, 0, 0])
-                    blk.apply_transform(trimesh.transformations.rotation_matrix(
-                        math.pi / 2 - tm, [0, 0, 1]))
+                    blk.apply_transform(
+                        trimesh.transformations.rotation_matrix(math.pi / 2 - tm, [0, 0, 1])
+                    )
                     blk.apply_translation([cx, cy, z])
                     parts.append(blk)
             # the storey's floor slab / balcony over the arcade
