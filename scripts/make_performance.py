@@ -265,8 +265,8 @@ def paper_tables() -> list[str]:
     if not rows:
         return []
     return ["## The paper's tables", "",
-            "voxgi's procedural look-alikes of the paper's test scenes (their geometry was "
-            "never published, so the comparison is by kind, not exact), at matching record "
+            "voxgi's procedural look-alikes of the paper's test scenes (the paper does not "
+            "publish their geometry, so the comparison is by kind, not exact), at matching record "
             "counts, radii and light path lengths (LPL), 512x512 display. Seconds for shooting "
             "(ST), linear propagation (LT), display (RTT) and in total (TT); the paper's "
             f"figures in parentheses (one 1.86 GHz core; voxgi {threads} threads; the paper's "
