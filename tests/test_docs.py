@@ -13,8 +13,12 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_performance_page_matches_the_json():
     # The page is generated: an edit by hand, or a JSON re-run without
     # regenerating the page, makes it differ from the script's output.
-    res = subprocess.run([sys.executable, str(ROOT / "scripts" / "make_performance.py"), "--check"],
-                         capture_output=True, text=True, check=False)
+    res = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "make_performance.py"), "--check"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert res.returncode == 0, res.stdout + res.stderr
 
 
