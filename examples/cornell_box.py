@@ -9,7 +9,7 @@ then gathering the bounces), and display the result by progressive ray
 tracing with virtual point lights. Writes ``cornell_box.exr`` (linear
 radiance) and ``cornell_box.png``.
 
-Run: ``python examples/cornell_box.py`` (about half a minute on two cores).
+Run: ``python examples/cornell_box.py`` (about a minute on two cores).
 """
 
 import voxgi
@@ -24,7 +24,7 @@ s = sol.stats
 print(
     f"solved: {sol.bounces} bounces, {s['shoot_rays']:,} shooting and {s['gather_rays']:,} "
     f"gathering rays in {s['seconds']['total']:.1f} s; "
-    f"energy imbalance {max(s['energy']['imbalance']):.2%}"
+    "energy imbalance (R / G / B) " + " / ".join(f"{x:+.2%}" for x in s["energy"]["imbalance"])
 )
 
 out = voxgi.render(scene, sol, progress=False)
