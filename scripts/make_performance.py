@@ -1,0 +1,723 @@
+"""Write docs/performance.md from the benchmark JSON in benchmarks/results/.
+
+Run: ``python scripts/make_performance.py`` (``--check`` exits 1 if the
+committed page differs from what the JSON gives, ``--stdout`` prints it).
+Every table names the command that writes its JSON; re-run that command,
+then this script, to refresh the page.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+OUT = ROOT / "docs" / "performance.md"
+
+
+def load(name: str) -> dict | None:
+    path = RESULTS / name
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def pct(x: float | None, digits: int = 2) -> str:
+    """A fraction as a percentage; tiny values keep two significant digits."""
+    if x is None:
+        return ""
+    v = 100.0 * x
+    if v == 0:
+        return "0"
+    if abs(v) < 0.01:
+        return f"{v:.1e}%"
+    return f"{v:.{digits}f}%"
+
+
+def sci(x: float | None) -> str:
+    return "" if x is None else f"{x:.2g}" if x == 0 else f"{x:.2e}"
+
+
+def secs(x: float | None) -> str:
+    if x is None:
+        return ""
+    return f"{x:.3g}" if x < 100 else f"{x:.0f}"
+
+
+def table(header: list[str], rows: list[list]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def source(cmd: str, *files: str) -> str:
+    names = ", ".join(f"`benchmarks/results/{f}`" for f in files)
+    return f"Command: `{cmd}` (writes {names})."
+
+
+def machine(d: dict) -> str:
+    cpu = d.get("cpu") or "x86-64"
+    cores = d.get("cores") or d.get("cpu_count")
+    return f"{cpu}, {cores} cores" if cores else cpu
+
+
+# ----------------------------------------------------------------------------- sections
+
+
+def furnaces() -> list[str]:
+    out = [
+        "## Furnaces",
+        "",
+        "Closed enclosures where every surface emits `Le = 1` with albedo ρ: the exact "
+        "radiance is `Le / (1 - ρ)` everywhere (`docs/design.md §1`). Error of the front "
+        "records against it (mean of |error|, and the largest), iterations, and the lost "
+        "fraction δ (`docs/design.md §5`). R 8, shooting R 8.",
+        "",
+    ]
+    names = {
+        "sphere": "sphere",
+        "sphere+box": "sphere with a closed box inside",
+        "box": "box",
+        "box+sphere": "box with a closed sphere inside",
+    }
+    for fname, cmd in (
+        ("propagation_furnace.json", "python benchmarks/propagation.py furnace"),
+        ("propagation_furnace_res96_R8.json", "python benchmarks/propagation.py furnace --res 96"),
+    ):
+        d = load(fname)
+        if d is None:
+            continue
+        res = d["rows"][0]["res"]
+        rhos = sorted({r["rho"] for r in d["rows"]})
+        scenes = list(dict.fromkeys(r["scene"] for r in d["rows"]))
+        by = {(r["scene"], r["rho"]): r for r in d["rows"]}
+        rows = []
+        for s in scenes:
+            cells = [names.get(s, s), f"{by[(s, rhos[0])]['records']:,}"]
+            for rho in rhos:
+                r = by.get((s, rho))
+                cells.append(
+                    ""
+                    if r is None
+                    else f"{pct(r['mean_err'])} / {pct(r['max_err'])} ({r['iters']} it)"
+                )
+            cells.append(sci(max(0.0, by[(s, rhos[0])]["delta"])))
+            rows.append(cells)
+        out += [
+            f"**Resolution {res}**",
+            "",
+            table(["scene", "records"] + [f"ρ {rho}: mean / max" for rho in rhos] + ["δ"], rows),
+            "",
+            source(cmd, fname),
+            "",
+        ]
+    return out
+
+
+def cap_sphere() -> list[str]:
+    d = load("propagation_cap.json")
+    if d is None:
+        return []
+    radii = sorted({r["R"] for r in d["rows"]})
+    ress = sorted({r["res"] for r in d["rows"]})
+    by = {(r["res"], r["R"]): r for r in d["rows"]}
+    rows = [
+        [res, f"{by[(res, radii[0])]['records']:,}"]
+        + [f"{pct(by[(res, R)]['mean_err'])} / {pct(by[(res, R)]['max_err'])}" for R in radii]
+        for res in ress
+    ]
+    return [
+        "## Sphere with an emitting cap",
+        "",
+        f"Inside a sphere every pair of points has the same form factor, so "
+        f"`L(x) = Le(x) + ρ L̄e / (1 - ρ)` (`docs/design.md §1`): this checks the "
+        f"visibility weights, not only the energy. ρ {d['rho']}, shooting radius equal "
+        f"to the gathering radius R; mean / max relative error of the front records.",
+        "",
+        table(["resolution", "records"] + [f"R {R}" for R in radii], rows),
+        "",
+        source("python benchmarks/propagation.py cap", "propagation_cap.json"),
+        "",
+    ]
+
+
+def extrapolation() -> list[str]:
+    d = load("propagation_accel.json")
+    if d is None:
+        return []
+    rows = [
+        [
+            r["scene"],
+            "on" if r["extrapolate"] else "off",
+            r["iters"],
+            sci(r["mean_err_vs_converged"]),
+            sci(r["max_err_vs_converged"]),
+            secs(r["seconds"]),
+        ]
+        for r in d["rows"]
+    ]
+    return [
+        "## Convergence at high albedo",
+        "",
+        "Iterations to `tol = 1e-4` at albedo 0.99 with and without the geometric-tail "
+        "extrapolation (`docs/design.md §5`; the solver always extrapolates, the 'off' rows "
+        "show what it saves), at most 300 iterations; error against a solve to 1e-8.",
+        "",
+        table(["scene", "extrapolation", "iterations", "mean error", "max error", "seconds"], rows),
+        "",
+        source("python benchmarks/propagation.py accel", "propagation_accel.json"),
+        "",
+    ]
+
+
+def later_bounces() -> list[str]:
+    d = load("propagation_later.json")
+    if d is None:
+        return []
+    rows = [
+        [
+            r["R"],
+            r["later_R"] if r["later_R"] is not None else "same",
+            r["iters"],
+            secs(r["gather_s"]),
+            pct(r["mean_err_vs_R22"]),
+            pct(r["p99_err_vs_R22"]),
+        ]
+        for r in d["rows"]
+    ]
+    return [
+        "## Coarser later bounces",
+        "",
+        f"Cornell box at resolution {d['res']}: gathering radius R for the first two "
+        "bounces and `later_directions` after them (`SolveTuning`, `docs/design.md §5`), "
+        "against R 22 throughout (tol 1e-6). 'same' is the plain fixed-point solve.",
+        "",
+        table(["R", "later R", "iterations", "gathering s", "mean error", "99th percentile"], rows),
+        "",
+        source("python benchmarks/propagation.py later", "propagation_later.json"),
+        "",
+    ]
+
+
+def energy() -> list[str]:
+    out = [
+        "## Energy balance",
+        "",
+        "The open Cornell box: `(emitted - absorbed - escaping) / emitted` per channel, the "
+        "escaping power counted on the sender side (`docs/design.md §5`). It measures how "
+        "well the discretisation conserves energy; it converges with the resolution "
+        "(`docs/design.md §10`). Solve tolerance 1e-5, 2 threads.",
+        "",
+    ]
+    for fname in ("propagation_energy_R8.json", "propagation_energy_R22.json"):
+        d = load(fname)
+        if d is None:
+            continue
+        r0 = d["rows"][0]
+        rows = [
+            [
+                r["res"],
+                f"{r['records']:,}",
+                r["iters"],
+                " / ".join(pct(r[f"imbalance_{c}"], 3) for c in "rgb"),
+                f"{r['escaping/emitted']:.3f}",
+                secs(r["seconds"]),
+            ]
+            for r in d["rows"]
+        ]
+        res_list = " ".join(str(r["res"]) for r in d["rows"])
+        cmd = (
+            f"python benchmarks/propagation.py energy --radii {r0['R']} {r0['Rs']} "
+            f"--res {res_list} --threads 2"
+        )
+        out += [
+            f"**Gathering R {r0['R']}, shooting R {r0['Rs']}**",
+            "",
+            table(
+                [
+                    "resolution",
+                    "records",
+                    "iterations",
+                    "imbalance R / G / B",
+                    "escaping / emitted",
+                    "solve s",
+                ],
+                rows,
+            ),
+            "",
+            source(cmd, fname),
+            "",
+        ]
+    d = load("propagation_cornell.json")
+    if d is not None:
+        rows = [
+            [
+                r["scene"],
+                r["res"],
+                f"{r['records']:,}",
+                " / ".join(pct(r[f"imbalance_{c}"], 3) for c in "rg"),
+                f"{r['absorbed/emitted']:.4f}",
+            ]
+            for r in d["rows"]
+            if r.get("coverage", True) and r.get("silhouettes", True)
+        ]
+        out += [
+            "**Direct light and closed variants** (R 8; 'albedo 0' keeps only the shooting)",
+            "",
+            table(
+                ["Cornell box", "resolution", "records", "imbalance R / G", "absorbed / emitted"],
+                rows,
+            ),
+            "",
+            source("python benchmarks/propagation.py cornell", "propagation_cornell.json"),
+            "",
+        ]
+    return out
+
+
+def linear() -> list[str]:
+    d = load("propagation_linear.json")
+    if d is None:
+        return []
+    rows = [
+        [
+            f"{r['records']:,}",
+            r["R"],
+            f"{r['families']:,}",
+            r["iters"],
+            secs(r["seconds"]),
+            f"{r['ns_per_ray']:.1f}",
+        ]
+        for r in d["rows"]
+    ]
+    return [
+        "## Linear cost",
+        "",
+        "Gathering time for N, 2N and 4N records (the bunny room at three resolutions) "
+        "and for more directions, fixed iterations, 1 thread. A gathering ray is one record "
+        "meeting one direction family in one iteration (`docs/design.md §7`); a constant "
+        "cost per ray is linear time.",
+        "",
+        table(["records", "R", "families", "iterations", "seconds", "ns per ray"], rows),
+        "",
+        "![linear cost](../benchmarks/results/linear_cost.png)",
+        "",
+        source("python benchmarks/propagation.py linear", "propagation_linear.json"),
+        "",
+    ]
+
+
+def throughput() -> list[str]:
+    out = []
+    d = load("propagation_throughput.json")
+    if d is not None:
+        r0 = d["rows"][0]
+        what = {
+            "onepass": "walk the lines (one pass)",
+            "sort": "walk the lines (sorted)",
+            "record": "walk and record the pairs",
+            "replay": "replay the recorded pairs",
+            "solve4 (record + 3 replays)": "a 4-iteration solve (1 recording, 3 replays)",
+        }
+        rows = [
+            [
+                what.get(r["algorithm"], r["algorithm"]),
+                r["threads"],
+                secs(r["seconds"]),
+                f"{r['Mrays_s']:.1f}",
+                f"{r['Mrays_s_per_thread']:.1f}",
+                f"{r['table_GB']:.2f}" if r["table_GB"] else "",
+            ]
+            for r in d["rows"]
+        ]
+        out += [
+            "## Gathering throughput",
+            "",
+            f"The bunny room, {r0['records']:,} records, R {r0['R']} (2,991 families): one "
+            "gathering pass in each mode, and what a 4-iteration solve makes of them (one "
+            "recording pass, three replays; `docs/design.md §4`).",
+            "",
+            table(
+                ["pass", "threads", "seconds", "M rays/s", "M rays/s per thread", "pair table GB"],
+                rows,
+            ),
+            "",
+            source("python benchmarks/propagation.py throughput", "propagation_throughput.json"),
+            "",
+        ]
+    d = load("propagation_paper.json")
+    if d is not None:
+        r0 = d["rows"][0]
+        rows = [
+            [
+                r["threads"],
+                r["pairs"],
+                secs(r["shoot_s"]),
+                secs(r["gather_s"]),
+                f"{r['gather_Mrays_s_per_thread']:.0f}",
+                f"{r['shoot_Mrays_s']:.2f}",
+            ]
+            for r in d["rows"]
+        ]
+        out += [
+            "## The paper's work unit",
+            "",
+            f"About {r0['records']:,} records ({r0['emitters']} emitters), gathering R 22 "
+            f"for 4 iterations, shooting R 35 from a small area light. The paper reports "
+            f"{r0['paper_propagate_s']} s of propagation and {r0['paper_shoot_s']} s of "
+            "shooting on one 1.86 GHz core.",
+            "",
+            table(
+                [
+                    "threads",
+                    "pairs",
+                    "shooting s",
+                    "gathering s",
+                    "gathering M rays/s per thread",
+                    "shooting M rays/s",
+                ],
+                rows,
+            ),
+            "",
+            source("python benchmarks/propagation.py paper", "propagation_paper.json"),
+            "",
+        ]
+    return out
+
+
+def voxelize() -> list[str]:
+    d = load("voxelize.json")
+    if d is None:
+        return []
+    rows = [
+        [
+            r["case"],
+            f"{r['triangles']:,}",
+            r["resolution"],
+            f"{r['records']:,}",
+            secs(r["median_s"]),
+            f"{r['rss_peak_bytes'] / 2**20:.0f}",
+        ]
+        for r in d["results"]
+    ]
+    return [
+        "## Voxelization",
+        "",
+        f"Median of repeated runs, {d['threads']} threads.",
+        "",
+        table(["mesh", "triangles", "resolution", "records", "seconds", "peak MB"], rows),
+        "",
+        source("python benchmarks/voxelize.py", "voxelize.json"),
+        "",
+    ]
+
+
+def paper_tables() -> list[str]:
+    rows = []
+    threads = None
+    for fname in ("paper_tables.json", "paper_tables_sponza.json"):
+        d = load(fname)
+        if d is None:
+            continue
+        threads = d["threads"]
+        for r in d["rows"]:
+            p = r["paper"]
+            rows.append(
+                [
+                    r["scene"],
+                    f"{r['front_records']:,}",
+                    f"{p['voxels']:,}",
+                    f"{r['SR']} / {r['LR']}",
+                    r["LPL"],
+                    f"{secs(r['ST'])} ({p['ST']})",
+                    f"{secs(r['LT'])} ({p['LT']})",
+                    f"{secs(r['RTT'])} ({p['RTT']})",
+                    f"{secs(r['TT'])} ({p['TT']})",
+                ]
+            )
+    if not rows:
+        return []
+    return [
+        "## The paper's tables",
+        "",
+        "voxgi's procedural look-alikes of the paper's test scenes (the paper does not "
+        "publish their geometry, so the comparison is by kind, not exact), at matching record "
+        "counts, radii and light path lengths (LPL), 512x512 display. Seconds for shooting "
+        "(ST), linear propagation (LT), display (RTT) and in total (TT); the paper's "
+        f"figures in parentheses (one 1.86 GHz core; voxgi {threads} threads; the paper's "
+        "Sponza display is 1024x768).",
+        "",
+        table(
+            [
+                "scene",
+                "front records",
+                "paper voxels",
+                "SR / LR",
+                "LPL",
+                "ST s",
+                "LT s",
+                "RTT s",
+                "TT s",
+            ],
+            rows,
+        ),
+        "",
+        "Command: `python benchmarks/paper_tables.py --scenes labyrinth emission shadow "
+        "geometric bunny` and `python benchmarks/paper_tables.py --scenes sponza --out "
+        "benchmarks/results/paper_tables_sponza.json` (write "
+        "`benchmarks/results/paper_tables.json`, `benchmarks/results/paper_tables_sponza.json`).",
+        "",
+    ]
+
+
+def _mitsuba_time(d: dict, err: float) -> float | None:
+    """Mitsuba's time to a relMSE, from its sweep (error falls as 1/spp)."""
+    pts = sorted((m["rel_mse"], m["seconds"]) for m in d["mitsuba"])
+    best = min(pts, key=lambda p: abs(p[0] - err) / p[0])
+    return best[1] * best[0] / err
+
+
+def versus_mitsuba() -> list[str]:
+    out = [
+        "## Against a path tracer",
+        "",
+        "Time to an error against a converged Mitsuba 3 reference (`docs/design.md §9`): "
+        "relMSE = mean((x - r)² / (r² + 0.01)); voxgi timed over voxelize + solve + display "
+        "(its relMSE the mean of three seeds), Mitsuba 3 (`llvm_ad_rgb`) per render, in the "
+        "same run on 2 threads.",
+        "",
+    ]
+    for fname, title, cmd in (
+        (
+            "time_vs_error_256.json",
+            "Cornell box, 256x256",
+            "python benchmarks/time_vs_error.py --size 256 --split",
+        ),
+        (
+            "time_vs_error_512.json",
+            "Cornell box, 512x512",
+            "python benchmarks/time_vs_error.py --size 512 --spp 4 16 64 256",
+        ),
+        (
+            "time_vs_error_shadow_256.json",
+            "`shadow`, 256x256",
+            "python benchmarks/time_vs_error.py --scene shadow --size 256 --high",
+        ),
+        (
+            "time_vs_error_geometric_256.json",
+            "`geometric`, 256x256",
+            "python benchmarks/time_vs_error.py --scene geometric --size 256 --high",
+        ),
+    ):
+        d = load(fname)
+        if d is None:
+            continue
+        rows = [
+            [f"Mitsuba 3, {m['spp']} spp", secs(m["seconds"]), sci(m["rel_mse"]), ""]
+            for m in d["mitsuba"]
+        ]
+        for v in d["voxgi"]:
+            tol = v["render"].get("tol")
+            how = (
+                f"{v['frames']} frames"
+                if tol == 0
+                else f"tol {tol or 1e-3:.0e}".replace("e-0", "e-")
+            )
+            label = f"voxgi res {v['resolution']}, R {v['directions']}, {how}"
+            t_m = _mitsuba_time(d, v["rel_mse"])
+            rows.append(
+                [
+                    label,
+                    secs(v["seconds"]),
+                    sci(v["rel_mse"]),
+                    f"{t_m / v['seconds']:.1f}x" if t_m else "",
+                ]
+            )
+        if "second_view" in d:
+            rows.append(
+                [
+                    "voxgi, a second view of the saved solution (display only)",
+                    secs(d["second_view"]["seconds"]),
+                    "",
+                    "",
+                ]
+            )
+        png = fname.replace(".json", ".png")
+        out += [
+            f"**{title}**",
+            "",
+            table(
+                [
+                    "renderer / setting",
+                    "seconds",
+                    "relMSE",
+                    "Mitsuba's time to that error / voxgi's",
+                ],
+                rows,
+            ),
+            "",
+        ]
+        if (RESULTS / png).exists():
+            out += [f"![time against error](../benchmarks/results/{png})", ""]
+        if "split" in d:
+            srows = [
+                [r["resolution"], r["frames"], sci(r["rel_mse_vs_ref"])] for r in d["split"]["rows"]
+            ]
+            out += [
+                "The voxels' own error (long renders, so that the display's noise is "
+                f"small) against the display's noise at the defaults "
+                f"({sci(d['split']['display_noise_rel_mse'])}):",
+                "",
+                table(["resolution", "frames", "relMSE"], srows),
+                "",
+            ]
+        out += [source(cmd, fname), ""]
+    d = load("cornell_defaults.json")
+    if d is not None:
+        rows = [
+            [
+                f"{size}x{size}",
+                secs(s["whole_pipeline"]),
+                secs(s["display"]),
+                s["frames"],
+                sci(s["rel_mse"]),
+                sci(s["est_noise_rel_mse"]),
+            ]
+            for size, s in d["sizes"].items()
+        ]
+        out += [
+            "**`voxgi.render(scene)` with the defaults** (Cornell box, resolution "
+            f"{d['resolution']}, {d['records']:,} records, solve {secs(d['solve'])} s in "
+            f"{d['bounces']} bounces)",
+            "",
+            table(
+                [
+                    "size",
+                    "whole pipeline s",
+                    "display s",
+                    "frames",
+                    "relMSE",
+                    "estimated noise relMSE",
+                ],
+                rows,
+            ),
+            "",
+            source("python benchmarks/cornell_defaults.py", "cornell_defaults.json"),
+            "",
+        ]
+    return out
+
+
+def distributed() -> list[str]:
+    d = load("distributed.json")
+    if d is None:
+        return []
+    rows = [
+        [
+            r["where"],
+            r["workers"] or "",
+            secs(r["startup_s"]) if r["workers"] else "",
+            secs(r["solve_s"]),
+            secs(r["render_s"]),
+            sci(r.get("solve_rel_diff")) if r["workers"] else "",
+            sci(r.get("image_max_abs_diff")) if r["workers"] else "",
+        ]
+        for r in d["rows"]
+    ]
+    c1 = d["cost"]["1"]
+    p = d["params"]
+    return [
+        "## Distribution",
+        "",
+        f"The bunny room at resolution {p['resolution']} ({d['records']:,} records), "
+        f"R {p['directions']} / shooting {p['shoot_directions']}, {p['max_bounces']} "
+        f"iterations; render {p['width']}x{p['width']}, {p['frames']} frames. 'local' uses "
+        "both cores; each Dask worker one thread, on the same two cores, so this shows the "
+        "overhead and that the answers are equal, not a speed-up (`docs/design.md §8`).",
+        "",
+        table(
+            [
+                "where",
+                "workers",
+                "cluster start s",
+                "solve s",
+                "render s",
+                "solve rel. diff",
+                "image diff",
+            ],
+            rows,
+        ),
+        "",
+        f"Cost-model terms: c = {c1['c_s_per_record_family']:.2g} s per record and family "
+        f"on one core, o = {c1['o_s_per_call']:.2g} s per distributed call with one worker "
+        f"({c1['bytes_per_call_per_worker']:,} bytes per call and worker).",
+        "",
+        source("python benchmarks/distributed.py", "distributed.json"),
+        "",
+    ]
+
+
+def build() -> str:
+    meta = load("propagation_furnace.json") or {}
+    lines = [
+        "# Performance and accuracy",
+        "",
+        "<!-- Generated by scripts/make_performance.py from benchmarks/results/*.json; "
+        "do not edit by hand. -->",
+        "",
+        "Figures of the benchmark scripts in `benchmarks/`, each of which writes the JSON "
+        "named under its table (`python benchmarks/run_all.py` runs them all; then "
+        "`python scripts/make_performance.py` rewrites this page). Measured on "
+        f"{machine(meta)}, no GPU; timings on a shared machine vary by up to a third "
+        "between runs, errors do not. The method behind each figure is in "
+        "[design.md](design.md).",
+        "",
+        "Contents: furnaces, the emitting-cap sphere, convergence at high albedo, coarser "
+        "later bounces, energy balance, linear cost, throughput, the paper's work unit, "
+        "voxelization, the paper's tables, time against error versus Mitsuba 3, "
+        "distribution.",
+        "",
+    ]
+    for part in (
+        furnaces,
+        cap_sphere,
+        extrapolation,
+        later_bounces,
+        energy,
+        linear,
+        throughput,
+        voxelize,
+        paper_tables,
+        versus_mitsuba,
+        distributed,
+    ):
+        lines += part()
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument(
+        "--check",
+        action="store_true",
+        help="exit 1 if docs/performance.md is not what the JSON gives",
+    )
+    ap.add_argument("--stdout", action="store_true", help="print instead of writing")
+    args = ap.parse_args(argv)
+    text = build()
+    if args.stdout:
+        sys.stdout.write(text)
+        return 0
+    if args.check:
+        same = OUT.exists() and OUT.read_text() == text
+        if not same:
+            print(f"{OUT.relative_to(ROOT)} is out of date: run python scripts/make_performance.py")
+        return 0 if same else 1
+    OUT.write_text(text)
+    print(f"wrote {OUT.relative_to(ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
