@@ -8,6 +8,7 @@ namespace py = pybind11;
 void bind_voxelize(py::module_ &m);
 void bind_propagate(py::module_ &m);
 void bind_display(py::module_ &m);
+void bind_direct_light(py::module_ &m);
 
 PYBIND11_MODULE(_core, m) {
     m.doc() = "voxgi compiled core: voxelization, discrete-line propagation, VPL shading";
@@ -28,4 +29,5 @@ PYBIND11_MODULE(_core, m) {
     bind_voxelize(m);
     bind_propagate(m);
     bind_display(m);
+    bind_direct_light(m);
 }
