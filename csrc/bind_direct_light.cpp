@@ -1,8 +1,8 @@
 // Bindings of the direct-light kernels (direct_light.h).
-#include <cmath>
-
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
+
+#include <cmath>
 
 #include "direct_light.h"
 #include "pycommon.h"
@@ -13,17 +13,24 @@ using namespace voxgi::py_helpers;
 
 namespace {
 
-voxgi::EmitterTriangles emitters(const F64 &corners, const F64 &normal, const U8 &two_sided,
-                                 const F64 &radiance, const F64 &cdf, const F64 &density) {
+// The arrays behind an EmitterTriangles, checked; kept alive by the caller.
+voxgi::EmitterTriangles emitters(const py::tuple &t) {
+    if (t.size() != 6) throw py::value_error("emitters: expected 6 arrays");
+    const auto corners = t[0].cast<F64>();
     if (corners.ndim() != 3 || corners.shape(1) != 3 || corners.shape(2) != 3)
-        throw py::value_error("corners must have shape (E, 3, 3)");
+        throw py::value_error("emitters: corners must have shape (E, 3, 3)");
     const py::ssize_t e = corners.shape(0);
-    if (e == 0) throw py::value_error("corners: no emitting triangle");
-    check_2d(normal, e, 3, "normal");
-    check_1d(two_sided, e, "two_sided");
-    check_2d(radiance, e, 3, "radiance");
-    check_1d(cdf, e, "cdf");
-    check_1d(density, e, "density");
+    if (e == 0) throw py::value_error("emitters: no emitting triangle");
+    const auto normal = t[1].cast<F64>();
+    const auto two_sided = t[2].cast<U8>();
+    const auto radiance = t[3].cast<F64>();
+    const auto cdf = t[4].cast<F64>();
+    const auto density = t[5].cast<F64>();
+    check_2d(normal, e, 3, "emitters: normal");
+    check_1d(two_sided, e, "emitters: two_sided");
+    check_2d(radiance, e, 3, "emitters: radiance");
+    check_1d(cdf, e, "emitters: cdf");
+    check_1d(density, e, "emitters: density");
     voxgi::EmitterTriangles em;
     em.count = e;
     em.corners = corners.data();
@@ -35,51 +42,70 @@ voxgi::EmitterTriangles emitters(const F64 &corners, const F64 &normal, const U8
     return em;
 }
 
-py::tuple rays(const F64 &corners, const F64 &normal, const U8 &two_sided, const F64 &radiance,
-               const F64 &cdf, const F64 &density, const F64 &point, const F64 &rec_normal,
-               const F64 &shift, const F64 &sequence, double offset, int threads) {
-    const voxgi::EmitterTriangles em = emitters(corners, normal, two_sided, radiance, cdf, density);
+voxgi::DirectLightQuery query(const F64 &point, const F64 &normal, const F64 &shift,
+                              const F64 &sequence, double offset) {
     check_2d(point, -1, 3, "point");
     const py::ssize_t n = point.shape(0);
-    check_2d(rec_normal, n, 3, "normal of the records");
-    check_2d(shift, n, 3, "shift");
-    check_2d(sequence, -1, 3, "sequence");
+    check_2d(normal, n, 3, "normal");
+    check_2d(shift, n, 5, "shift");
+    check_2d(sequence, -1, 5, "sequence");
     if (!(offset >= 0.0) || !std::isfinite(offset)) throw py::value_error("offset must be >= 0");
     voxgi::DirectLightQuery q;
     q.records = n;
     q.point = point.data();
-    q.normal = rec_normal.data();
+    q.normal = normal.data();
     q.shift = shift.data();
     q.samples = sequence.shape(0);
     q.sequence = sequence.data();
     q.offset = offset;
-    const py::ssize_t m = n * q.samples;
-    F32 org({m, py::ssize_t(3)}), dir({m, py::ssize_t(3)}), len({m}), con({m, py::ssize_t(3)});
-    float *o = org.mutable_data(), *d = dir.mutable_data(), *l = len.mutable_data(),
-          *c = con.mutable_data();
-    const voxgi::StopCheck stop = make_stop_check();
-    {
-        py::gil_scoped_release release;
-        voxgi::direct_light_rays(em, q, o, d, l, c, voxgi::resolve_threads(threads), stop);
-    }
-    return py::make_tuple(org, dir, len, con);
+    return q;
 }
 
-py::tuple sum(const F32 &contribution, const I32 &hit, py::ssize_t samples, int threads) {
-    check_2d(contribution, -1, 3, "contribution");
-    const py::ssize_t m = contribution.shape(0);
-    check_1d(hit, m, "hit");
-    if (samples < 1 || m % samples != 0)
-        throw py::value_error("samples must divide the number of rays");
-    const py::ssize_t n = m / samples;
-    F64 out({n, py::ssize_t(3)}), sq({n});
-    const float *c = contribution.data();
-    const int32_t *h = hit.data();
-    double *o = out.mutable_data(), *s = sq.mutable_data();
+py::tuple rays(const py::tuple &emit, const F64 &point, const F64 &normal, const F64 &shift,
+               const F64 &sequence, double offset, int threads) {
+    const voxgi::EmitterTriangles em = emitters(emit);
+    const voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
+    const py::ssize_t m = q.records * q.samples, three = 3;
+    F32 lo({m, three}), ld({m, three}), ll({m}), con({m, three}), ho({m, three}), hd({m, three});
+    float *plo = lo.mutable_data(), *pld = ld.mutable_data(), *pll = ll.mutable_data(),
+          *pc = con.mutable_data(), *pho = ho.mutable_data(), *phd = hd.mutable_data();
     const voxgi::StopCheck stop = make_stop_check();
     {
         py::gil_scoped_release release;
-        voxgi::direct_light_sum(n, samples, c, h, o, s, voxgi::resolve_threads(threads), stop);
+        voxgi::direct_light_rays(em, q, plo, pld, pll, pc, pho, phd, voxgi::resolve_threads(threads),
+                                 stop);
+    }
+    return py::make_tuple(lo, ld, ll, con, ho, hd);
+}
+
+py::tuple sum(const py::tuple &emit, const F64 &point, const F64 &normal, const F64 &shift,
+              const F64 &sequence, double offset, const F32 &contribution, const I32 &light_hit,
+              const F32 &hemi_direction, const I32 &hemi_hit, const F32 &hemi_u, const F32 &hemi_v,
+              const I32 &emitter_of, int threads) {
+    const voxgi::EmitterTriangles em = emitters(emit);
+    const voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
+    const py::ssize_t m = q.records * q.samples;
+    check_2d(contribution, m, 3, "contribution");
+    check_1d(light_hit, m, "light_hit");
+    check_2d(hemi_direction, m, 3, "hemi_direction");
+    check_1d(hemi_hit, m, "hemi_hit");
+    check_1d(hemi_u, m, "hemi_u");
+    check_1d(hemi_v, m, "hemi_v");
+    check_1d(emitter_of, -1, "emitter_of");
+    const int32_t *eo = emitter_of.data();
+    for (py::ssize_t t = 0; t < emitter_of.shape(0); ++t)
+        if (eo[t] >= em.count) throw py::value_error("emitter_of: index past the emitters");
+    F64 out({q.records, py::ssize_t(3)}), sq({q.records});
+    const float *pc = contribution.data(), *phd = hemi_direction.data(), *pu = hemi_u.data(),
+                *pv = hemi_v.data();
+    const int32_t *plh = light_hit.data(), *phh = hemi_hit.data();
+    double *po = out.mutable_data(), *ps = sq.mutable_data();
+    const int64_t nt = emitter_of.shape(0);
+    const voxgi::StopCheck stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::direct_light_sum(em, q, pc, plh, phd, phh, pu, pv, eo, nt, po, ps,
+                                voxgi::resolve_threads(threads), stop);
     }
     return py::make_tuple(out, sq);
 }
@@ -87,16 +113,20 @@ py::tuple sum(const F32 &contribution, const I32 &hit, py::ssize_t samples, int 
 }  // namespace
 
 void bind_direct_light(py::module_ &m) {
-    m.def("direct_light_rays", &rays, "corners"_a.noconvert(), "normal"_a.noconvert(),
-          "two_sided"_a.noconvert(), "radiance"_a.noconvert(), "cdf"_a.noconvert(),
-          "density"_a.noconvert(), "point"_a.noconvert(), "record_normal"_a.noconvert(),
+    m.def("direct_light_rays", &rays, "emitters"_a, "point"_a.noconvert(), "normal"_a.noconvert(),
           "shift"_a.noconvert(), "sequence"_a.noconvert(), "offset"_a, "threads"_a = 0,
-          R"doc(Shadow rays from records to points drawn on the emitting triangles.
+          R"doc(The light and hemisphere rays of records (samples each, record-major).
 
-Returns (origin (M, 3) float32, direction (M, 3) float32, length (M,) float32,
-contribution (M, 3) float32) with M = records x samples, record-major.)doc");
-    m.def("direct_light_sum", &sum, "contribution"_a.noconvert(), "hit"_a.noconvert(),
-          "samples"_a, "threads"_a = 0,
-          R"doc(Per record: mean unoccluded contribution (N, 3) float64 and the mean
-square of its luminance (N,) float64; hit != -1 marks an occluded ray.)doc");
+emitters: (corners (E,3,3), normal (E,3), two_sided (E,) uint8, radiance (E,3),
+cdf (E,), density (E,)), float64 but two_sided. point, normal (N,3), shift
+(N,5), sequence (S,5) float64. Returns float32 arrays: light origin (M,3),
+direction (M,3), length (M,), contribution (M,3), hemisphere origin (M,3) and
+direction (M,3), M = N x S.)doc");
+    m.def("direct_light_sum", &sum, "emitters"_a, "point"_a.noconvert(), "normal"_a.noconvert(),
+          "shift"_a.noconvert(), "sequence"_a.noconvert(), "offset"_a,
+          "contribution"_a.noconvert(), "light_hit"_a.noconvert(), "hemi_direction"_a.noconvert(),
+          "hemi_hit"_a.noconvert(), "hemi_u"_a.noconvert(), "hemi_v"_a.noconvert(),
+          "emitter_of"_a.noconvert(), "threads"_a = 0,
+          R"doc(Per record: direct irradiance (N,3) float64 and the mean square of
+the luminance of each light + hemisphere sample pair (N,) float64.)doc");
 }

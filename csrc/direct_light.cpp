@@ -6,18 +6,24 @@
 namespace voxgi {
 namespace {
 
+constexpr double kPi = 3.14159265358979323846;
 constexpr double kLuminance[3] = {0.2126, 0.7152, 0.0722};
 constexpr int64_t kRecordsPerTask = 256;
 
-inline double dot(const double *a, const double *b) {
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+inline double dot(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+// The record's k-th sample point of [0, 1)^5, shifted by the record's shift.
+inline void sample_point(const DirectLightQuery &q, int64_t r, int64_t s, double u[5]) {
+    for (int i = 0; i < 5; ++i) {
+        u[i] = q.sequence[5 * s + i] + q.shift[5 * r + i];
+        if (u[i] >= 1.0) u[i] -= 1.0;
+    }
 }
 
-// Draw triangle and point for one sample u of [0, 1)^3: u[0] by the
-// cumulative table, (u[1], u[2]) uniform in area (square-root warp).
-inline int64_t draw(const EmitterTriangles &em, const double u[3], double y[3]) {
-    const double *end = em.cdf + em.count;
-    int64_t k = std::upper_bound(em.cdf, end, u[0]) - em.cdf;
+// A light sample: triangle by the cumulative table, point uniform in area
+// (square-root warp of the barycentrics).
+inline int64_t draw_light(const EmitterTriangles &em, const double u[3], double y[3]) {
+    int64_t k = std::upper_bound(em.cdf, em.cdf + em.count, u[0]) - em.cdf;
     k = std::min<int64_t>(k, em.count - 1);
     const double s = std::sqrt(u[1]);
     const double b0 = 1.0 - s, b1 = u[2] * s, b2 = 1.0 - b0 - b1;
@@ -26,72 +32,124 @@ inline int64_t draw(const EmitterTriangles &em, const double u[3], double y[3]) 
     return k;
 }
 
+// Cosine of the emitter's normal with the direction back to the receiver
+// (w points from the receiver to the emitter); 0 on a one-sided back.
+inline double emitter_cosine(const EmitterTriangles &em, int64_t k, const double w[3]) {
+    const double c = -dot(w, em.normal + 3 * k);
+    return em.two_sided[k] ? std::fabs(c) : std::max(c, 0.0);
+}
+
+// Cosine-distributed direction about n (Malley's method) in an orthonormal
+// frame built without branches (Duff et al. 2017).
+inline void cosine_direction(const double n[3], double u1, double u2, double w[3]) {
+    const double sign = std::copysign(1.0, n[2]);
+    const double a = -1.0 / (sign + n[2]), b = n[0] * n[1] * a;
+    const double t[3] = {1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]};
+    const double bt[3] = {b, sign + n[1] * n[1] * a, -n[1]};
+    const double rad = std::sqrt(u1), phi = 2.0 * kPi * u2;
+    const double x = rad * std::cos(phi), y = rad * std::sin(phi), z = std::sqrt(std::max(0.0, 1.0 - u1));
+    for (int i = 0; i < 3; ++i) w[i] = x * t[i] + y * bt[i] + z * n[i];
+}
+
+void light_ray(const EmitterTriangles &em, const DirectLightQuery &q, int64_t r, const double u[5],
+               float *o, float *w, float *len, float *c) {
+    const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
+    double y[3], d[3];
+    const int64_t k = draw_light(em, u, y);
+    for (int i = 0; i < 3; ++i) d[i] = y[i] - x[i];
+    const double r2 = dot(d, d), dist = std::sqrt(r2);
+    double cos_x = 0.0, cos_y = 0.0;
+    if (dist > 2.0 * q.offset) {
+        const double wd[3] = {d[0] / dist, d[1] / dist, d[2] / dist};
+        cos_x = dot(wd, nx);
+        cos_y = emitter_cosine(em, k, wd);
+    }
+    if (cos_x <= 0.0 || cos_y <= 0.0) {
+        for (int i = 0; i < 3; ++i) o[i] = float(x[i]), w[i] = float(nx[i]), c[i] = 0.f;
+        *len = 0.f;
+        return;
+    }
+    // off the surface on the lit side; the segment stops an offset short of
+    // the emitter so the emitter does not occlude its own point
+    double org[3], seg[3];
+    for (int i = 0; i < 3; ++i) org[i] = x[i] + q.offset * nx[i], seg[i] = y[i] - org[i];
+    const double sl = std::sqrt(dot(seg, seg));
+    for (int i = 0; i < 3; ++i) o[i] = float(org[i]), w[i] = float(seg[i] / sl);
+    *len = float(std::max(0.0, sl - q.offset));
+    // power heuristic, area measure: f p_light / (p_light^2 + p_hemisphere^2)
+    const double g = cos_x * cos_y / r2, pl = em.density[k], ph = g / kPi;
+    const double weight = g * pl / (pl * pl + ph * ph);
+    for (int i = 0; i < 3; ++i) c[i] = float(weight * em.radiance[3 * k + i]);
+}
+
 }  // namespace
 
-void direct_light_rays(const EmitterTriangles &em, const DirectLightQuery &q, float *origin,
-                       float *direction, float *length, float *contribution, int threads,
+void direct_light_rays(const EmitterTriangles &em, const DirectLightQuery &q, float *light_origin,
+                       float *light_direction, float *light_length, float *contribution,
+                       float *hemi_origin, float *hemi_direction, int threads,
                        const StopCheck &stop) {
     const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
-        const int64_t r0 = task * kRecordsPerTask;
-        const int64_t r1 = std::min(q.records, r0 + kRecordsPerTask);
-        for (int64_t r = r0; r < r1; ++r) {
-            const double *x = q.point + 3 * r, *nx = q.normal + 3 * r, *sh = q.shift + 3 * r;
+        const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
+        for (int64_t r = task * kRecordsPerTask; r < r1; ++r) {
+            const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
             for (int64_t s = 0; s < q.samples; ++s) {
                 const int64_t ray = r * q.samples + s;
-                double u[3], y[3], d[3];
+                double u[5], w[3];
+                sample_point(q, r, s, u);
+                light_ray(em, q, r, u, light_origin + 3 * ray, light_direction + 3 * ray,
+                          light_length + ray, contribution + 3 * ray);
+                cosine_direction(nx, u[3], u[4], w);
                 for (int i = 0; i < 3; ++i) {
-                    u[i] = q.sequence[3 * s + i] + sh[i];
-                    if (u[i] >= 1.0) u[i] -= 1.0;
+                    hemi_origin[3 * ray + i] = float(x[i] + q.offset * nx[i]);
+                    hemi_direction[3 * ray + i] = float(w[i]);
                 }
-                const int64_t k = draw(em, u, y);
-                for (int i = 0; i < 3; ++i) d[i] = y[i] - x[i];
-                const double r2 = dot(d, d), dist = std::sqrt(r2);
-                double cos_x = 0.0, cos_y = 0.0;
-                if (dist > 2.0 * q.offset) {
-                    cos_x = dot(d, nx) / dist;
-                    cos_y = -dot(d, em.normal + 3 * k) / dist;
-                    if (em.two_sided[k]) cos_y = std::fabs(cos_y);
-                }
-                float *o = origin + 3 * ray, *w = direction + 3 * ray, *c = contribution + 3 * ray;
-                if (cos_x <= 0.0 || cos_y <= 0.0) {
-                    for (int i = 0; i < 3; ++i) o[i] = float(x[i]), w[i] = float(nx[i]), c[i] = 0.f;
-                    length[ray] = 0.f;
-                    continue;
-                }
-                // start off the surface on the lit side; the segment ends an
-                // offset short of the emitter so the emitter does not occlude
-                double org[3], seg[3];
-                for (int i = 0; i < 3; ++i) org[i] = x[i] + q.offset * nx[i], seg[i] = y[i] - org[i];
-                const double len = std::sqrt(dot(seg, seg));
-                for (int i = 0; i < 3; ++i) o[i] = float(org[i]), w[i] = float(seg[i] / len);
-                length[ray] = float(std::max(0.0, len - q.offset));
-                const double g = cos_x * cos_y / (r2 * em.density[k]);
-                for (int i = 0; i < 3; ++i) c[i] = float(g * em.radiance[3 * k + i]);
             }
         }
     });
 }
 
-void direct_light_sum(int64_t records, int64_t samples, const float *contribution,
-                      const int32_t *hit, double *irradiance, double *mean_square, int threads,
-                      const StopCheck &stop) {
-    const int64_t tasks = (records + kRecordsPerTask - 1) / kRecordsPerTask;
+void direct_light_sum(const EmitterTriangles &em, const DirectLightQuery &q,
+                      const float *contribution, const int32_t *light_hit, const float *hemi_direction,
+                      const int32_t *hemi_hit, const float *hemi_u, const float *hemi_v,
+                      const int32_t *emitter_of, int64_t scene_triangles, double *irradiance,
+                      double *mean_square, int threads, const StopCheck &stop) {
+    const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
-        const int64_t r0 = task * kRecordsPerTask;
-        const int64_t r1 = std::min(records, r0 + kRecordsPerTask);
-        for (int64_t r = r0; r < r1; ++r) {
+        const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
+        for (int64_t r = task * kRecordsPerTask; r < r1; ++r) {
+            const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
             double sum[3] = {0.0, 0.0, 0.0}, sq = 0.0;
-            for (int64_t s = 0; s < samples; ++s) {
-                const int64_t ray = r * samples + s;
-                if (hit[ray] != -1) continue;
-                const float *c = contribution + 3 * ray;
+            for (int64_t s = 0; s < q.samples; ++s) {
+                const int64_t ray = r * q.samples + s;
+                double pair[3] = {0.0, 0.0, 0.0};
+                if (light_hit[ray] == -1)
+                    for (int i = 0; i < 3; ++i) pair[i] += contribution[3 * ray + i];
+                const int32_t t = hemi_hit[ray];
+                const int32_t k = (t >= 0 && t < scene_triangles) ? emitter_of[t] : -1;
+                if (k >= 0) {
+                    // the hit point from its barycentrics, in double
+                    const double *c = em.corners + 9 * k;
+                    const double bu = hemi_u[ray], bv = hemi_v[ray], b0 = 1.0 - bu - bv;
+                    double d[3];
+                    for (int i = 0; i < 3; ++i) d[i] = b0 * c[i] + bu * c[3 + i] + bv * c[6 + i] - x[i];
+                    const double r2 = dot(d, d);
+                    const double w[3] = {hemi_direction[3 * ray], hemi_direction[3 * ray + 1],
+                                         hemi_direction[3 * ray + 2]};
+                    const double cos_x = std::max(0.0, dot(w, nx)), cos_y = emitter_cosine(em, k, w);
+                    if (cos_y > 0.0 && r2 > 0.0) {
+                        // power heuristic, solid-angle measure
+                        const double pl = em.density[k] * r2 / cos_y, ph = cos_x / kPi;
+                        const double weight = cos_x * ph / (pl * pl + ph * ph);
+                        for (int i = 0; i < 3; ++i) pair[i] += weight * em.radiance[3 * k + i];
+                    }
+                }
                 double lum = 0.0;
-                for (int i = 0; i < 3; ++i) sum[i] += c[i], lum += kLuminance[i] * c[i];
+                for (int i = 0; i < 3; ++i) sum[i] += pair[i], lum += kLuminance[i] * pair[i];
                 sq += lum * lum;
             }
-            for (int i = 0; i < 3; ++i) irradiance[3 * r + i] = sum[i] / double(samples);
-            mean_square[r] = sq / double(samples);
+            for (int i = 0; i < 3; ++i) irradiance[3 * r + i] = sum[i] / double(q.samples);
+            mean_square[r] = sq / double(q.samples);
         }
     });
 }

@@ -1,7 +1,10 @@
-// Direct light on the records: shadow rays from each record's surface point
-// to points drawn on the emitting triangles (docs/design.md §5). The rays are
-// traced by Embree from Python; these kernels make them and sum the
-// unoccluded contributions. No pybind11 here: plain pointers and sizes.
+// Direct light on the records (docs/design.md §5): from each record's surface
+// point, shadow rays to points drawn on the emitting triangles (light
+// sampling) and rays in cosine-distributed directions (hemisphere sampling),
+// combined by the power heuristic (Veach 1997), so that neither a small lamp far away
+// nor a large emitter next to the record gives unbounded variance. Embree
+// traces the rays from Python; these kernels make them and sum what they
+// bring. No pybind11 here: plain pointers and sizes.
 #pragma once
 
 #include <cstdint>
@@ -10,43 +13,53 @@
 
 namespace voxgi {
 
-// The emitting triangles of a scene and the discrete distribution they are
-// drawn from (in proportion to power, uniform in area inside each).
+// The emitting triangles of a scene and the distribution light samples are
+// drawn from (a triangle in proportion to power, a point uniform in area).
 struct EmitterTriangles {
     int64_t count = 0;
-    const double *corners = nullptr;    // (count, 3, 3) corner positions
-    const double *normal = nullptr;     // (count, 3) unit winding normals
-    const uint8_t *two_sided = nullptr; // (count,) nonzero: emits on both sides
-    const double *radiance = nullptr;   // (count, 3) emitted radiance
-    const double *cdf = nullptr;        // (count,) cumulative draw probability, last 1
-    const double *density = nullptr;    // (count,) area density: probability / area
+    const double *corners = nullptr;     // (count, 3, 3) corner positions
+    const double *normal = nullptr;      // (count, 3) unit winding normals
+    const uint8_t *two_sided = nullptr;  // (count,) nonzero: emits on both sides
+    const double *radiance = nullptr;    // (count, 3) emitted radiance
+    const double *cdf = nullptr;         // (count,) cumulative draw probability, last 1
+    const double *density = nullptr;     // (count,) area density of a light sample: probability / area
 };
 
-// The records receiving direct light and the samples each takes.
+// The records lit and the samples each takes: `samples` light samples and
+// as many hemisphere samples, from one shared point set shifted per record
+// (Cranley-Patterson rotation), so each record's samples are stratified.
 struct DirectLightQuery {
     int64_t records = 0;
-    const double *point = nullptr;   // (records, 3) surface points
-    const double *normal = nullptr;  // (records, 3) unit normals of the lit side
-    const double *shift = nullptr;   // (records, 3) per-record shift of the sequence, in [0, 1)
+    const double *point = nullptr;     // (records, 3) surface points
+    const double *normal = nullptr;    // (records, 3) unit normals of the lit side
+    const double *shift = nullptr;     // (records, 5) per-record shift, in [0, 1)
     int64_t samples = 0;
-    const double *sequence = nullptr;  // (samples, 3) points of [0, 1)^3
-    double offset = 0.0;               // shadow-ray offset from both ends, scene units
+    const double *sequence = nullptr;  // (samples, 5) points of [0, 1)^5
+    double offset = 0.0;               // ray offset from the surfaces, scene units
 };
 
-// One shadow ray per record and sample, record-major: origin, unit direction
-// and length (float32, as Embree takes them) and the RGB contribution
-// L_e cos_x cos_y / (r^2 density) the ray brings if it is unoccluded. Rays
-// that cannot contribute (a back face on either end, or closer than twice
-// the offset) get length 0 and contribution 0.
-void direct_light_rays(const EmitterTriangles &em, const DirectLightQuery &q, float *origin,
-                       float *direction, float *length, float *contribution, int threads,
+// The rays of every record and sample, record-major, as Embree takes them
+// (float32 origin, unit direction, length). Light rays end an offset short of
+// their emitter point and are asked "occluded?"; their `contribution` is
+// the RGB they add if unoccluded (already weighted). Hemisphere rays are
+// infinite and asked "which triangle first?". Light rays that cannot
+// contribute (a back face at either end, or closer than twice the offset)
+// get length 0.
+void direct_light_rays(const EmitterTriangles &em, const DirectLightQuery &q, float *light_origin,
+                       float *light_direction, float *light_length, float *contribution,
+                       float *hemi_origin, float *hemi_direction, int threads,
                        const StopCheck &stop);
 
-// Per record: the mean RGB contribution of its unoccluded rays (irradiance)
-// and the mean square of the luminance of each ray's contribution (for its
-// variance). hit[k] != -1 marks ray k occluded (Embree's answer).
-void direct_light_sum(int64_t records, int64_t samples, const float *contribution,
-                      const int32_t *hit, double *irradiance, double *mean_square, int threads,
-                      const StopCheck &stop);
+// Per record: the direct irradiance (the mean over its samples of the pair
+// light + hemisphere sample) and the mean square of that pair's luminance
+// (for its variance). light_hit[k] != -1: light ray k occluded. hemi_hit[k]:
+// the scene triangle hemisphere ray k met first (-1: none), hemi_u/v its
+// barycentrics there; emitter_of[t]: the emitter index of scene triangle t,
+// or -1.
+void direct_light_sum(const EmitterTriangles &em, const DirectLightQuery &q,
+                      const float *contribution, const int32_t *light_hit, const float *hemi_direction,
+                      const int32_t *hemi_hit, const float *hemi_u, const float *hemi_v,
+                      const int32_t *emitter_of, int64_t scene_triangles, double *irradiance,
+                      double *mean_square, int threads, const StopCheck &stop);
 
 }  // namespace voxgi

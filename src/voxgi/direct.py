@@ -58,16 +58,23 @@ class EmitterSampler:
     """
 
     def __init__(self, scene: Scene):
-        tris, rad, two = [], [], []
+        tris, rad, two, owner = [], [], [], []
+        first = 0  # the object's first triangle in the scene's order
         for o in scene.objects:
             le = np.asarray(o.material.emission, np.float64)
+            first += len(o.faces)
             if not np.any(le > 0):
                 continue
+            owner.append(np.arange(first - len(o.faces), first))
             t = o.vertices[o.faces].astype(np.float64)
             tris.append(t)
             rad.append(np.broadcast_to(le, (len(t), 3)))
             two.append(np.full(len(t), bool(o.two_sided)))
+        #: (T,) int32: the emitter index of each scene triangle (in the
+        #: order of :meth:`Scene.triangles`), -1 for those that do not emit
+        self.emitter_of = np.full(first, -1, np.int32)
         if tris:
+            self.emitter_of[np.concatenate(owner)] = np.arange(sum(map(len, owner)), dtype=np.int32)
             self.triangles = np.concatenate(tris)
             self.radiance = np.concatenate(rad).astype(np.float64)
             self.two_sided = np.concatenate(two)
@@ -153,20 +160,38 @@ class _ShadowRays:
                 self._scene.run(org[a:b], dirs[a:b], query="OCCLUDED", dists=length[a:b]), np.int32
             )
 
-        n = len(org)
+        return self._split(len(org), one, pool, np.concatenate)
+
+    def first_hit(
+        self, org: np.ndarray, dirs: np.ndarray, pool: ThreadPoolExecutor | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(R,) int32 triangle each ray meets first (-1: none) and its
+        barycentrics u, v there (float32)."""
+
+        def one(a: int, b: int):
+            h = self._scene.run(org[a:b], dirs[a:b], query="INTERSECT", output=1)
+            return np.asarray(h["primID"], np.int32), h["u"], h["v"]
+
+        def join(parts):
+            return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
+
+        return self._split(len(org), one, pool, join)
+
+    def _split(self, n: int, one, pool, join):
         if pool is None or n < 8192:
             return one(0, n)
         cuts = np.linspace(0, n, self.threads + 1).astype(np.int64)
         futs = [pool.submit(one, int(a), int(b)) for a, b in itertools.pairwise(cuts)]
-        return np.concatenate([f.result() for f in futs])
+        return join([f.result() for f in futs])
 
 
 def _sequence(samples: int, seed: int) -> np.ndarray:
-    """(samples, 3) scrambled Sobol' points: one record's stratified samples."""
+    """(samples, 5) scrambled Sobol' points: one record's stratified samples
+    (three dimensions pick the light point, two the hemisphere direction)."""
     from scipy.stats import qmc
 
     m = max(0, int(np.ceil(np.log2(samples))))
-    pts = qmc.Sobol(3, scramble=True, seed=np.random.default_rng(seed)).random_base2(m)
+    pts = qmc.Sobol(5, scramble=True, seed=np.random.default_rng(seed)).random_base2(m)
     return pts[:samples]
 
 
@@ -178,7 +203,8 @@ def direct_irradiance(
     seed: int = 0,
     threads: int | None = None,
     offset: float | None = None,
-    rel_error: float = 0.02,
+    rel_error: float = 0.1,
+    receivers: str = "reflecting",
     max_rays: int = 1 << 21,
 ) -> tuple[np.ndarray, dict]:
     """Irradiance from the emitters at every record's surface point, by shadow rays.
@@ -202,15 +228,19 @@ def direct_irradiance(
         Records whose estimated standard error exceeds this share of their
         irradiance (those next to an emitter) get more samples, in up to
         two more rounds.
+    receivers : {"reflecting", "all"}, optional
+        The records to light: those that reflect (albedo > 0), which is all
+        the light transport needs, or every record with area (black ones
+        too), which an energy balance needs.
     max_rays : int, optional
         Rays traced per batch (bounds the temporary memory).
 
     Returns
     -------
     irradiance : (N, 3) float64
-        Direct irradiance (W/m² per unit radiance scale) of every record; 0
-        for records that reflect nothing (albedo 0) or have no area, which
-        need none.
+        Direct irradiance of every record (radiance units times π); 0 for
+        records with no area and, unless ``receivers="all"``, for records
+        that reflect nothing (albedo 0).
     stats : dict
         ``rays``, ``samples``, ``emitter_triangles``, ``records_lit``,
         ``refined_records`` (given more samples), ``max_samples``,
@@ -237,6 +267,8 @@ def direct_irradiance(
             f"{scene.fingerprint()!r})"
         )
     samples = _validate.integer(samples, "samples", low=1, high=1 << 16)
+    if receivers not in ("reflecting", "all"):
+        raise ValueError(f"receivers: expected 'reflecting' or 'all', got {receivers!r}")
     seed = _validate.integer(seed, "seed")
     nthreads = _validate.threads(threads)
     t0 = time.perf_counter()
@@ -244,7 +276,11 @@ def direct_irradiance(
     out = np.zeros((n, 3))
     emit = EmitterSampler(scene)
     area = np.asarray(vox.area, np.float64)
-    lit = np.flatnonzero(np.any(np.asarray(vox.albedo) > 0, axis=1) & (area > 0))
+    lit = (
+        np.flatnonzero(area > 0)
+        if receivers == "all"
+        else np.flatnonzero(np.any(np.asarray(vox.albedo) > 0, axis=1) & (area > 0))
+    )
     stats = {"rays": 0, "samples": samples, "emitter_triangles": len(emit), "records_lit": len(lit)}
     if len(emit) == 0 or len(lit) == 0:
         stats["seconds"] = time.perf_counter() - t0
@@ -259,24 +295,33 @@ def direct_irradiance(
     counts = np.zeros(n, np.int64)
     mean_sq = np.zeros(n)
     try:
-        todo, per = lit, samples
+        groups = [(lit, samples)]
         for _ in range(_ROUNDS):
-            base = _sequence(per, int(rng.integers(1 << 31)))
-            shifts = rng.random((n, 3))
-            per_batch = max(1, max_rays // per)
-            for a in range(0, len(todo), per_batch):
-                rec = todo[a : a + per_batch]
-                m, sq = _batch(
-                    emit, tracer, pool, point[rec], normal[rec], shifts[rec], base, offset, nthreads
-                )
-                # running means over the rounds, weighted by sample counts
-                w_old = counts[rec] / (counts[rec] + per)
-                out[rec] = w_old[:, None] * out[rec] + (1 - w_old)[:, None] * m
-                mean_sq[rec] = w_old * mean_sq[rec] + (1 - w_old) * sq
-                counts[rec] += per
-            stats["rays"] += len(todo) * per
-            todo, per = _noisy(out, mean_sq, counts, lit, rel_error, samples)
-            if len(todo) == 0:
+            for todo, per in groups:
+                base = _sequence(per, int(rng.integers(1 << 31)))
+                shifts = rng.random((len(todo), 5))
+                per_batch = max(1, max_rays // per)
+                for a in range(0, len(todo), per_batch):
+                    rec = todo[a : a + per_batch]
+                    m, sq = _batch(
+                        emit,
+                        tracer,
+                        pool,
+                        point[rec],
+                        normal[rec],
+                        shifts[a : a + per_batch],
+                        base,
+                        offset,
+                        nthreads,
+                    )
+                    # running means over the rounds, weighted by sample counts
+                    w_old = counts[rec] / (counts[rec] + per)
+                    out[rec] = w_old[:, None] * out[rec] + (1 - w_old)[:, None] * m
+                    mean_sq[rec] = w_old * mean_sq[rec] + (1 - w_old) * sq
+                    counts[rec] += per
+                stats["rays"] += len(todo) * per
+            groups = _noisy(out, mean_sq, counts, lit, rel_error, samples)
+            if not groups:
                 break
     finally:
         if pool is not None:
@@ -294,22 +339,24 @@ def _noisy(
     lit: np.ndarray,
     rel_error: float,
     samples: int,
-) -> tuple[np.ndarray, int]:
-    """Records whose standard error exceeds ``rel_error`` of their estimate.
+) -> list[tuple[np.ndarray, int]]:
+    """Records whose standard error exceeds ``rel_error`` of their estimate,
+    grouped by the samples each still needs.
 
-    Returns them and the samples each still needs (one count for all: enough
-    for the worst of them, capped at 16 times ``samples`` a round), so that
-    records next to an emitter, where the 1/r² term varies most, get the
-    samples they need and the rest of the scene keeps ``samples``.
+    The counts are rounded up to powers of two (at least ``samples``, at most
+    16 times it a round), so that records next to an emitter, where the 1/r²
+    term varies most, get the samples they need in a few batches and the rest
+    of the scene keeps ``samples``.
     """
     lum = out[lit] @ _LUMINANCE
     var = np.maximum(mean_sq[lit] - lum * lum, 0.0) / counts[lit]
     need = var / np.maximum((rel_error * lum) ** 2, np.finfo(np.float64).tiny)
     bad = (lum > 0) & (need > 1.0)
     if not np.any(bad):
-        return lit[:0], 0
-    extra = int(min(16 * samples, np.ceil(np.max((need[bad] - 1.0) * counts[lit][bad]))))
-    return lit[bad], max(extra, samples)
+        return []
+    extra = np.clip((need[bad] - 1.0) * counts[lit][bad], samples, 16 * samples)
+    size = np.minimum(2 ** np.ceil(np.log2(extra)).astype(np.int64), 16 * samples)
+    return [(lit[bad][size == k], int(k)) for k in np.unique(size)]
 
 
 def _batch(
@@ -324,19 +371,34 @@ def _batch(
     nthreads: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Estimates of the records at ``x`` (R, 3) from the samples ``base``
-    (S, 3) shifted per record by ``shift`` (R, 3).
+    (S, 5) shifted per record by ``shift`` (R, 5).
 
     Returns the mean RGB irradiance (R, 3) and the mean square of its
     luminance (R,), from which the caller judges each record's noise.
     """
-    org, dirs, length, contribution = _core.direct_light_rays(
-        *emit.arrays,
+    args = (
+        emit.arrays,
         np.ascontiguousarray(x),
         np.ascontiguousarray(nx),
         np.ascontiguousarray(shift),
         base,
         float(offset),
+    )
+    lo, ld, length, contribution, ho, hd = _core.direct_light_rays(*args, threads=nthreads)
+    # light rays that cannot contribute (a back face at either end) have length 0
+    live = np.flatnonzero(length > 0)
+    light_hit = np.full(len(length), -1, np.int32)
+    if len(live):
+        light_hit[live] = tracer.occluded(lo[live], ld[live], length[live], pool)
+    hit, u, v = tracer.first_hit(ho, hd, pool)
+    return _core.direct_light_sum(
+        *args,
+        contribution,
+        light_hit,
+        hd,
+        hit,
+        np.ascontiguousarray(u, np.float32),
+        np.ascontiguousarray(v, np.float32),
+        emit.emitter_of,
         threads=nthreads,
     )
-    hit = tracer.occluded(org, dirs, length, pool)
-    return _core.direct_light_sum(contribution, hit, len(base), threads=nthreads)

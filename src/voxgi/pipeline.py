@@ -24,6 +24,7 @@ __all__ = [
     "RENDER_DIRECTIONS",
     "RENDER_RESOLUTION",
     "RENDER_SOLVE_TOL",
+    "RENDER_SOLVE_TUNING",
     "render",
     "solve",
     "solve_for_display",
@@ -39,6 +40,11 @@ RENDER_DIRECTIONS = 8
 #: The solve's ``tol`` in that pipeline: tighter changes the picture's error
 #: by nothing the display can show, and costs more bounces.
 RENDER_SOLVE_TOL = 1e-3
+#: The rest of that solve's settings: no diagnostic passes, and direct light
+#: by shadow rays to the exact emitters (``docs/design.md`` §5), which thin
+#: occluders in front of a lamp or window cannot swallow, and whose cost does
+#: not grow with the number of emitter records.
+RENDER_SOLVE_TUNING = SolveTuning(diagnostics=False, direct_light="exact")
 
 
 def solve(
@@ -84,7 +90,8 @@ def solve_for_display(
     progress: bool = True,
     client=None,
 ) -> Solution:
-    """Solve ``vox`` as the display needs it: ``RENDER_SOLVE_TOL``, no diagnostic passes.
+    """Solve ``vox`` as the display needs it: :data:`RENDER_SOLVE_TOL` and
+    :data:`RENDER_SOLVE_TUNING` (exact direct light, no diagnostic passes).
 
     Parameters
     ----------
@@ -102,7 +109,7 @@ def solve_for_display(
         threads=threads,
         progress=progress,
         client=client,
-        tuning=SolveTuning(diagnostics=False),
+        tuning=RENDER_SOLVE_TUNING,
     )
 
 

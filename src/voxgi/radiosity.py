@@ -42,6 +42,7 @@ from typing import Protocol
 import numpy as np
 
 from . import _core, _validate
+from .direct import direct_irradiance
 from .directions import DirectionSet, direction_set
 from .voxels import VoxelSet
 
@@ -119,7 +120,7 @@ class Solution:
             v = getattr(self.vox, f.name)
             if isinstance(v, np.ndarray):
                 arrays["vox_" + f.name] = v
-            elif f.name not in ("stats",):
+            elif f.name not in ("stats", "scene"):  # the scene stays with its files
                 meta["vox_" + f.name] = v
         arrays["radiosity"] = self.radiosity
         arrays["meta"] = np.frombuffer(
@@ -153,11 +154,19 @@ class Solution:
             raise ValueError(f"{path}: empty file (0 bytes), not a voxgi solution file")
         try:
             sol = cls._load(path)
-        except (OSError, EOFError, ValueError, KeyError, TypeError, zlib.error,
-                zipfile.BadZipFile) as exc:
+        except (
+            OSError,
+            EOFError,
+            ValueError,
+            KeyError,
+            TypeError,
+            zlib.error,
+            zipfile.BadZipFile,
+        ) as exc:
             # (json and Unicode decoding errors are ValueErrors)
-            raise ValueError(f"{path}: not a readable voxgi solution file "
-                             f"({type(exc).__name__}: {exc})") from None
+            raise ValueError(
+                f"{path}: not a readable voxgi solution file ({type(exc).__name__}: {exc})"
+            ) from None
         vox = sol.vox
         ijk = np.asarray(vox.ijk)
         if ijk.ndim != 2:
@@ -165,30 +174,39 @@ class Solution:
         n = len(ijk)
         # Every per-record array has the record count and the type VoxelSet
         # documents: a short one would otherwise load and fail later in render.
-        want = {"ijk": ((n, 3), np.int32), "normal": ((n, 3), np.float32),
-                "area": ((n,), np.float32), "albedo": ((n, 3), np.float32),
-                "emission": ((n, 3), np.float32), "centroid": ((n, 3), np.float64),
-                "object_id": ((n,), np.int32), "back": ((n,), np.bool_),
-                "side": ((n,), np.int8), "origin": ((3,), np.float64)}
+        want = {
+            "ijk": ((n, 3), np.int32),
+            "normal": ((n, 3), np.float32),
+            "area": ((n,), np.float32),
+            "albedo": ((n, 3), np.float32),
+            "emission": ((n, 3), np.float32),
+            "centroid": ((n, 3), np.float64),
+            "object_id": ((n,), np.int32),
+            "back": ((n,), np.bool_),
+            "side": ((n,), np.int8),
+            "origin": ((3,), np.float64),
+        }
         for name, (shape, dtype) in want.items():
             a = getattr(vox, name)
             if a is None and name == "side":
                 continue
             a = np.asarray(a)
             if a.shape != shape or a.dtype != dtype:
-                raise ValueError(f"{path}: vox_{name} must be {np.dtype(dtype).name} of shape "
-                                 f"{shape} for {n} records, got {a.dtype} {a.shape}")
+                raise ValueError(
+                    f"{path}: vox_{name} must be {np.dtype(dtype).name} of shape "
+                    f"{shape} for {n} records, got {a.dtype} {a.shape}"
+                )
             if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
                 raise ValueError(f"{path}: vox_{name} has non-finite values")
         if n and ijk.min() < 0:
             raise ValueError(f"{path}: vox_ijk has negative voxel coordinates")
         if not (np.isfinite(vox.pitch) and vox.pitch > 0) or vox.resolution < 2:
-            raise ValueError(f"{path}: bad grid (pitch {vox.pitch}, resolution "
-                             f"{vox.resolution})")
+            raise ValueError(f"{path}: bad grid (pitch {vox.pitch}, resolution {vox.resolution})")
         r = np.asarray(sol.radiosity)
         if r.shape != (n, 3) or r.dtype.kind != "f":
-            raise ValueError(f"{path}: radiosity must be floats of shape ({n}, 3), got "
-                             f"{r.dtype} {r.shape}")
+            raise ValueError(
+                f"{path}: radiosity must be floats of shape ({n}, 3), got {r.dtype} {r.shape}"
+            )
         with np.errstate(over="ignore"):
             sol.radiosity = r.astype(np.float32)
         if not np.all(np.isfinite(sol.radiosity)):
@@ -493,6 +511,17 @@ class SolveTuning:
     max_cache_bytes : int or None
         Budget for the recorded pairs; None: a quarter of the memory available
         when the solve starts (``pair_cache=None``), no limit (True).
+    direct_light : {"shoot", "exact"}
+        How the records get their direct light (``docs/design.md`` §5):
+        ``"shoot"`` marches discrete rays from every emitter record (the
+        paper's method; cost emitter records x directions x path length);
+        ``"exact"`` traces shadow rays from every record to points on the
+        emitting triangles (:func:`voxgi.direct.direct_irradiance`; cost
+        records x samples; needs ``vox.scene``, else the solve shoots and
+        ``stats["skipped"]`` says why).
+    direct_samples : int
+        Emitter points per record for ``direct_light="exact"`` (records whose
+        estimate stays noisy get more).
 
     >>> SolveTuning(shoot_directions=8).later_after
     2
@@ -508,6 +537,8 @@ class SolveTuning:
     diagnostics: bool = True
     pair_cache: bool | None = None
     max_cache_bytes: int | None = None
+    direct_light: str = "shoot"
+    direct_samples: int = 64
 
 
 @dataclass(frozen=True)
@@ -528,6 +559,8 @@ class _Settings:
     diagnostics: bool
     pair_cache: bool | None
     cache_cap: int | None
+    direct_light: str = "shoot"
+    direct_samples: int = 64
 
 
 def _settings(directions, max_bounces, tol, threads, tuning) -> _Settings:
@@ -537,6 +570,8 @@ def _settings(directions, max_bounces, tol, threads, tuning) -> _Settings:
         raise TypeError(f"tuning: expected voxgi.SolveTuning or None, got {type(t).__name__}")
     if t.pair_cache is not None and not isinstance(t.pair_cache, (bool, np.bool_)):
         raise TypeError(f"pair_cache: expected True, False or None, got {t.pair_cache!r}")
+    if t.direct_light not in ("shoot", "exact"):
+        raise ValueError(f"direct_light: expected 'shoot' or 'exact', got {t.direct_light!r}")
     return _Settings(
         R=_validate.integer(directions, "directions", low=1, high=256),
         Rs=_validate.integer(t.shoot_directions, "shoot_directions", low=1, high=256),
@@ -554,6 +589,8 @@ def _settings(directions, max_bounces, tol, threads, tuning) -> _Settings:
         diagnostics=bool(t.diagnostics),
         pair_cache=t.pair_cache,
         cache_cap=_validate.integer(t.max_cache_bytes, "max_cache_bytes", low=0, allow_none=True),
+        direct_light=t.direct_light,
+        direct_samples=_validate.integer(t.direct_samples, "direct_samples", low=1, high=1 << 16),
     )
 
 
@@ -958,7 +995,13 @@ def _normalise(p: _Problem) -> None:
     t = time.perf_counter()
     opt, nt = p.opt, p.opt.threads
     Sg = p.sysm.normalisation(p.gds.families, p.gds.weights, nt)
-    Ss = Sg if opt.Rs == opt.R else p.sysm.normalisation(p.sds.families, p.sds.weights, nt)
+    # exact direct light shoots nothing: the shooting set needs no S(n)
+    shoots = opt.direct_light == "shoot" or getattr(p.vox, "scene", None) is None
+    Ss = (
+        Sg
+        if opt.Rs == opt.R or not shoots
+        else p.sysm.normalisation(p.sds.families, p.sds.weights, nt)
+    )
     Sl = None
     if p.lds is not None:
         if opt.Rl == opt.R:
@@ -1003,8 +1046,37 @@ def _silhouettes(p: _Problem, emitters_send: np.ndarray) -> dict:
 
 
 def _direct_light(p: _Problem):
+    """Direct irradiance H_d from the emitters, the power that escapes on the
+    way and the rays it took: by shadow rays to the exact emitters where the
+    tuning asks for it and the records know their scene, else by shooting."""
+    if p.opt.direct_light == "exact":
+        if getattr(p.vox, "scene", None) is not None:
+            return _exact_direct_light(p)
+        p.stats["skipped"]["exact_direct_light"] = (
+            "the records carry no scene (vox.scene is None): shot along the lines instead"
+        )
+    return _shot_direct_light(p)
+
+
+def _exact_direct_light(p: _Problem):
+    """Direct irradiance by shadow rays from every record with area (black
+    ones too, for the energy balance); what the records do not receive
+    escapes."""
+    t = time.perf_counter()
+    Hd, st = direct_irradiance(
+        p.vox.scene, p.vox, samples=p.opt.direct_samples, threads=p.opt.threads, receivers="all"
+    )
+    p.seconds["direct"] = time.perf_counter() - t
+    p.stats["direct_light"] = {"method": "exact", **st}
+    received = (Hd * p.area[:, None]).sum(axis=0)
+    escape = (p.E * p.area[:, None]).sum(axis=0) - received
+    return Hd, escape, 0
+
+
+def _shot_direct_light(p: _Problem):
     """Shooting: direct irradiance H_d from the emitters, the power that
     escapes on the way (sender side) and the shooting rays."""
+    p.stats["direct_light"] = {"method": "shoot"}
     t = time.perf_counter()
     E_send = p.twins.send(p.E)
     es = np.flatnonzero(np.any(E_send > 0, axis=1)).astype(np.int32)

@@ -60,6 +60,9 @@ class VoxelSet:
         (the back record of a one-sided surface, or the second live side of
         a two-sided one). Every side-1 record directly follows its side-0
         record, with the same voxel, area and centroid and the opposite normal.
+    scene : Scene or None
+        The scene voxelized (set by :func:`voxelize`; None for records loaded
+        from a file). The solve traces its exact triangles for direct light.
     """
 
     ijk: np.ndarray
@@ -76,6 +79,7 @@ class VoxelSet:
     scene_fingerprint: str = ""
     stats: dict = field(default_factory=dict)
     side: np.ndarray | None = None
+    scene: object = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return int(self.ijk.shape[0])
@@ -433,4 +437,5 @@ def voxelize(
         scene_fingerprint=scene.fingerprint(),
         stats=stats,
         side=res["side"],
+        scene=scene,
     )
