@@ -520,23 +520,30 @@ def test_memory_estimate_is_within_2x_of_the_measured_peak(subdivisions, resolut
     # ru_maxrss survives exec, and a forked child starts from its parent's RSS:
     # a small Python in between keeps pytest's own memory out of the figure.
     launcher = "import subprocess, sys; sys.exit(subprocess.run(sys.argv[1:]).returncode)"
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-c",
-            launcher,
-            sys.executable,
-            "-c",
-            _PEAK_SCRIPT,
-            str(tmp_path / "mesh.npz"),
-            str(resolution),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=True,
-    )
-    m = json.loads(r.stdout.strip().splitlines()[-1])
+
+    def measure() -> dict:
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                launcher,
+                sys.executable,
+                "-c",
+                _PEAK_SCRIPT,
+                str(tmp_path / "mesh.npz"),
+                str(resolution),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=True,
+        )
+        return json.loads(r.stdout.strip().splitlines()[-1])
+
+    # The estimate bounds the worst case, both threads' chunks in memory at
+    # once; on a busy machine one run may not overlap them, so take the
+    # larger of two runs.
+    m = max((measure() for _ in range(2)), key=lambda d: d["peak"] - d["rss0"])
     growth = m["peak"] - m["rss0"]
     # the high-water mark is the call's own, not one from building the scene
     assert m["peak"] > m["before"]
