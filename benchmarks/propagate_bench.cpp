@@ -1,12 +1,14 @@
 // Stand-alone timing of the propagation kernels (no Python), for a quiet
 // machine: reads records written by `benchmarks/propagation.py dump`, times
-// one gathering pass over all families (one-pass and counting-sort) and the
-// shooting, on the thread counts given.
+// one gathering pass over all families (the one-pass walk and the sorted
+// reference walk) and the shooting, on the thread counts given.
 //
-//   g++ -O3 -std=c++17 -pthread -Icsrc benchmarks/propagate_bench.cpp csrc/propagate.cpp -o bench
+//   g++ -O3 -std=c++17 -pthread -Icsrc benchmarks/propagate_bench.cpp csrc/lineframe.cpp \
+//       csrc/linesystem.cpp csrc/gather.cpp csrc/pairtable.cpp csrc/shoot.cpp \
+//       csrc/reference.cpp csrc/util/memory.cpp -o bench
 //   ./bench records.bin 1 2
 //   ./bench records.bin stride=10 1    (every 10th gathering family: a quick A/B of two
-//                                        builds of csrc/propagate.cpp, side by side)
+//                                        builds of the kernels, side by side)
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -15,7 +17,7 @@
 #include <fstream>
 #include <vector>
 
-#include "propagate.h"
+#include "linesystem.h"
 
 template <class T>
 static std::vector<T> read_vec(std::ifstream &f, int64_t n) {
@@ -78,24 +80,34 @@ int main(int argc, char **argv) {
     std::printf("%8s %10s %10s %12s %14s\n", "threads", "kernel", "seconds", "Mrays/s", "Mrays/s/thread");
     for (int th : threads) {
         for (int onepass = 1; onepass >= 0; --onepass) {
-            sys.gather(fams[0].data(), sel.data(), std::min<int64_t>(16, sel.size()), val.data(), out.data(),
-                       nullptr, th, none, onepass);
+            voxgi::GatherOptions opt;
+            opt.threads = th;
+            auto pass = [&](int64_t nsel) {
+                if (onepass)
+                    sys.gather(fams[0].data(), sel.data(), nsel, val.data(), out.data(), nullptr,
+                               opt, none);
+                else
+                    sys.gather_sorted(fams[0].data(), sel.data(), nsel, val.data(), out.data(),
+                                      nullptr, false, nullptr, th, none);
+            };
+            pass(std::min<int64_t>(16, sel.size()));  // warm-up
             double best = 1e30;
             for (int r = 0; r < 2; ++r) {
                 auto t0 = now();
-                sys.gather(fams[0].data(), sel.data(), sel.size(), val.data(), out.data(), nullptr, th,
-                           none, onepass);
+                pass(static_cast<int64_t>(sel.size()));
                 best = std::min(best, secs(t0, now()));
             }
             const double rays = double(n) * sel.size();
             std::printf("%8d %10s %10.3f %12.1f %14.1f\n", th, onepass ? "onepass" : "sort", best,
                         rays / best / 1e6, rays / best / 1e6 / th);
         }
-        int64_t steps = 0;
+        voxgi::ShootOptions opt;
+        opt.threads = th;
         auto t0 = now();
-        int64_t rays = sys.shoot(emit.data(), ne, fams[1].data(), nfs, val.data(), hd.data(), unf.data(),
-                                 th, none, &steps);
+        const voxgi::ShootCount count = sys.shoot(emit.data(), ne, fams[1].data(), nfs, val.data(),
+                                                  hd.data(), unf.data(), opt, none);
         const double s = secs(t0, now());
+        const int64_t rays = count.rays, steps = count.steps;
         std::printf("%8d %10s %10.3f %12.1f %14.1f   (%lld rays, %lld voxel steps, %.1f Msteps/s)\n", th,
                     "shoot", s, rays / s / 1e6, rays / s / 1e6 / th, (long long)rays, (long long)steps,
                     steps / s / 1e6);

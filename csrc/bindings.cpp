@@ -1,12 +1,14 @@
 // The voxgi._core extension: gathers the per-kernel binding files.
 #include <pybind11/pybind11.h>
 
-#include "common.h"
+#include "util/parallel.h"
 
 namespace py = pybind11;
 
 void bind_voxelize(py::module_ &m);
-void bind_propagate(py::module_ &m);
+void bind_pairtable(py::module_ &m);
+void bind_linesystem(py::module_ &m);
+void bind_testing(py::module_ &m);
 void bind_display(py::module_ &m);
 
 PYBIND11_MODULE(_core, m) {
@@ -26,6 +28,8 @@ PYBIND11_MODULE(_core, m) {
     m.def("hardware_threads", [] { return voxgi::resolve_threads(0); },
           "Number of hardware threads the kernels use when threads=None.");
     bind_voxelize(m);
-    bind_propagate(m);
+    bind_pairtable(m);
+    bind_linesystem(m);
+    bind_testing(m);
     bind_display(m);
 }

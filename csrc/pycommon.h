@@ -7,7 +7,7 @@
 #include <chrono>
 #include <string>
 
-#include "common.h"
+#include "util/parallel.h"
 
 namespace voxgi::py_helpers {
 namespace py = pybind11;

@@ -16,7 +16,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "common.h"
+#include "util/parallel.h"
 
 namespace voxgi {
 

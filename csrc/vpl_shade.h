@@ -13,7 +13,7 @@
 
 #include <cstdint>
 
-#include "common.h"
+#include "util/parallel.h"
 
 namespace voxgi {
 

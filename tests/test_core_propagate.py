@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from voxgi import _core
+from voxgi._core import testing
 from voxgi.directions import direction_set
 
 # ----------------------------------------------------------------- records
@@ -332,7 +333,7 @@ def test_threads_partial_sums_and_algorithms_agree(sphere24):
     # independent of the thread count to float rounding (requirement: 1e-6)
     assert np.allclose(one, two, rtol=1e-12, atol=0)
     assert np.allclose(vis1, vis2, rtol=1e-12, atol=0)
-    srt, _, _ = s.gather(ds.families, ds.weights, vals, fams, False, 1, "sort")
+    srt, _, _ = testing.gather_sorted(s, ds.families, ds.weights, vals, fams, False, 1)
     assert np.allclose(one, srt, rtol=1e-12, atol=0)
     # disjoint subsets add up to the full pass (the Dask work unit)
     a = _core.gather_families(
@@ -407,7 +408,7 @@ def test_onepass_walk_agrees_with_the_sorted_walk_on_every_voxel_kind(stand, rad
     # The sorted walk orders every voxel's records by depth with one general
     # rule; the one-pass walk takes shortcuts for one record and for exact
     # twins. Both must find the same pairs: the same sums, visibility and
-    # lines, also when recording, transposed, and with stand-ins. (The
+    # lines, also when recording and with stand-ins. (The
     # one-pass walk also computes the line keys its own way, dividing once
     # per slab; radii 1 and 2 give main components A = 1 and 2.)
     rec = mixed_voxel_records()
@@ -417,7 +418,8 @@ def test_onepass_walk_agrees_with_the_sorted_walk_on_every_voxel_kind(stand, rad
     vals = np.random.default_rng(2).random((n, 3)).astype(np.float32)
     ds, fams = all_families(radius)
     one, vis1, lines1 = s.gather(ds.families, ds.weights, vals, fams, True, 1, stand_in=sb)
-    srt, vis2, lines2 = s.gather(ds.families, ds.weights, vals, fams, True, 1, "sort", stand_in=sb)
+    srt, vis2, lines2 = testing.gather_sorted(s, ds.families, ds.weights, vals, fams, True, 1,
+                                              stand_in=sb)
     assert lines1 == lines2 > 0
     assert np.count_nonzero(vis1) > n // 2  # the scene pairs most records
     assert np.allclose(one, srt, rtol=1e-12, atol=1e-300)
@@ -427,10 +429,6 @@ def test_onepass_walk_agrees_with_the_sorted_walk_on_every_voxel_kind(stand, rad
     assert np.allclose(got, one, rtol=1e-12, atol=1e-300)
     rep, _ = s.gather_recorded(tab, vals, fams, False, 1)
     assert np.allclose(rep, one, rtol=1e-12, atol=1e-300)
-    t1, _, _ = s.gather(ds.families, ds.weights, vals, fams, False, 1, stand_in=sb, transpose=True)
-    t2, _, _ = s.gather(ds.families, ds.weights, vals, fams, False, 1, "sort", stand_in=sb,
-                        transpose=True)
-    assert np.allclose(t1, t2, rtol=1e-12, atol=1e-300)
 
 
 @pytest.mark.parametrize("history", [3, 16])
@@ -453,7 +451,8 @@ def test_onepass_walk_passes_coplanar_runs_as_the_sorted_walk_does(history, stan
     vals = np.random.default_rng(4).random((n, 3)).astype(np.float32)
     ds, fams = all_families(11)
     one, vis1, lines1 = s.gather(ds.families, ds.weights, vals, fams, True, 2, stand_in=sb)
-    srt, vis2, lines2 = s.gather(ds.families, ds.weights, vals, fams, True, 1, "sort", stand_in=sb)
+    srt, vis2, lines2 = testing.gather_sorted(s, ds.families, ds.weights, vals, fams, True, 1,
+                                              stand_in=sb)
     assert lines1 == lines2
     assert np.allclose(one, srt, rtol=1e-12, atol=1e-300)
     assert np.allclose(vis1, vis2, rtol=1e-12, atol=1e-300)
@@ -546,8 +545,6 @@ def test_recorded_pairs_refuse_what_they_do_not_hold(sphere24):
     with pytest.raises(ValueError, match="stand-in"):
         s.gather(ds.families, ds.weights, vals, fams, False, 1, stand_in=rec["back"].copy(),
                  record=tab)
-    with pytest.raises(ValueError, match="one-pass"):
-        s.gather(ds.families, ds.weights, vals, fams, False, 1, "sort", record=tab)
     other = all_families(5)[0]
     with pytest.raises(ValueError, match="other families"):
         s.gather(other.families, other.weights, vals, fams, False, 1, record=tab)
@@ -556,10 +553,10 @@ def test_recorded_pairs_refuse_what_they_do_not_hold(sphere24):
         small.gather_recorded(tab, np.ones((small.size, 3), np.float32), half, False, 1)
 
 
-@pytest.mark.parametrize("algorithm", ["onepass", "sort"])
-def test_transposed_gathering_is_the_adjoint(sphere24, algorithm):
+@pytest.mark.parametrize("walk", ["onepass", "sort"])
+def test_transposed_gathering_is_the_adjoint(sphere24, walk):
     # <x, K y> == <K^T x, y> for the gathering operator K (same pairs, the
-    # weight of the record that receives in K)
+    # weight of the record that receives in K), K from either walk
     rec, s = sphere24
     n = len(rec["ijk"])
     rng = np.random.default_rng(9)
@@ -568,9 +565,13 @@ def test_transposed_gathering_is_the_adjoint(sphere24, algorithm):
     ds, fams = all_families(5)
     sb = rec["back"].copy()
     for stand in (None, sb):
-        Ky, _, _ = s.gather(ds.families, ds.weights, y, fams, False, 2, algorithm, stand_in=stand)
-        KTx, _, _ = s.gather(ds.families, ds.weights, x, fams, False, 2, algorithm,
-                             stand_in=stand, transpose=True)
+        if walk == "onepass":
+            Ky, _, _ = s.gather(ds.families, ds.weights, y, fams, False, 2, stand_in=stand)
+        else:
+            Ky, _, _ = testing.gather_sorted(s, ds.families, ds.weights, y, fams, False, 2,
+                                             stand_in=stand)
+        KTx, _, _ = testing.gather_sorted(s, ds.families, ds.weights, x, fams, False, 2,
+                                          stand_in=stand, transpose=True)
         lhs = np.sum(x.astype(np.float64) * Ky)
         assert lhs > 0
         assert np.sum(KTx * y) == pytest.approx(lhs, rel=1e-12)
@@ -608,8 +609,11 @@ def test_bad_input_is_an_error_not_a_crash():
         s.gather(ds.families, ds.weights[:-1], v, fams)
     with pytest.raises(ValueError, match="emitter"):
         s.shoot(np.array([7], np.int32), ds.families, ds.weights, v)
-    with pytest.raises(ValueError, match="algorithm"):
-        s.gather(ds.families, ds.weights, v, fams, False, 1, "quick")
+    with pytest.raises(ValueError, match="family_indices"):
+        testing.gather_sorted(s, ds.families, ds.weights, v, np.array([-1], np.int64))
+    with pytest.raises(ValueError, match="send_scale"):
+        testing.shoot_sender_side(s, fams[:1].astype(np.int32), ds.families, ds.weights, v,
+                                  np.ones(3), np.ones(4))
 
 
 def test_sender_side_deposit_conserves_power(sphere24):
@@ -624,7 +628,7 @@ def test_sender_side_deposit_conserves_power(sphere24):
     S = s.normalisation(ds.families, ds.weights)
     area = np.ascontiguousarray(rec["area"], np.float64)
     idx = np.flatnonzero(emit).astype(np.int32)
-    hd, unfound, _, _ = s.shoot(idx, ds.families, ds.weights, E, 0, area / S, area)
+    hd, unfound, _, _ = testing.shoot_sender_side(s, idx, ds.families, ds.weights, E, area / S, area)
     emitted = area[emit].sum()
     lost = (area[idx] * unfound / S[idx]).sum()
     # (rel 1e-7: directions with |n·σ| < 1e-6 count in S but cast no ray)
