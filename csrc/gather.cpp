@@ -335,13 +335,14 @@ int64_t walk_family(GatherWork &w, const LineSystem::Axis &ax, const LineFrame &
     return nwalked;
 }
 
-// A group's sums in the global order, (n,3) and (n,) (vis, when summed).
+// A group's sums in its axis's order, (n,3) and (n,) (vis, when summed).
 struct GroupSums {
+    int m = 0;
     std::unique_ptr<double[]> acc, vis;
 };
 
-// Sums buffers kept for the next groups (a group's sums wait for the groups
-// before it to be added).
+// Sums buffers kept for the next groups (a group's sums wait here until the
+// groups before it have been added).
 class SumsPool {
 public:
     SumsPool(int64_t n, bool vis) : n_(n), vis_(vis) {}
@@ -371,25 +372,92 @@ private:
     std::vector<GroupSums> free_;
 };
 
-// Move the thread's sums (axis order) into `s` (global order), leaving them zero.
-void collect(GatherWork &w, const int32_t *ord, int64_t n, GroupSums &s) {
+// Move the thread's sums into `s`, leaving them zero.
+void collect(GatherWork &w, int m, int64_t n, GroupSums &s) {
+    s.m = m;
     GatherRec *a = w.rec.data();
     double *o = s.acc.get();
     for (int64_t i = 0; i < n; ++i) {
-        const int64_t r = ord[i];
-        o[3 * r] = a[i].acc[0];
-        o[3 * r + 1] = a[i].acc[1];
-        o[3 * r + 2] = a[i].acc[2];
+        o[3 * i] = a[i].acc[0];
+        o[3 * i + 1] = a[i].acc[1];
+        o[3 * i + 2] = a[i].acc[2];
         a[i].acc[0] = a[i].acc[1] = a[i].acc[2] = 0.0;
     }
     if (s.vis) {
-        double *v = w.vis.data(), *ov = s.vis.get();
-        for (int64_t i = 0; i < n; ++i) {
-            ov[ord[i]] = v[i];
-            v[i] = 0.0;
-        }
+        std::copy(w.vis.begin(), w.vis.begin() + n, s.vis.get());
+        std::fill(w.vis.begin(), w.vis.begin() + n, 0.0);
     }
 }
+
+// The groups of a pass: the selected families in by-axis order (by column
+// within an axis when recording), cut into groups of whole tiles of one
+// axis. A group's sums are made by one task, and the groups' sums are added
+// in group order: the result does not depend on the number of threads. The
+// group size depends on the selection only: 16 families, up to 64 for large
+// sets (fewer sums to add).
+struct GatherPlan {
+    std::vector<LineFrame> frames;  // per selected family
+    std::vector<int64_t> order;     // selected families (indices into sel) in group order
+    std::vector<int64_t> start;     // group g: order[start[g] .. start[g+1])
+    int64_t groups() const { return static_cast<int64_t>(start.size()) - 1; }
+};
+
+GatherPlan plan_groups(const Family *fams, const int64_t *sel, int64_t nsel, const int32_t *lo,
+                       const int32_t *hi, const PairTable *record) {
+    GatherPlan plan;
+    plan.frames.reserve(nsel);
+    for (int64_t k = 0; k < nsel; ++k) plan.frames.emplace_back(fams[sel[k]].v, lo, hi);
+    const auto &frames = plan.frames;
+    const int64_t size =
+        PairTable::kTile * std::min<int64_t>(4, std::max<int64_t>(1, nsel / (32 * PairTable::kTile)));
+    plan.order.resize(nsel);
+    std::iota(plan.order.begin(), plan.order.end(), int64_t(0));
+    auto column = [&](int64_t k) { return record ? int64_t(record->slot[sel[k]]) : int64_t(0); };
+    std::stable_sort(plan.order.begin(), plan.order.end(), [&](int64_t a, int64_t b) {
+        if (frames[a].m != frames[b].m) return frames[a].m < frames[b].m;
+        return column(a) < column(b);
+    });
+    for (int64_t q = 0, in_axis = 0; q < nsel; ++q, ++in_axis) {
+        const int64_t k = plan.order[q];
+        const bool new_axis = q == 0 || frames[k].m != frames[plan.order[q - 1]].m;
+        if (new_axis) in_axis = 0;
+        const bool cut = record ? new_axis || column(k) / size != column(plan.order[q - 1]) / size
+                                : in_axis % size == 0;
+        if (cut) plan.start.push_back(q);
+    }
+    plan.start.push_back(nsel);
+    return plan;
+}
+
+// Recording: the tile being filled by a group's task, written out when the
+// group moves to the next tile and at its end; its families are marked
+// recorded only then (a pass stopped half-way leaves them unrecorded).
+struct TileWriter {
+    PairTable *table;
+    int m;
+    int32_t *buf;  // the thread's family-major buffer: a family's writes stay within n entries
+    int64_t tile = -1;
+    uint32_t lanes = 0;
+    std::vector<int64_t> families;
+    // the column to write family f's pairs into
+    int32_t *column(int64_t f) {
+        const int64_t t = table->slot[f] / PairTable::kTile;
+        if (t != tile) flush();
+        tile = t;
+        const int lane = table->slot[f] % PairTable::kTile;
+        lanes |= 1u << lane;
+        families.push_back(f);
+        return buf + int64_t(lane) * table->n;
+    }
+    void flush() {
+        if (tile < 0) return;
+        table->write_tile(m, tile, lanes, buf);
+        for (int64_t f : families) table->filled[f] = 1;
+        families.clear();
+        lanes = 0;
+        tile = -1;
+    }
+};
 
 }  // namespace
 
@@ -413,37 +481,11 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
                            const StopCheck &stop) const {
     PairTable *record = opt.record;
     if (record) check_record(fams, sel, nsel, opt);
-    std::vector<LineFrame> frames;
-    frames.reserve(nsel);
-    for (int64_t k = 0; k < nsel; ++k) frames.emplace_back(fams[sel[k]].v, lo_, hi_);
-    // Groups: up to kTile families of one axis, in by-axis order (when
-    // recording, the families of one tile of the table, so that one task
-    // writes each tile). A group's sums are made by one thread and the
-    // groups' sums added in group order: the result does not depend on the
-    // number of threads.
-    std::vector<int64_t> order(nsel);
-    std::iota(order.begin(), order.end(), int64_t(0));
-    auto column = [&](int64_t k) { return record ? int64_t(record->slot[sel[k]]) : int64_t(0); };
-    std::stable_sort(order.begin(), order.end(), [&](int64_t a, int64_t b) {
-        if (frames[a].m != frames[b].m) return frames[a].m < frames[b].m;
-        return column(a) < column(b);
-    });
-    std::vector<int64_t> group_start;
-    for (int64_t q = 0, in_axis = 0; q < nsel; ++q, ++in_axis) {
-        const int64_t k = order[q];
-        const bool new_axis = q == 0 || frames[k].m != frames[order[q - 1]].m;
-        if (new_axis) in_axis = 0;
-        const bool new_group = record ? new_axis || column(k) / PairTable::kTile !=
-                                                        column(order[q - 1]) / PairTable::kTile
-                                      : in_axis % PairTable::kTile == 0;
-        if (new_group) group_start.push_back(q);
-    }
-    group_start.push_back(nsel);
-    const int64_t ngroups = static_cast<int64_t>(group_start.size()) - 1;
+    const GatherPlan plan = plan_groups(fams, sel, nsel, lo_, hi_, record);
     // values and stand-in flags in each needed axis order
     std::vector<float> valax[3];
     std::vector<uint8_t> sbax[3];
-    for (const auto &fr : frames) {
+    for (const auto &fr : plan.frames) {
         const int m = fr.m;
         if (!valax[m].empty()) continue;
         to_axis_order(m, val, valax[m]);
@@ -453,53 +495,57 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         for (int64_t i = 0; i < n_; ++i) sbax[m][i] = opt.stand_in[ord[i]] ? 1 : 0;
     }
     WalkShared ws{eps_, hist_, vis != nullptr, opt.stand_in != nullptr, 1};
-    for (const auto &fr : frames) ws.max_keys = std::max<int64_t>(ws.max_keys, fr.nu * fr.nw);
+    for (const auto &fr : plan.frames) ws.max_keys = std::max<int64_t>(ws.max_keys, fr.nu * fr.nw);
 
-    std::fill(out, out + 3 * n_, 0.0);
-    if (vis) std::fill(vis, vis + n_, 0.0);
-    const int threads = static_cast<int>(
-        std::max<int64_t>(1, std::min<int64_t>(resolve_threads(opt.threads), ngroups)));
-    std::vector<GatherWork> work(threads);
-    std::vector<int64_t> lines(threads, 0);
+    // the sums of each axis's groups, in that axis's order
+    std::vector<double> tot[3], tvis[3];
     SumsPool pool(n_, vis != nullptr);
     InOrder<GroupSums> in_order;
     auto add_group = [&](GroupSums &s) {
-        const double *a = s.acc.get();
-        for (int64_t i = 0; i < 3 * n_; ++i) out[i] += a[i];
-        if (vis)
-            for (int64_t i = 0; i < n_; ++i) vis[i] += s.vis[i];
+        std::vector<double> &ta = tot[s.m], &tv = tvis[s.m];
+        if (ta.empty()) ta.assign(3 * n_, 0.0);
+        for (int64_t i = 0; i < 3 * n_; ++i) ta[i] += s.acc[i];
+        if (vis) {
+            if (tv.empty()) tv.assign(n_, 0.0);
+            for (int64_t i = 0; i < n_; ++i) tv[i] += s.vis[i];
+        }
         pool.give(std::move(s));
     };
-    parallel_for(ngroups, threads, stop, [&](int64_t g, int t) {
+    const int threads = static_cast<int>(
+        std::max<int64_t>(1, std::min<int64_t>(resolve_threads(opt.threads), plan.groups())));
+    std::vector<GatherWork> work(threads);
+    std::vector<int64_t> lines(threads, 0);
+    parallel_for(plan.groups(), threads, stop, [&](int64_t g, int t) {
         GatherWork &w = work[t];
-        const int m = frames[order[group_start[g]]].m;
+        const int m = plan.frames[plan.order[plan.start[g]]].m;
         if (w.rec_axis != m)
             load_axis(w, ax_[m], m, n_, valax[m].data(), opt.stand_in ? sbax[m].data() : nullptr);
-        uint32_t lanes = 0;  // recording: the tile's columns this group fills
-        for (int64_t q = group_start[g]; q < group_start[g + 1]; ++q) {
-            const int64_t k = order[q];
-            int32_t *rt = nullptr;
-            if (record) {
-                // into this thread's family-major buffer (a family's writes
-                // then stay within n entries); the tile is written out after
-                const int lane = record->slot[sel[k]] % PairTable::kTile;
-                if (w.rbuf.empty()) w.rbuf.assign(static_cast<size_t>(PairTable::kTile) * n_, 0);
-                rt = w.rbuf.data() + int64_t(lane) * n_;
-                lanes |= 1u << lane;
-            }
-            lines[t] += walk_family(w, ax_[m], frames[k], fams[sel[k]], ws, rt);
+        if (record && w.rbuf.empty()) w.rbuf.assign(static_cast<size_t>(PairTable::kTile) * n_, 0);
+        TileWriter tw{record, m, w.rbuf.data(), -1, 0, {}};
+        for (int64_t q = plan.start[g]; q < plan.start[g + 1]; ++q) {
+            const int64_t k = plan.order[q];
+            int32_t *rt = record ? tw.column(sel[k]) : nullptr;
+            lines[t] += walk_family(w, ax_[m], plan.frames[k], fams[sel[k]], ws, rt);
         }
-        if (record) {
-            const int64_t f0 = sel[order[group_start[g]]];
-            record->write_tile(m, record->slot[f0] / PairTable::kTile, lanes, w.rbuf.data());
-            // only now: a pass stopped half-way (Ctrl-C) leaves its families unrecorded
-            for (int64_t q = group_start[g]; q < group_start[g + 1]; ++q)
-                record->filled[sel[order[q]]] = 1;
-        }
+        if (record) tw.flush();
         GroupSums s = pool.take();
-        collect(w, ax_[m].order.data(), n_, s);
+        collect(w, m, n_, s);
         in_order.finish(g, std::move(s), add_group);
     });
+    // into the global order, axis by axis
+    std::fill(out, out + 3 * n_, 0.0);
+    if (vis) std::fill(vis, vis + n_, 0.0);
+    for (int m = 0; m < 3; ++m) {
+        if (tot[m].empty()) continue;
+        const int32_t *ord = ax_[m].order.data();
+        for (int64_t i = 0; i < n_; ++i) {
+            const int64_t r = ord[i];
+            out[3 * r] += tot[m][3 * i];
+            out[3 * r + 1] += tot[m][3 * i + 1];
+            out[3 * r + 2] += tot[m][3 * i + 2];
+            if (vis) vis[r] += tvis[m][i];
+        }
+    }
     int64_t total = 0;
     for (auto x : lines) total += x;
     return total;
