@@ -394,7 +394,7 @@ void collect(GatherWork &w, int m, int64_t n, GroupSums &s) {
 // axis. A group's sums are made by one task, and the groups' sums are added
 // in group order: the result does not depend on the number of threads. The
 // group size depends on the selection only: 16 families, up to 64 for large
-// sets (fewer sums to add).
+// selections (fewer sums to add).
 struct GatherPlan {
     std::vector<LineFrame> frames;  // per selected family
     std::vector<int64_t> order;     // selected families (indices into sel) in group order
@@ -417,13 +417,18 @@ GatherPlan plan_groups(const Family *fams, const int64_t *sel, int64_t nsel, con
         if (frames[a].m != frames[b].m) return frames[a].m < frames[b].m;
         return column(a) < column(b);
     });
-    for (int64_t q = 0, in_axis = 0; q < nsel; ++q, ++in_axis) {
+    // a group ends after `size` families, or when recording at the first
+    // tile boundary after that (whole tiles, however sparse the selection)
+    for (int64_t q = 0, in_group = 0; q < nsel; ++q, ++in_group) {
         const int64_t k = plan.order[q];
         const bool new_axis = q == 0 || frames[k].m != frames[plan.order[q - 1]].m;
-        if (new_axis) in_axis = 0;
-        const bool cut = record ? new_axis || column(k) / size != column(plan.order[q - 1]) / size
-                                : in_axis % size == 0;
-        if (cut) plan.start.push_back(q);
+        const bool full = in_group >= size;
+        const bool cut = new_axis || (full && (!record || column(k) / PairTable::kTile !=
+                                                              column(plan.order[q - 1]) / PairTable::kTile));
+        if (cut) {
+            plan.start.push_back(q);
+            in_group = 0;
+        }
     }
     plan.start.push_back(nsel);
     return plan;
