@@ -78,6 +78,8 @@ py::dict voxelize_py(const F64 &triangles, const I32 &tri_object, const B8 &two_
         py::gil_scoped_release release;
         chunks = voxgi::voxelize(tp, F, op, int32_t(O), tsp, ap, ep, P, threads, stop, st, &prog);
     }
+    // the final state, so that a caller always hears of the end, however short the work
+    if (!progress.is_none()) progress(prog.phase.load(), prog.total.load(), prog.total.load());
     py::ssize_t N = 0;
     for (const auto &c : chunks) N += py::ssize_t(c.size());
     I32 ijk({N, py::ssize_t(3)});
@@ -168,7 +170,8 @@ eps : float
 threads : int
     0: all hardware threads. The output does not depend on it.
 progress : callable(phase, done, total) or None
-    Called from the calling thread about every 100 ms.
+    Called from the calling thread about every 100 ms, and once at the end
+    with done == total.
 
 Returns
 -------

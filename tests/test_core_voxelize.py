@@ -129,11 +129,22 @@ def test_inputs_are_not_modified_and_threads_do_not_matter():
         np.testing.assert_array_equal(one[k], three[k])
 
 
-def test_progress_callable_is_called_or_harmless():
+def test_progress_callable_hears_the_end():
     calls = []
     out = _core.voxelize(**args(n_tris=20), progress=lambda *x: calls.append(x))
     assert len(out["area"]) > 0
-    assert all(len(c) == 3 for c in calls)
+    assert calls, "the progress callable was never called"
+    assert all(len(c) == 3 and 0 <= c[1] <= c[2] for c in calls)
+    _, done, total = calls[-1]
+    assert done == total > 0
+
+
+def test_progress_callable_errors_propagate():
+    def fail(*_):
+        raise RuntimeError("from progress")
+
+    with pytest.raises(RuntimeError, match="from progress"):
+        _core.voxelize(**args(n_tris=20), progress=fail)
 
 
 def test_area_matches_triangle_area():
