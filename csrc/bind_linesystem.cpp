@@ -12,7 +12,7 @@ using namespace voxgi::py_helpers;
 
 namespace {
 
-voxgi::LineSystem *make_system(const I32 &ijk, const F32 &normal, const F32 &point, float epsilon,
+voxgi::LineSystem* make_system(const I32& ijk, const F32& normal, const F32& point, float epsilon,
                                int history) {
     check_2d(ijk, -1, 3, "ijk");
     const py::ssize_t n = ijk.shape(0);
@@ -21,26 +21,26 @@ voxgi::LineSystem *make_system(const I32 &ijk, const F32 &normal, const F32 &poi
     check_2d(point, n, 3, "point");
     if (!std::isfinite(epsilon) || epsilon < 0)
         throw py::value_error("epsilon must be finite and >= 0");
-    const int32_t *a = ijk.data();
+    const int32_t* a = ijk.data();
     const float *b = normal.data(), *c = point.data();
     py::gil_scoped_release release;
     return new voxgi::LineSystem(n, a, b, c, epsilon, history);
 }
 
-py::array_t<double> normalisation(const voxgi::LineSystem &s, I32 families, F64 weights,
+py::array_t<double> normalisation(const voxgi::LineSystem& s, I32 families, F64 weights,
                                   int threads) {
     auto fams = to_families(families, weights);
     F64 out(s.size());
-    double *o = out.mutable_data();
+    double* o = out.mutable_data();
     auto stop = make_stop_check();
     py::gil_scoped_release release;
     s.normalisation(fams.data(), static_cast<int64_t>(fams.size()), o, threads, stop);
     return out;
 }
 
-py::tuple gather(const voxgi::LineSystem &s, I32 families, F64 weights, F32 values,
+py::tuple gather(const voxgi::LineSystem& s, I32 families, F64 weights, F32 values,
                  I64 family_indices, bool want_vis, int threads, std::optional<Bool> stand_in,
-                 voxgi::PairTable *record) {
+                 voxgi::PairTable* record) {
     auto fams = to_families(families, weights);
     const py::ssize_t n = s.size();
     check_2d(values, n, 3, "values");
@@ -50,8 +50,8 @@ py::tuple gather(const voxgi::LineSystem &s, I32 families, F64 weights, F32 valu
     opt.stand_in = flags_ptr(stand_in, n, "stand_in");
     opt.record = record;
     opt.threads = threads;
-    const float *v = values.data();
-    const int64_t *sel = family_indices.data();
+    const float* v = values.data();
+    const int64_t* sel = family_indices.data();
     const py::ssize_t ns = family_indices.shape(0);
     double *o = out.sums.mutable_data(), *vp = out.vis_ptr();
     auto stop = make_stop_check();
@@ -63,14 +63,14 @@ py::tuple gather(const voxgi::LineSystem &s, I32 families, F64 weights, F32 valu
     return py::make_tuple(out.sums, out.vis_or_none(), lines);
 }
 
-py::tuple gather_recorded(const voxgi::LineSystem &s, const voxgi::PairTable &table, F32 values,
+py::tuple gather_recorded(const voxgi::LineSystem& s, const voxgi::PairTable& table, F32 values,
                           I64 family_indices, bool want_vis, int threads) {
     const py::ssize_t n = s.size();
     check_2d(values, n, 3, "values");
     check_1d(family_indices, -1, "family_indices");
     GatherArrays out(n, want_vis);
-    const float *v = values.data();
-    const int64_t *sel = family_indices.data();
+    const float* v = values.data();
+    const int64_t* sel = family_indices.data();
     const py::ssize_t ns = family_indices.shape(0);
     double *o = out.sums.mutable_data(), *vp = out.vis_ptr();
     auto stop = make_stop_check();
@@ -81,7 +81,7 @@ py::tuple gather_recorded(const voxgi::LineSystem &s, const voxgi::PairTable &ta
     return py::make_tuple(out.sums, out.vis_or_none());
 }
 
-py::tuple shoot(const voxgi::LineSystem &s, I32 emitters, I32 families, F64 weights, F32 values,
+py::tuple shoot(const voxgi::LineSystem& s, I32 emitters, I32 families, F64 weights, F32 values,
                 int threads, std::optional<F64> coverage, std::optional<Bool> stand_in,
                 std::optional<I32> object, std::optional<F64> sil_area, std::optional<Bool> back) {
     auto fams = to_families(families, weights);
@@ -107,8 +107,8 @@ py::tuple shoot(const voxgi::LineSystem &s, I32 emitters, I32 families, F64 weig
     opt.stand_in = flags_ptr(stand_in, n, "stand_in");
     F64 hd({n, py::ssize_t(3)});
     F64 unfound(ne);
-    const int32_t *e = emitters.data();
-    const float *v = values.data();
+    const int32_t* e = emitters.data();
+    const float* v = values.data();
     double *h = hd.mutable_data(), *u = unfound.mutable_data();
     auto stop = make_stop_check();
     voxgi::ShootCount count;
@@ -119,7 +119,7 @@ py::tuple shoot(const voxgi::LineSystem &s, I32 emitters, I32 families, F64 weig
     return py::make_tuple(hd, unfound, count.rays, count.steps);
 }
 
-py::array_t<uint32_t> keys(const voxgi::LineSystem &s, I32 v) {
+py::array_t<uint32_t> keys(const voxgi::LineSystem& s, I32 v) {
     check_1d(v, 3, "v");
     int32_t vv[3] = {v.data()[0], v.data()[1], v.data()[2]};
     int m = 0;
@@ -135,12 +135,12 @@ py::array_t<double> gather_families(I32 ijk, F32 normal, F32 point, I32 families
                                     F32 values, I64 family_indices, float epsilon, int history,
                                     int threads, std::optional<Bool> stand_in) {
     std::unique_ptr<voxgi::LineSystem> s(make_system(ijk, normal, point, epsilon, history));
-    py::tuple r = gather(*s, families, weights, values, family_indices, false, threads, stand_in,
-                         nullptr);
+    py::tuple r =
+        gather(*s, families, weights, values, family_indices, false, threads, stand_in, nullptr);
     return r[0].cast<py::array_t<double>>();
 }
 
-constexpr const char *kLineSystemDoc = R"doc(
+constexpr const char* kLineSystemDoc = R"doc(
 Records prepared for discrete-line propagation (docs/design.md §4).
 
 Parameters
@@ -157,7 +157,7 @@ history : int
     F records remembered per line (1..32).
 )doc";
 
-constexpr const char *kGatherDoc = R"doc(Jacobi gathering over a subset of direction families.
+constexpr const char* kGatherDoc = R"doc(Jacobi gathering over a subset of direction families.
 
 Returns (sums, vis, lines): sums (N, 3) float64, for every record the sum over
 the selected families and both signs of values[partner] * cos * weight (not
@@ -170,7 +170,8 @@ never pair along a line, and a stand-in F is not occluded/answered by a
 stand-in B. record (PairTable from make_pair_table for the same families and
 stand-in flags, optional): also write the pairs found into it.)doc";
 
-constexpr const char *kShootDoc = R"doc(Integer discrete rays from the emitter records along every direction they face.
+constexpr const char* kShootDoc =
+    R"doc(Integer discrete rays from the emitter records along every direction they face.
 
 Returns (hd, unfound, rays, steps): hd (N, 3) float64, per receiver the sum of
 values[e] * cos_r * weight (added in emitter order: independent of threads);
@@ -189,18 +190,22 @@ object's F records, to the receivers behind (silhouettes).)doc";
 
 }  // namespace
 
-void bind_linesystem(py::module_ &m) {
+void bind_linesystem(py::module_& m) {
     py::class_<voxgi::LineSystem>(m, "LineSystem", kLineSystemDoc)
         .def(py::init(&make_system), "ijk"_a.noconvert(), "normal"_a.noconvert(),
              "point"_a.noconvert(), "epsilon"_a = 0.05f, "history"_a = 8)
         .def_property_readonly("size", &voxgi::LineSystem::size, "Records N.")
         .def_property_readonly(
             "lo",
-            [](const voxgi::LineSystem &s) { return py::make_tuple(s.lo()[0], s.lo()[1], s.lo()[2]); },
+            [](const voxgi::LineSystem& s) {
+                return py::make_tuple(s.lo()[0], s.lo()[1], s.lo()[2]);
+            },
             "Lowest voxel coordinate of the records along each axis.")
         .def_property_readonly(
             "hi",
-            [](const voxgi::LineSystem &s) { return py::make_tuple(s.hi()[0], s.hi()[1], s.hi()[2]); },
+            [](const voxgi::LineSystem& s) {
+                return py::make_tuple(s.hi()[0], s.hi()[1], s.hi()[2]);
+            },
             "Highest voxel coordinate of the records along each axis.")
         .def("normalisation", &normalisation, "families"_a.noconvert(), "weights"_a.noconvert(),
              "threads"_a = 0,
@@ -212,7 +217,7 @@ void bind_linesystem(py::module_ &m) {
              kGatherDoc)
         .def(
             "make_pair_table",
-            [](const voxgi::LineSystem &s, I32 families, F64 weights, bool with_stand_in) {
+            [](const voxgi::LineSystem& s, I32 families, F64 weights, bool with_stand_in) {
                 auto fams = to_families(families, weights);
                 py::gil_scoped_release release;
                 return s.make_pair_table(fams.data(), static_cast<int64_t>(fams.size()),
@@ -232,7 +237,8 @@ float rounding). Every family in family_indices must have been recorded.)doc")
              "coverage"_a.noconvert() = py::none(), "stand_in"_a.noconvert() = py::none(),
              "object"_a.noconvert() = py::none(), "sil_area"_a.noconvert() = py::none(),
              "back"_a.noconvert() = py::none(), kShootDoc)
-        .def("keys", &keys, "v"_a.noconvert(), "Line key of every record for family v, (N,) uint32.");
+        .def("keys", &keys, "v"_a.noconvert(),
+             "Line key of every record for family v, (N,) uint32.");
 
     m.def("gather_families", &gather_families, "ijk"_a.noconvert(), "normal"_a.noconvert(),
           "point"_a.noconvert(), "families"_a.noconvert(), "weights"_a.noconvert(),

@@ -4,7 +4,7 @@
 namespace py = pybind11;
 using namespace pybind11::literals;
 
-void bind_pairtable(py::module_ &m) {
+void bind_pairtable(py::module_& m) {
     auto pair_table = py::class_<voxgi::PairTable>(m, "PairTable", R"doc(
 The pairs of one direction set's gathering, recorded for replay
 (LineSystem.make_pair_table, LineSystem.gather(record=...),
@@ -16,14 +16,14 @@ records.)doc");
     pair_table.attr("MAX_RECORDS") = voxgi::PairTable::kMaxRecords;
     pair_table
         .def_property_readonly(
-            "nbytes", [](const voxgi::PairTable &t) { return t.bytes(); },
+            "nbytes", [](const voxgi::PairTable& t) { return t.bytes(); },
             "Bytes of the table's blocks (address space; pages are used as they are written).")
         .def_property_readonly(
-            "families", [](const voxgi::PairTable &t) { return t.nfam; },
+            "families", [](const voxgi::PairTable& t) { return t.nfam; },
             "Families of the set the table was made for.")
         .def_property_readonly(
             "recorded",
-            [](const voxgi::PairTable &t) {
+            [](const voxgi::PairTable& t) {
                 int64_t k = 0;
                 for (auto f : t.filled) k += f;
                 return k;
@@ -31,9 +31,9 @@ records.)doc");
             "How many families' pairs are recorded.")
         .def_property_readonly(
             "recorded_mask",
-            [](const voxgi::PairTable &t) {
+            [](const voxgi::PairTable& t) {
                 py::array_t<bool> out(static_cast<py::ssize_t>(t.filled.size()));
-                bool *o = out.mutable_data();
+                bool* o = out.mutable_data();
                 for (size_t f = 0; f < t.filled.size(); ++f) o[f] = t.filled[f] != 0;
                 return out;
             },

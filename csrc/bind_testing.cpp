@@ -8,7 +8,7 @@ using namespace voxgi::py_helpers;
 
 namespace {
 
-py::tuple gather_sorted(const voxgi::LineSystem &s, I32 families, F64 weights, F32 values,
+py::tuple gather_sorted(const voxgi::LineSystem& s, I32 families, F64 weights, F32 values,
                         I64 family_indices, bool want_vis, int threads,
                         std::optional<Bool> stand_in, bool transpose) {
     auto fams = to_families(families, weights);
@@ -16,9 +16,9 @@ py::tuple gather_sorted(const voxgi::LineSystem &s, I32 families, F64 weights, F
     check_2d(values, n, 3, "values");
     check_selection(family_indices, fams.size());
     GatherArrays out(n, want_vis);
-    const uint8_t *sb = flags_ptr(stand_in, n, "stand_in");
-    const float *v = values.data();
-    const int64_t *sel = family_indices.data();
+    const uint8_t* sb = flags_ptr(stand_in, n, "stand_in");
+    const float* v = values.data();
+    const int64_t* sel = family_indices.data();
     const py::ssize_t ns = family_indices.shape(0);
     double *o = out.sums.mutable_data(), *vp = out.vis_ptr();
     auto stop = make_stop_check();
@@ -30,7 +30,7 @@ py::tuple gather_sorted(const voxgi::LineSystem &s, I32 families, F64 weights, F
     return py::make_tuple(out.sums, out.vis_or_none(), lines);
 }
 
-py::tuple shoot_sender_side(const voxgi::LineSystem &s, I32 emitters, I32 families, F64 weights,
+py::tuple shoot_sender_side(const voxgi::LineSystem& s, I32 emitters, I32 families, F64 weights,
                             F32 values, F64 send_scale, F64 recv_area, int threads,
                             std::optional<Bool> stand_in) {
     auto fams = to_families(families, weights);
@@ -42,10 +42,10 @@ py::tuple shoot_sender_side(const voxgi::LineSystem &s, I32 emitters, I32 famili
     const py::ssize_t ne = emitters.shape(0);
     F64 hd({n, py::ssize_t(3)});
     F64 unfound(ne);
-    const int32_t *e = emitters.data();
-    const float *v = values.data();
+    const int32_t* e = emitters.data();
+    const float* v = values.data();
     const double *ss = send_scale.data(), *ra = recv_area.data();
-    const uint8_t *sb = flags_ptr(stand_in, n, "stand_in");
+    const uint8_t* sb = flags_ptr(stand_in, n, "stand_in");
     double *h = hd.mutable_data(), *u = unfound.mutable_data();
     auto stop = make_stop_check();
     voxgi::ShootCount count;
@@ -59,7 +59,7 @@ py::tuple shoot_sender_side(const voxgi::LineSystem &s, I32 emitters, I32 famili
 
 }  // namespace
 
-void bind_testing(py::module_ &m) {
+void bind_testing(py::module_& m) {
     py::module_ t = m.def_submodule(
         "testing", "Reference and adjoint variants of the kernels, for the tests only.");
     t.def("gather_sorted", &gather_sorted, "system"_a, "families"_a.noconvert(),

@@ -55,15 +55,15 @@ constexpr uint32_t kAnswered = 0x80000000u;
 struct FacingB {
 #if defined(__SSE2__)
     __m128 p, n;
-    explicit FacingB(const GatherRec &b) : p(_mm_loadu_ps(b.pt)), n(_mm_loadu_ps(b.nrm)) {}
-    bool faces(const GatherRec &f, float eps) const {
+    explicit FacingB(const GatherRec& b) : p(_mm_loadu_ps(b.pt)), n(_mm_loadu_ps(b.nrm)) {}
+    bool faces(const GatherRec& f, float eps) const {
         const __m128 d = _mm_sub_ps(p, _mm_loadu_ps(f.pt));
         return sum3(_mm_mul_ps(d, _mm_loadu_ps(f.nrm))) > eps && -sum3(_mm_mul_ps(d, n)) > eps;
     }
 #else
-    const GatherRec &b;
-    explicit FacingB(const GatherRec &b_) : b(b_) {}
-    bool faces(const GatherRec &f, float eps) const {
+    const GatherRec& b;
+    explicit FacingB(const GatherRec& b_) : b(b_) {}
+    bool faces(const GatherRec& f, float eps) const {
         return facing(f.pt, f.nrm, b.pt, b.nrm, eps);
     }
 #endif
@@ -85,7 +85,7 @@ struct GatherWork {
     // (rec_axis; -1: none yet)
     std::vector<GatherRec> rec;
     int rec_axis = -1;
-    std::vector<double> vis;    // the current group's, axis order
+    std::vector<double> vis;     // the current group's, axis order
     std::vector<PendingB> pend;  // the queued B records of one slab
     // per record (axis order): bits 0-30 previous F on the line + 1 (0:
     // none), bit 31 answered; valid for F records
@@ -109,15 +109,15 @@ struct WalkShared {
 // from one record to the next): the link is written for every record (only
 // F records are ever read through it), the B entry is written always and
 // kept by advancing the count.
-VOXGI_INLINE void step_record(uint32_t *lnk, int32_t p, float c, int32_t &lastF, PendingB *pend,
-                              size_t &np) {
+VOXGI_INLINE void step_record(uint32_t* lnk, int32_t p, float c, int32_t& lastF, PendingB* pend,
+                              size_t& np) {
     lnk[p] = static_cast<uint32_t>(lastF + 1);
     pend[np] = PendingB{p, lastF, c};
     np += static_cast<size_t>((c < -kTiny) & (lastF >= 0));
     lastF = c > kTiny ? p : lastF;
 }
 
-VOXGI_INLINE void add(GatherRec &to, const GatherRec &from, double w) {
+VOXGI_INLINE void add(GatherRec& to, const GatherRec& from, double w) {
     to.acc[0] += from.val[0] * w;
     to.acc[1] += from.val[1] * w;
     to.acc[2] += from.val[2] * w;
@@ -130,17 +130,17 @@ VOXGI_INLINE void add(GatherRec &to, const GatherRec &from, double w) {
 // flags (fixed for a family's walk, so they are template arguments, not
 // branches in the chain loop).
 template <bool Vis, bool Rec, bool Stand>
-VOXGI_INLINE void pair_record(GatherRec *rec, uint32_t *lnk, const PendingB &q, int K, float eps,
-                              double wgt, const float *dh, double *vs, int32_t *rt) {
+VOXGI_INLINE void pair_record(GatherRec* rec, uint32_t* lnk, const PendingB& q, int K, float eps,
+                              double wgt, const float* dh, double* vs, int32_t* rt) {
     const int32_t p = q.p;
-    GatherRec &rp = rec[p];
+    GatherRec& rp = rec[p];
     const double cb = -double(q.c) * wgt;
     bool got = false;
     const bool sp = Stand && rp.stand;  // two stand-ins never pair
     int32_t f = q.f;
     const FacingB fb(rp);
     for (int h = 0; h < K && f >= 0; ++h) {
-        GatherRec &rf = rec[f];
+        GatherRec& rf = rec[f];
         const int32_t older = static_cast<int32_t>(lnk[f] & ~kAnswered) - 1;
         if ((Stand && sp && rf.stand) || !fb.faces(rf, eps)) {
             f = older;
@@ -171,8 +171,8 @@ VOXGI_INLINE void pair_record(GatherRec *rec, uint32_t *lnk, const PendingB &q, 
 // line), and with the queue in hand the partners of the pairs kAhead places
 // on are prefetched while this pair waits for its own.
 template <bool Vis, bool Rec, bool Stand>
-void pair_pending(GatherRec *rec, uint32_t *lnk, const PendingB *pend, size_t np, int K, float eps,
-                  double wgt, const float *dh, double *vs, int32_t *rt) {
+void pair_pending(GatherRec* rec, uint32_t* lnk, const PendingB* pend, size_t np, int K, float eps,
+                  double wgt, const float* dh, double* vs, int32_t* rt) {
     constexpr size_t kAhead = 8;
     for (size_t j = 0; j < std::min(np, kAhead); ++j) {
         __builtin_prefetch(rec + pend[j].f, 1, 3);
@@ -189,8 +189,8 @@ void pair_pending(GatherRec *rec, uint32_t *lnk, const PendingB *pend, size_t np
     }
 }
 
-using PairFn = void (*)(GatherRec *, uint32_t *, const PendingB *, size_t, int, float, double,
-                        const float *, double *, int32_t *);
+using PairFn = void (*)(GatherRec*, uint32_t*, const PendingB*, size_t, int, float, double,
+                        const float*, double*, int32_t*);
 
 // The pair_pending instance for a walk's options.
 template <bool Vis>
@@ -205,10 +205,10 @@ PairFn pick_pairing(bool vis, bool rec, bool stand) {
 // The records of voxel g that are not a twin pair, in their order along d
 // (by depth, B before F at equal depth: sort_group's order), through
 // step_record.
-VOXGI_INLINE void step_voxel(int32_t i, int gn, const float *NR, const float *PT, const float *dh,
-                             Hit *hg, uint32_t *lk, int32_t &lastF, PendingB *pq, size_t &nq) {
+VOXGI_INLINE void step_voxel(int32_t i, int gn, const float* NR, const float* PT, const float* dh,
+                             Hit* hg, uint32_t* lk, int32_t& lastF, PendingB* pq, size_t& nq) {
     if (gn == 1) {  // no depth order needed
-        const float *nr = NR + 3 * int64_t(i);
+        const float* nr = NR + 3 * int64_t(i);
         step_record(lk, i, nr[0] * dh[0] + nr[1] * dh[1] + nr[2] * dh[2], lastF, pq, nq);
     } else if (gn == 2) {
         const float d0 = dot3(PT + 3 * i, dh), d1 = dot3(PT + 3 * i + 3, dh);
@@ -233,9 +233,9 @@ VOXGI_INLINE void step_voxel(int32_t i, int gn, const float *NR, const float *PT
 // orders them); their n.d are c and -c exactly. step_record(pa, -ac) then
 // step_record(pb, ac), written out: the B leaves lastF as it is, so both
 // links are lastF + 1, and only the B can be queued.
-VOXGI_INLINE void step_twins(int32_t i, const float *NR, const float *dh, uint32_t *lk,
-                             int32_t &lastF, PendingB *pq, size_t &nq) {
-    const float *nr = NR + 3 * int64_t(i);
+VOXGI_INLINE void step_twins(int32_t i, const float* NR, const float* dh, uint32_t* lk,
+                             int32_t& lastF, PendingB* pq, size_t& nq) {
+    const float* nr = NR + 3 * int64_t(i);
     const float c = nr[0] * dh[0] + nr[1] * dh[1] + nr[2] * dh[2];
     const bool first_is_f = c > 0.0f;  // then the twin (i + 1) is the B, met first
     const int32_t pa = first_is_f ? i + 1 : i, pb = first_is_f ? i : i + 1;
@@ -248,12 +248,12 @@ VOXGI_INLINE void step_twins(int32_t i, const float *NR, const float *dh, uint32
 }
 
 // Load the records of axis m into the thread's record array.
-void load_axis(GatherWork &w, const LineSystem::Axis &ax, int m, int64_t n, const float *val,
-               const uint8_t *stand) {
+void load_axis(GatherWork& w, const LineSystem::Axis& ax, int m, int64_t n, const float* val,
+               const uint8_t* stand) {
     w.rec.resize(n);
-    const float *pn0 = ax.pn.data();
+    const float* pn0 = ax.pn.data();
     for (int64_t i = 0; i < n; ++i) {
-        GatherRec &r = w.rec[i];
+        GatherRec& r = w.rec[i];
         for (int c = 0; c < 3; ++c) {
             r.pt[c] = pn0[8 * i + c];
             r.nrm[c] = pn0[8 * i + 3 + c];
@@ -270,8 +270,8 @@ void load_axis(GatherWork &w, const LineSystem::Axis &ax, int m, int64_t n, cons
 // through the links) lives in a table indexed by the line key. Slab by slab,
 // its queue paired after it: the voxel loop itself calls nothing, so its
 // values stay in registers. Returns the lines walked (>= 2 records).
-int64_t walk_family(GatherWork &w, const LineSystem::Axis &ax, const LineFrame &fr,
-                    const Family &F, const WalkShared &ws, int32_t *rt) {
+int64_t walk_family(GatherWork& w, const LineSystem::Axis& ax, const LineFrame& fr, const Family& F,
+                    const WalkShared& ws, int32_t* rt) {
     const int64_t n = static_cast<int64_t>(ax.order.size());
     if (w.table.empty()) w.table.assign(ws.max_keys, LineState{0, -1});
     if (ws.vis && w.vis.empty()) w.vis.assign(n, 0.0);
@@ -279,7 +279,7 @@ int64_t walk_family(GatherWork &w, const LineSystem::Axis &ax, const LineFrame &
     if (w.pend.size() < static_cast<size_t>(n) + 1) w.pend.resize(n + 1);
     if (w.lnk.size() < static_cast<size_t>(n)) w.lnk.assign(n, 0);
     if (static_cast<int>(w.group.size()) < ax.gmax) w.group.resize(ax.gmax);
-    const int32_t cur = ++w.stamp;  // no clearing: entries of other families carry old stamps
+    const int32_t cur = ++w.stamp;        // no clearing: entries of other families carry old stamps
     const int32_t counted = 2 * cur + 1;  // the stamp of a line with >= 2 records in this pass
     float dh[3];
     unit_direction(F, dh);
@@ -289,19 +289,19 @@ int64_t walk_family(GatherWork &w, const LineSystem::Axis &ax, const LineFrame &
     // which could alias the frame's int32 members) do not force them back to
     // memory on every voxel.
     const SlabKey sk(fr);
-    const int32_t *__restrict AX = ax.X.data(), *__restrict AY = ax.Y.data();
-    const int32_t *__restrict AZ = ax.Z.data();
-    const int32_t *__restrict GS = ax.gstart.data();
-    const uint8_t *__restrict GL = ax.gflag.data();
-    const float *__restrict NR = ax.nrm.data();  // compact: the walk streams 24 B a record, not 64
-    const float *__restrict PT = ax.pt.data();
-    const int32_t *__restrict SL = ax.gslab.data();
-    LineState *__restrict tbl = w.table.data();
-    uint32_t *__restrict lk = w.lnk.data();
-    PendingB *__restrict pq = w.pend.data();
-    Hit *hg = w.group.data();
-    GatherRec *rec = w.rec.data();
-    double *vs = ws.vis ? w.vis.data() : nullptr;
+    const int32_t* __restrict AX = ax.X.data(), * __restrict AY = ax.Y.data();
+    const int32_t* __restrict AZ = ax.Z.data();
+    const int32_t* __restrict GS = ax.gstart.data();
+    const uint8_t* __restrict GL = ax.gflag.data();
+    const float* __restrict NR = ax.nrm.data();  // compact: the walk streams 24 B a record, not 64
+    const float* __restrict PT = ax.pt.data();
+    const int32_t* __restrict SL = ax.gslab.data();
+    LineState* __restrict tbl = w.table.data();
+    uint32_t* __restrict lk = w.lnk.data();
+    PendingB* __restrict pq = w.pend.data();
+    Hit* hg = w.group.data();
+    GatherRec* rec = w.rec.data();
+    double* vs = ws.vis ? w.vis.data() : nullptr;
     const int64_t nslab = static_cast<int64_t>(ax.gslab.size()) - 1;
     int64_t nwalked = 0;
     for (int64_t sl = 0; sl < nslab; ++sl) {
@@ -312,7 +312,7 @@ int64_t walk_family(GatherWork &w, const LineSystem::Axis &ax, const LineFrame &
             const int32_t i = GS[g];
             // (the tests hold this key and LineFrame::key, through the two
             // walks, to the same pairs)
-            LineState &ls = tbl[sk.key(AY[i], AZ[i], base)];
+            LineState& ls = tbl[sk.key(AY[i], AZ[i], base)];
             const int32_t old = ls.stamp;
             const bool seen = (old >> 1) == cur;
             int32_t lastF = seen ? ls.last : -1;
@@ -344,7 +344,7 @@ struct GroupSums {
 // Sums buffers kept for the next groups (a group's sums wait here until the
 // groups before it have been added).
 class SumsPool {
-public:
+   public:
     SumsPool(int64_t n, bool vis) : n_(n), vis_(vis) {}
     GroupSums take() {
         {
@@ -360,12 +360,12 @@ public:
         if (vis_) s.vis.reset(new double[n_]);
         return s;
     }
-    void give(GroupSums &&s) {
+    void give(GroupSums&& s) {
         std::lock_guard<std::mutex> lock(mu_);
         free_.push_back(std::move(s));
     }
 
-private:
+   private:
     int64_t n_;
     bool vis_;
     std::mutex mu_;
@@ -373,10 +373,10 @@ private:
 };
 
 // Move the thread's sums into `s`, leaving them zero.
-void collect(GatherWork &w, int m, int64_t n, GroupSums &s) {
+void collect(GatherWork& w, int m, int64_t n, GroupSums& s) {
     s.m = m;
-    GatherRec *a = w.rec.data();
-    double *o = s.acc.get();
+    GatherRec* a = w.rec.data();
+    double* o = s.acc.get();
     for (int64_t i = 0; i < n; ++i) {
         o[3 * i] = a[i].acc[0];
         o[3 * i + 1] = a[i].acc[1];
@@ -402,14 +402,14 @@ struct GatherPlan {
     int64_t groups() const { return static_cast<int64_t>(start.size()) - 1; }
 };
 
-GatherPlan plan_groups(const Family *fams, const int64_t *sel, int64_t nsel, const int32_t *lo,
-                       const int32_t *hi, const PairTable *record) {
+GatherPlan plan_groups(const Family* fams, const int64_t* sel, int64_t nsel, const int32_t* lo,
+                       const int32_t* hi, const PairTable* record) {
     GatherPlan plan;
     plan.frames.reserve(nsel);
     for (int64_t k = 0; k < nsel; ++k) plan.frames.emplace_back(fams[sel[k]].v, lo, hi);
-    const auto &frames = plan.frames;
-    const int64_t size =
-        PairTable::kTile * std::min<int64_t>(4, std::max<int64_t>(1, nsel / (32 * PairTable::kTile)));
+    const auto& frames = plan.frames;
+    const int64_t size = PairTable::kTile *
+                         std::min<int64_t>(4, std::max<int64_t>(1, nsel / (32 * PairTable::kTile)));
     plan.order.resize(nsel);
     std::iota(plan.order.begin(), plan.order.end(), int64_t(0));
     auto column = [&](int64_t k) { return record ? int64_t(record->slot[sel[k]]) : int64_t(0); };
@@ -423,8 +423,9 @@ GatherPlan plan_groups(const Family *fams, const int64_t *sel, int64_t nsel, con
         const int64_t k = plan.order[q];
         const bool new_axis = q == 0 || frames[k].m != frames[plan.order[q - 1]].m;
         const bool full = in_group >= size;
-        const bool cut = new_axis || (full && (!record || column(k) / PairTable::kTile !=
-                                                              column(plan.order[q - 1]) / PairTable::kTile));
+        const bool cut =
+            new_axis || (full && (!record || column(k) / PairTable::kTile !=
+                                                 column(plan.order[q - 1]) / PairTable::kTile));
         if (cut) {
             plan.start.push_back(q);
             in_group = 0;
@@ -438,14 +439,14 @@ GatherPlan plan_groups(const Family *fams, const int64_t *sel, int64_t nsel, con
 // group moves to the next tile and at its end; its families are marked
 // recorded only then (a pass stopped half-way leaves them unrecorded).
 struct TileWriter {
-    PairTable *table;
+    PairTable* table;
     int m;
-    int32_t *buf;  // the thread's family-major buffer: a family's writes stay within n entries
+    int32_t* buf;  // the thread's family-major buffer: a family's writes stay within n entries
     int64_t tile = -1;
     uint32_t lanes = 0;
     std::vector<int64_t> families;
     // the column to write family f's pairs into
-    int32_t *column(int64_t f) {
+    int32_t* column(int64_t f) {
         const int64_t t = table->slot[f] / PairTable::kTile;
         if (t != tile) flush();
         tile = t;
@@ -466,9 +467,9 @@ struct TileWriter {
 
 }  // namespace
 
-void LineSystem::check_record(const Family *fams, const int64_t *sel, int64_t nsel,
-                              const GatherOptions &opt) const {
-    const PairTable &t = *opt.record;
+void LineSystem::check_record(const Family* fams, const int64_t* sel, int64_t nsel,
+                              const GatherOptions& opt) const {
+    const PairTable& t = *opt.record;
     if (t.n != n_) throw std::invalid_argument("pair table made for another line system");
     if (t.with_stand_in != (opt.stand_in != nullptr))
         throw std::invalid_argument("pair table made with other stand-in flags");
@@ -481,33 +482,33 @@ void LineSystem::check_record(const Family *fams, const int64_t *sel, int64_t ns
     }
 }
 
-int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel, const float *val,
-                           double *out, double *vis, const GatherOptions &opt,
-                           const StopCheck &stop) const {
-    PairTable *record = opt.record;
+int64_t LineSystem::gather(const Family* fams, const int64_t* sel, int64_t nsel, const float* val,
+                           double* out, double* vis, const GatherOptions& opt,
+                           const StopCheck& stop) const {
+    PairTable* record = opt.record;
     if (record) check_record(fams, sel, nsel, opt);
     const GatherPlan plan = plan_groups(fams, sel, nsel, lo_, hi_, record);
     // values and stand-in flags in each needed axis order
     std::vector<float> valax[3];
     std::vector<uint8_t> sbax[3];
-    for (const auto &fr : plan.frames) {
+    for (const auto& fr : plan.frames) {
         const int m = fr.m;
         if (!valax[m].empty()) continue;
         to_axis_order(m, val, valax[m]);
         if (!opt.stand_in) continue;
         sbax[m].resize(n_);
-        const int32_t *ord = ax_[m].order.data();
+        const int32_t* ord = ax_[m].order.data();
         for (int64_t i = 0; i < n_; ++i) sbax[m][i] = opt.stand_in[ord[i]] ? 1 : 0;
     }
     WalkShared ws{eps_, hist_, vis != nullptr, opt.stand_in != nullptr, 1};
-    for (const auto &fr : plan.frames) ws.max_keys = std::max<int64_t>(ws.max_keys, fr.nu * fr.nw);
+    for (const auto& fr : plan.frames) ws.max_keys = std::max<int64_t>(ws.max_keys, fr.nu * fr.nw);
 
     // the sums of each axis's groups, in that axis's order
     std::vector<double> tot[3], tvis[3];
     SumsPool pool(n_, vis != nullptr);
     InOrder<GroupSums> in_order;
-    auto add_group = [&](GroupSums &s) {
-        std::vector<double> &ta = tot[s.m], &tv = tvis[s.m];
+    auto add_group = [&](GroupSums& s) {
+        std::vector<double>&ta = tot[s.m], &tv = tvis[s.m];
         if (ta.empty()) ta.assign(3 * n_, 0.0);
         for (int64_t i = 0; i < 3 * n_; ++i) ta[i] += s.acc[i];
         if (vis) {
@@ -521,7 +522,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
     std::vector<GatherWork> work(threads);
     std::vector<int64_t> lines(threads, 0);
     parallel_for(plan.groups(), threads, stop, [&](int64_t g, int t) {
-        GatherWork &w = work[t];
+        GatherWork& w = work[t];
         const int m = plan.frames[plan.order[plan.start[g]]].m;
         if (w.rec_axis != m)
             load_axis(w, ax_[m], m, n_, valax[m].data(), opt.stand_in ? sbax[m].data() : nullptr);
@@ -529,7 +530,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
         TileWriter tw{record, m, w.rbuf.data(), -1, 0, {}};
         for (int64_t q = plan.start[g]; q < plan.start[g + 1]; ++q) {
             const int64_t k = plan.order[q];
-            int32_t *rt = record ? tw.column(sel[k]) : nullptr;
+            int32_t* rt = record ? tw.column(sel[k]) : nullptr;
             lines[t] += walk_family(w, ax_[m], plan.frames[k], fams[sel[k]], ws, rt);
         }
         if (record) tw.flush();
@@ -542,7 +543,7 @@ int64_t LineSystem::gather(const Family *fams, const int64_t *sel, int64_t nsel,
     if (vis) std::fill(vis, vis + n_, 0.0);
     for (int m = 0; m < 3; ++m) {
         if (tot[m].empty()) continue;
-        const int32_t *ord = ax_[m].order.data();
+        const int32_t* ord = ax_[m].order.data();
         for (int64_t i = 0; i < n_; ++i) {
             const int64_t r = ord[i];
             out[3 * r] += tot[m][3 * i];

@@ -30,7 +30,8 @@ LineFrame::LineFrame(const int32_t v[3], const int32_t lo_[3], const int32_t hi_
     // (num * ceil(2^32/A)) >> 32 == num / A exactly while
     // num * (ceil(2^32/A)*A - 2^32) < 2^32, which holds for num < 2^32 / A.
     if (std::max(maxu, maxw) >= (int64_t(1) << 32) / A)
-        throw std::invalid_argument("scene too large for 32-bit line keys at this direction radius");
+        throw std::invalid_argument(
+            "scene too large for 32-bit line keys at this direction radius");
     magic = ((uint64_t(1) << 32) + uint64_t(A) - 1) / uint64_t(A);
     nu = maxu / A + 1;
     nw = maxw / A + 1;

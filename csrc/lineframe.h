@@ -16,9 +16,9 @@ struct Family {
 };
 
 // The unit vector of a family in float (the one every kernel uses for n.d).
-inline void unit_direction(const Family &f, float d[3]) {
-    const float len = std::sqrt(float(f.v[0]) * f.v[0] + float(f.v[1]) * f.v[1] +
-                                float(f.v[2]) * f.v[2]);
+inline void unit_direction(const Family& f, float d[3]) {
+    const float len =
+        std::sqrt(float(f.v[0]) * f.v[0] + float(f.v[1]) * f.v[1] + float(f.v[2]) * f.v[2]);
     for (int c = 0; c < 3; ++c) d[c] = f.v[c] / len;
 }
 
@@ -56,7 +56,7 @@ struct LineFrame {
 // per slab.
 struct SlabKey {
     int64_t A, B, C, XmA, nw, half, xlo, yo, zo, ysn, zs;
-    explicit SlabKey(const LineFrame &fr)
+    explicit SlabKey(const LineFrame& fr)
         : A(fr.A),
           B(fr.B),
           C(fr.C),

@@ -18,7 +18,7 @@ struct Hit {
 };
 
 // Order records of one voxel along d: by depth, then B (c < 0) before F.
-inline void sort_group(Hit *g, int n) {
+inline void sort_group(Hit* g, int n) {
     for (int i = 1; i < n; ++i) {
         Hit h = g[i];
         int j = i - 1;
@@ -32,7 +32,7 @@ inline void sort_group(Hit *g, int n) {
 
 // B at pb (normal nb) and F at pf (normal nf) see each other when each lies
 // strictly in front of the other's plane (by more than eps).
-inline bool facing(const float *pf, const float *nf, const float *pb, const float *nb, float eps) {
+inline bool facing(const float* pf, const float* nf, const float* pb, const float* nb, float eps) {
     const float d0 = pb[0] - pf[0], d1 = pb[1] - pf[1], d2 = pb[2] - pf[2];
     return (d0 * nf[0] + d1 * nf[1] + d2 * nf[2] > eps) &&
            (-(d0 * nb[0] + d1 * nb[1] + d2 * nb[2]) > eps);

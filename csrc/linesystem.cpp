@@ -15,7 +15,7 @@
 
 namespace voxgi {
 
-LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const float *point,
+LineSystem::LineSystem(int64_t n, const int32_t* ijk, const float* normal, const float* point,
                        float epsilon, int history)
     : n_(n), eps_(epsilon), hist_(history), normal_(nullptr), point_(nullptr) {
     if (n < 1) throw std::invalid_argument("no records");
@@ -44,7 +44,7 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
     }
     // Voxel index from the (x, y, z) order (the occupancy bitset is built on
     // the first shoot: gathering does not need it).
-    const Axis &a0 = ax_[0];
+    const Axis& a0 = ax_[0];
     for (int64_t i = 0; i < n; ++i) {
         const int64_t k = linear(a0.X[i], a0.Y[i], a0.Z[i]);
         if (vkey_.empty() || vkey_.back() != k) {
@@ -58,10 +58,10 @@ LineSystem::LineSystem(int64_t n, const int32_t *ijk, const float *normal, const
 // The lexicographic order of main axis m, keys (x_m, x_o1, x_o2): LSD
 // counting sort, three stable passes, O(n + extent); then the records'
 // coordinates, normals and points copied into that order.
-void LineSystem::sort_axis(int m, const int32_t *ijk) {
+void LineSystem::sort_axis(int m, const int32_t* ijk) {
     const int64_t n = n_;
     const int o1 = (m == 0) ? 1 : 0, o2 = (m == 2) ? 1 : 2;
-    Axis &ax = ax_[m];
+    Axis& ax = ax_[m];
     std::vector<int32_t> tmp(n), cnt;
     ax.order.resize(n);
     std::iota(ax.order.begin(), ax.order.end(), 0);
@@ -98,7 +98,7 @@ void LineSystem::sort_axis(int m, const int32_t *ijk) {
 
 // The voxels and slabs of axis m's order, and which voxels hold twins.
 void LineSystem::find_voxels(int m) {
-    Axis &ax = ax_[m];
+    Axis& ax = ax_[m];
     for (int64_t i = 0; i < n_; ++i) {
         const bool slab = i == 0 || ax.X[i] != ax.X[i - 1];
         if (slab || ax.Y[i] != ax.Y[i - 1] || ax.Z[i] != ax.Z[i - 1]) {
@@ -145,16 +145,16 @@ int64_t LineSystem::linear(int32_t x, int32_t y, int32_t z) const {
     return ((int64_t(x) - lo_[0]) * ny + (int64_t(y) - lo_[1])) * nz + (int64_t(z) - lo_[2]);
 }
 
-void LineSystem::to_axis_order(int m, const float *val, std::vector<float> &out) const {
+void LineSystem::to_axis_order(int m, const float* val, std::vector<float>& out) const {
     out.resize(3 * n_);
-    const int32_t *ord = ax_[m].order.data();
+    const int32_t* ord = ax_[m].order.data();
     for (int64_t i = 0; i < n_; ++i)
         for (int c = 0; c < 3; ++c) out[3 * i + c] = val[3 * int64_t(ord[i]) + c];
 }
 
-void LineSystem::keys(const int32_t v[3], uint32_t *out) const {
+void LineSystem::keys(const int32_t v[3], uint32_t* out) const {
     LineFrame fr(v, lo_, hi_);
-    const Axis &ax = ax_[fr.m];
+    const Axis& ax = ax_[fr.m];
     for (int64_t i = 0; i < n_; ++i)
         out[ax.order[i]] = fr.key(ax.X[i] - fr.lo[fr.m], fr.yprime(ax.Y[i]), fr.zprime(ax.Z[i]));
 }
@@ -164,14 +164,14 @@ namespace {
 // S depends on the normal only, and flat walls give many records one normal:
 // the first record of every distinct normal (bit-exact equality) and, for
 // every record, the index of its normal among them.
-void distinct_normals(int64_t n, const float *normal, std::vector<int64_t> &first,
-                      std::vector<int64_t> &which) {
+void distinct_normals(int64_t n, const float* normal, std::vector<int64_t>& first,
+                      std::vector<int64_t>& which) {
     struct Key {
         uint32_t a, b, c;
-        bool operator==(const Key &o) const { return a == o.a && b == o.b && c == o.c; }
+        bool operator==(const Key& o) const { return a == o.a && b == o.b && c == o.c; }
     };
     struct Hash {
-        size_t operator()(const Key &k) const {
+        size_t operator()(const Key& k) const {
             uint64_t h = k.a * 0x9E3779B97F4A7C15ull;
             h ^= (k.b + 0x7F4A7C15ull) * 0xC2B2AE3D27D4EB4Full;
             h ^= (k.c + 0x165667B1ull) * 0x94D049BB133111EBull;
@@ -194,15 +194,15 @@ void distinct_normals(int64_t n, const float *normal, std::vector<int64_t> &firs
 
 }  // namespace
 
-void LineSystem::normalisation(const Family *fams, int64_t nf, double *S, int threads,
-                               const StopCheck &stop) const {
+void LineSystem::normalisation(const Family* fams, int64_t nf, double* S, int threads,
+                               const StopCheck& stop) const {
     // Unit vectors once; each record sums |n.s| * weight over the families
     // (one of +v, -v faces it).
     std::vector<double> u(3 * nf);
     for (int64_t f = 0; f < nf; ++f) {
-        const double l = std::sqrt(double(fams[f].v[0]) * fams[f].v[0] +
-                                   double(fams[f].v[1]) * fams[f].v[1] +
-                                   double(fams[f].v[2]) * fams[f].v[2]);
+        const double l =
+            std::sqrt(double(fams[f].v[0]) * fams[f].v[0] + double(fams[f].v[1]) * fams[f].v[1] +
+                      double(fams[f].v[2]) * fams[f].v[2]);
         for (int c = 0; c < 3; ++c) u[3 * f + c] = fams[f].v[c] / l;
     }
     std::vector<int64_t> first, which;

@@ -26,10 +26,10 @@ struct GatherOptions {
     // stand-in B looks past the stand-in F records of its line (neither
     // receives from the other, the F is not marked answered, so it does not
     // occlude the older F records from the receivers further on).
-    const uint8_t *stand_in = nullptr;
+    const uint8_t* stand_in = nullptr;
     // nullable: also record the pairs found (a table from make_pair_table
     // for the same family array and the same stand-in flags every time)
-    PairTable *record = nullptr;
+    PairTable* record = nullptr;
     int threads = 0;  // 0: all hardware threads
 };
 
@@ -46,11 +46,11 @@ struct ShootOptions {
     // whole line per voxel of its band. Meant for flat emitters: on a curved
     // sheet the neighbours in front of e's plane would still occlude e's
     // share. A negative coverage[e] keeps the whole-line rule for e.
-    const double *coverage = nullptr;
+    const double* coverage = nullptr;
     // As for GatherOptions; a stand-in receiver's sender is the nearest
     // facing F that is not a stand-in (so a stand-in emitter deposits
     // nothing on a stand-in receiver).
-    const uint8_t *stand_in = nullptr;
+    const uint8_t* stand_in = nullptr;
     // Silhouettes (all three or none). A band of receivers of one object in
     // consecutive steps covers sum sil_area[r] |n_r.d| / |d_m| of the line
     // (sil_area: area in voxel units; negative: the record's object is never
@@ -60,13 +60,13 @@ struct ShootOptions {
     // then meets an F record of that object within one step, the line only
     // grazed it: the share T (1 - band) goes on, the object's F and back
     // records (and the front B records of the grazed face, within 60 degrees
-    // of its normal, while the line still runs along it) no longer stop it,
+    // of its normal, while the line still runs along it) do not stop it,
     // and later receivers take T times their usual deposit; another face of
     // the object that the line runs towards (a lit side below a grazed top
     // edge) is such a receiver.
-    const int32_t *object = nullptr;
-    const double *sil_area = nullptr;
-    const uint8_t *back = nullptr;
+    const int32_t* object = nullptr;
+    const double* sil_area = nullptr;
+    const uint8_t* back = nullptr;
     int threads = 0;  // 0: all hardware threads
 };
 
@@ -80,24 +80,24 @@ struct ShootCount {
 // surface points stored in each order (so that a family's pass streams
 // through memory), and a voxel -> records index for shooting.
 class LineSystem {
-public:
+   public:
     // ijk (n,3) voxel coordinates; normal (n,3) unit; point (n,3) a point of
     // the surface in voxel units (voxel ijk spans [ijk, ijk+1]); epsilon the
     // facing-rule margin in voxel units; history the number of F records
     // remembered per line (1..32; the shooting keeps only the first and the
     // latest of a run of F records in one plane, so a face the line runs
     // along takes two places, not one a voxel).
-    LineSystem(int64_t n, const int32_t *ijk, const float *normal, const float *point,
+    LineSystem(int64_t n, const int32_t* ijk, const float* normal, const float* point,
                float epsilon, int history);
 
     int64_t size() const { return n_; }
-    const int32_t *lo() const { return lo_; }
-    const int32_t *hi() const { return hi_; }
+    const int32_t* lo() const { return lo_; }
+    const int32_t* hi() const { return hi_; }
 
     // Raw sum S(n) = sum over families, both signs, of max(0, n.s) * weight
     // for every record (the hemisphere's cos-weighted solid angle / pi).
-    void normalisation(const Family *fams, int64_t nf, double *S, int threads,
-                       const StopCheck &stop) const;
+    void normalisation(const Family* fams, int64_t nf, double* S, int threads,
+                       const StopCheck& stop) const;
 
     // Gathering over the families `fams[sel[k]]` (k < nsel): for every pair
     // of mutually visible records along a line, out[x] += val[partner] *
@@ -106,21 +106,19 @@ public:
     // partner. out and vis are overwritten; they do not depend on the number
     // of threads. Returns the number of lines walked (lines with >= 2
     // records); lines with one record are skipped.
-    int64_t gather(const Family *fams, const int64_t *sel, int64_t nsel, const float *val,
-                   double *out, double *vis, const GatherOptions &opt,
-                   const StopCheck &stop) const;
+    int64_t gather(const Family* fams, const int64_t* sel, int64_t nsel, const float* val,
+                   double* out, double* vis, const GatherOptions& opt, const StopCheck& stop) const;
 
     // An empty table for the pairs of these families (zero pages: memory is
     // used as the pairs are written).
-    PairTable make_pair_table(const Family *fams, int64_t nf, bool with_stand_in) const;
+    PairTable make_pair_table(const Family* fams, int64_t nf, bool with_stand_in) const;
 
     // The gathering pass over the recorded families `sel` (every one of them
     // recorded), from the table instead of the lines: the same pairs, the
     // same weights, the sums added per record in family order (results
     // equal gather's to float rounding, and do not depend on `threads`).
-    void gather_recorded(const PairTable &table, const int64_t *sel, int64_t nsel,
-                         const float *val, double *out, double *vis, int threads,
-                         const StopCheck &stop) const;
+    void gather_recorded(const PairTable& table, const int64_t* sel, int64_t nsel, const float* val,
+                         double* out, double* vis, int threads, const StopCheck& stop) const;
 
     // Shooting from the emitter records `emit[0..ne)` along every direction
     // +v and -v of every family (with n_e.s > 0): an integer march along the
@@ -129,12 +127,12 @@ public:
     // double, overwritten; added in emitter order, whatever the threads).
     // unfound[k] = sum of cos_e * weight over the rays of emitter k that met
     // no receiver (sender side, overwritten).
-    ShootCount shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
-                     const float *val, double *hd, double *unfound, const ShootOptions &opt,
-                     const StopCheck &stop) const;
+    ShootCount shoot(const int32_t* emit, int64_t ne, const Family* fams, int64_t nf,
+                     const float* val, double* hd, double* unfound, const ShootOptions& opt,
+                     const StopCheck& stop) const;
 
     // Key of every record for family v (tests: each key is one naive line).
-    void keys(const int32_t v[3], uint32_t *out) const;
+    void keys(const int32_t v[3], uint32_t* out) const;
 
     // ------------------------------------------------ reference.cpp (tests)
     // The gathering by a stable counting sort of every family's records by
@@ -143,20 +141,19 @@ public:
     // val[x] * cos_x * weight for the same pairs (x's weight, the partner
     // receives): with val = area / S, the power each record delivers per
     // unit sent (docs/design.md §5). vis is unchanged by transpose.
-    int64_t gather_sorted(const Family *fams, const int64_t *sel, int64_t nsel, const float *val,
-                          double *out, double *vis, bool transpose, const uint8_t *stand_in,
-                          int threads, const StopCheck &stop) const;
+    int64_t gather_sorted(const Family* fams, const int64_t* sel, int64_t nsel, const float* val,
+                          double* out, double* vis, bool transpose, const uint8_t* stand_in,
+                          int threads, const StopCheck& stop) const;
     // The shooting with the deposit on the sender side: a ray of e carries
     // val[e] * cos_e * weight * send_scale[e] (send_scale = area / S: the
     // ray's power) and its receivers share it in proportion to recv_area[r]
     // * cos_r; hd then holds power, and the direct light conserves energy
     // exactly, at the price of per-record aliasing (which voxel catches a ray
     // is not which surface is there).
-    ShootCount shoot_sender_side(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
-                                 const float *val, const double *send_scale,
-                                 const double *recv_area, double *hd, double *unfound,
-                                 const uint8_t *stand_in, int threads,
-                                 const StopCheck &stop) const;
+    ShootCount shoot_sender_side(const int32_t* emit, int64_t ne, const Family* fams, int64_t nf,
+                                 const float* val, const double* send_scale,
+                                 const double* recv_area, double* hd, double* unfound,
+                                 const uint8_t* stand_in, int threads, const StopCheck& stop) const;
 
     // The records in main axis m's order (the walks and the march read them).
     struct Axis {
@@ -178,7 +175,7 @@ public:
         int gmax = 0;  // most records in one voxel
     };
 
-private:
+   private:
     int64_t n_;
     float eps_;
     int hist_;
@@ -194,18 +191,18 @@ private:
     std::vector<float> own_normal_, own_point_;  // copies in the global record order
     const float *normal_, *point_;
 
-    void sort_axis(int m, const int32_t *ijk);
+    void sort_axis(int m, const int32_t* ijk);
     void find_voxels(int m);
     void build_occupancy() const;
     int64_t linear(int32_t x, int32_t y, int32_t z) const;
     // val (n,3) global order -> out (n,3) in main axis m's order
-    void to_axis_order(int m, const float *val, std::vector<float> &out) const;
-    void check_record(const Family *fams, const int64_t *sel, int64_t nsel,
-                      const GatherOptions &opt) const;
+    void to_axis_order(int m, const float* val, std::vector<float>& out) const;
+    void check_record(const Family* fams, const int64_t* sel, int64_t nsel,
+                      const GatherOptions& opt) const;
     template <class Deposit>
-    ShootCount march(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
-                     const float *val, double *hd, double *unfound, const ShootOptions &opt,
-                     const Deposit &deposit, const StopCheck &stop) const;
+    ShootCount march(const int32_t* emit, int64_t ne, const Family* fams, int64_t nf,
+                     const float* val, double* hd, double* unfound, const ShootOptions& opt,
+                     const Deposit& deposit, const StopCheck& stop) const;
     friend class ShootMarch;
 };
 

@@ -13,12 +13,12 @@
 
 namespace voxgi {
 
-void PairTable::write_tile(int m, int64_t tile, uint32_t lanes, int32_t *buf) {
+void PairTable::write_tile(int m, int64_t tile, uint32_t lanes, int32_t* buf) {
     constexpr int kT = kTile, kE = kEntry, kR = kRow;
-    uint8_t *blk = snd[m].data() + tile * n * kR;
+    uint8_t* blk = snd[m].data() + tile * n * kR;
     if (lanes != (1u << kT) - 1) {  // some columns: entry by entry
         for (int64_t p = 0; p < n; ++p) {
-            uint8_t *row = blk + p * kR;
+            uint8_t* row = blk + p * kR;
             for (int lane = 0; lane < kT; ++lane)
                 if (lanes >> lane & 1u) {
                     const uint32_t x = static_cast<uint32_t>(buf[int64_t(lane) * n + p]);
@@ -43,7 +43,7 @@ void PairTable::write_tile(int m, int64_t tile, uint32_t lanes, int32_t *buf) {
     store_fence();
 }
 
-PairTable LineSystem::make_pair_table(const Family *fams, int64_t nf, bool with_stand_in) const {
+PairTable LineSystem::make_pair_table(const Family* fams, int64_t nf, bool with_stand_in) const {
     if (n_ > PairTable::kMaxRecords)
         throw std::invalid_argument("pair table: " + std::to_string(n_) + " records, at most " +
                                     std::to_string(PairTable::kMaxRecords) +
@@ -84,11 +84,12 @@ struct AxisColumns {
     std::vector<int32_t> lane;
     std::vector<float> dx, dy, dz;
     std::vector<double> wt;
-    std::vector<int64_t> tile, tile_first;  // tiles with a selected column, where their columns start
+    std::vector<int64_t> tile,
+        tile_first;  // tiles with a selected column, where their columns start
     size_t size() const { return lane.size(); }
 };
 
-void select_columns(const PairTable &tab, const int64_t *sel, int64_t nsel, AxisColumns cols[3]) {
+void select_columns(const PairTable& tab, const int64_t* sel, int64_t nsel, AxisColumns cols[3]) {
     std::vector<int64_t> fam[3];
     for (int64_t k = 0; k < nsel; ++k) {
         const int64_t f = sel[k];
@@ -98,10 +99,10 @@ void select_columns(const PairTable &tab, const int64_t *sel, int64_t nsel, Axis
         fam[tab.fam_axis[f]].push_back(f);
     }
     for (int m = 0; m < 3; ++m) {
-        std::vector<int64_t> &fm = fam[m];
+        std::vector<int64_t>& fm = fam[m];
         std::stable_sort(fm.begin(), fm.end(),
                          [&](int64_t a, int64_t b) { return tab.slot[a] < tab.slot[b]; });
-        AxisColumns &ac = cols[m];
+        AxisColumns& ac = cols[m];
         for (int64_t f : fm) {
             const int32_t c = tab.slot[f];
             ac.lane.push_back(c % PairTable::kTile);
@@ -122,18 +123,18 @@ constexpr int64_t kReplayChunk = 1024;  // records whose sums stay in L1 while t
 
 // One tile's selected columns for records [b, e): acc[p - b] += val[sender]
 // * |n.d| * weight (acc[.][3] sums the weights: v holds 1 there).
-void replay_tile(const uint8_t *blk, const AxisColumns &ac, size_t ti, const float *nrm,
-                 const float *v, int64_t b, int64_t e, double (*acc)[4]) {
+void replay_tile(const uint8_t* blk, const AxisColumns& ac, size_t ti, const float* nrm,
+                 const float* v, int64_t b, int64_t e, double (*acc)[4]) {
     constexpr int kT = PairTable::kTile;
     const int64_t q0 = ac.tile_first[ti], q1 = ac.tile_first[ti + 1];
     const int nq = static_cast<int>(q1 - q0);  // at most kT
     const float *tx = ac.dx.data() + q0, *ty = ac.dy.data() + q0, *tz = ac.dz.data() + q0;
-    const int32_t *tl = ac.lane.data() + q0;
-    const double *tw = ac.wt.data() + q0;
+    const int32_t* tl = ac.lane.data() + q0;
+    const double* tw = ac.wt.data() + q0;
     for (int64_t p = b; p < e; ++p) {
-        const uint8_t *row = blk + p * PairTable::kRow;
+        const uint8_t* row = blk + p * PairTable::kRow;
         const float n0 = nrm[3 * p], n1 = nrm[3 * p + 1], n2 = nrm[3 * p + 2];
-        double *a = acc[p - b];
+        double* a = acc[p - b];
         // the tile's |n.d| at once (a loop the compiler vectorises; each lane
         // the same float operations in the same order)
         alignas(16) float cs[kT];
@@ -148,9 +149,9 @@ void replay_tile(const uint8_t *blk, const AxisColumns &ac, size_t ti, const flo
 
 }  // namespace
 
-void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64_t nsel,
-                                 const float *val, double *out, double *vis, int threads,
-                                 const StopCheck &stop) const {
+void LineSystem::gather_recorded(const PairTable& tab, const int64_t* sel, int64_t nsel,
+                                 const float* val, double* out, double* vis, int threads,
+                                 const StopCheck& stop) const {
     if (tab.n != n_) throw std::invalid_argument("pair table made for another line system");
     AxisColumns cols[3];
     select_columns(tab, sel, nsel, cols);
@@ -159,12 +160,12 @@ void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64
     threads = resolve_threads(threads);
     std::vector<float> va(4 * n_);
     for (int m = 0; m < 3; ++m) {
-        const AxisColumns &ac = cols[m];
+        const AxisColumns& ac = cols[m];
         if (ac.size() == 0) continue;
         // values in this axis's order (the senders are axis-order positions),
         // 16 bytes a record: the value, then 1 (so that one pair of packed
         // multiply-adds also sums the weight)
-        const int32_t *ord = ax_[m].order.data();
+        const int32_t* ord = ax_[m].order.data();
         for (int64_t i = 0; i < n_; ++i) {
             const int64_t r = ord[i];
             va[4 * i] = val[3 * r];
@@ -172,8 +173,8 @@ void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64
             va[4 * i + 2] = val[3 * r + 2];
             va[4 * i + 3] = 1.0f;
         }
-        const uint8_t *base = tab.snd[m].data();
-        const float *nrm = ax_[m].nrm.data();
+        const uint8_t* base = tab.snd[m].data();
+        const float* nrm = ax_[m].nrm.data();
         // A chunk of records at a time, tile after tile: the table streams
         // (one 48-byte row per record and tile), and every record's sum is
         // added in column order by one task (no dependence on threads).
@@ -183,8 +184,8 @@ void LineSystem::gather_recorded(const PairTable &tab, const int64_t *sel, int64
             for (int64_t p = b; p < e; ++p)
                 for (int c = 0; c < 4; ++c) acc[p - b][c] = 0.0;
             for (size_t ti = 0; ti < ac.tile.size(); ++ti)
-                replay_tile(base + ac.tile[ti] * n_ * PairTable::kRow, ac, ti, nrm, va.data(), b,
-                            e, acc);
+                replay_tile(base + ac.tile[ti] * n_ * PairTable::kRow, ac, ti, nrm, va.data(), b, e,
+                            acc);
             for (int64_t p = b; p < e; ++p) {
                 const int64_t r = ord[p];
                 out[3 * r] += acc[p - b][0];

@@ -18,12 +18,12 @@ namespace voxgi {
 // tile). Filled by LineSystem::gather (GatherOptions::record), read by
 // LineSystem::gather_recorded.
 struct PairTable {
-    static constexpr int kTile = 16;                                // columns per tile
-    static constexpr int kEntry = 3;                                // bytes per entry
-    static constexpr int kRow = kTile * kEntry;                     // bytes per record and tile (a multiple of 16)
+    static constexpr int kTile = 16;             // columns per tile
+    static constexpr int kEntry = 3;             // bytes per entry
+    static constexpr int kRow = kTile * kEntry;  // bytes per record and tile (a multiple of 16)
     static constexpr int64_t kMaxRecords = (int64_t(1) << 24) - 2;  // position + 1 fits 3 bytes
     // entry `lane` of a row (reads 4 bytes: a block has slack after its last row)
-    static uint32_t entry(const uint8_t *row, int lane) {
+    static uint32_t entry(const uint8_t* row, int lane) {
         uint32_t x;
         std::memcpy(&x, row + kEntry * lane, 4);
         return x & 0xFFFFFFu;
@@ -46,7 +46,7 @@ struct PairTable {
     // Write one tile of axis m from a family-major buffer of kTile columns of
     // n int32 entries (column `lane` for every lane set in `lanes`), and
     // clear the buffer as it is read.
-    void write_tile(int m, int64_t tile, uint32_t lanes, int32_t *buf);
+    void write_tile(int m, int64_t tile, uint32_t lanes, int32_t* buf);
 };
 
 }  // namespace voxgi

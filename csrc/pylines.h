@@ -17,13 +17,13 @@ namespace voxgi::py_helpers {
 using Bool = py::array_t<bool, py::array::c_style>;
 
 // (F, 3) int32 vectors and (F,) float64 weights -> families, checked.
-inline std::vector<Family> to_families(const I32 &families, const F64 &weights) {
+inline std::vector<Family> to_families(const I32& families, const F64& weights) {
     check_2d(families, -1, 3, "families");
     check_1d(weights, families.shape(0), "weights");
     const py::ssize_t nf = families.shape(0);
     std::vector<Family> out(nf);
-    const int32_t *v = families.data();
-    const double *w = weights.data();
+    const int32_t* v = families.data();
+    const double* w = weights.data();
     for (py::ssize_t f = 0; f < nf; ++f) {
         int m = 0;
         for (int i = 1; i < 3; ++i)
@@ -41,29 +41,30 @@ inline std::vector<Family> to_families(const I32 &families, const F64 &weights) 
 }
 
 // The optional per-record flags: (n,) bool, or nullptr.
-inline const uint8_t *flags_ptr(const std::optional<Bool> &a, py::ssize_t n, const char *name) {
+inline const uint8_t* flags_ptr(const std::optional<Bool>& a, py::ssize_t n, const char* name) {
     if (!a) return nullptr;
     check_1d(*a, n, name);
     static_assert(sizeof(bool) == 1, "bool must be one byte");
-    return reinterpret_cast<const uint8_t *>(a->data());
+    return reinterpret_cast<const uint8_t*>(a->data());
 }
 
 // (S,) int64 indices into the families, checked.
-inline void check_selection(const I64 &family_indices, size_t nf) {
+inline void check_selection(const I64& family_indices, size_t nf) {
     check_1d(family_indices, -1, "family_indices");
-    const int64_t *sel = family_indices.data();
+    const int64_t* sel = family_indices.data();
     for (py::ssize_t k = 0; k < family_indices.shape(0); ++k)
         if (sel[k] < 0 || sel[k] >= static_cast<int64_t>(nf))
-            throw py::value_error("family_indices[" + std::to_string(k) + "] = " +
-                                  std::to_string(sel[k]) + " is out of range");
+            throw py::value_error("family_indices[" + std::to_string(k) +
+                                  "] = " + std::to_string(sel[k]) + " is out of range");
 }
 
 // The (sums, vis) arrays a gathering fills: (n, 3) and (n,) or None.
 struct GatherArrays {
     F64 sums, vis;
     bool want_vis;
-    GatherArrays(py::ssize_t n, bool want) : sums({n, py::ssize_t(3)}), vis(want ? n : 0), want_vis(want) {}
-    double *vis_ptr() { return want_vis ? vis.mutable_data() : nullptr; }
+    GatherArrays(py::ssize_t n, bool want)
+        : sums({n, py::ssize_t(3)}), vis(want ? n : 0), want_vis(want) {}
+    double* vis_ptr() { return want_vis ? vis.mutable_data() : nullptr; }
     py::object vis_or_none() const { return want_vis ? py::object(vis) : py::object(py::none()); }
 };
 

@@ -21,32 +21,32 @@ struct FamilySums {
 
 // What one line's walk reads and writes.
 struct SortedLine {
-    const LineSystem::Axis &ax;
-    const float *pn;   // point and normal, 8 floats per record (axis order)
-    const float *val;  // (axis order)
-    const uint8_t *stand;
-    const float *dh;
+    const LineSystem::Axis& ax;
+    const float* pn;   // point and normal, 8 floats per record (axis order)
+    const float* val;  // (axis order)
+    const uint8_t* stand;
+    const float* dh;
     double wgt;
     float eps;
     int K;
     bool transpose;
-    FamilySums &sums;
+    FamilySums& sums;
     bool vis;
 };
 
 // Walk the records line[j0..j1) of one line in their order along +v: every
 // B receives from the nearest facing F, and answers every facing F back to
 // the first one already answered.
-void walk_line(const SortedLine &L, const int32_t *line, int64_t j0, int64_t j1,
-               std::vector<Hit> &group) {
+void walk_line(const SortedLine& L, const int32_t* line, int64_t j0, int64_t j1,
+               std::vector<Hit>& group) {
     int32_t hp[kMaxHistory];
     bool ha[kMaxHistory];
     int hn = 0;
-    double *acc = L.sums.acc.data();
-    double *vs = L.vis ? L.sums.vis.data() : nullptr;
+    double* acc = L.sums.acc.data();
+    double* vs = L.vis ? L.sums.vis.data() : nullptr;
     auto add = [&](int32_t to, int32_t from, double w) {  // to takes from's value
-        const float *v = L.val + 3 * int64_t(L.transpose ? to : from);
-        double *a = acc + 3 * int64_t(L.transpose ? from : to);
+        const float* v = L.val + 3 * int64_t(L.transpose ? to : from);
+        double* a = acc + 3 * int64_t(L.transpose ? from : to);
         a[0] += v[0] * w;
         a[1] += v[1] * w;
         a[2] += v[2] * w;
@@ -58,7 +58,7 @@ void walk_line(const SortedLine &L, const int32_t *line, int64_t j0, int64_t j1,
         while (ge < j1 && L.ax.X[line[ge]] == x0) ++ge;
         const int gn = static_cast<int>(ge - j);
         if (static_cast<int>(group.size()) < gn) group.resize(gn);
-        Hit *g = group.data();
+        Hit* g = group.data();
         for (int a = 0; a < gn; ++a) {
             const int32_t p = line[j + a];
             g[a] = Hit{p, dot3(L.pn + 8 * int64_t(p), L.dh), dot3(L.pn + 3 + 8 * int64_t(p), L.dh)};
@@ -108,10 +108,10 @@ void walk_line(const SortedLine &L, const int32_t *line, int64_t j0, int64_t j1,
 
 }  // namespace
 
-int64_t LineSystem::gather_sorted(const Family *fams, const int64_t *sel, int64_t nsel,
-                                  const float *val, double *out, double *vis, bool transpose,
-                                  const uint8_t *stand_in, int threads,
-                                  const StopCheck &stop) const {
+int64_t LineSystem::gather_sorted(const Family* fams, const int64_t* sel, int64_t nsel,
+                                  const float* val, double* out, double* vis, bool transpose,
+                                  const uint8_t* stand_in, int threads,
+                                  const StopCheck& stop) const {
     std::vector<float> valax[3];
     std::vector<uint8_t> sbax[3];
     for (int m = 0; m < 3; ++m) {
@@ -122,20 +122,21 @@ int64_t LineSystem::gather_sorted(const Family *fams, const int64_t *sel, int64_
     }
     std::fill(out, out + 3 * n_, 0.0);
     if (vis) std::fill(vis, vis + n_, 0.0);
-    threads = static_cast<int>(std::max<int64_t>(1, std::min<int64_t>(resolve_threads(threads), nsel)));
+    threads =
+        static_cast<int>(std::max<int64_t>(1, std::min<int64_t>(resolve_threads(threads), nsel)));
     std::vector<int64_t> lines(threads, 0);
     InOrder<FamilySums> in_order;
-    auto add_family = [&](FamilySums &s) {
-        const int32_t *ord = ax_[s.m].order.data();
+    auto add_family = [&](FamilySums& s) {
+        const int32_t* ord = ax_[s.m].order.data();
         for (int64_t i = 0; i < n_; ++i) {
             for (int c = 0; c < 3; ++c) out[3 * int64_t(ord[i]) + c] += s.acc[3 * i + c];
             if (vis) vis[ord[i]] += s.vis[i];
         }
     };
     parallel_for(nsel, threads, stop, [&](int64_t k, int t) {
-        const Family &F = fams[sel[k]];
+        const Family& F = fams[sel[k]];
         const LineFrame fr(F.v, lo_, hi_);
-        const Axis &ax = ax_[fr.m];
+        const Axis& ax = ax_[fr.m];
         FamilySums sums;
         sums.m = fr.m;
         sums.acc.assign(3 * n_, 0.0);
@@ -189,13 +190,13 @@ namespace {
 struct SenderSide {
     static constexpr bool kKeepShadowed = true;
     const double *send_scale, *recv_area;
-    bool operator()(const Ray &r, const Family &, const float *ve,
-                    const std::vector<RayHit> &recv, std::vector<Deposit> &out) const {
+    bool operator()(const Ray& r, const Family&, const float* ve, const std::vector<RayHit>& recv,
+                    std::vector<Deposit>& out) const {
         double tot = 0.0;
-        for (const RayHit &q : recv) tot += recv_area[q.p] * q.c;
+        for (const RayHit& q : recv) tot += recv_area[q.p] * q.c;
         if (!(tot > 0)) return false;
         const double pw = r.ce * send_scale[r.e] / tot;
-        for (const RayHit &q : recv) {
+        for (const RayHit& q : recv) {
             const double share = pw * recv_area[q.p] * q.c;
             out.push_back(Deposit{q.p, {ve[0] * share, ve[1] * share, ve[2] * share}});
         }
@@ -205,11 +206,11 @@ struct SenderSide {
 
 }  // namespace
 
-ShootCount LineSystem::shoot_sender_side(const int32_t *emit, int64_t ne, const Family *fams,
-                                         int64_t nf, const float *val, const double *send_scale,
-                                         const double *recv_area, double *hd, double *unfound,
-                                         const uint8_t *stand_in, int threads,
-                                         const StopCheck &stop) const {
+ShootCount LineSystem::shoot_sender_side(const int32_t* emit, int64_t ne, const Family* fams,
+                                         int64_t nf, const float* val, const double* send_scale,
+                                         const double* recv_area, double* hd, double* unfound,
+                                         const uint8_t* stand_in, int threads,
+                                         const StopCheck& stop) const {
     ShootOptions opt;
     opt.stand_in = stand_in;
     opt.threads = threads;

@@ -12,9 +12,9 @@ namespace {
 // covers and the share of the ray still travelling.
 struct ReceiverSide {
     static constexpr bool kKeepShadowed = false;
-    bool operator()(const Ray &r, const Family &F, const float *ve,
-                    const std::vector<RayHit> &recv, std::vector<Deposit> &out) const {
-        for (const RayHit &q : recv) {
+    bool operator()(const Ray& r, const Family& F, const float* ve, const std::vector<RayHit>& recv,
+                    std::vector<Deposit>& out) const {
+        for (const RayHit& q : recv) {
             const double cr = double(q.c) * F.weight * r.alpha * q.T;
             out.push_back(Deposit{q.p, {ve[0] * cr, ve[1] * cr, ve[2] * cr}});
         }
@@ -24,9 +24,9 @@ struct ReceiverSide {
 
 }  // namespace
 
-ShootCount LineSystem::shoot(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
-                             const float *val, double *hd, double *unfound,
-                             const ShootOptions &opt, const StopCheck &stop) const {
+ShootCount LineSystem::shoot(const int32_t* emit, int64_t ne, const Family* fams, int64_t nf,
+                             const float* val, double* hd, double* unfound, const ShootOptions& opt,
+                             const StopCheck& stop) const {
     if ((opt.object == nullptr) != (opt.sil_area == nullptr) ||
         (opt.object == nullptr) != (opt.back == nullptr))
         throw std::invalid_argument("object, sil_area and back go together");

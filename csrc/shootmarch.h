@@ -69,8 +69,8 @@ struct Ray {
 // Per-call data of the march: the families' frames and directions, the
 // records' positions, and the options.
 class ShootMarch {
-public:
-    ShootMarch(const LineSystem &s, const Family *fams, int64_t nf, const ShootOptions &opt,
+   public:
+    ShootMarch(const LineSystem& s, const Family* fams, int64_t nf, const ShootOptions& opt,
                bool keep_shadowed)
         : s_(s), fams_(fams), nf_(nf), opt_(opt), keep_shadowed_(keep_shadowed) {
         s.build_occupancy();
@@ -80,7 +80,7 @@ public:
             frames_.emplace_back(fams[f].v, s.lo_, s.hi_);
             unit_direction(fams[f], &dhat_[3 * f]);
         }
-        const LineSystem::Axis &a0 = s.ax_[0];
+        const LineSystem::Axis& a0 = s.ax_[0];
         pos0_.resize(s.n_);
         for (int64_t i = 0; i < s.n_; ++i) pos0_[a0.order[i]] = static_cast<int32_t>(i);
         P_ = s.point_;
@@ -90,11 +90,11 @@ public:
     }
 
     int64_t families() const { return nf_; }
-    const Family &family(int64_t f) const { return fams_[f]; }
+    const Family& family(int64_t f) const { return fams_[f]; }
 
     // Start e's ray along family f; false when e is parallel to it.
-    bool start(int32_t e, int64_t f, Ray &r) const {
-        const float *dv = &dhat_[3 * f];
+    bool start(int32_t e, int64_t f, Ray& r) const {
+        const float* dv = &dhat_[3 * f];
         const float cv = dot3(N_ + 3 * int64_t(e), dv);
         if (std::abs(cv) <= kTiny) return false;
         r.reset();
@@ -103,9 +103,9 @@ public:
         for (int c = 0; c < 3; ++c) r.sd[c] = r.s * dv[c];
         r.ce = std::abs(double(cv)) * fams_[f].weight;
         r.partial = opt_.coverage && opt_.coverage[e] >= 0;
-        r.alpha = r.partial ? opt_.coverage[e] * std::abs(double(cv)) /
-                                  std::abs(double(dv[frames_[f].m]))
-                            : 1.0;
+        r.alpha = r.partial
+                      ? opt_.coverage[e] * std::abs(double(cv)) / std::abs(double(dv[frames_[f].m]))
+                      : 1.0;
         r.inv_dm = 1.0 / std::abs(double(dv[frames_[f].m]));
         r.hp[0] = e;
         return true;
@@ -114,15 +114,15 @@ public:
     // March the ray to the end of its line, or until it stops; the
     // receivers whose nearest facing sender is e go to `recv`. Returns the
     // voxels visited.
-    int64_t run(const LineFrame &fr, Ray &r, std::vector<Hit> &group,
-                std::vector<RayHit> &recv) const;
+    int64_t run(const LineFrame& fr, Ray& r, std::vector<Hit>& group,
+                std::vector<RayHit>& recv) const;
 
-private:
+   private:
     friend class LineSystem;
-    const LineSystem &s_;
-    const Family *fams_;
+    const LineSystem& s_;
+    const Family* fams_;
     int64_t nf_;
-    const ShootOptions &opt_;
+    const ShootOptions& opt_;
     bool keep_shadowed_;  // sender side: a shadowed receiver that e faces takes e's power
     std::vector<LineFrame> frames_;
     std::vector<float> dhat_;
@@ -131,18 +131,18 @@ private:
     float eps_;
     int K_;
 
-public:
-    const LineFrame &frame(int64_t f) const { return frames_[f]; }
+   public:
+    const LineFrame& frame(int64_t f) const { return frames_[f]; }
 
-private:
+   private:
     bool same_plane(int32_t q, int32_t p) const;
-    void visit(int64_t slot, bool first, Ray &r, std::vector<Hit> &group,
-               std::vector<RayHit> &recv) const;
-    bool on_front(int32_t p, Ray &r) const;
-    bool leave_band(int32_t p, Ray &r) const;
-    bool on_back(int32_t p, float c, Ray &r, const std::vector<Hit> &group,
-                 std::vector<RayHit> &recv) const;
-    void join_band(int32_t p, float c, Ray &r, const std::vector<Hit> &group) const;
+    void visit(int64_t slot, bool first, Ray& r, std::vector<Hit>& group,
+               std::vector<RayHit>& recv) const;
+    bool on_front(int32_t p, Ray& r) const;
+    bool leave_band(int32_t p, Ray& r) const;
+    bool on_back(int32_t p, float c, Ray& r, const std::vector<Hit>& group,
+                 std::vector<RayHit>& recv) const;
+    void join_band(int32_t p, float c, Ray& r, const std::vector<Hit>& group) const;
 };
 
 // q and p lie in one plane with one normal (to 1e-5 in the normal, eps along
@@ -158,9 +158,9 @@ inline bool ShootMarch::same_plane(int32_t q, int32_t p) const {
     return std::abs(off) <= eps_;
 }
 
-inline int64_t ShootMarch::run(const LineFrame &fr, Ray &r, std::vector<Hit> &group,
-                               std::vector<RayHit> &recv) const {
-    const LineSystem::Axis &a0 = s_.ax_[0];
+inline int64_t ShootMarch::run(const LineFrame& fr, Ray& r, std::vector<Hit>& group,
+                               std::vector<RayHit>& recv) const {
+    const LineSystem::Axis& a0 = s_.ax_[0];
     const int32_t pe = pos0_[r.e];
     const int32_t eijk[3] = {a0.X[pe], a0.Y[pe], a0.Z[pe]};
     // the line through e's voxel: u, w fixed; y', z' follow from x'
@@ -177,7 +177,7 @@ inline int64_t ShootMarch::run(const LineFrame &fr, Ray &r, std::vector<Hit> &gr
     // no division in the loop.
     int64_t numy = fr.B * (fr.XmA - X0) + h, numz = fr.C * (fr.XmA - X0) + h;
     int64_t qy = numy / fr.A, ry = numy % fr.A, qz = numz / fr.A, rz = numz % fr.A;
-    const uint64_t *occ = s_.occ_.data();
+    const uint64_t* occ = s_.occ_.data();
     int64_t nsteps = 0;
     bool first = true;
     for (int64_t X = X0; X >= 0 && X <= Xr && !r.stopped; first = false) {
@@ -222,9 +222,9 @@ inline int64_t ShootMarch::run(const LineFrame &fr, Ray &r, std::vector<Hit> &gr
 }
 
 // The records of one occupied voxel in their order along the ray.
-inline void ShootMarch::visit(int64_t slot, bool first, Ray &r, std::vector<Hit> &group,
-                              std::vector<RayHit> &recv) const {
-    const LineSystem::Axis &a0 = s_.ax_[0];
+inline void ShootMarch::visit(int64_t slot, bool first, Ray& r, std::vector<Hit>& group,
+                              std::vector<RayHit>& recv) const {
+    const LineSystem::Axis& a0 = s_.ax_[0];
     const int32_t b = s_.vstart_[slot], en = s_.vstart_[slot + 1];
     group.clear();
     for (int32_t i = b; i < en; ++i) {
@@ -251,10 +251,10 @@ inline void ShootMarch::visit(int64_t slot, bool first, Ray &r, std::vector<Hit>
 // An F record on the ray: it joins the history, or lets the ray through
 // (e's own sheet, a grazed object), or stops the ray (the history is full).
 // False: the ray stops.
-inline bool ShootMarch::on_front(int32_t p, Ray &r) const {
+inline bool ShootMarch::on_front(int32_t p, Ray& r) const {
     if (r.partial) {  // e's own sheet (or behind it) does not occlude e
         const float *pq = P_ + 3 * int64_t(p), *pe = P_ + 3 * int64_t(r.e);
-        const float *nE = N_ + 3 * int64_t(r.e);
+        const float* nE = N_ + 3 * int64_t(r.e);
         const float off =
             (pq[0] - pe[0]) * nE[0] + (pq[1] - pe[1]) * nE[1] + (pq[2] - pe[2]) * nE[2];
         if (off <= eps_) return true;
@@ -289,7 +289,7 @@ inline bool ShootMarch::on_front(int32_t p, Ray &r) const {
 // of it: the line now leaves the object (its back twins or another face,
 // behind the band's plane), so it only clipped the edge; the share of the
 // line the band did not cover goes on. True: p was such a record.
-inline bool ShootMarch::leave_band(int32_t p, Ray &r) const {
+inline bool ShootMarch::leave_band(int32_t p, Ray& r) const {
     const int32_t op = opt_.object[p];
     if (!(op == r.band_obj && r.band_crease && r.istep <= r.band_step + 1)) return false;
     const float *pq = P_ + 3 * int64_t(p), *nq = N_ + 3 * int64_t(p);
@@ -305,7 +305,7 @@ inline bool ShootMarch::leave_band(int32_t p, Ray &r) const {
     r.band_obj = -1;
     r.carried = true;
     r.found_seg = false;
-    // the object's F records seen so far no longer occlude
+    // the object's F records seen so far stop occluding
     int hk = 1;
     for (int hh = 1; hh < r.hn; ++hh)
         if (opt_.object[r.hp[hh]] != op) r.hp[hk++] = r.hp[hh];
@@ -317,18 +317,17 @@ inline bool ShootMarch::leave_band(int32_t p, Ray &r) const {
 // A B record on the ray: it receives from e if e is its nearest facing
 // sender; if another F is, e is shadowed there and the ray stops. False: the
 // ray stops.
-inline bool ShootMarch::on_back(int32_t p, float c, Ray &r, const std::vector<Hit> &group,
-                                std::vector<RayHit> &recv) const {
-    const int32_t *object = opt_.object;
-    const uint8_t *stand_in = opt_.stand_in;
+inline bool ShootMarch::on_back(int32_t p, float c, Ray& r, const std::vector<Hit>& group,
+                                std::vector<RayHit>& recv) const {
+    const int32_t* object = opt_.object;
+    const uint8_t* stand_in = opt_.stand_in;
     // the grazing remainder does not see the inside of the object it passed
     // (its back records) nor, while the line still runs along it, its front
     // records (another face of it, which the remainder runs towards, does
     // receive it: a lit side below a grazed top edge)
     if (object && object[p] == r.carry_obj &&
-        (opt_.back[p] ||
-         (r.istep <= r.carry_step + 1 &&
-          dot3(N_ + 3 * int64_t(p), N_ + 3 * int64_t(r.carry_face)) > 0.5f))) {
+        (opt_.back[p] || (r.istep <= r.carry_step + 1 &&
+                          dot3(N_ + 3 * int64_t(p), N_ + 3 * int64_t(r.carry_face)) > 0.5f))) {
         r.carry_step = r.istep;
         return true;
     }
@@ -367,8 +366,8 @@ inline bool ShootMarch::on_back(int32_t p, float c, Ray &r, const std::vector<Hi
 // Receiver p joins the ray's band of its object (silhouettes); a silhouette
 // when p's voxel holds another face of p's object that this line leaves
 // (F), at a convex edge.
-inline void ShootMarch::join_band(int32_t p, float c, Ray &r, const std::vector<Hit> &group) const {
-    const int32_t *object = opt_.object;
+inline void ShootMarch::join_band(int32_t p, float c, Ray& r, const std::vector<Hit>& group) const {
+    const int32_t* object = opt_.object;
     if (object[p] != r.band_obj || r.istep > r.band_step + 1) {
         r.band_obj = object[p];
         r.band_cov = 0.0;
@@ -376,7 +375,7 @@ inline void ShootMarch::join_band(int32_t p, float c, Ray &r, const std::vector<
     }
     if (!r.band_crease && opt_.sil_area[p] >= 0) {
         const float *pp = P_ + 3 * int64_t(p), *np_ = N_ + 3 * int64_t(p);
-        for (const Hit &g : group) {
+        for (const Hit& g : group) {
             const int32_t q = g.p;
             if (g.c <= kTiny || object[q] != object[p]) continue;
             const float *pq = P_ + 3 * int64_t(q), *nq = N_ + 3 * int64_t(q);
@@ -401,13 +400,11 @@ inline void ShootMarch::join_band(int32_t p, float c, Ray &r, const std::vector<
 // delivered nothing after all). Tasks of kChunk emitters; their deposits are
 // added to hd in task order, so hd does not depend on the threads.
 template <class DepositFn>
-ShootCount LineSystem::march(const int32_t *emit, int64_t ne, const Family *fams, int64_t nf,
-                             const float *val, double *hd, double *unfound,
-                             const ShootOptions &opt, const DepositFn &deposit,
-                             const StopCheck &stop) const {
+ShootCount LineSystem::march(const int32_t* emit, int64_t ne, const Family* fams, int64_t nf,
+                             const float* val, double* hd, double* unfound, const ShootOptions& opt,
+                             const DepositFn& deposit, const StopCheck& stop) const {
     for (int64_t k = 0; k < ne; ++k)
-        if (emit[k] < 0 || emit[k] >= n_)
-            throw std::invalid_argument("emitter index out of range");
+        if (emit[k] < 0 || emit[k] >= n_) throw std::invalid_argument("emitter index out of range");
     const ShootMarch sm(*this, fams, nf, opt, DepositFn::kKeepShadowed);
     constexpr int64_t kChunk = 4;
     const int64_t tasks = (ne + kChunk - 1) / kChunk;
@@ -416,9 +413,9 @@ ShootCount LineSystem::march(const int32_t *emit, int64_t ne, const Family *fams
     std::vector<int64_t> rays(threads, 0), steps(threads, 0);
     std::fill(hd, hd + 3 * n_, 0.0);
     InOrder<std::vector<Deposit>> in_order;
-    auto add = [&](std::vector<Deposit> &d) {
-        for (const Deposit &x : d) {
-            double *H = hd + 3 * int64_t(x.r);
+    auto add = [&](std::vector<Deposit>& d) {
+        for (const Deposit& x : d) {
+            double* H = hd + 3 * int64_t(x.r);
             H[0] += x.v[0];
             H[1] += x.v[1];
             H[2] += x.v[2];
@@ -431,7 +428,7 @@ ShootCount LineSystem::march(const int32_t *emit, int64_t ne, const Family *fams
         int64_t nsteps = 0, nrays = 0;  // locals: no store per step
         Ray r;
         for (int64_t k = task * kChunk; k < std::min(ne, (task + 1) * kChunk); ++k) {
-            const float *ve = val + 3 * int64_t(emit[k]);
+            const float* ve = val + 3 * int64_t(emit[k]);
             double lost = 0.0;
             for (int64_t f = 0; f < nf; ++f) {
                 if (!sm.start(emit[k], f, r)) continue;

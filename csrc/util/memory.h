@@ -11,25 +11,25 @@ namespace voxgi {
 // kSlack readable bytes follow the last one (for 4-byte loads of 3-byte
 // entries).
 class ZeroBlock {
-public:
+   public:
     static constexpr size_t kSlack = 16;
     ZeroBlock() = default;
-    ZeroBlock(const ZeroBlock &) = delete;
-    ZeroBlock &operator=(const ZeroBlock &) = delete;
-    ZeroBlock(ZeroBlock &&o) noexcept : p_(o.p_), size_(o.size_) {
+    ZeroBlock(const ZeroBlock&) = delete;
+    ZeroBlock& operator=(const ZeroBlock&) = delete;
+    ZeroBlock(ZeroBlock&& o) noexcept : p_(o.p_), size_(o.size_) {
         o.p_ = nullptr;
         o.size_ = 0;
     }
-    ZeroBlock &operator=(ZeroBlock &&o) noexcept;
+    ZeroBlock& operator=(ZeroBlock&& o) noexcept;
     ~ZeroBlock() { release(); }
 
     void allocate(size_t bytes);  // throws std::bad_alloc
     void release();
-    uint8_t *data() const { return p_; }
+    uint8_t* data() const { return p_; }
     size_t size() const { return size_; }
 
-private:
-    uint8_t *p_ = nullptr;
+   private:
+    uint8_t* p_ = nullptr;
     size_t size_ = 0;
 };
 

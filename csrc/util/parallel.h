@@ -42,7 +42,7 @@ inline int resolve_threads(int threads) {
 // started and Interrupted is thrown after all workers have joined.
 // Exceptions from workers are rethrown on the calling thread.
 template <class Body>
-void parallel_for(int64_t n_tasks, int threads, const StopCheck &stop, Body &&body) {
+void parallel_for(int64_t n_tasks, int threads, const StopCheck& stop, Body&& body) {
     threads = std::max(1, std::min<int>(threads, static_cast<int>(std::max<int64_t>(n_tasks, 1))));
     std::atomic<int64_t> next{0};
     std::atomic<bool> cancel{false};
@@ -67,8 +67,8 @@ void parallel_for(int64_t n_tasks, int threads, const StopCheck &stop, Body &&bo
     std::vector<std::thread> pool;
     for (int t = 1; t < threads; ++t) pool.emplace_back(worker, t);
     worker(0);
-    for (auto &th : pool) th.join();
-    for (auto &e : errors)
+    for (auto& th : pool) th.join();
+    for (auto& e : errors)
         if (e) std::rethrow_exception(e);
     if (cancel) throw Interrupted();  // only stop() can have set it without an error
 }
@@ -80,9 +80,9 @@ void parallel_for(int64_t n_tasks, int threads, const StopCheck &stop, Body &&bo
 // runs under the lock, one result at a time.
 template <class Result>
 class InOrder {
-public:
+   public:
     template <class Combine>
-    void finish(int64_t task, Result &&r, Combine &&combine) {
+    void finish(int64_t task, Result&& r, Combine&& combine) {
         std::lock_guard<std::mutex> lock(mu_);
         waiting_.emplace(task, std::move(r));
         for (auto it = waiting_.begin(); it != waiting_.end() && it->first == next_;) {
@@ -92,7 +92,7 @@ public:
         }
     }
 
-private:
+   private:
     std::mutex mu_;
     int64_t next_ = 0;
     std::map<int64_t, Result> waiting_;

@@ -11,7 +11,7 @@
 
 namespace voxgi {
 
-inline float dot3(const float *a, const float *b) {
+inline float dot3(const float* a, const float* b) {
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
 
@@ -24,7 +24,7 @@ inline float sum3(__m128 t) {
 #endif
 
 // a[k] += double(x[k]) * c for k < 4 (a 16-byte aligned)
-inline void madd4(double *a, const float *x, double c) {
+inline void madd4(double* a, const float* x, double c) {
 #if defined(__SSE2__)
     const __m128 v = _mm_loadu_ps(x);
     const __m128d cc = _mm_set1_pd(c);
@@ -39,11 +39,11 @@ inline void madd4(double *a, const float *x, double c) {
 // Copy `bytes` (a multiple of 16) from an aligned buffer to aligned memory
 // that nothing reads back soon: streamed past the cache, no read for
 // ownership. Call store_fence() after the last one.
-inline void stream_copy(uint8_t *dst, const uint8_t *src, int bytes) {
+inline void stream_copy(uint8_t* dst, const uint8_t* src, int bytes) {
 #if defined(__SSE2__)
     for (int q = 0; q < bytes; q += 16)
-        _mm_stream_si128(reinterpret_cast<__m128i *>(dst + q),
-                         _mm_load_si128(reinterpret_cast<const __m128i *>(src + q)));
+        _mm_stream_si128(reinterpret_cast<__m128i*>(dst + q),
+                         _mm_load_si128(reinterpret_cast<const __m128i*>(src + q)));
 #else
     std::memcpy(dst, src, bytes);
 #endif
