@@ -481,11 +481,11 @@ void emit_records(const Context& ctx, const int64_t* cell, const Cluster& cl,
     cs.records += 2;
 }
 
-void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t np, Scratch& S,
-                  std::vector<VoxelRecord>& out, ChunkStats& cs) {
+// The piece of each triangle in the cell (clipped exactly; a triangle that
+// only touches the cell gets a point of itself), into S.pieces and S.verts.
+int clip_pieces(const Context& ctx, const int64_t cell[3], const Pair* pairs, int64_t np,
+                Scratch& S, ChunkStats& cs) {
     const VoxelizeParams& P = *ctx.P;
-    const uint64_t D1 = P.dims[1], D2 = P.dims[2];
-    const int64_t cell[3] = {int64_t(key / (D1 * D2)), int64_t((key / D2) % D1), int64_t(key % D2)};
     auto& pieces = S.pieces;
     if (pieces.size() < size_t(np)) pieces.resize(size_t(np));
     int n_pieces = 0;
@@ -524,10 +524,15 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
         pc.v_n = poly.n;
         verts.insert(verts.end(), &poly.v[0][0], &poly.v[0][0] + 3 * poly.n);
     }
-    if (n_pieces == 0) return;
-    ++cs.cells;
+    return n_pieces;
+}
 
-    // Clusters: per object (ascending), greedy by orientation in triangle order.
+// Clusters: per object (ascending), greedy by orientation in triangle order;
+// then the pieces of each cluster, in the order they joined it (S.cl_start,
+// S.cl_items).
+void cluster_pieces(const Context& ctx, int n_pieces, Scratch& S, ChunkStats& cs) {
+    const VoxelizeParams& P = *ctx.P;
+    auto& pieces = S.pieces;
     auto& order = S.order;
     order.resize(size_t(n_pieces));
     for (int q = 0; q < n_pieces; ++q) order[q] = q;
@@ -573,7 +578,6 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
     }
     const size_t ncl = clusters.size();
     cs.clusters += int64_t(ncl);
-    // Pieces of each cluster, in the order they joined it.
     auto& cl_start = S.cl_start;
     auto& cl_items = S.cl_items;
     cl_start.assign(ncl + 1, 0);
@@ -584,97 +588,126 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
         next.assign(cl_start.begin(), cl_start.end() - 1);
         for (int idx : order) cl_items[size_t(next[size_t(pieces[idx].cluster)]++)] = idx;
     }
+}
 
-    // Cutting planes: every cluster with area, through its area-weighted
-    // centroid, normal to its area-weighted normal.
-    struct Plane {
-        double n[3], off;
-        bool ok;
-    };
-    Plane planes[64];
-    const bool do_cut = P.cut && ncl > 1;
-    if (do_cut) {
-        for (size_t q = 0; q < ncl && q < 64; ++q) {
-            const Cluster& c = clusters[q];
-            const double len = std::sqrt(dot3(c.sum_an, c.sum_an));
-            planes[q].ok = c.sum_a > 0 && len > 0;
-            if (!planes[q].ok) continue;
-            double ctr[3];
-            for (int d = 0; d < 3; ++d) {
-                planes[q].n[d] = c.sum_an[d] / len;
-                ctr[d] = c.sum_ac[d] / c.sum_a;
-            }
-            planes[q].off = dot3(planes[q].n, ctr);
+// A cutting plane: through a cluster's area-weighted centroid, normal to its
+// area-weighted normal (ok: the cluster has area).
+struct Plane {
+    double n[3], off;
+    bool ok;
+};
+
+void cutting_planes(const std::vector<Cluster>& clusters, Plane planes[64]) {
+    const size_t ncl = clusters.size();
+    for (size_t q = 0; q < ncl && q < 64; ++q) {
+        const Cluster& c = clusters[q];
+        const double len = std::sqrt(dot3(c.sum_an, c.sum_an));
+        planes[q].ok = c.sum_a > 0 && len > 0;
+        if (!planes[q].ok) continue;
+        double ctr[3];
+        for (int d = 0; d < 3; ++d) {
+            planes[q].n[d] = c.sum_an[d] / len;
+            ctr[d] = c.sum_ac[d] / c.sum_a;
         }
+        planes[q].off = dot3(planes[q].n, ctr);
     }
+}
 
+// Cut the parts of cluster ci (S.parts) by the planes of the other clusters
+// that they straddle; each part's sig gets one bit per cut (its side).
+// Returns the cuts made.
+int cut_cluster(const Context& ctx, size_t ci, size_t ncl, const Plane* planes, Scratch& S,
+                ChunkStats& cs) {
+    const VoxelizeParams& P = *ctx.P;
+    const auto& pieces = S.pieces;
     auto& parts = S.parts;
     auto& parts2 = S.parts2;
     auto& pool = S.pool;
-    pool.clear();
+    int n_cuts = 0;
+    {
+        for (size_t sj = 0; sj < ncl && sj < 64; ++sj) {
+            if (sj == ci || !planes[sj].ok) continue;
+            const Plane& pl = planes[sj];
+            // A surface of the same orientation (as clustering judges it)
+            // is the same sheet continued, e.g. where two objects of one
+            // curved surface meet: nothing to separate.
+            if (ci < 64 && planes[ci].ok && dot3(pl.n, planes[ci].n) >= P.cos_cluster) continue;
+            bool straddles = false;
+            for (const PartRef& pt : parts) {
+                if (!(pt.area > 0)) continue;
+                double mn, mx;
+                signed_range(pt.poly, pl.n, pl.off, mn, mx);
+                if (mx > P.cut_delta && mn < -P.cut_delta) {
+                    straddles = true;
+                    break;
+                }
+            }
+            if (!straddles) continue;
+            if (n_cuts == kMaxCuts) {
+                ++cs.cut_limit;
+                continue;
+            }
+            const uint64_t bit = uint64_t(1) << n_cuts++;
+            parts2.clear();
+            for (const PartRef& pt : parts) {
+                double mn = 0, mx = 0;
+                if (pt.area > 0) signed_range(pt.poly, pl.n, pl.off, mn, mx);
+                if (pt.area > 0 && mx > P.cut_delta && mn < -P.cut_delta) {
+                    const double* tn = pieces[pt.piece].tn;
+                    for (int s = 0; s < 2; ++s) {
+                        pool.emplace_back();
+                        Poly& poly = pool.back();
+                        clip_plane(pt.poly, poly, pl.n, pl.off, s == 0 ? 1.0 : -1.0);
+                        if (poly.n == 0) continue;
+                        PartRef np_{
+                            view(poly), pt.piece, pt.sig | (s == 0 ? bit : 0), 0.0, {0, 0, 0}};
+                        np_.area = poly.n >= 3 ? area_centroid(view(poly), tn, np_.c) : 0.0;
+                        if (!(np_.area > 0)) {
+                            np_.area = 0;
+                            area_centroid(view(poly), tn, np_.c);
+                        }
+                        if (poly.overflow) ++cs.overflows;
+                        parts2.push_back(np_);
+                    }
+                } else {
+                    parts2.push_back(pt);
+                    if (dot3(pl.n, pt.c) - pl.off >= 0) parts2.back().sig |= bit;
+                }
+            }
+            parts.swap(parts2);
+        }
+    }
+    return n_cuts;
+}
+
+void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t np, Scratch& S,
+                  std::vector<VoxelRecord>& out, ChunkStats& cs) {
+    const VoxelizeParams& P = *ctx.P;
+    const uint64_t D1 = P.dims[1], D2 = P.dims[2];
+    const int64_t cell[3] = {int64_t(key / (D1 * D2)), int64_t((key / D2) % D1), int64_t(key % D2)};
+    const int n_pieces = clip_pieces(ctx, cell, pairs, np, S, cs);
+    if (n_pieces == 0) return;
+    ++cs.cells;
+    cluster_pieces(ctx, n_pieces, S, cs);
+    const auto& clusters = S.clusters;
+    const auto& pieces = S.pieces;
+    const size_t ncl = clusters.size();
+    Plane planes[64];
+    const bool do_cut = P.cut && ncl > 1;
+    if (do_cut) cutting_planes(clusters, planes);
+    auto& parts = S.parts;
+    S.pool.clear();
     for (size_t ci = 0; ci < ncl; ++ci) {
         const Cluster& cl = clusters[ci];
         parts.clear();
-        for (int q = cl_start[ci]; q < cl_start[ci + 1]; ++q) {
-            const Piece& pc = pieces[cl_items[q]];
+        for (int q = S.cl_start[ci]; q < S.cl_start[ci + 1]; ++q) {
+            const Piece& pc = pieces[S.cl_items[q]];
             const PolyView pv{
-                reinterpret_cast<const double (*)[3]>(verts.data() + 3 * size_t(pc.v_off)), pc.v_n};
-            parts.push_back(PartRef{pv, cl_items[q], 0, pc.area, {pc.c[0], pc.c[1], pc.c[2]}});
+                reinterpret_cast<const double (*)[3]>(S.verts.data() + 3 * size_t(pc.v_off)),
+                pc.v_n};
+            parts.push_back(PartRef{pv, S.cl_items[q], 0, pc.area, {pc.c[0], pc.c[1], pc.c[2]}});
         }
-        int n_cuts = 0;
-        if (do_cut) {
-            for (size_t sj = 0; sj < ncl && sj < 64; ++sj) {
-                if (sj == ci || !planes[sj].ok) continue;
-                const Plane& pl = planes[sj];
-                // A surface of the same orientation (as clustering judges it)
-                // is the same sheet continued, e.g. where two objects of one
-                // curved surface meet: nothing to separate.
-                if (ci < 64 && planes[ci].ok && dot3(pl.n, planes[ci].n) >= P.cos_cluster) continue;
-                bool straddles = false;
-                for (const PartRef& pt : parts) {
-                    if (!(pt.area > 0)) continue;
-                    double mn, mx;
-                    signed_range(pt.poly, pl.n, pl.off, mn, mx);
-                    if (mx > P.cut_delta && mn < -P.cut_delta) {
-                        straddles = true;
-                        break;
-                    }
-                }
-                if (!straddles) continue;
-                if (n_cuts == kMaxCuts) {
-                    ++cs.cut_limit;
-                    continue;
-                }
-                const uint64_t bit = uint64_t(1) << n_cuts++;
-                parts2.clear();
-                for (const PartRef& pt : parts) {
-                    double mn = 0, mx = 0;
-                    if (pt.area > 0) signed_range(pt.poly, pl.n, pl.off, mn, mx);
-                    if (pt.area > 0 && mx > P.cut_delta && mn < -P.cut_delta) {
-                        const double* tn = pieces[pt.piece].tn;
-                        for (int s = 0; s < 2; ++s) {
-                            pool.emplace_back();
-                            Poly& poly = pool.back();
-                            clip_plane(pt.poly, poly, pl.n, pl.off, s == 0 ? 1.0 : -1.0);
-                            if (poly.n == 0) continue;
-                            PartRef np_{
-                                view(poly), pt.piece, pt.sig | (s == 0 ? bit : 0), 0.0, {0, 0, 0}};
-                            np_.area = poly.n >= 3 ? area_centroid(view(poly), tn, np_.c) : 0.0;
-                            if (!(np_.area > 0)) {
-                                np_.area = 0;
-                                area_centroid(view(poly), tn, np_.c);
-                            }
-                            if (poly.overflow) ++cs.overflows;
-                            parts2.push_back(np_);
-                        }
-                    } else {
-                        parts2.push_back(pt);
-                        if (dot3(pl.n, pt.c) - pl.off >= 0) parts2.back().sig |= bit;
-                    }
-                }
-                parts.swap(parts2);
-            }
-        }
+        const int n_cuts = do_cut ? cut_cluster(ctx, ci, ncl, planes, S, cs) : 0;
         if (n_cuts > 0)
             std::stable_sort(parts.begin(), parts.end(),
                              [](const PartRef& x, const PartRef& y) { return x.sig < y.sig; });
