@@ -55,8 +55,8 @@ def scene_records(request):
 
 def _same(results, what):
     first = results[0]
-    for th, other in zip(THREADS[1:], results[1:]):
-        for k, (a, b) in enumerate(zip(first, other)):
+    for th, other in zip(THREADS[1:], results[1:], strict=True):
+        for k, (a, b) in enumerate(zip(first, other, strict=True)):
             if a is None:
                 assert b is None
                 continue
@@ -79,8 +79,9 @@ def test_gather_walk_and_replay(scene_records):
     walked, replayed = [], []
     for th in THREADS:
         tab = s.make_pair_table(ds.families, ds.weights, sb is not None)
-        sums, vis, lines = s.gather(ds.families, ds.weights, vals, sel, True, th, stand_in=sb,
-                                    record=tab)
+        sums, vis, lines = s.gather(
+            ds.families, ds.weights, vals, sel, True, th, stand_in=sb, record=tab
+        )
         walked.append((sums, vis, np.int64(lines)))
         replayed.append(s.gather_recorded(tab, vals, sel, True, th))
     assert np.count_nonzero(walked[0][1]) > len(vox) // 2  # the walk pairs most records
@@ -89,7 +90,7 @@ def test_gather_walk_and_replay(scene_records):
 
 
 def test_shoot(scene_records):
-    _, _, vox, rec, s = scene_records
+    _, _, _, rec, s = scene_records
     emit = np.flatnonzero(rec["emission"].sum(axis=1) > 0).astype(np.int32)
     assert len(emit) > 0
     ds = direction_set(8)
@@ -97,8 +98,16 @@ def test_shoot(scene_records):
     sil = dict(object=rec["object"], sil_area=rec["area_vox"], back=rec["back"])
     out = []
     for th in THREADS:
-        hd, unfound, rays, steps = s.shoot(emit, ds.families, ds.weights, rec["emission"], th,
-                                           coverage=rec["area_vox"], stand_in=sb, **sil)
+        hd, unfound, rays, steps = s.shoot(
+            emit,
+            ds.families,
+            ds.weights,
+            rec["emission"],
+            th,
+            coverage=rec["area_vox"],
+            stand_in=sb,
+            **sil,
+        )
         out.append((hd, unfound, np.int64(rays), np.int64(steps)))
     assert np.count_nonzero(out[0][0]) > 0
     _same(out, "shoot")
@@ -147,7 +156,8 @@ def test_full_pipeline_twice_identical(tmp_path):
     imgs = []
     for _ in range(2):
         sc = voxgi.Scene.load(p)
-        sol = voxgi.solve(voxgi.voxelize(sc, resolution=10, progress=False), directions=4,
-                          progress=False)
+        sol = voxgi.solve(
+            voxgi.voxelize(sc, resolution=10, progress=False), directions=4, progress=False
+        )
         imgs.append(voxgi.display.render(sc, sol, max_frames=2, progress=False, seed=3).image)
     assert np.array_equal(imgs[0], imgs[1])
