@@ -3,7 +3,7 @@
 
 #include <limits>
 
-#include "pycommon.h"
+#include "bind_common.h"
 #include "vpl_shade.h"
 
 namespace py = pybind11;

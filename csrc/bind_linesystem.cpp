@@ -4,7 +4,7 @@
 // so bad input is a ValueError, never a crash.
 #include <memory>
 
-#include "pylines.h"
+#include "bind_lines.h"
 
 namespace py = pybind11;
 using namespace pybind11::literals;

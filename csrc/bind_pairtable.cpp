@@ -1,5 +1,5 @@
 // pybind11 bindings of PairTable (pairtable.h).
-#include "pylines.h"
+#include "bind_lines.h"
 
 namespace py = pybind11;
 using namespace pybind11::literals;

@@ -1,6 +1,6 @@
 // pybind11 bindings of the reference and adjoint variants (reference.cpp),
 // in the private submodule voxgi._core.testing: for the tests only.
-#include "pylines.h"
+#include "bind_lines.h"
 
 namespace py = pybind11;
 using namespace pybind11::literals;

@@ -3,7 +3,7 @@
 #include <cstring>
 #include <memory>
 
-#include "pycommon.h"
+#include "bind_common.h"
 #include "voxelize.h"
 
 namespace py = pybind11;

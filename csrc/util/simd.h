@@ -1,5 +1,5 @@
-// Small SSE2 helpers for the hot loops (every x86-64 has SSE2; elsewhere the
-// scalar forms run). Each helper makes the same IEEE operations in the same
+// Small SSE2 functions for the hot loops (every x86-64 has SSE2; elsewhere the
+// scalar forms run). Each makes the same IEEE operations in the same
 // order as its scalar form, so results do not depend on which one runs.
 #pragma once
 

@@ -1,4 +1,4 @@
-// pybind11 helpers shared by the bind_*.cpp files.
+// pybind11 conversions and checks shared by the bind_*.cpp files.
 #pragma once
 
 #include <pybind11/numpy.h>

@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "bind_common.h"
 #include "linesystem.h"
-#include "pycommon.h"
 
 namespace voxgi::py_helpers {
 
