@@ -90,7 +90,7 @@ int main(int argc, char** argv) {
                                opt, none);
                 else
                     sys.gather_sorted(fams[0].data(), sel.data(), nsel, val.data(), out.data(),
-                                      nullptr, false, nullptr, th, none);
+                                      nullptr, false, opt, none);
             };
             pass(std::min<int64_t>(16, sel.size()));  // warm-up
             double best = 1e30;

@@ -25,7 +25,10 @@ py::tuple gather_sorted(const voxgi::LineSystem& s, I32 families, F64 weights, F
     int64_t lines;
     {
         py::gil_scoped_release release;
-        lines = s.gather_sorted(fams.data(), sel, ns, v, o, vp, transpose, sb, threads, stop);
+        voxgi::GatherOptions opt;
+        opt.stand_in = sb;
+        opt.threads = threads;
+        lines = s.gather_sorted(fams.data(), sel, ns, v, o, vp, transpose, opt, stop);
     }
     return py::make_tuple(out.sums, out.vis_or_none(), lines);
 }
@@ -51,8 +54,11 @@ py::tuple shoot_sender_side(const voxgi::LineSystem& s, I32 emitters, I32 famili
     voxgi::ShootCount count;
     {
         py::gil_scoped_release release;
+        voxgi::ShootOptions opt;
+        opt.stand_in = sb;
+        opt.threads = threads;
         count = s.shoot_sender_side(e, ne, fams.data(), static_cast<int64_t>(fams.size()), v, ss,
-                                    ra, h, u, sb, threads, stop);
+                                    ra, h, u, opt, stop);
     }
     return py::make_tuple(hd, unfound, count.rays, count.steps);
 }

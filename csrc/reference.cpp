@@ -110,8 +110,9 @@ void walk_line(const SortedLine& L, const int32_t* line, int64_t j0, int64_t j1,
 
 int64_t LineSystem::gather_sorted(const Family* fams, const int64_t* sel, int64_t nsel,
                                   const float* val, double* out, double* vis, bool transpose,
-                                  const uint8_t* stand_in, int threads,
-                                  const StopCheck& stop) const {
+                                  const GatherOptions& opt, const StopCheck& stop) const {
+    if (opt.record) throw std::invalid_argument("the sorted walk does not record pairs");
+    const uint8_t* stand_in = opt.stand_in;
     std::vector<float> valax[3];
     std::vector<uint8_t> sbax[3];
     for (int m = 0; m < 3; ++m) {
@@ -122,8 +123,8 @@ int64_t LineSystem::gather_sorted(const Family* fams, const int64_t* sel, int64_
     }
     std::fill(out, out + 3 * n_, 0.0);
     if (vis) std::fill(vis, vis + n_, 0.0);
-    threads =
-        static_cast<int>(std::max<int64_t>(1, std::min<int64_t>(resolve_threads(threads), nsel)));
+    const int threads = static_cast<int>(
+        std::max<int64_t>(1, std::min<int64_t>(resolve_threads(opt.threads), nsel)));
     std::vector<int64_t> lines(threads, 0);
     InOrder<FamilySums> in_order;
     auto add_family = [&](FamilySums& s) {
@@ -209,11 +210,10 @@ struct SenderSide {
 ShootCount LineSystem::shoot_sender_side(const int32_t* emit, int64_t ne, const Family* fams,
                                          int64_t nf, const float* val, const double* send_scale,
                                          const double* recv_area, double* hd, double* unfound,
-                                         const uint8_t* stand_in, int threads,
-                                         const StopCheck& stop) const {
-    ShootOptions opt;
-    opt.stand_in = stand_in;
-    opt.threads = threads;
+                                         const ShootOptions& opt, const StopCheck& stop) const {
+    if (opt.coverage || opt.object)
+        throw std::invalid_argument(
+            "coverage and silhouettes: only with the receiver-side deposit");
     return march(emit, ne, fams, nf, val, hd, unfound, opt, SenderSide{send_scale, recv_area},
                  stop);
 }
