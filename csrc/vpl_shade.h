@@ -45,10 +45,10 @@ struct ShadeVPLs {
     const float* normal = nullptr;  // (K, 3) unit normal
     const float* weight = nullptr;  // (K, 3) (TA_set / n_set) * B / pi: radiance times the
                                     // estimator weight; for an MIS VPL just its radiance B / pi
-    const float* area = nullptr;  // (K,) area the record stands for (bounds the geometry term)
-    const float* pa = nullptr;    // (K,) n_v x the VPL's area pdf (per unit area) for VPLs
-                                  // combined with gather rays (balance heuristic), 0 for
-                                  // the others; or null: none
+    const float* area = nullptr;    // (K,) area the record stands for (bounds the geometry term)
+    const float* pa = nullptr;      // (K,) n_v x the VPL's area pdf (per unit area) for VPLs
+                                    // combined with gather rays (balance heuristic), 0 for
+                                    // the others; or null: none
 };
 
 // Multiple importance sampling of the non-emitter set between VPLs (n_v a
