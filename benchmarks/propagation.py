@@ -387,7 +387,7 @@ def throughput(args) -> None:
         args_ = (ds.families, ds.weights, vals, fam, False, th)
         runs = {
             "onepass": (s.gather, args_, {}),
-            "sort": (s.gather, (*args_, "sort"), {}),
+            "sort": (voxgi._core.testing.gather_sorted, (s, *args_), {}),
             "record": (s.gather, args_, {"record": tab}),
             "replay": (s.gather_recorded, (tab, vals, fam, False, th), {}),
         }
@@ -533,7 +533,9 @@ def _send_ratio(vox, R: int, threads: int) -> dict:
     S = s.normalisation(ds.families, ds.weights, threads)
     w = np.repeat((a["area"] / S)[:, None], 3, axis=1).astype(np.float32)
     _, vis, _ = s.gather(ds.families, ds.weights, np.zeros((n, 3), np.float32), fam, True, threads)
-    col, _, _ = s.gather(ds.families, ds.weights, w, fam, False, threads, transpose=True)
+    col, _, _ = voxgi._core.testing.gather_sorted(
+        s, ds.families, ds.weights, w, fam, False, threads, transpose=True
+    )
     target = a["area"] * vis / S
     out = {}
     for o in np.unique(vox.object_id):

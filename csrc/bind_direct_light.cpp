@@ -4,8 +4,8 @@
 
 #include <cmath>
 
+#include "bind_common.h"
 #include "direct_light.h"
-#include "pycommon.h"
 
 namespace py = pybind11;
 using namespace pybind11::literals;
@@ -14,7 +14,7 @@ using namespace voxgi::py_helpers;
 namespace {
 
 // The arrays behind an EmitterTriangles, checked; kept alive by the caller.
-voxgi::EmitterTriangles emitters(const py::tuple &t) {
+voxgi::EmitterTriangles emitters(const py::tuple& t) {
     if (t.size() != 6) throw py::value_error("emitters: expected 6 arrays");
     const auto corners = t[0].cast<F64>();
     if (corners.ndim() != 3 || corners.shape(1) != 3 || corners.shape(2) != 3)
@@ -42,8 +42,8 @@ voxgi::EmitterTriangles emitters(const py::tuple &t) {
     return em;
 }
 
-voxgi::DirectLightQuery query(const F64 &point, const F64 &normal, const F64 &shift,
-                              const F64 &sequence, double offset) {
+voxgi::DirectLightQuery query(const F64& point, const F64& normal, const F64& shift,
+                              const F64& sequence, double offset) {
     check_2d(point, -1, 3, "point");
     const py::ssize_t n = point.shape(0);
     check_2d(normal, n, 3, "normal");
@@ -61,8 +61,8 @@ voxgi::DirectLightQuery query(const F64 &point, const F64 &normal, const F64 &sh
     return q;
 }
 
-py::tuple rays(const py::tuple &emit, const F64 &point, const F64 &normal, const F64 &shift,
-               const F64 &sequence, double offset, int threads) {
+py::tuple rays(const py::tuple& emit, const F64& point, const F64& normal, const F64& shift,
+               const F64& sequence, double offset, int threads) {
     const voxgi::EmitterTriangles em = emitters(emit);
     const voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
     const py::ssize_t m = q.records * q.samples, three = 3;
@@ -72,16 +72,16 @@ py::tuple rays(const py::tuple &emit, const F64 &point, const F64 &normal, const
     const voxgi::StopCheck stop = make_stop_check();
     {
         py::gil_scoped_release release;
-        voxgi::direct_light_rays(em, q, plo, pld, pll, pc, pho, phd, voxgi::resolve_threads(threads),
-                                 stop);
+        voxgi::direct_light_rays(em, q, plo, pld, pll, pc, pho, phd,
+                                 voxgi::resolve_threads(threads), stop);
     }
     return py::make_tuple(lo, ld, ll, con, ho, hd);
 }
 
-py::tuple sum(const py::tuple &emit, const F64 &point, const F64 &normal, const F64 &shift,
-              const F64 &sequence, double offset, const F32 &contribution, const I32 &light_hit,
-              const F32 &hemi_direction, const I32 &hemi_hit, const F32 &hemi_u, const F32 &hemi_v,
-              const I32 &emitter_of, int threads) {
+py::tuple sum(const py::tuple& emit, const F64& point, const F64& normal, const F64& shift,
+              const F64& sequence, double offset, const F32& contribution, const I32& light_hit,
+              const F32& hemi_direction, const I32& hemi_hit, const F32& hemi_u, const F32& hemi_v,
+              const I32& emitter_of, int threads) {
     const voxgi::EmitterTriangles em = emitters(emit);
     const voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
     const py::ssize_t m = q.records * q.samples;
@@ -92,7 +92,7 @@ py::tuple sum(const py::tuple &emit, const F64 &point, const F64 &normal, const 
     check_1d(hemi_u, m, "hemi_u");
     check_1d(hemi_v, m, "hemi_v");
     check_1d(emitter_of, -1, "emitter_of");
-    const int32_t *eo = emitter_of.data();
+    const int32_t* eo = emitter_of.data();
     for (py::ssize_t t = 0; t < emitter_of.shape(0); ++t)
         if (eo[t] >= em.count) throw py::value_error("emitter_of: index past the emitters");
     F64 out({q.records, py::ssize_t(3)}), sq({q.records});
@@ -112,7 +112,7 @@ py::tuple sum(const py::tuple &emit, const F64 &point, const F64 &normal, const 
 
 }  // namespace
 
-void bind_direct_light(py::module_ &m) {
+void bind_direct_light(py::module_& m) {
     m.def("direct_light_rays", &rays, "emitters"_a, "point"_a.noconvert(), "normal"_a.noconvert(),
           "shift"_a.noconvert(), "sequence"_a.noconvert(), "offset"_a, "threads"_a = 0,
           R"doc(The light and hemisphere rays of records (samples each, record-major).
@@ -123,10 +123,10 @@ cdf (E,), density (E,)), float64 but two_sided. point, normal (N,3), shift
 direction (M,3), length (M,), contribution (M,3), hemisphere origin (M,3) and
 direction (M,3), M = N x S.)doc");
     m.def("direct_light_sum", &sum, "emitters"_a, "point"_a.noconvert(), "normal"_a.noconvert(),
-          "shift"_a.noconvert(), "sequence"_a.noconvert(), "offset"_a,
-          "contribution"_a.noconvert(), "light_hit"_a.noconvert(), "hemi_direction"_a.noconvert(),
-          "hemi_hit"_a.noconvert(), "hemi_u"_a.noconvert(), "hemi_v"_a.noconvert(),
-          "emitter_of"_a.noconvert(), "threads"_a = 0,
+          "shift"_a.noconvert(), "sequence"_a.noconvert(), "offset"_a, "contribution"_a.noconvert(),
+          "light_hit"_a.noconvert(), "hemi_direction"_a.noconvert(), "hemi_hit"_a.noconvert(),
+          "hemi_u"_a.noconvert(), "hemi_v"_a.noconvert(), "emitter_of"_a.noconvert(),
+          "threads"_a = 0,
           R"doc(Per record: direct irradiance (N,3) float64 and the mean square of
 the luminance of each light + hemisphere sample pair (N,) float64.)doc");
 }

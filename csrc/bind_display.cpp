@@ -3,7 +3,7 @@
 
 #include <limits>
 
-#include "pycommon.h"
+#include "bind_common.h"
 #include "vpl_shade.h"
 
 namespace py = pybind11;
@@ -12,8 +12,8 @@ using namespace voxgi::py_helpers;
 
 namespace {
 
-voxgi::ShadeMaterials materials(const F32 &albedo, const F32 &rs, const F32 &nu, const F32 &nv,
-                                const U8 &glossy) {
+voxgi::ShadeMaterials materials(const F32& albedo, const F32& rs, const F32& nu, const F32& nv,
+                                const U8& glossy) {
     check_2d(albedo, -1, 3, "mat_albedo");
     const py::ssize_t m = albedo.shape(0);
     check_2d(rs, m, 3, "mat_rs");
@@ -38,15 +38,15 @@ voxgi::ShadeMIS make_mis(double n_gather) {
     return mis;
 }
 
-voxgi::ShadeHits make_hits(const F64 &hit_pos, const F32 &hit_normal, const F32 &hit_ng,
-                           const F32 &hit_wo, const I32 &hit_material, py::ssize_t n_mat) {
+voxgi::ShadeHits make_hits(const F64& hit_pos, const F32& hit_normal, const F32& hit_ng,
+                           const F32& hit_wo, const I32& hit_material, py::ssize_t n_mat) {
     check_2d(hit_pos, -1, 3, "hit_pos");
     const py::ssize_t P = hit_pos.shape(0);
     check_2d(hit_normal, P, 3, "hit_normal");
     check_2d(hit_ng, P, 3, "hit_ng");
     check_2d(hit_wo, P, 3, "hit_wo");
     check_1d(hit_material, P, "hit_material");
-    const int32_t *mi = hit_material.data();
+    const int32_t* mi = hit_material.data();
     for (py::ssize_t p = 0; p < P; ++p)
         if (mi[p] >= n_mat)
             throw py::value_error("hit_material: index " + std::to_string(mi[p]) +
@@ -61,95 +61,273 @@ voxgi::ShadeHits make_hits(const F64 &hit_pos, const F32 &hit_normal, const F32 
     return hits;
 }
 
+auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                    F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, F64 vpl_pos,
+                    F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa, double n_gather,
+                    double eps, I64 ray_count, F32 ray_org, F32 ray_dir, F32 ray_len,
+                    F32 ray_contrib, int threads) {
+    check_2d(hit_pos, -1, 3, "hit_pos");
+    const py::ssize_t P = hit_pos.shape(0);
+    check_2d(hit_normal, P, 3, "hit_normal");
+    check_2d(hit_ng, P, 3, "hit_ng");
+    check_2d(hit_wo, P, 3, "hit_wo");
+    check_1d(hit_material, P, "hit_material");
+    check_2d(vpl_pos, -1, 3, "vpl_pos");
+    const py::ssize_t K = vpl_pos.shape(0);
+    check_2d(vpl_normal, K, 3, "vpl_normal");
+    check_2d(vpl_weight, K, 3, "vpl_weight");
+    check_1d(vpl_area, K, "vpl_area");
+    check_1d(vpl_pa, K, "vpl_pa");
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    voxgi::ShadeMIS mis = make_mis(n_gather);
+    {
+        const float* vp = vpl_pa.data();
+        for (py::ssize_t k = 0; k < K; ++k) {
+            if (!(vp[k] >= 0.f) || !std::isfinite(vp[k]))
+                throw py::value_error("vpl_pa must be finite and >= 0");
+            if (vp[k] > 0.f && !(n_gather > 0.0))
+                throw py::value_error("vpl_pa: MIS VPLs need n_gather > 0");
+        }
+    }
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    {
+        const int32_t* mi = hit_material.data();
+        for (py::ssize_t p = 0; p < P; ++p)
+            if (mi[p] >= mats.count)
+                throw py::value_error("hit_material: index " + std::to_string(mi[p]) +
+                                      " out of range (" + std::to_string(mats.count) +
+                                      " materials)");
+    }
+    // Output buffers, reused across frames by the caller: room for P*K rays.
+    check_1d(ray_count, P, "ray_count");
+    check_2d(ray_org, -1, 3, "ray_org");
+    const py::ssize_t cap = ray_org.shape(0);
+    if (cap < P * K)
+        throw py::value_error("ray buffers hold " + std::to_string(cap) + " rays, need " +
+                              std::to_string(P * K));
+    check_2d(ray_dir, cap, 3, "ray_dir");
+    check_1d(ray_len, cap, "ray_len");
+    check_2d(ray_contrib, cap, 3, "ray_contrib");
+    if (!ray_count.writeable() || !ray_org.writeable() || !ray_dir.writeable() ||
+        !ray_len.writeable() || !ray_contrib.writeable())
+        throw py::value_error("ray buffers must be writeable");
+    voxgi::ShadeHits hits;
+    hits.count = P;
+    hits.pos = hit_pos.data();
+    hits.normal = hit_normal.data();
+    hits.ng = hit_ng.data();
+    hits.wo = hit_wo.data();
+    hits.material = hit_material.data();
+    voxgi::ShadeVPLs vpls;
+    vpls.count = K;
+    vpls.pos = vpl_pos.data();
+    vpls.normal = vpl_normal.data();
+    vpls.weight = vpl_weight.data();
+    vpls.area = vpl_area.data();
+    vpls.pa = vpl_pa.data();
+    int64_t* pc = ray_count.mutable_data();
+    float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data(), *pl = ray_len.mutable_data(),
+          *pr = ray_contrib.mutable_data();
+    auto stop = make_stop_check();
+    int64_t n;
+    {
+        py::gil_scoped_release release;
+        n = voxgi::vpl_prepare(hits, mats, vpls, mis, eps, pc, po, pd, pl, pr, threads, stop);
+    }
+    return n;
+}
+
+auto gather_rays_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                    int n_gather, uint64_t seed, int64_t frame, double eps, I64 ray_count,
+                    F32 ray_org, F32 ray_dir, int threads) {
+    voxgi::ShadeHits hits = make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material,
+                                      std::numeric_limits<int32_t>::max());
+    const py::ssize_t P = hits.count;
+    if (n_gather < 0 || n_gather > 4096) throw py::value_error("n_gather must be in [0, 4096]");
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    check_1d(ray_count, P, "ray_count");
+    check_2d(ray_org, -1, 3, "ray_org");
+    check_2d(ray_dir, ray_org.shape(0), 3, "ray_dir");
+    if (ray_org.shape(0) < P * n_gather)
+        throw py::value_error("ray buffers hold " + std::to_string(ray_org.shape(0)) +
+                              " rays, need " + std::to_string(P * n_gather));
+    int64_t* pc = ray_count.mutable_data();
+    float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data();
+    auto stop = make_stop_check();
+    int64_t n;
+    {
+        py::gil_scoped_release release;
+        n = voxgi::gather_rays(hits, n_gather, seed, frame, eps, pc, po, pd, threads, stop);
+    }
+    return n;
+}
+
+auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                     F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
+                     double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided, U8 obj_emitter,
+                     I64 rec_sorted_key, I32 rec_order, I32 rec_cell_start, F64 rec_centroid,
+                     F32 rec_normal, I32 rec_object, F32 rec_radiance, F32 rec_pa, I64 grid_dims,
+                     I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count, F32 ray_dir,
+                     I32 prim, F32 out, int threads) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    const py::ssize_t P = hits.count;
+    voxgi::ShadeMIS mis = make_mis(n_gather);
+    if (!(n_gather > 0.0)) throw py::value_error("n_gather must be > 0");
+    if (tri_v.ndim() != 3 || tri_v.shape(1) != 3 || tri_v.shape(2) != 3)
+        throw py::value_error("tri_v must have shape (F, 3, 3)");
+    const py::ssize_t F = tri_v.shape(0);
+    check_1d(tri_object, F, "tri_object");
+    check_1d(obj_two_sided, -1, "obj_two_sided");
+    const py::ssize_t O = obj_two_sided.shape(0);
+    check_1d(obj_emitter, O, "obj_emitter");
+    {
+        const int32_t* to = tri_object.data();
+        for (py::ssize_t f = 0; f < F; ++f)
+            if (to[f] < 0 || to[f] >= O) throw py::value_error("tri_object: index out of range");
+    }
+    check_1d(rec_sorted_key, -1, "rec_sorted_key");
+    const py::ssize_t N = rec_sorted_key.shape(0);
+    check_1d(rec_order, N, "rec_order");
+    check_2d(rec_centroid, N, 3, "rec_centroid");
+    check_2d(rec_normal, N, 3, "rec_normal");
+    check_1d(rec_object, N, "rec_object");
+    check_2d(rec_radiance, N, 3, "rec_radiance");
+    check_1d(rec_pa, N, "rec_pa");
+    check_1d(grid_dims, 3, "grid_dims");
+    check_1d(grid_lo, 3, "grid_lo");
+    check_1d(grid_origin, 3, "grid_origin");
+    if (!(pitch > 0.0) || !std::isfinite(pitch)) throw py::value_error("pitch must be > 0");
+    {
+        const int32_t* ro = rec_order.data();
+        const int64_t* sk = rec_sorted_key.data();
+        for (py::ssize_t i = 0; i < N; ++i) {
+            if (ro[i] < 0 || ro[i] >= N) throw py::value_error("rec_order: index out of range");
+            if (i && sk[i] < sk[i - 1]) throw py::value_error("rec_sorted_key must be ascending");
+        }
+    }
+    check_1d(ray_count, P, "ray_count");
+    check_2d(ray_dir, -1, 3, "ray_dir");
+    const py::ssize_t R = ray_dir.shape(0);
+    check_1d(prim, R, "prim");
+    {
+        const int64_t* rc = ray_count.data();
+        int64_t total = 0;
+        for (py::ssize_t p = 0; p < P; ++p) {
+            if (rc[p] < 0) throw py::value_error("ray_count: negative count");
+            total += rc[p];
+        }
+        if (total != R) throw py::value_error("ray_count does not sum to the number of rays");
+    }
+    check_2d(out, P, 3, "out");
+    if (!out.writeable()) throw py::value_error("out must be writeable");
+    voxgi::ShadeTriangles tris;
+    tris.count = F;
+    tris.v = tri_v.data();
+    tris.object = tri_object.data();
+    tris.two_sided = obj_two_sided.data();
+    tris.emitter = obj_emitter.data();
+    voxgi::RecordGrid grid;
+    grid.count = N;
+    grid.sorted_key = rec_sorted_key.data();
+    grid.order = rec_order.data();
+    grid.centroid = rec_centroid.data();
+    grid.normal = rec_normal.data();
+    grid.object = rec_object.data();
+    grid.radiance = rec_radiance.data();
+    grid.pa = rec_pa.data();
+    for (int a = 0; a < 3; ++a) {
+        grid.dims[a] = grid_dims.data()[a];
+        grid.lo[a] = grid_lo.data()[a];
+        grid.origin[a] = grid_origin.data()[a];
+        if (grid.dims[a] < 1) throw py::value_error("grid_dims must be >= 1");
+    }
+    grid.pitch = pitch;
+    // Optional dense table of each voxel key's first sorted record.
+    check_1d(rec_cell_start, -1, "rec_cell_start");
+    if (rec_cell_start.shape(0) > 0) {
+        const int64_t cells = grid.dims[0] * grid.dims[1] * grid.dims[2];
+        if (rec_cell_start.shape(0) != cells + 1)
+            throw py::value_error("rec_cell_start must have dims product + 1 entries");
+        const int32_t* cs = rec_cell_start.data();
+        if (cs[0] != 0 || cs[cells] != N) throw py::value_error("rec_cell_start: bad bounds");
+        for (int64_t c = 0; c < cells; ++c)
+            if (cs[c + 1] < cs[c]) throw py::value_error("rec_cell_start must be ascending");
+        grid.cell_start = cs;
+    } else {
+        const int64_t* sk = rec_sorted_key.data();
+        if (N > 0 && (sk[0] < 0 || sk[N - 1] >= grid.dims[0] * grid.dims[1] * grid.dims[2]))
+            throw py::value_error("rec_sorted_key: key outside the grid");
+    }
+    const int64_t* pc = ray_count.data();
+    const float* pd = ray_dir.data();
+    const int32_t* pp = prim.data();
+    float* po = out.mutable_data();
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::gather_shade(hits, mats, mis, tris, grid, pc, pd, pp, po, threads, stop);
+    }
+}
+
+auto vpl_accumulate_py(I64 ray_count, F32 ray_contrib, U8 occluded, int threads) {
+    check_1d(ray_count, -1, "ray_count");
+    check_2d(ray_contrib, -1, 3, "ray_contrib");
+    const py::ssize_t R = ray_contrib.shape(0), P = ray_count.shape(0);
+    check_1d(occluded, R, "occluded");
+    const int64_t* pc = ray_count.data();
+    int64_t total = 0;
+    for (py::ssize_t p = 0; p < P; ++p) {
+        if (pc[p] < 0) throw py::value_error("ray_count: negative count");
+        total += pc[p];
+    }
+    if (total != R)
+        throw py::value_error("ray_count sums to " + std::to_string(total) + ", expected " +
+                              std::to_string(R) + " rays");
+    F32 out({P, py::ssize_t(3)});
+    float* po = out.mutable_data();
+    const float* pr = ray_contrib.data();
+    const uint8_t* po_cc = occluded.data();
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::vpl_accumulate(P, pc, pr, po_cc, po, threads, stop);
+    }
+    return out;
+}
+
+auto shade_brdf_py(F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, I32 material,
+                   F32 n, F32 k1, F32 k2) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    check_1d(material, -1, "material");
+    const py::ssize_t Q = material.shape(0);
+    check_2d(n, Q, 3, "n");
+    check_2d(k1, Q, 3, "k1");
+    check_2d(k2, Q, 3, "k2");
+    const int32_t* mi = material.data();
+    for (py::ssize_t q = 0; q < Q; ++q)
+        if (mi[q] < 0 || mi[q] >= mats.count) throw py::value_error("material: index out of range");
+    F32 out({Q, py::ssize_t(3)});
+    float* po = out.mutable_data();
+    const float *pn = n.data(), *p1 = k1.data(), *p2 = k2.data();
+    for (py::ssize_t q = 0; q < Q; ++q)
+        voxgi::shade_brdf(mats, mi[q], pn + 3 * q, p1 + 3 * q, p2 + 3 * q, po + 3 * q);
+    return out;
+}
+
 }  // namespace
 
-void bind_display(py::module_ &m) {
-    m.def(
-        "vpl_prepare",
-        [](F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, F32 mat_albedo,
-           F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, F64 vpl_pos, F32 vpl_normal,
-           F32 vpl_weight, F32 vpl_area, F32 vpl_pa, double n_gather,
-           double eps, I64 ray_count, F32 ray_org, F32 ray_dir, F32 ray_len, F32 ray_contrib,
-           int threads) {
-            check_2d(hit_pos, -1, 3, "hit_pos");
-            const py::ssize_t P = hit_pos.shape(0);
-            check_2d(hit_normal, P, 3, "hit_normal");
-            check_2d(hit_ng, P, 3, "hit_ng");
-            check_2d(hit_wo, P, 3, "hit_wo");
-            check_1d(hit_material, P, "hit_material");
-            check_2d(vpl_pos, -1, 3, "vpl_pos");
-            const py::ssize_t K = vpl_pos.shape(0);
-            check_2d(vpl_normal, K, 3, "vpl_normal");
-            check_2d(vpl_weight, K, 3, "vpl_weight");
-            check_1d(vpl_area, K, "vpl_area");
-            check_1d(vpl_pa, K, "vpl_pa");
-            if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
-            voxgi::ShadeMIS mis = make_mis(n_gather);
-            {
-                const float *vp = vpl_pa.data();
-                for (py::ssize_t k = 0; k < K; ++k) {
-                    if (!(vp[k] >= 0.f) || !std::isfinite(vp[k]))
-                        throw py::value_error("vpl_pa must be finite and >= 0");
-                    if (vp[k] > 0.f && !(n_gather > 0.0))
-                        throw py::value_error("vpl_pa: MIS VPLs need n_gather > 0");
-                }
-            }
-            voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
-            {
-                const int32_t *mi = hit_material.data();
-                for (py::ssize_t p = 0; p < P; ++p)
-                    if (mi[p] >= mats.count)
-                        throw py::value_error("hit_material: index " + std::to_string(mi[p]) +
-                                              " out of range (" + std::to_string(mats.count) +
-                                              " materials)");
-            }
-            // Output buffers, reused across frames by the caller: room for P*K rays.
-            check_1d(ray_count, P, "ray_count");
-            check_2d(ray_org, -1, 3, "ray_org");
-            const py::ssize_t cap = ray_org.shape(0);
-            if (cap < P * K)
-                throw py::value_error("ray buffers hold " + std::to_string(cap) + " rays, need " +
-                                      std::to_string(P * K));
-            check_2d(ray_dir, cap, 3, "ray_dir");
-            check_1d(ray_len, cap, "ray_len");
-            check_2d(ray_contrib, cap, 3, "ray_contrib");
-            if (!ray_count.writeable() || !ray_org.writeable() || !ray_dir.writeable() ||
-                !ray_len.writeable() || !ray_contrib.writeable())
-                throw py::value_error("ray buffers must be writeable");
-            voxgi::ShadeHits hits;
-            hits.count = P;
-            hits.pos = hit_pos.data();
-            hits.normal = hit_normal.data();
-            hits.ng = hit_ng.data();
-            hits.wo = hit_wo.data();
-            hits.material = hit_material.data();
-            voxgi::ShadeVPLs vpls;
-            vpls.count = K;
-            vpls.pos = vpl_pos.data();
-            vpls.normal = vpl_normal.data();
-            vpls.weight = vpl_weight.data();
-            vpls.area = vpl_area.data();
-            vpls.pa = vpl_pa.data();
-            int64_t *pc = ray_count.mutable_data();
-            float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data(),
-                  *pl = ray_len.mutable_data(), *pr = ray_contrib.mutable_data();
-            auto stop = make_stop_check();
-            int64_t n;
-            {
-                py::gil_scoped_release release;
-                n = voxgi::vpl_prepare(hits, mats, vpls, mis, eps, pc, po, pd, pl, pr, threads,
-                                       stop);
-            }
-            return n;
-        },
-        "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(),
-        "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(),
-        "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(),
-        "mat_glossy"_a.noconvert(), "vpl_pos"_a.noconvert(), "vpl_normal"_a.noconvert(),
-        "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(), "vpl_pa"_a.noconvert(),
-        "n_gather"_a, "eps"_a, "ray_count"_a.noconvert(), "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(),
-        "ray_len"_a.noconvert(), "ray_contrib"_a.noconvert(), "threads"_a = 0,
-        R"doc(Pass 1 of a display frame: per (pixel, VPL) pair the unoccluded contribution
+void bind_display(py::module_& m) {
+    m.def("vpl_prepare", &vpl_prepare_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
+          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "vpl_pos"_a.noconvert(),
+          "vpl_normal"_a.noconvert(), "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(),
+          "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "ray_count"_a.noconvert(),
+          "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(), "ray_len"_a.noconvert(),
+          "ray_contrib"_a.noconvert(), "threads"_a = 0,
+          R"doc(Pass 1 of a display frame: per (pixel, VPL) pair the unoccluded contribution
 and a shadow ray where it is non-zero.
 
 Inputs are C-contiguous: hit_pos (P, 3) float64, hit_normal / hit_ng / hit_wo
@@ -165,219 +343,37 @@ rays): ray_count (P,) int64, ray_org (C, 3), ray_dir (C, 3), ray_len (C,),
 ray_contrib (C, 3) float32, rays pixel-major in VPL order. Returns the
 number R of rays written (the first R rows).)doc");
 
-    m.def(
-        "gather_rays",
-        [](F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, int n_gather,
-           uint64_t seed, int64_t frame, double eps, I64 ray_count, F32 ray_org, F32 ray_dir,
-           int threads) {
-            voxgi::ShadeHits hits = make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material,
-                                              std::numeric_limits<int32_t>::max());
-            const py::ssize_t P = hits.count;
-            if (n_gather < 0 || n_gather > 4096) throw py::value_error("n_gather must be in [0, 4096]");
-            if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
-            check_1d(ray_count, P, "ray_count");
-            check_2d(ray_org, -1, 3, "ray_org");
-            check_2d(ray_dir, ray_org.shape(0), 3, "ray_dir");
-            if (ray_org.shape(0) < P * n_gather)
-                throw py::value_error("ray buffers hold " + std::to_string(ray_org.shape(0)) +
-                                      " rays, need " + std::to_string(P * n_gather));
-            int64_t *pc = ray_count.mutable_data();
-            float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data();
-            auto stop = make_stop_check();
-            int64_t n;
-            {
-                py::gil_scoped_release release;
-                n = voxgi::gather_rays(hits, n_gather, seed, frame, eps, pc, po, pd, threads, stop);
-            }
-            return n;
-        },
-        "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(),
-        "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(), "n_gather"_a, "seed"_a, "frame"_a,
-        "eps"_a, "ray_count"_a.noconvert(), "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(),
-        "threads"_a = 0,
-        R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
+    m.def("gather_rays", &gather_rays_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+          "n_gather"_a, "seed"_a, "frame"_a, "eps"_a, "ray_count"_a.noconvert(),
+          "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(), "threads"_a = 0,
+          R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), written in place into ray_count (P,) int64 and
 ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc");
 
-    m.def(
-        "gather_shade",
-        [](F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, F32 mat_albedo,
-           F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided, U8 obj_emitter, I64 rec_sorted_key,
-           I32 rec_order, I32 rec_cell_start, F64 rec_centroid, F32 rec_normal, I32 rec_object, F32 rec_radiance,
-           F32 rec_pa, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count,
-           F32 ray_dir, I32 prim, F32 out, int threads) {
-            voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
-            voxgi::ShadeHits hits = make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material,
-                                              mats.count);
-            const py::ssize_t P = hits.count;
-            voxgi::ShadeMIS mis = make_mis(n_gather);
-            if (!(n_gather > 0.0)) throw py::value_error("n_gather must be > 0");
-            if (tri_v.ndim() != 3 || tri_v.shape(1) != 3 || tri_v.shape(2) != 3)
-                throw py::value_error("tri_v must have shape (F, 3, 3)");
-            const py::ssize_t F = tri_v.shape(0);
-            check_1d(tri_object, F, "tri_object");
-            check_1d(obj_two_sided, -1, "obj_two_sided");
-            const py::ssize_t O = obj_two_sided.shape(0);
-            check_1d(obj_emitter, O, "obj_emitter");
-            {
-                const int32_t *to = tri_object.data();
-                for (py::ssize_t f = 0; f < F; ++f)
-                    if (to[f] < 0 || to[f] >= O) throw py::value_error("tri_object: index out of range");
-            }
-            check_1d(rec_sorted_key, -1, "rec_sorted_key");
-            const py::ssize_t N = rec_sorted_key.shape(0);
-            check_1d(rec_order, N, "rec_order");
-            check_2d(rec_centroid, N, 3, "rec_centroid");
-            check_2d(rec_normal, N, 3, "rec_normal");
-            check_1d(rec_object, N, "rec_object");
-            check_2d(rec_radiance, N, 3, "rec_radiance");
-            check_1d(rec_pa, N, "rec_pa");
-            check_1d(grid_dims, 3, "grid_dims");
-            check_1d(grid_lo, 3, "grid_lo");
-            check_1d(grid_origin, 3, "grid_origin");
-            if (!(pitch > 0.0) || !std::isfinite(pitch)) throw py::value_error("pitch must be > 0");
-            {
-                const int32_t *ro = rec_order.data();
-                const int64_t *sk = rec_sorted_key.data();
-                for (py::ssize_t i = 0; i < N; ++i) {
-                    if (ro[i] < 0 || ro[i] >= N) throw py::value_error("rec_order: index out of range");
-                    if (i && sk[i] < sk[i - 1]) throw py::value_error("rec_sorted_key must be ascending");
-                }
-            }
-            check_1d(ray_count, P, "ray_count");
-            check_2d(ray_dir, -1, 3, "ray_dir");
-            const py::ssize_t R = ray_dir.shape(0);
-            check_1d(prim, R, "prim");
-            {
-                const int64_t *rc = ray_count.data();
-                int64_t total = 0;
-                for (py::ssize_t p = 0; p < P; ++p) {
-                    if (rc[p] < 0) throw py::value_error("ray_count: negative count");
-                    total += rc[p];
-                }
-                if (total != R) throw py::value_error("ray_count does not sum to the number of rays");
-            }
-            check_2d(out, P, 3, "out");
-            if (!out.writeable()) throw py::value_error("out must be writeable");
-            voxgi::ShadeTriangles tris;
-            tris.count = F;
-            tris.v = tri_v.data();
-            tris.object = tri_object.data();
-            tris.two_sided = obj_two_sided.data();
-            tris.emitter = obj_emitter.data();
-            voxgi::RecordGrid grid;
-            grid.count = N;
-            grid.sorted_key = rec_sorted_key.data();
-            grid.order = rec_order.data();
-            grid.centroid = rec_centroid.data();
-            grid.normal = rec_normal.data();
-            grid.object = rec_object.data();
-            grid.radiance = rec_radiance.data();
-            grid.pa = rec_pa.data();
-            for (int a = 0; a < 3; ++a) {
-                grid.dims[a] = grid_dims.data()[a];
-                grid.lo[a] = grid_lo.data()[a];
-                grid.origin[a] = grid_origin.data()[a];
-                if (grid.dims[a] < 1) throw py::value_error("grid_dims must be >= 1");
-            }
-            grid.pitch = pitch;
-            // Optional dense table of each voxel key's first sorted record.
-            check_1d(rec_cell_start, -1, "rec_cell_start");
-            if (rec_cell_start.shape(0) > 0) {
-                const int64_t cells = grid.dims[0] * grid.dims[1] * grid.dims[2];
-                if (rec_cell_start.shape(0) != cells + 1)
-                    throw py::value_error("rec_cell_start must have dims product + 1 entries");
-                const int32_t *cs = rec_cell_start.data();
-                if (cs[0] != 0 || cs[cells] != N) throw py::value_error("rec_cell_start: bad bounds");
-                for (int64_t c = 0; c < cells; ++c)
-                    if (cs[c + 1] < cs[c]) throw py::value_error("rec_cell_start must be ascending");
-                grid.cell_start = cs;
-            } else {
-                const int64_t *sk = rec_sorted_key.data();
-                if (N > 0 && (sk[0] < 0 || sk[N - 1] >= grid.dims[0] * grid.dims[1] * grid.dims[2]))
-                    throw py::value_error("rec_sorted_key: key outside the grid");
-            }
-            const int64_t *pc = ray_count.data();
-            const float *pd = ray_dir.data();
-            const int32_t *pp = prim.data();
-            float *po = out.mutable_data();
-            auto stop = make_stop_check();
-            {
-                py::gil_scoped_release release;
-                voxgi::gather_shade(hits, mats, mis, tris, grid, pc, pd, pp, po, threads, stop);
-            }
-        },
-        "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(),
-        "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(),
-        "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(),
-        "mat_glossy"_a.noconvert(), "n_gather"_a, "tri_v"_a.noconvert(),
-        "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "obj_emitter"_a.noconvert(),
-        "rec_sorted_key"_a.noconvert(), "rec_order"_a.noconvert(),
-        "rec_cell_start"_a.noconvert(), "rec_centroid"_a.noconvert(),
-        "rec_normal"_a.noconvert(), "rec_object"_a.noconvert(), "rec_radiance"_a.noconvert(),
-        "rec_pa"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
-        "grid_origin"_a.noconvert(), "pitch"_a, "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(),
-        "prim"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0,
-        R"doc(Shade the gather rays (prim: first triangle hit, -1 none) with the radiance
+    m.def("gather_shade", &gather_shade_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
+          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "tri_v"_a.noconvert(),
+          "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "obj_emitter"_a.noconvert(),
+          "rec_sorted_key"_a.noconvert(), "rec_order"_a.noconvert(), "rec_cell_start"_a.noconvert(),
+          "rec_centroid"_a.noconvert(), "rec_normal"_a.noconvert(), "rec_object"_a.noconvert(),
+          "rec_radiance"_a.noconvert(), "rec_pa"_a.noconvert(), "grid_dims"_a.noconvert(),
+          "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a,
+          "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(), "prim"_a.noconvert(),
+          "out"_a.noconvert(), "threads"_a = 0,
+          R"doc(Shade the gather rays (prim: first triangle hit, -1 none) with the radiance
 of the record at each hit point, MIS-weighted against the VPLs; adds into
 out (P, 3) float32.)doc");
 
-    m.def(
-        "vpl_accumulate",
-        [](I64 ray_count, F32 ray_contrib, U8 occluded, int threads) {
-            check_1d(ray_count, -1, "ray_count");
-            check_2d(ray_contrib, -1, 3, "ray_contrib");
-            const py::ssize_t R = ray_contrib.shape(0), P = ray_count.shape(0);
-            check_1d(occluded, R, "occluded");
-            const int64_t *pc = ray_count.data();
-            int64_t total = 0;
-            for (py::ssize_t p = 0; p < P; ++p) {
-                if (pc[p] < 0) throw py::value_error("ray_count: negative count");
-                total += pc[p];
-            }
-            if (total != R)
-                throw py::value_error("ray_count sums to " + std::to_string(total) + ", expected " +
-                                      std::to_string(R) + " rays");
-            F32 out({P, py::ssize_t(3)});
-            float *po = out.mutable_data();
-            const float *pr = ray_contrib.data();
-            const uint8_t *po_cc = occluded.data();
-            auto stop = make_stop_check();
-            {
-                py::gil_scoped_release release;
-                voxgi::vpl_accumulate(P, pc, pr, po_cc, po, threads, stop);
-            }
-            return out;
-        },
-        "ray_count"_a.noconvert(), "ray_contrib"_a.noconvert(), "occluded"_a.noconvert(),
-        "threads"_a = 0,
-        R"doc(Pass 2 of a display frame: per pixel, the sum of the contributions of the
+    m.def("vpl_accumulate", &vpl_accumulate_py, "ray_count"_a.noconvert(),
+          "ray_contrib"_a.noconvert(), "occluded"_a.noconvert(), "threads"_a = 0,
+          R"doc(Pass 2 of a display frame: per pixel, the sum of the contributions of the
 rays not occluded (uint8 (R,)), in ray order. Returns (P, 3) float32.)doc");
 
-    m.def(
-        "shade_brdf",
-        [](F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, I32 material,
-           F32 n, F32 k1, F32 k2) {
-            voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
-            check_1d(material, -1, "material");
-            const py::ssize_t Q = material.shape(0);
-            check_2d(n, Q, 3, "n");
-            check_2d(k1, Q, 3, "k1");
-            check_2d(k2, Q, 3, "k2");
-            const int32_t *mi = material.data();
-            for (py::ssize_t q = 0; q < Q; ++q)
-                if (mi[q] < 0 || mi[q] >= mats.count)
-                    throw py::value_error("material: index out of range");
-            F32 out({Q, py::ssize_t(3)});
-            float *po = out.mutable_data();
-            const float *pn = n.data(), *p1 = k1.data(), *p2 = k2.data();
-            for (py::ssize_t q = 0; q < Q; ++q)
-                voxgi::shade_brdf(mats, mi[q], pn + 3 * q, p1 + 3 * q, p2 + 3 * q, po + 3 * q);
-            return out;
-        },
-        "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
-        "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "material"_a.noconvert(),
-        "n"_a.noconvert(), "k1"_a.noconvert(), "k2"_a.noconvert(),
-        R"doc(The display's BRDF f(k1, k2) (1/sr) for Q direction pairs (tests):
+    m.def("shade_brdf", &shade_brdf_py, "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(),
+          "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(),
+          "material"_a.noconvert(), "n"_a.noconvert(), "k1"_a.noconvert(), "k2"_a.noconvert(),
+          R"doc(The display's BRDF f(k1, k2) (1/sr) for Q direction pairs (tests):
 rho/pi, or Ashikhmin-Shirley coupled diffuse + specular where mat_glossy.)doc");
 }

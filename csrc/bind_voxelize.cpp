@@ -3,7 +3,7 @@
 #include <cstring>
 #include <memory>
 
-#include "pycommon.h"
+#include "bind_common.h"
 #include "voxelize.h"
 
 namespace py = pybind11;
@@ -14,10 +14,10 @@ namespace {
 
 using B8 = py::array_t<bool, py::array::c_style>;
 
-py::dict voxelize_py(const F64 &triangles, const I32 &tri_object, const B8 &two_sided,
-                     const F32 &albedo, const F32 &emission, const F64 &origin, double pitch,
-                     const I32 &dims, double cos_cluster, bool cut, double eps, int threads,
-                     const py::object &progress) {
+py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_sided,
+                     const F32& albedo, const F32& emission, const F64& origin, double pitch,
+                     const I32& dims, double cos_cluster, bool cut, double eps, int threads,
+                     const py::object& progress) {
     if (triangles.ndim() != 3 || triangles.shape(1) != 3 || triangles.shape(2) != 3)
         throw py::value_error("triangles must have shape (F, 3, 3)");
     const py::ssize_t F = triangles.shape(0);
@@ -69,17 +69,19 @@ py::dict voxelize_py(const F64 &triangles, const I32 &tri_object, const B8 &two_
     }
 
     std::vector<std::vector<voxgi::VoxelRecord>> chunks;
-    const double *tp = triangles.data();
-    const int32_t *op = tri_object.data();
-    const bool *tsp = two_sided.data();
-    const float *ap = albedo.data();
-    const float *ep = emission.data();
+    const double* tp = triangles.data();
+    const int32_t* op = tri_object.data();
+    const bool* tsp = two_sided.data();
+    const float* ap = albedo.data();
+    const float* ep = emission.data();
     {
         py::gil_scoped_release release;
         chunks = voxgi::voxelize(tp, F, op, int32_t(O), tsp, ap, ep, P, threads, stop, st, &prog);
     }
+    // the final state, so that a caller always hears of the end, however short the work
+    if (!progress.is_none()) progress(prog.phase.load(), prog.total.load(), prog.total.load());
     py::ssize_t N = 0;
-    for (const auto &c : chunks) N += py::ssize_t(c.size());
+    for (const auto& c : chunks) N += py::ssize_t(c.size());
     I32 ijk({N, py::ssize_t(3)});
     F32 normal({N, py::ssize_t(3)});
     F32 area(N);
@@ -93,13 +95,13 @@ py::dict voxelize_py(const F64 &triangles, const I32 &tri_object, const B8 &two_
         int32_t *pi = ijk.mutable_data(), *po = object.mutable_data();
         float *pn = normal.mutable_data(), *pa = area.mutable_data(), *pal = alb.mutable_data(),
               *pe = emi.mutable_data();
-        double *pc = centroid.mutable_data();
-        bool *pb = back.mutable_data();
-        int8_t *ps = side.mutable_data();
+        double* pc = centroid.mutable_data();
+        bool* pb = back.mutable_data();
+        int8_t* ps = side.mutable_data();
         py::gil_scoped_release release;
         py::ssize_t r = 0;
-        for (auto &c : chunks) {
-            for (const auto &rec : c) {
+        for (auto& c : chunks) {
+            for (const auto& rec : c) {
                 for (int d = 0; d < 3; ++d) {
                     pi[3 * r + d] = rec.ijk[d];
                     pn[3 * r + d] = rec.normal[d];
@@ -117,19 +119,17 @@ py::dict voxelize_py(const F64 &triangles, const I32 &tri_object, const B8 &two_
         }
     }
     const int64_t out_bytes = int64_t(N) * (12 + 12 + 4 + 12 + 12 + 24 + 4 + 1 + 1);
-    py::dict stats("triangles"_a = st.triangles, "skipped_degenerate"_a = st.skipped_degenerate,
-                   "pairs"_a = st.pairs, "cells"_a = st.cells, "records"_a = st.records,
-                   "back_records"_a = st.back_records,
-                   "two_sided_records"_a = st.two_sided_records,
-                   "touch_records"_a = st.touch_records, "clusters"_a = st.clusters,
-                   "cut_clusters"_a = st.cut_clusters, "cut_records"_a = st.cut_records,
-                   "cut_limit_hits"_a = st.cut_limit_hits,
-                   "polygon_overflows"_a = st.polygon_overflows,
-                   "peak_bytes"_a = std::max<int64_t>(
-                       st.peak_bytes, int64_t(N) * int64_t(sizeof(voxgi::VoxelRecord)) + out_bytes),
-                   "seconds_pairs"_a = st.seconds_pairs, "seconds_sort"_a = st.seconds_sort,
-                   "seconds_records"_a = st.seconds_records,
-                   "threads"_a = voxgi::resolve_threads(threads));
+    py::dict stats(
+        "triangles"_a = st.triangles, "skipped_degenerate"_a = st.skipped_degenerate,
+        "pairs"_a = st.pairs, "cells"_a = st.cells, "records"_a = st.records,
+        "back_records"_a = st.back_records, "two_sided_records"_a = st.two_sided_records,
+        "touch_records"_a = st.touch_records, "clusters"_a = st.clusters,
+        "cut_clusters"_a = st.cut_clusters, "cut_records"_a = st.cut_records,
+        "cut_limit_hits"_a = st.cut_limit_hits, "polygon_overflows"_a = st.polygon_overflows,
+        "peak_bytes"_a = std::max<int64_t>(
+            st.peak_bytes, int64_t(N) * int64_t(sizeof(voxgi::VoxelRecord)) + out_bytes),
+        "seconds_pairs"_a = st.seconds_pairs, "seconds_sort"_a = st.seconds_sort,
+        "seconds_records"_a = st.seconds_records, "threads"_a = voxgi::resolve_threads(threads));
     return py::dict("ijk"_a = ijk, "normal"_a = normal, "area"_a = area, "albedo"_a = alb,
                     "emission"_a = emi, "centroid"_a = centroid, "object_id"_a = object,
                     "back"_a = back, "side"_a = side, "stats"_a = stats);
@@ -137,7 +137,7 @@ py::dict voxelize_py(const F64 &triangles, const I32 &tri_object, const B8 &two_
 
 }  // namespace
 
-void bind_voxelize(py::module_ &m) {
+void bind_voxelize(py::module_& m) {
     m.def("voxelize", &voxelize_py, "triangles"_a.noconvert(), "tri_object"_a.noconvert(),
           "two_sided"_a.noconvert(), "albedo"_a.noconvert(), "emission"_a.noconvert(),
           "origin"_a.noconvert(), "pitch"_a, "dims"_a.noconvert(), "cos_cluster"_a = 0.5,
@@ -168,7 +168,8 @@ eps : float
 threads : int
     0: all hardware threads. The output does not depend on it.
 progress : callable(phase, done, total) or None
-    Called from the calling thread about every 100 ms.
+    Called from the calling thread about every 100 ms, and once at the end
+    with done == total.
 
 Returns
 -------

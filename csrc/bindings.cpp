@@ -1,14 +1,16 @@
 // The voxgi._core extension: gathers the per-kernel binding files.
 #include <pybind11/pybind11.h>
 
-#include "common.h"
+#include "util/parallel.h"
 
 namespace py = pybind11;
 
-void bind_voxelize(py::module_ &m);
-void bind_propagate(py::module_ &m);
-void bind_display(py::module_ &m);
-void bind_direct_light(py::module_ &m);
+void bind_voxelize(py::module_& m);
+void bind_pairtable(py::module_& m);
+void bind_linesystem(py::module_& m);
+void bind_testing(py::module_& m);
+void bind_display(py::module_& m);
+void bind_direct_light(py::module_& m);
 
 PYBIND11_MODULE(_core, m) {
     m.doc() = "voxgi compiled core: voxelization, discrete-line propagation, VPL shading";
@@ -19,15 +21,18 @@ PYBIND11_MODULE(_core, m) {
     py::register_exception_translator([](std::exception_ptr p) {
         try {
             if (p) std::rethrow_exception(p);
-        } catch (const voxgi::Interrupted &) {
+        } catch (const voxgi::Interrupted&) {
             if (!PyErr_Occurred()) PyErr_SetNone(PyExc_KeyboardInterrupt);
             throw py::error_already_set();
         }
     });
-    m.def("hardware_threads", [] { return voxgi::resolve_threads(0); },
-          "Number of hardware threads the kernels use when threads=None.");
+    m.def(
+        "hardware_threads", [] { return voxgi::resolve_threads(0); },
+        "Number of hardware threads the kernels use when threads=None.");
     bind_voxelize(m);
-    bind_propagate(m);
+    bind_pairtable(m);
+    bind_linesystem(m);
+    bind_testing(m);
     bind_display(m);
     bind_direct_light(m);
 }

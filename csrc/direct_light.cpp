@@ -10,10 +10,12 @@ constexpr double kPi = 3.14159265358979323846;
 constexpr double kLuminance[3] = {0.2126, 0.7152, 0.0722};
 constexpr int64_t kRecordsPerTask = 256;
 
-inline double dot(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+inline double dot(const double* a, const double* b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
 
 // The record's k-th sample point of [0, 1)^5, shifted by the record's shift.
-inline void sample_point(const DirectLightQuery &q, int64_t r, int64_t s, double u[5]) {
+inline void sample_point(const DirectLightQuery& q, int64_t r, int64_t s, double u[5]) {
     for (int i = 0; i < 5; ++i) {
         u[i] = q.sequence[5 * s + i] + q.shift[5 * r + i];
         if (u[i] >= 1.0) u[i] -= 1.0;
@@ -22,19 +24,19 @@ inline void sample_point(const DirectLightQuery &q, int64_t r, int64_t s, double
 
 // A light sample: triangle by the cumulative table, point uniform in area
 // (square-root warp of the barycentrics).
-inline int64_t draw_light(const EmitterTriangles &em, const double u[3], double y[3]) {
+inline int64_t draw_light(const EmitterTriangles& em, const double u[3], double y[3]) {
     int64_t k = std::upper_bound(em.cdf, em.cdf + em.count, u[0]) - em.cdf;
     k = std::min<int64_t>(k, em.count - 1);
     const double s = std::sqrt(u[1]);
     const double b0 = 1.0 - s, b1 = u[2] * s, b2 = 1.0 - b0 - b1;
-    const double *c = em.corners + 9 * k;
+    const double* c = em.corners + 9 * k;
     for (int i = 0; i < 3; ++i) y[i] = b0 * c[i] + b1 * c[3 + i] + b2 * c[6 + i];
     return k;
 }
 
 // Cosine of the emitter's normal with the direction back to the receiver
 // (w points from the receiver to the emitter); 0 on a one-sided back.
-inline double emitter_cosine(const EmitterTriangles &em, int64_t k, const double w[3]) {
+inline double emitter_cosine(const EmitterTriangles& em, int64_t k, const double w[3]) {
     const double c = -dot(w, em.normal + 3 * k);
     return em.two_sided[k] ? std::fabs(c) : std::max(c, 0.0);
 }
@@ -47,12 +49,13 @@ inline void cosine_direction(const double n[3], double u1, double u2, double w[3
     const double t[3] = {1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]};
     const double bt[3] = {b, sign + n[1] * n[1] * a, -n[1]};
     const double rad = std::sqrt(u1), phi = 2.0 * kPi * u2;
-    const double x = rad * std::cos(phi), y = rad * std::sin(phi), z = std::sqrt(std::max(0.0, 1.0 - u1));
+    const double x = rad * std::cos(phi), y = rad * std::sin(phi),
+                 z = std::sqrt(std::max(0.0, 1.0 - u1));
     for (int i = 0; i < 3; ++i) w[i] = x * t[i] + y * bt[i] + z * n[i];
 }
 
-void light_ray(const EmitterTriangles &em, const DirectLightQuery &q, int64_t r, const double u[5],
-               float *o, float *w, float *len, float *c) {
+void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r, const double u[5],
+               float* o, float* w, float* len, float* c) {
     const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
     double y[3], d[3];
     const int64_t k = draw_light(em, u, y);
@@ -84,10 +87,10 @@ void light_ray(const EmitterTriangles &em, const DirectLightQuery &q, int64_t r,
 
 }  // namespace
 
-void direct_light_rays(const EmitterTriangles &em, const DirectLightQuery &q, float *light_origin,
-                       float *light_direction, float *light_length, float *contribution,
-                       float *hemi_origin, float *hemi_direction, int threads,
-                       const StopCheck &stop) {
+void direct_light_rays(const EmitterTriangles& em, const DirectLightQuery& q, float* light_origin,
+                       float* light_direction, float* light_length, float* contribution,
+                       float* hemi_origin, float* hemi_direction, int threads,
+                       const StopCheck& stop) {
     const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
         const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
@@ -109,11 +112,11 @@ void direct_light_rays(const EmitterTriangles &em, const DirectLightQuery &q, fl
     });
 }
 
-void direct_light_sum(const EmitterTriangles &em, const DirectLightQuery &q,
-                      const float *contribution, const int32_t *light_hit, const float *hemi_direction,
-                      const int32_t *hemi_hit, const float *hemi_u, const float *hemi_v,
-                      const int32_t *emitter_of, int64_t scene_triangles, double *irradiance,
-                      double *mean_square, int threads, const StopCheck &stop) {
+void direct_light_sum(const EmitterTriangles& em, const DirectLightQuery& q,
+                      const float* contribution, const int32_t* light_hit,
+                      const float* hemi_direction, const int32_t* hemi_hit, const float* hemi_u,
+                      const float* hemi_v, const int32_t* emitter_of, int64_t scene_triangles,
+                      double* irradiance, double* mean_square, int threads, const StopCheck& stop) {
     const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
         const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
@@ -129,14 +132,16 @@ void direct_light_sum(const EmitterTriangles &em, const DirectLightQuery &q,
                 const int32_t k = (t >= 0 && t < scene_triangles) ? emitter_of[t] : -1;
                 if (k >= 0) {
                     // the hit point from its barycentrics, in double
-                    const double *c = em.corners + 9 * k;
+                    const double* c = em.corners + 9 * k;
                     const double bu = hemi_u[ray], bv = hemi_v[ray], b0 = 1.0 - bu - bv;
                     double d[3];
-                    for (int i = 0; i < 3; ++i) d[i] = b0 * c[i] + bu * c[3 + i] + bv * c[6 + i] - x[i];
+                    for (int i = 0; i < 3; ++i)
+                        d[i] = b0 * c[i] + bu * c[3 + i] + bv * c[6 + i] - x[i];
                     const double r2 = dot(d, d);
                     const double w[3] = {hemi_direction[3 * ray], hemi_direction[3 * ray + 1],
                                          hemi_direction[3 * ray + 2]};
-                    const double cos_x = std::max(0.0, dot(w, nx)), cos_y = emitter_cosine(em, k, w);
+                    const double cos_x = std::max(0.0, dot(w, nx)),
+                                 cos_y = emitter_cosine(em, k, w);
                     if (cos_y > 0.0 && r2 > 0.0) {
                         // power heuristic, solid-angle measure
                         const double pl = em.density[k] * r2 / cos_y, ph = cos_x / kPi;

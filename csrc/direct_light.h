@@ -9,7 +9,7 @@
 
 #include <cstdint>
 
-#include "common.h"
+#include "util/parallel.h"
 
 namespace voxgi {
 
@@ -17,12 +17,12 @@ namespace voxgi {
 // drawn from (a triangle in proportion to power, a point uniform in area).
 struct EmitterTriangles {
     int64_t count = 0;
-    const double *corners = nullptr;     // (count, 3, 3) corner positions
-    const double *normal = nullptr;      // (count, 3) unit winding normals
-    const uint8_t *two_sided = nullptr;  // (count,) nonzero: emits on both sides
-    const double *radiance = nullptr;    // (count, 3) emitted radiance
-    const double *cdf = nullptr;         // (count,) cumulative draw probability, last 1
-    const double *density = nullptr;     // (count,) area density of a light sample: probability / area
+    const double* corners = nullptr;     // (count, 3, 3) corner positions
+    const double* normal = nullptr;      // (count, 3) unit winding normals
+    const uint8_t* two_sided = nullptr;  // (count,) nonzero: emits on both sides
+    const double* radiance = nullptr;    // (count, 3) emitted radiance
+    const double* cdf = nullptr;         // (count,) cumulative draw probability, last 1
+    const double* density = nullptr;  // (count,) area density of a light sample: probability / area
 };
 
 // The records lit and the samples each takes: `samples` light samples and
@@ -30,11 +30,11 @@ struct EmitterTriangles {
 // (Cranley-Patterson rotation), so each record's samples are stratified.
 struct DirectLightQuery {
     int64_t records = 0;
-    const double *point = nullptr;     // (records, 3) surface points
-    const double *normal = nullptr;    // (records, 3) unit normals of the lit side
-    const double *shift = nullptr;     // (records, 5) per-record shift, in [0, 1)
+    const double* point = nullptr;   // (records, 3) surface points
+    const double* normal = nullptr;  // (records, 3) unit normals of the lit side
+    const double* shift = nullptr;   // (records, 5) per-record shift, in [0, 1)
     int64_t samples = 0;
-    const double *sequence = nullptr;  // (samples, 5) points of [0, 1)^5
+    const double* sequence = nullptr;  // (samples, 5) points of [0, 1)^5
     double offset = 0.0;               // ray offset from the surfaces, scene units
 };
 
@@ -45,10 +45,10 @@ struct DirectLightQuery {
 // infinite and asked "which triangle first?". Light rays that cannot
 // contribute (a back face at either end, or closer than twice the offset)
 // get length 0.
-void direct_light_rays(const EmitterTriangles &em, const DirectLightQuery &q, float *light_origin,
-                       float *light_direction, float *light_length, float *contribution,
-                       float *hemi_origin, float *hemi_direction, int threads,
-                       const StopCheck &stop);
+void direct_light_rays(const EmitterTriangles& em, const DirectLightQuery& q, float* light_origin,
+                       float* light_direction, float* light_length, float* contribution,
+                       float* hemi_origin, float* hemi_direction, int threads,
+                       const StopCheck& stop);
 
 // Per record: the direct irradiance (the mean over its samples of the pair
 // light + hemisphere sample) and the mean square of that pair's luminance
@@ -56,10 +56,10 @@ void direct_light_rays(const EmitterTriangles &em, const DirectLightQuery &q, fl
 // the scene triangle hemisphere ray k met first (-1: none), hemi_u/v its
 // barycentrics there; emitter_of[t]: the emitter index of scene triangle t,
 // or -1.
-void direct_light_sum(const EmitterTriangles &em, const DirectLightQuery &q,
-                      const float *contribution, const int32_t *light_hit, const float *hemi_direction,
-                      const int32_t *hemi_hit, const float *hemi_u, const float *hemi_v,
-                      const int32_t *emitter_of, int64_t scene_triangles, double *irradiance,
-                      double *mean_square, int threads, const StopCheck &stop);
+void direct_light_sum(const EmitterTriangles& em, const DirectLightQuery& q,
+                      const float* contribution, const int32_t* light_hit,
+                      const float* hemi_direction, const int32_t* hemi_hit, const float* hemi_u,
+                      const float* hemi_v, const int32_t* emitter_of, int64_t scene_triangles,
+                      double* irradiance, double* mean_square, int threads, const StopCheck& stop);
 
 }  // namespace voxgi

@@ -37,7 +37,7 @@ struct Poly {
     bool overflow = false;
     double v[kMaxV][3];
     Poly() {}  // user-provided: no zeroing of v (hot path)
-    void push(const double *p) {
+    void push(const double* p) {
         if (n == kMaxV) {
             overflow = true;
             return;
@@ -54,10 +54,12 @@ struct PolyView {
     const double (*v)[3];
     int n;
 };
-inline PolyView view(const Poly &P) { return PolyView{P.v, P.n}; }
+inline PolyView view(const Poly& P) { return PolyView{P.v, P.n}; }
 
-inline double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-inline void cross3(const double *a, const double *b, double *o) {
+inline double dot3(const double* a, const double* b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+inline void cross3(const double* a, const double* b, double* o) {
     o[0] = a[1] * b[2] - a[2] * b[1];
     o[1] = a[2] * b[0] - a[0] * b[2];
     o[2] = a[0] * b[1] - a[1] * b[0];
@@ -66,13 +68,13 @@ inline void cross3(const double *a, const double *b, double *o) {
 // Keep the part of `in` where sgn * (v[axis] - c) >= 0 (closed half-space).
 // New vertices get v[axis] = c exactly, so neighbouring voxels' pieces share
 // their boundary bit for bit.
-void clip_axis(const Poly &in, Poly &out, int axis, double c, double sgn) {
+void clip_axis(const Poly& in, Poly& out, int axis, double c, double sgn) {
     out.n = 0;
     out.overflow = in.overflow;
     const int n = in.n;
     for (int p = 0; p < n; ++p) {
-        const double *a = in.v[p];
-        const double *b = in.v[p + 1 == n ? 0 : p + 1];
+        const double* a = in.v[p];
+        const double* b = in.v[p + 1 == n ? 0 : p + 1];
         const double da = sgn * (a[axis] - c), db = sgn * (b[axis] - c);
         if (da >= 0) out.push(a);
         if ((da >= 0) != (db >= 0)) {
@@ -86,13 +88,13 @@ void clip_axis(const Poly &in, Poly &out, int axis, double c, double sgn) {
 }
 
 // Keep the part of `in` where sgn * (n·v - off) >= 0.
-void clip_plane(const PolyView &in, Poly &out, const double *nrm, double off, double sgn) {
+void clip_plane(const PolyView& in, Poly& out, const double* nrm, double off, double sgn) {
     out.n = 0;
     out.overflow = false;
     const int n = in.n;
     for (int p = 0; p < n; ++p) {
-        const double *a = in.v[p];
-        const double *b = in.v[p + 1 == n ? 0 : p + 1];
+        const double* a = in.v[p];
+        const double* b = in.v[p + 1 == n ? 0 : p + 1];
         const double da = sgn * (dot3(nrm, a) - off), db = sgn * (dot3(nrm, b) - off);
         if (da >= 0) out.push(a);
         if ((da >= 0) != (db >= 0)) {
@@ -106,15 +108,14 @@ void clip_plane(const PolyView &in, Poly &out, const double *nrm, double off, do
 
 // Area (along the unit normal n of the polygon's plane) and area-weighted
 // centroid; the mean of the vertices when the area is zero.
-double area_centroid(const PolyView &P, const double *n, double *c) {
+double area_centroid(const PolyView& P, const double* n, double* c) {
     c[0] = c[1] = c[2] = 0;
     if (P.n == 0) return 0;
     double A = 0;
-    const double *v0 = P.v[0];
+    const double* v0 = P.v[0];
     for (int i = 1; i + 1 < P.n; ++i) {
         const double e1[3] = {P.v[i][0] - v0[0], P.v[i][1] - v0[1], P.v[i][2] - v0[2]};
-        const double e2[3] = {P.v[i + 1][0] - v0[0], P.v[i + 1][1] - v0[1],
-                              P.v[i + 1][2] - v0[2]};
+        const double e2[3] = {P.v[i + 1][0] - v0[0], P.v[i + 1][1] - v0[1], P.v[i + 1][2] - v0[2]};
         double cr[3];
         cross3(e1, e2, cr);
         const double a = 0.5 * dot3(cr, n);
@@ -134,8 +135,8 @@ double area_centroid(const PolyView &P, const double *n, double *c) {
 }
 
 // Closest point of the convex polygon P (plane normal n) to x; returns squared distance.
-double closest_on_poly(const PolyView &P, const double *n, const double *x, double *out) {
-    const double *v0 = P.v[0];
+double closest_on_poly(const PolyView& P, const double* n, const double* x, double* out) {
+    const double* v0 = P.v[0];
     const double h = (x[0] - v0[0]) * n[0] + (x[1] - v0[1]) * n[1] + (x[2] - v0[2]) * n[2];
     const double y[3] = {x[0] - h * n[0], x[1] - h * n[1], x[2] - h * n[2]};
     if (P.n >= 3) {
@@ -186,7 +187,7 @@ struct Tri {
     double g[3][3];
     double n[3];
 };
-bool load_tri(const double *tris, int64_t t, const VoxelizeParams &P, Tri &T) {
+bool load_tri(const double* tris, int64_t t, const VoxelizeParams& P, Tri& T) {
     const double inv = 1.0 / P.pitch;
     for (int v = 0; v < 3; ++v)
         for (int d = 0; d < 3; ++d) T.g[v][d] = (tris[t * 9 + v * 3 + d] - P.origin[d]) * inv;
@@ -207,8 +208,8 @@ inline int64_t iceil(double x) { return static_cast<int64_t>(std::ceil(x)); }
 
 // Phase 1 for one triangle: append the keys of every voxel whose cube, grown
 // by eps, meets the triangle.
-void triangle_cells(const Tri &T, uint32_t tri, const VoxelizeParams &P, std::vector<Pair> &out,
-                    int64_t &overflows) {
+void triangle_cells(const Tri& T, uint32_t tri, const VoxelizeParams& P, std::vector<Pair>& out,
+                    int64_t& overflows) {
     const double eps = P.eps;
     const int64_t D1 = P.dims[1], D2 = P.dims[2];
     // Voxel i along an axis meets [lo - eps, hi + eps] iff i <= hi + eps and i + 1 >= lo - eps.
@@ -269,7 +270,7 @@ void triangle_cells(const Tri &T, uint32_t tri, const VoxelizeParams &P, std::ve
 }
 
 // Stable LSD radix sort of pairs by key (16-bit digits).
-void radix_sort(std::vector<Pair> &v, uint64_t max_key, const StopCheck &stop) {
+void radix_sort(std::vector<Pair>& v, uint64_t max_key, const StopCheck& stop) {
     if (v.size() < 2) return;
     int bits = 0;
     while (bits < 64 && (max_key >> bits) != 0) ++bits;
@@ -277,14 +278,14 @@ void radix_sort(std::vector<Pair> &v, uint64_t max_key, const StopCheck &stop) {
     std::vector<size_t> count(1 << 16);
     for (int shift = 0; shift < bits; shift += 16) {
         std::fill(count.begin(), count.end(), 0);
-        for (const Pair &p : v) ++count[(p.key >> shift) & 0xFFFF];
+        for (const Pair& p : v) ++count[(p.key >> shift) & 0xFFFF];
         size_t sum = 0;
-        for (auto &cnt : count) {
+        for (auto& cnt : count) {
             const size_t c = cnt;
             cnt = sum;
             sum += c;
         }
-        for (const Pair &p : v) tmp[count[(p.key >> shift) & 0xFFFF]++] = p;
+        for (const Pair& p : v) tmp[count[(p.key >> shift) & 0xFFFF]++] = p;
         v.swap(tmp);
         if (stop && stop()) throw Interrupted();
     }
@@ -336,19 +337,19 @@ struct ChunkStats {
 };
 
 struct Context {
-    const double *tris;
-    const int32_t *tri_object;
-    const bool *two_sided;
-    const float *albedo;
-    const float *emission;
-    const VoxelizeParams *P;
+    const double* tris;
+    const int32_t* tri_object;
+    const bool* two_sided;
+    const float* albedo;
+    const float* emission;
+    const VoxelizeParams* P;
 };
 
 // Exact piece of T in voxel `cell` (closed cube). A triangle lying exactly in
 // the plane of a voxel face gives its area to the voxel below that plane
 // only, so that no area is counted twice; the voxel above just touches it.
 // On the grid's lower boundary (index 0) there is no voxel below: keep it.
-void clip_exact(const Tri &T, const int64_t *cell, Poly &out, Poly &tmp) {
+void clip_exact(const Tri& T, const int64_t* cell, Poly& out, Poly& tmp) {
     out.n = 0;
     out.overflow = false;
     for (int d = 0; d < 3; ++d)
@@ -366,7 +367,7 @@ void clip_exact(const Tri &T, const int64_t *cell, Poly &out, Poly &tmp) {
         if (out.n == 0) return;
     }
 }
-void clip_grown(const Tri &T, const int64_t *cell, double eps, Poly &out, Poly &tmp) {
+void clip_grown(const Tri& T, const int64_t* cell, double eps, Poly& out, Poly& tmp) {
     out.n = 0;
     out.overflow = false;
     for (int v = 0; v < 3; ++v) out.push(T.g[v]);
@@ -377,11 +378,12 @@ void clip_grown(const Tri &T, const int64_t *cell, double eps, Poly &out, Poly &
     }
 }
 
-void clamp_to_cell(double *p, const int64_t *cell) {
-    for (int d = 0; d < 3; ++d) p[d] = std::min(double(cell[d] + 1), std::max(double(cell[d]), p[d]));
+void clamp_to_cell(double* p, const int64_t* cell) {
+    for (int d = 0; d < 3; ++d)
+        p[d] = std::min(double(cell[d] + 1), std::max(double(cell[d]), p[d]));
 }
 
-void signed_range(const PolyView &P, const double *n, double off, double &mn, double &mx) {
+void signed_range(const PolyView& P, const double* n, double off, double& mn, double& mx) {
     mn = std::numeric_limits<double>::infinity();
     mx = -mn;
     for (int i = 0; i < P.n; ++i) {
@@ -391,15 +393,15 @@ void signed_range(const PolyView &P, const double *n, double off, double &mn, do
     }
 }
 
-void emit_records(const Context &ctx, const int64_t *cell, const Cluster &cl,
-                  const std::vector<Piece> &pieces, const std::vector<PartRef> &parts,
-                  size_t begin, size_t end, std::vector<VoxelRecord> &out, ChunkStats &cs) {
-    const VoxelizeParams &P = *ctx.P;
+void emit_records(const Context& ctx, const int64_t* cell, const Cluster& cl,
+                  const std::vector<Piece>& pieces, const std::vector<PartRef>& parts, size_t begin,
+                  size_t end, std::vector<VoxelRecord>& out, ChunkStats& cs) {
+    const VoxelizeParams& P = *ctx.P;
     double sa = 0, san[3] = {0, 0, 0}, sn[3] = {0, 0, 0}, sac[3] = {0, 0, 0};
     int n_pos = 0;
     for (size_t q = begin; q < end; ++q) {
-        const PartRef &pt = parts[q];
-        const Piece &pc = pieces[pt.piece];
+        const PartRef& pt = parts[q];
+        const Piece& pc = pieces[pt.piece];
         sa += pt.area;
         for (int d = 0; d < 3; ++d) {
             san[d] += pt.area * pc.n[d];
@@ -425,7 +427,7 @@ void emit_records(const Context &ctx, const int64_t *cell, const Cluster &cl,
             double best = std::numeric_limits<double>::infinity(), q[3],
                    bq[3] = {cen[0], cen[1], cen[2]};
             for (size_t k = begin; k < end; ++k) {
-                const PartRef &pt = parts[k];
+                const PartRef& pt = parts[k];
                 if (!(pt.area > 0)) continue;
                 const double dd = closest_on_poly(pt.poly, pieces[pt.piece].tn, cen, q);
                 if (dd < best) {
@@ -442,8 +444,7 @@ void emit_records(const Context &ctx, const int64_t *cell, const Cluster &cl,
             for (int d = 0; d < 3; ++d) m[d] += parts[k].c[d] / double(end - begin);
         double best = std::numeric_limits<double>::infinity();
         for (size_t k = begin; k < end; ++k) {
-            const double dv[3] = {parts[k].c[0] - m[0], parts[k].c[1] - m[1],
-                                  parts[k].c[2] - m[2]};
+            const double dv[3] = {parts[k].c[0] - m[0], parts[k].c[1] - m[1], parts[k].c[2] - m[2]};
             const double dd = dot3(dv, dv);
             if (dd < best) {
                 best = dd;
@@ -480,26 +481,26 @@ void emit_records(const Context &ctx, const int64_t *cell, const Cluster &cl,
     cs.records += 2;
 }
 
-void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t np, Scratch &S,
-                  std::vector<VoxelRecord> &out, ChunkStats &cs) {
-    const VoxelizeParams &P = *ctx.P;
-    const uint64_t D1 = P.dims[1], D2 = P.dims[2];
-    const int64_t cell[3] = {int64_t(key / (D1 * D2)), int64_t((key / D2) % D1), int64_t(key % D2)};
-    auto &pieces = S.pieces;
+// The piece of each triangle in the cell (clipped exactly; a triangle that
+// only touches the cell gets a point of itself), into S.pieces and S.verts.
+int clip_pieces(const Context& ctx, const int64_t cell[3], const Pair* pairs, int64_t np,
+                Scratch& S, ChunkStats& cs) {
+    const VoxelizeParams& P = *ctx.P;
+    auto& pieces = S.pieces;
     if (pieces.size() < size_t(np)) pieces.resize(size_t(np));
     int n_pieces = 0;
     Poly tmp, work;
-    auto &verts = S.verts;
+    auto& verts = S.verts;
     verts.clear();
     for (int64_t q = 0; q < np; ++q) {
         Tri T;
         if (!load_tri(ctx.tris, pairs[q].tri, P, T)) continue;  // counted in phase 1
-        Piece &pc = pieces[n_pieces++];
+        Piece& pc = pieces[n_pieces++];
         pc.obj = ctx.tri_object[pairs[q].tri];
         pc.cluster = -1;
         std::memcpy(pc.tn, T.n, sizeof(T.n));
         std::memcpy(pc.n, T.n, sizeof(T.n));
-        Poly &poly = work;
+        Poly& poly = work;
         clip_exact(T, cell, poly, tmp);
         pc.area = poly.n >= 3 ? area_centroid(view(poly), T.n, pc.c) : 0.0;
         if (!(pc.area > 0)) {
@@ -523,22 +524,27 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
         pc.v_n = poly.n;
         verts.insert(verts.end(), &poly.v[0][0], &poly.v[0][0] + 3 * poly.n);
     }
-    if (n_pieces == 0) return;
-    ++cs.cells;
+    return n_pieces;
+}
 
-    // Clusters: per object (ascending), greedy by orientation in triangle order.
-    auto &order = S.order;
+// Clusters: per object (ascending), greedy by orientation in triangle order;
+// then the pieces of each cluster, in the order they joined it (S.cl_start,
+// S.cl_items).
+void cluster_pieces(const Context& ctx, int n_pieces, Scratch& S, ChunkStats& cs) {
+    const VoxelizeParams& P = *ctx.P;
+    auto& pieces = S.pieces;
+    auto& order = S.order;
     order.resize(size_t(n_pieces));
     for (int q = 0; q < n_pieces; ++q) order[q] = q;
     // Objects are usually in order already (triangles come object by object).
     auto by_obj = [&](int x, int y) { return pieces[x].obj < pieces[y].obj; };
     if (!std::is_sorted(order.begin(), order.end(), by_obj))
         std::stable_sort(order.begin(), order.end(), by_obj);
-    auto &clusters = S.clusters;
+    auto& clusters = S.clusters;
     clusters.clear();
     size_t obj_first = 0;
     for (int idx : order) {
-        Piece &pc = pieces[idx];
+        Piece& pc = pieces[idx];
         if (clusters.empty() || clusters.back().obj != pc.obj) obj_first = clusters.size();
         const bool ts = ctx.two_sided[pc.obj];
         int found = -1;
@@ -560,7 +566,7 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
             clusters.push_back(c);
             found = int(clusters.size() - 1);
         }
-        Cluster &c = clusters[found];
+        Cluster& c = clusters[found];
         pc.cluster = found;
         ++c.count;
         c.sum_a += pc.area;
@@ -572,110 +578,139 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
     }
     const size_t ncl = clusters.size();
     cs.clusters += int64_t(ncl);
-    // Pieces of each cluster, in the order they joined it.
-    auto &cl_start = S.cl_start;
-    auto &cl_items = S.cl_items;
+    auto& cl_start = S.cl_start;
+    auto& cl_items = S.cl_items;
     cl_start.assign(ncl + 1, 0);
     for (size_t q = 0; q < ncl; ++q) cl_start[q + 1] = cl_start[q] + clusters[q].count;
     cl_items.resize(size_t(n_pieces));
     {
-        auto &next = S.next;
+        auto& next = S.next;
         next.assign(cl_start.begin(), cl_start.end() - 1);
         for (int idx : order) cl_items[size_t(next[size_t(pieces[idx].cluster)]++)] = idx;
     }
+}
 
-    // Cutting planes: every cluster with area, through its area-weighted
-    // centroid, normal to its area-weighted normal.
-    struct Plane {
-        double n[3], off;
-        bool ok;
-    };
-    Plane planes[64];
-    const bool do_cut = P.cut && ncl > 1;
-    if (do_cut) {
-        for (size_t q = 0; q < ncl && q < 64; ++q) {
-            const Cluster &c = clusters[q];
-            const double len = std::sqrt(dot3(c.sum_an, c.sum_an));
-            planes[q].ok = c.sum_a > 0 && len > 0;
-            if (!planes[q].ok) continue;
-            double ctr[3];
-            for (int d = 0; d < 3; ++d) {
-                planes[q].n[d] = c.sum_an[d] / len;
-                ctr[d] = c.sum_ac[d] / c.sum_a;
+// A cutting plane: through a cluster's area-weighted centroid, normal to its
+// area-weighted normal (ok: the cluster has area).
+struct Plane {
+    double n[3], off;
+    bool ok;
+};
+
+void cutting_planes(const std::vector<Cluster>& clusters, Plane planes[64]) {
+    const size_t ncl = clusters.size();
+    for (size_t q = 0; q < ncl && q < 64; ++q) {
+        const Cluster& c = clusters[q];
+        const double len = std::sqrt(dot3(c.sum_an, c.sum_an));
+        planes[q].ok = c.sum_a > 0 && len > 0;
+        if (!planes[q].ok) continue;
+        double ctr[3];
+        for (int d = 0; d < 3; ++d) {
+            planes[q].n[d] = c.sum_an[d] / len;
+            ctr[d] = c.sum_ac[d] / c.sum_a;
+        }
+        planes[q].off = dot3(planes[q].n, ctr);
+    }
+}
+
+// Cut the parts of cluster ci (S.parts) by the planes of the other clusters
+// that they straddle; each part's sig gets one bit per cut (its side).
+// Returns the cuts made.
+int cut_cluster(const Context& ctx, size_t ci, size_t ncl, const Plane* planes, Scratch& S,
+                ChunkStats& cs) {
+    const VoxelizeParams& P = *ctx.P;
+    const auto& pieces = S.pieces;
+    auto& parts = S.parts;
+    auto& parts2 = S.parts2;
+    auto& pool = S.pool;
+    int n_cuts = 0;
+    {
+        for (size_t sj = 0; sj < ncl && sj < 64; ++sj) {
+            if (sj == ci || !planes[sj].ok) continue;
+            const Plane& pl = planes[sj];
+            // A surface of the same orientation (as clustering judges it)
+            // is the same sheet continued, e.g. where two objects of one
+            // curved surface meet: nothing to separate.
+            if (ci < 64 && planes[ci].ok && dot3(pl.n, planes[ci].n) >= P.cos_cluster) continue;
+            bool straddles = false;
+            for (const PartRef& pt : parts) {
+                if (!(pt.area > 0)) continue;
+                double mn, mx;
+                signed_range(pt.poly, pl.n, pl.off, mn, mx);
+                if (mx > P.cut_delta && mn < -P.cut_delta) {
+                    straddles = true;
+                    break;
+                }
             }
-            planes[q].off = dot3(planes[q].n, ctr);
+            if (!straddles) continue;
+            if (n_cuts == kMaxCuts) {
+                ++cs.cut_limit;
+                continue;
+            }
+            const uint64_t bit = uint64_t(1) << n_cuts++;
+            parts2.clear();
+            for (const PartRef& pt : parts) {
+                double mn = 0, mx = 0;
+                if (pt.area > 0) signed_range(pt.poly, pl.n, pl.off, mn, mx);
+                if (pt.area > 0 && mx > P.cut_delta && mn < -P.cut_delta) {
+                    const double* tn = pieces[pt.piece].tn;
+                    for (int s = 0; s < 2; ++s) {
+                        pool.emplace_back();
+                        Poly& poly = pool.back();
+                        clip_plane(pt.poly, poly, pl.n, pl.off, s == 0 ? 1.0 : -1.0);
+                        if (poly.n == 0) continue;
+                        PartRef np_{
+                            view(poly), pt.piece, pt.sig | (s == 0 ? bit : 0), 0.0, {0, 0, 0}};
+                        np_.area = poly.n >= 3 ? area_centroid(view(poly), tn, np_.c) : 0.0;
+                        if (!(np_.area > 0)) {
+                            np_.area = 0;
+                            area_centroid(view(poly), tn, np_.c);
+                        }
+                        if (poly.overflow) ++cs.overflows;
+                        parts2.push_back(np_);
+                    }
+                } else {
+                    parts2.push_back(pt);
+                    if (dot3(pl.n, pt.c) - pl.off >= 0) parts2.back().sig |= bit;
+                }
+            }
+            parts.swap(parts2);
         }
     }
+    return n_cuts;
+}
 
-    auto &parts = S.parts;
-    auto &parts2 = S.parts2;
-    auto &pool = S.pool;
-    pool.clear();
+void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t np, Scratch& S,
+                  std::vector<VoxelRecord>& out, ChunkStats& cs) {
+    const VoxelizeParams& P = *ctx.P;
+    const uint64_t D1 = P.dims[1], D2 = P.dims[2];
+    const int64_t cell[3] = {int64_t(key / (D1 * D2)), int64_t((key / D2) % D1), int64_t(key % D2)};
+    const int n_pieces = clip_pieces(ctx, cell, pairs, np, S, cs);
+    if (n_pieces == 0) return;
+    ++cs.cells;
+    cluster_pieces(ctx, n_pieces, S, cs);
+    const auto& clusters = S.clusters;
+    const auto& pieces = S.pieces;
+    const size_t ncl = clusters.size();
+    Plane planes[64];
+    const bool do_cut = P.cut && ncl > 1;
+    if (do_cut) cutting_planes(clusters, planes);
+    auto& parts = S.parts;
+    S.pool.clear();
     for (size_t ci = 0; ci < ncl; ++ci) {
-        const Cluster &cl = clusters[ci];
+        const Cluster& cl = clusters[ci];
         parts.clear();
-        for (int q = cl_start[ci]; q < cl_start[ci + 1]; ++q) {
-            const Piece &pc = pieces[cl_items[q]];
-            const PolyView pv{reinterpret_cast<const double(*)[3]>(verts.data() + 3 * size_t(pc.v_off)),
-                              pc.v_n};
-            parts.push_back(PartRef{pv, cl_items[q], 0, pc.area, {pc.c[0], pc.c[1], pc.c[2]}});
+        for (int q = S.cl_start[ci]; q < S.cl_start[ci + 1]; ++q) {
+            const Piece& pc = pieces[S.cl_items[q]];
+            const PolyView pv{
+                reinterpret_cast<const double (*)[3]>(S.verts.data() + 3 * size_t(pc.v_off)),
+                pc.v_n};
+            parts.push_back(PartRef{pv, S.cl_items[q], 0, pc.area, {pc.c[0], pc.c[1], pc.c[2]}});
         }
-        int n_cuts = 0;
-        if (do_cut) {
-            for (size_t sj = 0; sj < ncl && sj < 64; ++sj) {
-                if (sj == ci || !planes[sj].ok) continue;
-                const Plane &pl = planes[sj];
-                // A surface of the same orientation (as clustering judges it)
-                // is the same sheet continued, e.g. where two objects of one
-                // curved surface meet: nothing to separate.
-                if (ci < 64 && planes[ci].ok && dot3(pl.n, planes[ci].n) >= P.cos_cluster) continue;
-                bool straddles = false;
-                for (const PartRef &pt : parts) {
-                    if (!(pt.area > 0)) continue;
-                    double mn, mx;
-                    signed_range(pt.poly, pl.n, pl.off, mn, mx);
-                    if (mx > P.cut_delta && mn < -P.cut_delta) {
-                        straddles = true;
-                        break;
-                    }
-                }
-                if (!straddles) continue;
-                if (n_cuts == kMaxCuts) {
-                    ++cs.cut_limit;
-                    continue;
-                }
-                const uint64_t bit = uint64_t(1) << n_cuts++;
-                parts2.clear();
-                for (const PartRef &pt : parts) {
-                    double mn = 0, mx = 0;
-                    if (pt.area > 0) signed_range(pt.poly, pl.n, pl.off, mn, mx);
-                    if (pt.area > 0 && mx > P.cut_delta && mn < -P.cut_delta) {
-                        const double *tn = pieces[pt.piece].tn;
-                        for (int s = 0; s < 2; ++s) {
-                            pool.emplace_back();
-                            Poly &poly = pool.back();
-                            clip_plane(pt.poly, poly, pl.n, pl.off, s == 0 ? 1.0 : -1.0);
-                            if (poly.n == 0) continue;
-                            PartRef np_{view(poly), pt.piece, pt.sig | (s == 0 ? bit : 0), 0.0, {0, 0, 0}};
-                            np_.area = poly.n >= 3 ? area_centroid(view(poly), tn, np_.c) : 0.0;
-                            if (!(np_.area > 0)) {
-                                np_.area = 0;
-                                area_centroid(view(poly), tn, np_.c);
-                            }
-                            if (poly.overflow) ++cs.overflows;
-                            parts2.push_back(np_);
-                        }
-                    } else {
-                        parts2.push_back(pt);
-                        if (dot3(pl.n, pt.c) - pl.off >= 0) parts2.back().sig |= bit;
-                    }
-                }
-                parts.swap(parts2);
-            }
-        }
+        const int n_cuts = do_cut ? cut_cluster(ctx, ci, ncl, planes, S, cs) : 0;
         if (n_cuts > 0)
             std::stable_sort(parts.begin(), parts.end(),
-                             [](const PartRef &x, const PartRef &y) { return x.sig < y.sig; });
+                             [](const PartRef& x, const PartRef& y) { return x.sig < y.sig; });
         size_t b = 0, n_rec = 0;
         while (b < parts.size()) {
             size_t e = b + 1;
@@ -693,24 +728,26 @@ void process_cell(const Context &ctx, uint64_t key, const Pair *pairs, int64_t n
 
 }  // namespace
 
-std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tris,
-                                               const int32_t *tri_object, int32_t n_objects,
-                                               const bool *two_sided, const float *albedo,
-                                               const float *emission, const VoxelizeParams &P,
-                                               int threads, const StopCheck &stop,
-                                               VoxelizeStats &st, VoxelizeProgress *progress) {
+std::vector<std::vector<VoxelRecord>> voxelize(const double* tris, int64_t n_tris,
+                                               const int32_t* tri_object, int32_t n_objects,
+                                               const bool* two_sided, const float* albedo,
+                                               const float* emission, const VoxelizeParams& P,
+                                               int threads, const StopCheck& stop,
+                                               VoxelizeStats& st, VoxelizeProgress* progress) {
     st = VoxelizeStats{};
     st.triangles = n_tris;
     if (!(P.pitch > 0) || !std::isfinite(P.pitch))
         throw std::invalid_argument("voxelize: pitch must be finite and > 0");
     for (int d = 0; d < 3; ++d) {
-        if (!std::isfinite(P.origin[d])) throw std::invalid_argument("voxelize: origin must be finite");
+        if (!std::isfinite(P.origin[d]))
+            throw std::invalid_argument("voxelize: origin must be finite");
         if (P.dims[d] < 1 || P.dims[d] >= (1 << 21))
             throw std::invalid_argument("voxelize: dims must lie in [1, 2^21)");
     }
     if (n_tris < 0 || n_tris >= (int64_t(1) << 32))
         throw std::invalid_argument("voxelize: too many triangles (at most 2^32 - 1)");
-    if (!(P.eps >= 0 && P.eps < 0.01)) throw std::invalid_argument("voxelize: eps must be in [0, 0.01)");
+    if (!(P.eps >= 0 && P.eps < 0.01))
+        throw std::invalid_argument("voxelize: eps must be in [0, 0.01)");
     if (!(P.cos_cluster >= -1 && P.cos_cluster <= 1))
         throw std::invalid_argument("voxelize: cos_cluster must be in [-1, 1]");
     threads = resolve_threads(threads);
@@ -725,8 +762,8 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tri
     auto t0 = Clock::now();
     // Small chunks when there are few triangles: the calling thread polls
     // Ctrl-C only between chunks, and one large triangle at a high resolution
-    // is already ~1e6 cells (a Cornell box at resolution 1024 answered Ctrl-C
-    // after 0.5 s with one 2048-triangle chunk, 3.4 s under ASan).
+    // is already ~1e6 cells, so a chunk of many such triangles would keep
+    // Ctrl-C waiting for seconds.
     const int64_t tri_chunk =
         std::max<int64_t>(1, std::min<int64_t>(2048, n_tris / (int64_t(threads) * 64)));
     const int64_t n_tchunks = (n_tris + tri_chunk - 1) / tri_chunk;
@@ -735,13 +772,13 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tri
     set_phase(1, n_tris);
     parallel_for(n_tchunks, threads, stop, [&](int64_t ch, int) {
         const int64_t t_end = std::min(n_tris, (ch + 1) * tri_chunk);
-        auto &out = chunk_pairs[ch];
+        auto& out = chunk_pairs[ch];
         out.reserve(size_t(t_end - ch * tri_chunk) * 4);
         for (int64_t t = ch * tri_chunk; t < t_end; ++t) {
             const int32_t o = tri_object[t];
             if (o < 0 || o >= n_objects)
-                throw std::invalid_argument("voxelize: tri_object[" + std::to_string(t) + "] = " +
-                                            std::to_string(o) + " is not in [0, " +
+                throw std::invalid_argument("voxelize: tri_object[" + std::to_string(t) +
+                                            "] = " + std::to_string(o) + " is not in [0, " +
                                             std::to_string(n_objects) + ")");
             Tri T;
             bool finite = true, inside = true;
@@ -774,7 +811,7 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tri
     std::vector<Pair> pairs;
     pairs.reserve(n_pairs);
     st.peak_bytes = int64_t(chunk_bytes + n_pairs * sizeof(Pair));
-    for (auto &cp : chunk_pairs) {
+    for (auto& cp : chunk_pairs) {
         pairs.insert(pairs.end(), cp.begin(), cp.end());
         std::vector<Pair>().swap(cp);
     }
@@ -806,7 +843,7 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tri
     set_phase(3, n_cells);
     parallel_for(n_cchunks, threads, stop, [&](int64_t ch, int th) {
         const int64_t c_end = std::min(n_cells, (ch + 1) * cell_chunk);
-        auto &o = out[ch];
+        auto& o = out[ch];
         o.reserve(size_t(c_end - ch * cell_chunk) * 2 + 16);  // front + reverse per voxel, usually
         for (int64_t c = ch * cell_chunk; c < c_end; ++c)
             process_cell(ctx, pairs[starts[c]].key, pairs.data() + starts[c],
@@ -815,7 +852,7 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tri
     });
     size_t rec_bytes = 0;
     for (int64_t ch = 0; ch < n_cchunks; ++ch) {
-        const ChunkStats &cs = cstats[ch];
+        const ChunkStats& cs = cstats[ch];
         st.cells += cs.cells;
         st.records += cs.records;
         st.back_records += cs.back;
@@ -829,7 +866,8 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tri
         rec_bytes += out[ch].capacity() * sizeof(VoxelRecord);
     }
     st.peak_bytes = std::max<int64_t>(
-        st.peak_bytes, int64_t(n_pairs * sizeof(Pair) + starts.size() * sizeof(int64_t) + rec_bytes));
+        st.peak_bytes,
+        int64_t(n_pairs * sizeof(Pair) + starts.size() * sizeof(int64_t) + rec_bytes));
     st.seconds_records = seconds_since(t0);
     return out;
 }

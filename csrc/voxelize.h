@@ -1,4 +1,4 @@
-// Exact sparse supercover voxelization of triangle meshes (DESIGN-NOTES §2, §4).
+// Exact sparse supercover voxelization of triangle meshes (docs/design.md §2, §4).
 //
 // Every voxel whose closed cube meets a triangle (within `eps` voxel units, so
 // that shared edges and vertices never open a gap) receives records. A record
@@ -16,7 +16,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "common.h"
+#include "util/parallel.h"
 
 namespace voxgi {
 
@@ -24,8 +24,8 @@ namespace voxgi {
 struct VoxelRecord {
     int32_t ijk[3];
     int32_t object;
-    float normal[3];     // unit
-    float area;          // scene units²
+    float normal[3];  // unit
+    float area;       // scene units²
     float albedo[3];
     float emission[3];
     double centroid[3];  // world position of a point on the surface inside the voxel
@@ -82,12 +82,9 @@ constexpr int kMaxCuts = 20;
 // the cutting planes, then front before reverse). The order does not depend
 // on `threads`. Throws std::invalid_argument on bad input, Interrupted when
 // `stop` says so.
-std::vector<std::vector<VoxelRecord>> voxelize(const double *tris, int64_t n_tris,
-                                               const int32_t *tri_object, int32_t n_objects,
-                                               const bool *two_sided, const float *albedo,
-                                               const float *emission, const VoxelizeParams &params,
-                                               int threads, const StopCheck &stop,
-                                               VoxelizeStats &stats,
-                                               VoxelizeProgress *progress = nullptr);
+std::vector<std::vector<VoxelRecord>> voxelize(
+    const double* tris, int64_t n_tris, const int32_t* tri_object, int32_t n_objects,
+    const bool* two_sided, const float* albedo, const float* emission, const VoxelizeParams& params,
+    int threads, const StopCheck& stop, VoxelizeStats& stats, VoxelizeProgress* progress = nullptr);
 
 }  // namespace voxgi

@@ -1,4 +1,4 @@
-// VPL shading kernels (see vpl_shade.h and DESIGN-NOTES §6).
+// VPL shading kernels (see vpl_shade.h and docs/design.md §6).
 #include "vpl_shade.h"
 
 #include <algorithm>
@@ -13,7 +13,9 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr int64_t kChunk = 512;  // pixels per task
 
-inline float dot3(const float *a, const float *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+inline float dot3(const float* a, const float* b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
 
 inline float pow5(float x) {
     float x2 = x * x;
@@ -21,7 +23,7 @@ inline float pow5(float x) {
 }
 
 // Tangent frame (u, v) around n: u from n x (0,1,0), or n x (1,0,0) when n is
-// near +-y (DESIGN-NOTES §6; meshes carry no UVs in voxgi).
+// near +-y (docs/design.md §6; meshes carry no UVs in voxgi).
 inline void tangent_frame(const float n[3], float u[3], float v[3]) {
     if (std::fabs(n[1]) < 0.99f) {  // n x (0, 1, 0)
         u[0] = -n[2];
@@ -41,15 +43,15 @@ inline void tangent_frame(const float n[3], float u[3], float v[3]) {
 
 }  // namespace
 
-void shade_brdf(const ShadeMaterials &mats, int32_t m, const float n[3], const float k1[3],
+void shade_brdf(const ShadeMaterials& mats, int32_t m, const float n[3], const float k1[3],
                 const float k2[3], float f[3]) {
-    const float *rd = mats.albedo + 3 * int64_t(m);
+    const float* rd = mats.albedo + 3 * int64_t(m);
     if (!mats.glossy || !mats.glossy[m]) {
         for (int c = 0; c < 3; ++c) f[c] = rd[c] * float(1.0 / kPi);
         return;
     }
     // Ashikhmin & Shirley 2000, eqs. (4) and (5): coupled diffuse + specular.
-    const float *rs = mats.rs + 3 * int64_t(m);
+    const float* rs = mats.rs + 3 * int64_t(m);
     const float nu = mats.nu[m], nv = mats.nv[m];
     const float nk1 = std::max(dot3(n, k1), 0.f), nk2 = std::max(dot3(n, k2), 1e-6f);
     float h[3] = {k1[0] + k2[0], k1[1] + k2[1], k1[2] + k2[2]};
@@ -78,9 +80,10 @@ void shade_brdf(const ShadeMaterials &mats, int32_t m, const float n[3], const f
     }
 }
 
-int64_t vpl_prepare(const ShadeHits &hits, const ShadeMaterials &mats, const ShadeVPLs &vpls,
-                    const ShadeMIS &mis, double eps, int64_t *ray_count, float *ray_org, float *ray_dir,
-                    float *ray_len, float *ray_contrib, int threads, const StopCheck &stop) {
+int64_t vpl_prepare(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPLs& vpls,
+                    const ShadeMIS& mis, double eps, int64_t* ray_count, float* ray_org,
+                    float* ray_dir, float* ray_len, float* ray_contrib, int threads,
+                    const StopCheck& stop) {
     const int64_t P = hits.count, K = vpls.count;
     const int64_t n_chunks = (P + kChunk - 1) / kChunk;
     std::vector<int64_t> chunk_rays(n_chunks, 0);
@@ -93,12 +96,13 @@ int64_t vpl_prepare(const ShadeHits &hits, const ShadeMaterials &mats, const Sha
             const int32_t m = hits.material[p];
             int64_t cnt = 0;
             if (m >= 0 && m < mats.count) {
-                const double *x = hits.pos + 3 * p;
+                const double* x = hits.pos + 3 * p;
                 const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
-                const double ox = x[0] + eps * ng[0], oy = x[1] + eps * ng[1], oz = x[2] + eps * ng[2];
+                const double ox = x[0] + eps * ng[0], oy = x[1] + eps * ng[1],
+                             oz = x[2] + eps * ng[2];
                 for (int64_t k = 0; k < K; ++k) {
-                    const double *y = vpls.pos + 3 * k;
-                    const float *ny = vpls.normal + 3 * k;
+                    const double* y = vpls.pos + 3 * k;
+                    const float* ny = vpls.normal + 3 * k;
                     const double dx = y[0] - x[0], dy = y[1] - x[1], dz = y[2] - x[2];
                     const double r2 = dx * dx + dy * dy + dz * dz;
                     if (!(r2 > 0.0)) continue;
@@ -117,12 +121,12 @@ int64_t vpl_prepare(const ShadeHits &hits, const ShadeMaterials &mats, const Sha
                     } else {
                         // The VPL is a disc of area dA: on the axis of a disc the exact
                         // point-to-disc term is cos cos / (r² + dA/pi); bounded, and
-                        // the point formula far away (DESIGN-NOTES §6).
+                        // the point formula far away (docs/design.md §6).
                         g = cc / (r2 + double(vpls.area[k]) / kPi);
                     }
                     float f[3];
                     shade_brdf(mats, m, n, wi, wo, f);
-                    const float *wk = vpls.weight + 3 * k;
+                    const float* wk = vpls.weight + 3 * k;
                     float cr[3];
                     bool any = false;
                     for (int ch = 0; ch < 3; ++ch) {
@@ -181,9 +185,9 @@ inline double to_unit(uint64_t x) { return double(x >> 11) * (1.0 / 900719925474
 
 }  // namespace
 
-int64_t gather_rays(const ShadeHits &hits, int n_gather, uint64_t seed, int64_t frame, double eps,
-                    int64_t *ray_count, float *ray_org, float *ray_dir, int threads,
-                    const StopCheck &stop) {
+int64_t gather_rays(const ShadeHits& hits, int n_gather, uint64_t seed, int64_t frame, double eps,
+                    int64_t* ray_count, float* ray_org, float* ray_dir, int threads,
+                    const StopCheck& stop) {
     const int64_t P = hits.count;
     std::vector<int64_t> offset(P + 1, 0);
     for (int64_t p = 0; p < P; ++p) {
@@ -197,7 +201,7 @@ int64_t gather_rays(const ShadeHits &hits, int n_gather, uint64_t seed, int64_t 
         const int64_t p1 = std::min(P, (c + 1) * kChunk);
         for (int64_t p = c * kChunk; p < p1; ++p) {
             if (ray_count[p] == 0) continue;
-            const double *x = hits.pos + 3 * p;
+            const double* x = hits.pos + 3 * p;
             const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
             float u[3], v[3];
             tangent_frame(n, u, v);
@@ -221,7 +225,7 @@ int64_t gather_rays(const ShadeHits &hits, int n_gather, uint64_t seed, int64_t 
     return offset[P];
 }
 
-int64_t lookup_record(const RecordGrid &g, const double y[3], const float n[3], int32_t obj) {
+int64_t lookup_record(const RecordGrid& g, const double y[3], const float n[3], int32_t obj) {
     int64_t c[3];
     for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((y[a] - g.origin[a]) / g.pitch));
     const double p2 = g.pitch * g.pitch;
@@ -240,13 +244,14 @@ int64_t lookup_record(const RecordGrid &g, const double y[3], const float n[3], 
         }
         for (int64_t q = q0; q < q1; ++q) {
             const int64_t r = g.order[q];
-            const double *cr = g.centroid + 3 * r;
-            const float *nr = g.normal + 3 * r;
+            const double* cr = g.centroid + 3 * r;
+            const float* nr = g.normal + 3 * r;
             const double dx = y[0] - cr[0], dy = y[1] - cr[1], dz = y[2] - cr[2];
             // Nearest centroid, strongly preferring the same side and object.
             const double penalty = 4.0 * (1.0 - dot3(nr, n)) + (g.object[r] != obj ? 4.0 : 0.0);
             const double score = dx * dx + dy * dy + dz * dz + p2 * penalty;
-            if (best < 0 || score < best_score) best = r, best_score = score, best_penalty = penalty;
+            if (best < 0 || score < best_score)
+                best = r, best_score = score, best_penalty = penalty;
         }
     };
     // The record of this surface (same object and side) in the hit's own
@@ -260,10 +265,10 @@ int64_t lookup_record(const RecordGrid &g, const double y[3], const float n[3], 
     return best;
 }
 
-void gather_shade(const ShadeHits &hits, const ShadeMaterials &mats, const ShadeMIS &mis,
-                  const ShadeTriangles &tris, const RecordGrid &grid, const int64_t *ray_count,
-                  const float *ray_dir, const int32_t *prim, float *out, int threads,
-                  const StopCheck &stop) {
+void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
+                  const ShadeTriangles& tris, const RecordGrid& grid, const int64_t* ray_count,
+                  const float* ray_dir, const int32_t* prim, float* out, int threads,
+                  const StopCheck& stop) {
     const int64_t P = hits.count;
     std::vector<int64_t> offset(P + 1, 0);
     for (int64_t p = 0; p < P; ++p) offset[p + 1] = offset[p] + ray_count[p];
@@ -273,13 +278,13 @@ void gather_shade(const ShadeHits &hits, const ShadeMaterials &mats, const Shade
         for (int64_t p = c * kChunk; p < p1; ++p) {
             const int32_t m = hits.material[p];
             if (m < 0 || offset[p + 1] == offset[p]) continue;
-            const double *x = hits.pos + 3 * p;
+            const double* x = hits.pos + 3 * p;
             const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
             double s[3] = {0.0, 0.0, 0.0};
             for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
                 const int32_t t = prim[r];
                 if (t < 0 || t >= tris.count) continue;
-                const float *df = ray_dir + 3 * r;
+                const float* df = ray_dir + 3 * r;
                 const double d[3] = {df[0], df[1], df[2]};
                 const double dl = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
                 const float wi[3] = {float(d[0] / dl), float(d[1] / dl), float(d[2] / dl)};
@@ -297,13 +302,13 @@ void gather_shade(const ShadeHits &hits, const ShadeMaterials &mats, const Shade
                 const double o[3] = {x[0] + 0.0, x[1] + 0.0, x[2] + 0.0};
                 const double dn = (d[0] * nt[0] + d[1] * nt[1] + d[2] * nt[2]) / dl;
                 if (dn == 0.0) continue;
-                const double tt = ((v0[0] - o[0]) * nt[0] + (v0[1] - o[1]) * nt[1] +
-                                   (v0[2] - o[2]) * nt[2]) / dn;
+                const double tt =
+                    ((v0[0] - o[0]) * nt[0] + (v0[1] - o[1]) * nt[1] + (v0[2] - o[2]) * nt[2]) / dn;
                 const double y[3] = {o[0] + tt * wi[0], o[1] + tt * wi[1], o[2] + tt * wi[2]};
                 const bool front = dn < 0.0;
                 const int32_t obj = tris.object[t];
                 if (!front && !tris.two_sided[obj]) continue;  // black back of a one-sided surface
-                if (tris.emitter[obj]) continue;                 // emitters: their own VPL set
+                if (tris.emitter[obj]) continue;               // emitters: their own VPL set
                 const float ns[3] = {float(front ? nt[0] : -nt[0]), float(front ? nt[1] : -nt[1]),
                                      float(front ? nt[2] : -nt[2])};
                 const int64_t rec = lookup_record(grid, y, ns, obj);
@@ -317,7 +322,7 @@ void gather_shade(const ShadeHits &hits, const ShadeMaterials &mats, const Shade
                 if (!(denom > 0.0)) continue;
                 float f[3];
                 shade_brdf(mats, m, n, wi, wo, f);
-                const float *L = grid.radiance + 3 * rec;
+                const float* L = grid.radiance + 3 * rec;
                 for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * cos_x / denom;
             }
             for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += float(s[ch]);
@@ -325,8 +330,8 @@ void gather_shade(const ShadeHits &hits, const ShadeMaterials &mats, const Shade
     });
 }
 
-void vpl_accumulate(int64_t n_pixels, const int64_t *ray_count, const float *ray_contrib,
-                    const uint8_t *occluded, float *out, int threads, const StopCheck &stop) {
+void vpl_accumulate(int64_t n_pixels, const int64_t* ray_count, const float* ray_contrib,
+                    const uint8_t* occluded, float* out, int threads, const StopCheck& stop) {
     std::vector<int64_t> offset(n_pixels + 1, 0);
     for (int64_t p = 0; p < n_pixels; ++p) offset[p + 1] = offset[p] + ray_count[p];
     const int64_t n_chunks = (n_pixels + kChunk - 1) / kChunk;

@@ -1,4 +1,4 @@
-// VPL shading kernels for the anti-aliased display (DESIGN-NOTES §6).
+// VPL shading kernels for the anti-aliased display (docs/design.md §6).
 //
 // One frame shades P hit points with the same K virtual point lights (VPLs).
 // It runs in two passes around the visibility queries, which Python makes
@@ -13,41 +13,42 @@
 
 #include <cstdint>
 
-#include "common.h"
+#include "util/parallel.h"
 
 namespace voxgi {
 
 // Per-material shading parameters (M materials).
 struct ShadeMaterials {
     int64_t count = 0;
-    const float *albedo = nullptr;  // (M, 3) diffuse reflectance rho (Rd)
-    const float *rs = nullptr;      // (M, 3) Ashikhmin-Shirley specular reflectance at normal incidence
-    const float *nu = nullptr;      // (M,)   AS exponent along the tangent u
-    const float *nv = nullptr;      // (M,)   AS exponent along the bitangent v
-    const uint8_t *glossy = nullptr;  // (M,) 1 where the material has a specular layer
+    const float* albedo = nullptr;  // (M, 3) diffuse reflectance rho (Rd)
+    const float* rs = nullptr;  // (M, 3) Ashikhmin-Shirley specular reflectance at normal incidence
+    const float* nu = nullptr;  // (M,)   AS exponent along the tangent u
+    const float* nv = nullptr;  // (M,)   AS exponent along the bitangent v
+    const uint8_t* glossy = nullptr;  // (M,) 1 where the material has a specular layer
 };
 
 // Hit points of one frame (P pixels).
 struct ShadeHits {
     int64_t count = 0;
-    const double *pos = nullptr;    // (P, 3) hit points on the surface
-    const float *normal = nullptr;  // (P, 3) unit shading normal, on the viewer's side
-    const float *ng = nullptr;      // (P, 3) unit geometric normal, on the viewer's side
-    const float *wo = nullptr;      // (P, 3) unit direction from the hit point to the viewer
-    const int32_t *material = nullptr;  // (P,) material index, or -1: not shaded (miss, black back side)
+    const double* pos = nullptr;    // (P, 3) hit points on the surface
+    const float* normal = nullptr;  // (P, 3) unit shading normal, on the viewer's side
+    const float* ng = nullptr;      // (P, 3) unit geometric normal, on the viewer's side
+    const float* wo = nullptr;      // (P, 3) unit direction from the hit point to the viewer
+    const int32_t* material =
+        nullptr;  // (P,) material index, or -1: not shaded (miss, black back side)
 };
 
 // VPLs of one frame (K lights).
 struct ShadeVPLs {
     int64_t count = 0;
-    const double *pos = nullptr;     // (K, 3) point on the surface
-    const float *normal = nullptr;   // (K, 3) unit normal
-    const float *weight = nullptr;   // (K, 3) (TA_set / n_set) * B / pi: radiance times the estimator
-                                     // weight; for an MIS VPL just its radiance B / pi
-    const float *area = nullptr;     // (K,) area the record stands for (bounds the geometry term)
-    const float *pa = nullptr;       // (K,) n_v x the VPL's area pdf (per unit area) for VPLs
-                                     // combined with gather rays (balance heuristic), 0 for
-                                     // the others; or null: none
+    const double* pos = nullptr;    // (K, 3) point on the surface
+    const float* normal = nullptr;  // (K, 3) unit normal
+    const float* weight = nullptr;  // (K, 3) (TA_set / n_set) * B / pi: radiance times the
+                                    // estimator weight; for an MIS VPL just its radiance B / pi
+    const float* area = nullptr;    // (K,) area the record stands for (bounds the geometry term)
+    const float* pa = nullptr;      // (K,) n_v x the VPL's area pdf (per unit area) for VPLs
+                                    // combined with gather rays (balance heuristic), 0 for
+                                    // the others; or null: none
 };
 
 // Multiple importance sampling of the non-emitter set between VPLs (n_v a
@@ -57,21 +58,21 @@ struct ShadeVPLs {
 //     f L cos_x cos_y / (r² n_v p_a(y) + n_g cos_x cos_y / pi),
 // which is at most pi f L / n_g: no 1/r² spike at contact, and no bias.
 struct ShadeMIS {
-    double n_gather = 0.0;    // gather rays per pixel per frame
+    double n_gather = 0.0;  // gather rays per pixel per frame
 };
 
 // Voxel records for looking up the radiance where a gather ray lands.
 struct RecordGrid {
     int64_t count = 0;
-    const int64_t *sorted_key = nullptr;  // (N,) linear voxel keys, ascending
-    const int32_t *order = nullptr;       // (N,) record of each sorted key
-    const int32_t *cell_start = nullptr;  // (dims product + 1,) first sorted index of each key,
+    const int64_t* sorted_key = nullptr;  // (N,) linear voxel keys, ascending
+    const int32_t* order = nullptr;       // (N,) record of each sorted key
+    const int32_t* cell_start = nullptr;  // (dims product + 1,) first sorted index of each key,
                                           // or null: binary search in sorted_key
-    const double *centroid = nullptr;     // (N, 3)
-    const float *normal = nullptr;        // (N, 3)
-    const int32_t *object = nullptr;      // (N,)
-    const float *radiance = nullptr;      // (N, 3) B / pi
-    const float *pa = nullptr;            // (N,) n_v p_a of the record (0: not a MIS VPL)
+    const double* centroid = nullptr;     // (N, 3)
+    const float* normal = nullptr;        // (N, 3)
+    const int32_t* object = nullptr;      // (N,)
+    const float* radiance = nullptr;      // (N, 3) B / pi
+    const float* pa = nullptr;            // (N,) n_v p_a of the record (0: not a MIS VPL)
     int64_t dims[3] = {0, 0, 0};          // key = (i * dims[1] + j) * dims[2] + k
     int64_t lo[3] = {0, 0, 0};            // ijk of key 0
     double origin[3] = {0.0, 0.0, 0.0};
@@ -81,10 +82,10 @@ struct RecordGrid {
 // Scene triangles for the gather rays' hit points.
 struct ShadeTriangles {
     int64_t count = 0;
-    const double *v = nullptr;           // (F, 3, 3) corners
-    const int32_t *object = nullptr;     // (F,)
-    const uint8_t *two_sided = nullptr;  // (O,) per object
-    const uint8_t *emitter = nullptr;    // (O,) per object: its records are sampled as VPLs only
+    const double* v = nullptr;           // (F, 3, 3) corners
+    const int32_t* object = nullptr;     // (F,)
+    const uint8_t* two_sided = nullptr;  // (O,) per object
+    const uint8_t* emitter = nullptr;    // (O,) per object: its records are sampled as VPLs only
 };
 
 // Pass 1. Writes per pixel the number of shadow rays (`ray_count`, (P,)), and
@@ -92,43 +93,44 @@ struct ShadeTriangles {
 // by `eps`), unit direction, length (to the VPL offset by `eps` along its
 // normal, shortened by `eps`) and unoccluded RGB contribution. The output
 // arrays need room for P*K rays. Returns the number of rays written.
-int64_t vpl_prepare(const ShadeHits &hits, const ShadeMaterials &mats, const ShadeVPLs &vpls,
-                    const ShadeMIS &mis, double eps, int64_t *ray_count, float *ray_org, float *ray_dir,
-                    float *ray_len, float *ray_contrib, int threads, const StopCheck &stop);
+int64_t vpl_prepare(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPLs& vpls,
+                    const ShadeMIS& mis, double eps, int64_t* ray_count, float* ray_org,
+                    float* ray_dir, float* ray_len, float* ray_contrib, int threads,
+                    const StopCheck& stop);
 
 // Pass 2. `ray_count` as written by vpl_prepare, `occluded` (R,) non-zero
 // where the shadow ray was blocked. Writes out (P, 3) the summed radiance.
-void vpl_accumulate(int64_t n_pixels, const int64_t *ray_count, const float *ray_contrib,
-                    const uint8_t *occluded, float *out, int threads, const StopCheck &stop);
+void vpl_accumulate(int64_t n_pixels, const int64_t* ray_count, const float* ray_contrib,
+                    const uint8_t* occluded, float* out, int threads, const StopCheck& stop);
 
 // Gather rays: n_g cosine-distributed directions around the shading normal
 // of each shaded pixel (material >= 0), stratified (n_g strata in azimuth x
 // elevation) and jittered with a hash of (seed, frame, pixel, k): the same
 // for any thread count. Writes `ray_count` (P,) and rays pixel-major into
 // org (R, 3) / dir (R, 3); returns R.
-int64_t gather_rays(const ShadeHits &hits, int n_gather, uint64_t seed, int64_t frame, double eps,
-                    int64_t *ray_count, float *ray_org, float *ray_dir, int threads,
-                    const StopCheck &stop);
+int64_t gather_rays(const ShadeHits& hits, int n_gather, uint64_t seed, int64_t frame, double eps,
+                    int64_t* ray_count, float* ray_org, float* ray_dir, int threads,
+                    const StopCheck& stop);
 
 // Shade the gather rays: `prim` (R,) the first triangle hit (-1: none).
 // Rays that hit the black back of a one-sided surface, an emitter (covered
 // by the emitter VPLs) or nothing add nothing; others look up the record at
 // the hit point (same voxel or a neighbour, same side and object preferred,
 // nearest centroid) and add the MIS-weighted f L term. Adds into out (P, 3).
-void gather_shade(const ShadeHits &hits, const ShadeMaterials &mats, const ShadeMIS &mis,
-                  const ShadeTriangles &tris, const RecordGrid &grid, const int64_t *ray_count,
-                  const float *ray_dir, const int32_t *prim, float *out, int threads,
-                  const StopCheck &stop);
+void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
+                  const ShadeTriangles& tris, const RecordGrid& grid, const int64_t* ray_count,
+                  const float* ray_dir, const int32_t* prim, float* out, int threads,
+                  const StopCheck& stop);
 
 // Index of the record that stands for the surface point y on object `obj`
 // seen from the side of normal n, or -1.
-int64_t lookup_record(const RecordGrid &grid, const double y[3], const float n[3], int32_t obj);
+int64_t lookup_record(const RecordGrid& grid, const double y[3], const float n[3], int32_t obj);
 
 // The BRDF used by the display for one pair of directions (exposed for tests):
 // Lambertian rho/pi, or with a specular layer the Ashikhmin-Shirley pair
 // (coupled diffuse + anisotropic Phong specular). k1 towards the light,
 // k2 towards the viewer, n the normal; all unit vectors. Writes f (3,).
-void shade_brdf(const ShadeMaterials &mats, int32_t m, const float n[3], const float k1[3],
+void shade_brdf(const ShadeMaterials& mats, int32_t m, const float n[3], const float k1[3],
                 const float k2[3], float f[3]);
 
 }  // namespace voxgi

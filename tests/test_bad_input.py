@@ -611,8 +611,6 @@ def test_core_linesystem_out_of_range_indices():
         ls.gather(fam, w[:-1].copy(), vals, np.array([0], np.int64))
     with pytest.raises((ValueError, TypeError)):
         ls.normalisation(fam.astype(np.int64), w)
-    with pytest.raises((ValueError, TypeError)):
-        ls.gather(fam, w, vals, np.array([0], np.int64), algorithm="magic")
 
 
 def test_core_voxelize_bad_arrays():

@@ -28,32 +28,45 @@ def hits(pos, normal, wo=None, material=None):
     pos = np.array(pos, np.float64).reshape(-1, 3)
     n = np.array(normal, np.float32).reshape(-1, 3)
     p = len(pos)
-    return dict(hit_pos=pos, hit_normal=n, hit_ng=n.copy(),
-                hit_wo=np.array(wo if wo is not None else n, np.float32).reshape(-1, 3),
-                hit_material=np.array(material if material is not None else np.zeros(p),
-                                      np.int32))
+    return dict(
+        hit_pos=pos,
+        hit_normal=n,
+        hit_ng=n.copy(),
+        hit_wo=np.array(wo if wo is not None else n, np.float32).reshape(-1, 3),
+        hit_material=np.array(material if material is not None else np.zeros(p), np.int32),
+    )
 
 
 def vpls(pos, normal, weight, area, pa=None, n_gather=0.0):
     k = len(np.array(area).reshape(-1))
-    return dict(vpl_pos=np.array(pos, np.float64).reshape(-1, 3),
-                vpl_normal=np.array(normal, np.float32).reshape(-1, 3),
-                vpl_weight=np.array(weight, np.float32).reshape(-1, 3),
-                vpl_area=np.array(area, np.float32).reshape(-1),
-                vpl_pa=np.array(pa if pa is not None else np.zeros(k), np.float32),
-                n_gather=n_gather)
+    return dict(
+        vpl_pos=np.array(pos, np.float64).reshape(-1, 3),
+        vpl_normal=np.array(normal, np.float32).reshape(-1, 3),
+        vpl_weight=np.array(weight, np.float32).reshape(-1, 3),
+        vpl_area=np.array(area, np.float32).reshape(-1),
+        vpl_pa=np.array(pa if pa is not None else np.zeros(k), np.float32),
+        n_gather=n_gather,
+    )
 
 
 def prepare(h, m, v, eps=1e-4, threads=0, cap=None):
     p, k = len(h["hit_pos"]), len(v["vpl_pos"])
     cap = p * k if cap is None else cap
-    out = dict(ray_count=np.full(p, -7, np.int64), ray_org=np.full((cap, 3), np.nan, np.float32),
-               ray_dir=np.full((cap, 3), np.nan, np.float32),
-               ray_len=np.full(cap, np.nan, np.float32),
-               ray_contrib=np.full((cap, 3), np.nan, np.float32))
+    out = dict(
+        ray_count=np.full(p, -7, np.int64),
+        ray_org=np.full((cap, 3), np.nan, np.float32),
+        ray_dir=np.full((cap, 3), np.nan, np.float32),
+        ray_len=np.full(cap, np.nan, np.float32),
+        ray_contrib=np.full((cap, 3), np.nan, np.float32),
+    )
     n = _core.vpl_prepare(**h, **m, **v, eps=eps, **out, threads=threads)
-    return (out["ray_count"], out["ray_org"][:n], out["ray_dir"][:n], out["ray_len"][:n],
-            out["ray_contrib"][:n])
+    return (
+        out["ray_count"],
+        out["ray_org"][:n],
+        out["ray_dir"][:n],
+        out["ray_len"][:n],
+        out["ray_contrib"][:n],
+    )
 
 
 def test_single_pair_exact_value():
@@ -93,7 +106,7 @@ def test_mis_weight_is_bounded_and_matches_formula():
     # contact at most pi f L / n_g, far away f L G / (n_v p), the plain estimator.
     h = hits([0, 0, 0], [0, 0, 1])
     m = mats(albedo=[(1, 1, 1)])
-    for r, a in ((1e-6, 1.0 / math.pi / 4), (10.0, 10.0 ** -2)):
+    for r, _a in ((1e-6, 1.0 / math.pi / 4), (10.0, 10.0**-2)):
         v = vpls([0, 0, r], [0, 0, -1], [2.0, 2.0, 2.0], [0.02], pa=[4.0], n_gather=4.0)
         _, _, _, _, contrib = prepare(h, m, v, eps=0.0)
         expect = (1 / math.pi) * 2.0 / (r * r * 4.0 + 4.0 / math.pi)
@@ -105,13 +118,17 @@ def test_mis_weight_is_bounded_and_matches_formula():
 
 def test_back_facing_and_below_surface_cost_no_ray():
     h = hits([[0, 0, 0], [0, 0, 0], [0, 0, 0]], [[0, 0, 1]] * 3, material=[0, 0, -1])
-    v = vpls([[0, 0, 1], [0, 0, 1], [0, 0, -1]],
-             [[0, 0, 1], [0, 0, -1], [0, 0, 1]],  # faces away, faces x, below x
-             [[1, 1, 1]] * 3, [0.01] * 3)
+    v = vpls(
+        [[0, 0, 1], [0, 0, 1], [0, 0, -1]],
+        [[0, 0, 1], [0, 0, -1], [0, 0, 1]],  # faces away, faces x, below x
+        [[1, 1, 1]] * 3,
+        [0.01] * 3,
+    )
     count, org, _, _, contrib = prepare(h, mats(), v)
     # Pixel 0 and 1: only the VPL facing it from above; pixel 2 is not shaded.
     assert count.tolist() == [1, 1, 0]
-    assert len(org) == 2 and np.all(contrib > 0)
+    assert len(org) == 2
+    assert np.all(contrib > 0)
 
 
 def test_accumulate_drops_occluded_rays_in_fixed_order():
@@ -131,16 +148,22 @@ def test_prepare_independent_of_thread_count():
     vn = rng.normal(size=(k, 3))
     vn /= np.linalg.norm(vn, axis=1, keepdims=True)
     h = hits(pos, n, material=rng.integers(-1, 2, p))
-    m = mats(albedo=[(0.3, 0.5, 0.7), (0.9, 0.1, 0.2)], rs=[(0, 0, 0), (0.3, 0.3, 0.3)],
-             nu=[1, 50], nv=[1, 500], glossy=[0, 1])
+    m = mats(
+        albedo=[(0.3, 0.5, 0.7), (0.9, 0.1, 0.2)],
+        rs=[(0, 0, 0), (0.3, 0.3, 0.3)],
+        nu=[1, 50],
+        nv=[1, 500],
+        glossy=[0, 1],
+    )
     v = vpls(rng.normal(size=(k, 3)) * 2, vn, rng.random((k, 3)), rng.random(k) * 0.01)
     a = prepare(h, m, v, threads=1)
     b = prepare(h, m, v, threads=2)
-    for x, y in zip(a, b):
+    for x, y in zip(a, b, strict=False):
         np.testing.assert_array_equal(x, y)
     occ = (rng.random(len(a[1])) < 0.3).astype(np.uint8)
-    np.testing.assert_array_equal(_core.vpl_accumulate(a[0], a[4], occ, 1),
-                                  _core.vpl_accumulate(a[0], a[4], occ, 2))
+    np.testing.assert_array_equal(
+        _core.vpl_accumulate(a[0], a[4], occ, 1), _core.vpl_accumulate(a[0], a[4], occ, 2)
+    )
     assert a[0].sum() == len(a[1]) > 0
 
 
@@ -151,12 +174,19 @@ def _as_reference(n, k1, k2, rd, rs, nu, nv):
     v = np.cross(n, u)
     h = (k1 + k2) / np.linalg.norm(k1 + k2)
     nh, hk = n @ h, h @ k1
-    e = (nu * (h @ u) ** 2 + nv * (h @ v) ** 2) / (1 - nh ** 2)
+    e = (nu * (h @ u) ** 2 + nv * (h @ v) ** 2) / (1 - nh**2)
     fres = rs + (1 - rs) * (1 - hk) ** 5
-    spec = math.sqrt((nu + 1) * (nv + 1)) / (8 * math.pi) * nh ** e / (
-        hk * max(n @ k1, n @ k2)) * fres
-    diff = 28 * rd / (23 * math.pi) * (1 - rs) * (1 - (1 - (n @ k1) / 2) ** 5) * (
-        1 - (1 - (n @ k2) / 2) ** 5)
+    spec = (
+        math.sqrt((nu + 1) * (nv + 1)) / (8 * math.pi) * nh**e / (hk * max(n @ k1, n @ k2)) * fres
+    )
+    diff = (
+        28
+        * rd
+        / (23 * math.pi)
+        * (1 - rs)
+        * (1 - (1 - (n @ k1) / 2) ** 5)
+        * (1 - (1 - (n @ k2) / 2) ** 5)
+    )
     return spec + diff
 
 
@@ -171,19 +201,27 @@ def _unit(rng, n, around=None):
 def test_brdf_lambert_and_ashikhmin_shirley_match_formulas():
     rng = np.random.default_rng(2)
     rd, rs, nu, nv = np.array([0.6, 0.4, 0.2]), np.array([0.05, 0.3, 0.9]), 20.0, 300.0
-    m = mats(albedo=[(0.2, 0.4, 0.6), tuple(rd)], rs=[(0, 0, 0), tuple(rs)], nu=[1, nu],
-             nv=[1, nv], glossy=[0, 1])
+    m = mats(
+        albedo=[(0.2, 0.4, 0.6), tuple(rd)],
+        rs=[(0, 0, 0), tuple(rs)],
+        nu=[1, nu],
+        nv=[1, nv],
+        glossy=[0, 1],
+    )
     q = 200
     n = _unit(rng, q)
     k1 = np.array([_unit(rng, 1, a)[0] for a in n])
     k2 = np.array([_unit(rng, 1, a)[0] for a in n])
     args = [np.ascontiguousarray(x, np.float32) for x in (n, k1, k2)]
-    lam = _core.shade_brdf(**m, material=np.zeros(q, np.int32), n=args[0], k1=args[1],
-                           k2=args[2])
+    lam = _core.shade_brdf(**m, material=np.zeros(q, np.int32), n=args[0], k1=args[1], k2=args[2])
     np.testing.assert_allclose(lam, np.tile([0.2, 0.4, 0.6], (q, 1)) / math.pi, rtol=1e-6)
     f = _core.shade_brdf(**m, material=np.ones(q, np.int32), n=args[0], k1=args[1], k2=args[2])
-    ref = np.array([_as_reference(*(x.astype(np.float64) for x in (a, b, c)), rd, rs, nu, nv)
-                    for a, b, c in zip(*args)])
+    ref = np.array(
+        [
+            _as_reference(*(x.astype(np.float64) for x in (a, b, c)), rd, rs, nu, nv)
+            for a, b, c in zip(*args, strict=False)
+        ]
+    )
     # float32 kernel vs float64 reference; pow(nh, e) with e up to 300
     # amplifies the rounding of nh (measured max rel. error 9e-6).
     np.testing.assert_allclose(f, ref, rtol=1e-4, atol=1e-7)
@@ -208,9 +246,13 @@ def test_ashikhmin_shirley_conserves_energy():
         m = mats(albedo=[(1.0, 1.0, 1.0)], rs=[(rs_,) * 3], nu=[nu], nv=[nu], glossy=[1])
         for theta in (0.1, 0.8, 1.3):
             k2 = np.tile([math.sin(theta), 0.0, math.cos(theta)], (q, 1))
-            f = _core.shade_brdf(**m, material=np.zeros(q, np.int32),
-                                 n=np.tile(n, (q, 1)), k1=np.ascontiguousarray(k1, np.float32),
-                                 k2=np.ascontiguousarray(k2, np.float32))
+            f = _core.shade_brdf(
+                **m,
+                material=np.zeros(q, np.int32),
+                n=np.tile(n, (q, 1)),
+                k1=np.ascontiguousarray(k1, np.float32),
+                k2=np.ascontiguousarray(k2, np.float32),
+            )
             albedo = float(np.mean(f[:, 0]) * math.pi)
             assert 0.0 < albedo < 1.03, (rs_, nu, theta, albedo)
 
@@ -234,29 +276,44 @@ def test_bad_arguments_are_errors_not_crashes():
     with pytest.raises(ValueError, match="ray buffers hold"):
         prepare(h, m, v, cap=0)
     with pytest.raises(ValueError, match="sums to"):
-        _core.vpl_accumulate(np.array([2], np.int64), np.zeros((1, 3), np.float32),
-                             np.zeros(1, np.uint8))
+        _core.vpl_accumulate(
+            np.array([2], np.int64), np.zeros((1, 3), np.float32), np.zeros(1, np.uint8)
+        )
     with pytest.raises(ValueError, match="negative"):
-        _core.vpl_accumulate(np.array([-1, 1], np.int64), np.zeros((0, 3), np.float32),
-                             np.zeros(0, np.uint8))
+        _core.vpl_accumulate(
+            np.array([-1, 1], np.int64), np.zeros((0, 3), np.float32), np.zeros(0, np.uint8)
+        )
 
 
 @settings(max_examples=60, deadline=None)
-@given(p=st.integers(0, 5), k=st.integers(0, 5), mat=st.integers(-2, 2),
-       dt=st.sampled_from([np.float32, np.float64, np.int32]), cols=st.integers(2, 4))
+@given(
+    p=st.integers(0, 5),
+    k=st.integers(0, 5),
+    mat=st.integers(-2, 2),
+    dt=st.sampled_from([np.float32, np.float64, np.int32]),
+    cols=st.integers(2, 4),
+)
 def test_fuzz_prepare(p, k, mat, dt, cols):
     rng = np.random.default_rng(p * 7 + k)
-    h = dict(hit_pos=rng.normal(size=(p, 3)), hit_normal=np.tile([0, 0, 1], (p, 1)).astype(dt),
-             hit_ng=np.tile([0, 0, 1], (p, 1)).astype(np.float32),
-             hit_wo=np.tile([0, 0, 1], (p, 1)).astype(np.float32),
-             hit_material=np.full(p, mat, np.int32))
-    v = vpls(rng.normal(size=(k, 3)), np.tile([0, 0, -1], (k, 1)), np.ones((k, 3)),
-             np.full(k, 0.01))
+    h = dict(
+        hit_pos=rng.normal(size=(p, 3)),
+        hit_normal=np.tile([0, 0, 1], (p, 1)).astype(dt),
+        hit_ng=np.tile([0, 0, 1], (p, 1)).astype(np.float32),
+        hit_wo=np.tile([0, 0, 1], (p, 1)).astype(np.float32),
+        hit_material=np.full(p, mat, np.int32),
+    )
+    v = vpls(
+        rng.normal(size=(k, 3)), np.tile([0, 0, -1], (k, 1)), np.ones((k, 3)), np.full(k, 0.01)
+    )
     v["vpl_weight"] = np.ones((k, cols), np.float32)
     v["vpl_pos"] = v["vpl_pos"][:k]
     try:
-        count, org, d, length, contrib = prepare(h, mats(), v)
+        count, org, _d, _length, contrib = prepare(h, mats(), v)
     except (TypeError, ValueError):
         return
-    assert dt is np.float32 and cols == 3 and (mat < 1 or p == 0)
-    assert count.sum() == len(org) and np.all(np.isfinite(contrib)) and np.all(contrib >= 0)
+    assert dt is np.float32
+    assert cols == 3
+    assert mat < 1 or p == 0
+    assert count.sum() == len(org)
+    assert np.all(np.isfinite(contrib))
+    assert np.all(contrib >= 0)

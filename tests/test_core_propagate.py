@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from voxgi import _core
+from voxgi._core import testing
 from voxgi.directions import direction_set
 
 # ----------------------------------------------------------------- records
@@ -332,7 +333,7 @@ def test_threads_partial_sums_and_algorithms_agree(sphere24):
     # independent of the thread count to float rounding (requirement: 1e-6)
     assert np.allclose(one, two, rtol=1e-12, atol=0)
     assert np.allclose(vis1, vis2, rtol=1e-12, atol=0)
-    srt, _, _ = s.gather(ds.families, ds.weights, vals, fams, False, 1, "sort")
+    srt, _, _ = testing.gather_sorted(s, ds.families, ds.weights, vals, fams, False, 1)
     assert np.allclose(one, srt, rtol=1e-12, atol=0)
     # disjoint subsets add up to the full pass (the Dask work unit)
     a = _core.gather_families(
@@ -407,7 +408,7 @@ def test_onepass_walk_agrees_with_the_sorted_walk_on_every_voxel_kind(stand, rad
     # The sorted walk orders every voxel's records by depth with one general
     # rule; the one-pass walk takes shortcuts for one record and for exact
     # twins. Both must find the same pairs: the same sums, visibility and
-    # lines, also when recording, transposed, and with stand-ins. (The
+    # lines, also when recording and with stand-ins. (The
     # one-pass walk also computes the line keys its own way, dividing once
     # per slab; radii 1 and 2 give main components A = 1 and 2.)
     rec = mixed_voxel_records()
@@ -417,7 +418,9 @@ def test_onepass_walk_agrees_with_the_sorted_walk_on_every_voxel_kind(stand, rad
     vals = np.random.default_rng(2).random((n, 3)).astype(np.float32)
     ds, fams = all_families(radius)
     one, vis1, lines1 = s.gather(ds.families, ds.weights, vals, fams, True, 1, stand_in=sb)
-    srt, vis2, lines2 = s.gather(ds.families, ds.weights, vals, fams, True, 1, "sort", stand_in=sb)
+    srt, vis2, lines2 = testing.gather_sorted(
+        s, ds.families, ds.weights, vals, fams, True, 1, stand_in=sb
+    )
     assert lines1 == lines2 > 0
     assert np.count_nonzero(vis1) > n // 2  # the scene pairs most records
     assert np.allclose(one, srt, rtol=1e-12, atol=1e-300)
@@ -427,10 +430,6 @@ def test_onepass_walk_agrees_with_the_sorted_walk_on_every_voxel_kind(stand, rad
     assert np.allclose(got, one, rtol=1e-12, atol=1e-300)
     rep, _ = s.gather_recorded(tab, vals, fams, False, 1)
     assert np.allclose(rep, one, rtol=1e-12, atol=1e-300)
-    t1, _, _ = s.gather(ds.families, ds.weights, vals, fams, False, 1, stand_in=sb, transpose=True)
-    t2, _, _ = s.gather(ds.families, ds.weights, vals, fams, False, 1, "sort", stand_in=sb,
-                        transpose=True)
-    assert np.allclose(t1, t2, rtol=1e-12, atol=1e-300)
 
 
 @pytest.mark.parametrize("history", [3, 16])
@@ -453,7 +452,9 @@ def test_onepass_walk_passes_coplanar_runs_as_the_sorted_walk_does(history, stan
     vals = np.random.default_rng(4).random((n, 3)).astype(np.float32)
     ds, fams = all_families(11)
     one, vis1, lines1 = s.gather(ds.families, ds.weights, vals, fams, True, 2, stand_in=sb)
-    srt, vis2, lines2 = s.gather(ds.families, ds.weights, vals, fams, True, 1, "sort", stand_in=sb)
+    srt, vis2, lines2 = testing.gather_sorted(
+        s, ds.families, ds.weights, vals, fams, True, 1, stand_in=sb
+    )
     assert lines1 == lines2
     assert np.allclose(one, srt, rtol=1e-12, atol=1e-300)
     assert np.allclose(vis1, vis2, rtol=1e-12, atol=1e-300)
@@ -479,8 +480,9 @@ def test_recorded_pairs_replay_the_gathering(sphere24, stand):
     tab = s.make_pair_table(ds.families, ds.weights, stand)
     assert tab.recorded == 0
     assert tab.families == len(fams)
-    rec_sums, rec_vis, rec_lines = s.gather(ds.families, ds.weights, vals, fams, True, 2,
-                                            stand_in=sb, record=tab)
+    rec_sums, rec_vis, rec_lines = s.gather(
+        ds.families, ds.weights, vals, fams, True, 2, stand_in=sb, record=tab
+    )
     assert tab.recorded == len(fams)
     assert rec_lines == lines
     assert np.allclose(rec_vis, vis, rtol=1e-12, atol=0)
@@ -512,7 +514,7 @@ def test_recorded_pairs_hold_positions_past_two_bytes():
     lower, upper = np.c_[g, np.zeros(len(g))], np.c_[g, np.full(len(g), 9)]
     ijk = np.concatenate([lower, upper]).astype(np.int32)
     normal = np.zeros((len(ijk), 3), np.float32)
-    normal[: len(g), 2], normal[len(g):, 2] = 1.0, -1.0
+    normal[: len(g), 2], normal[len(g) :, 2] = 1.0, -1.0
     point = (ijk + 0.5).astype(np.float32)
     n = len(ijk)
     assert n > 65536
@@ -544,10 +546,9 @@ def test_recorded_pairs_refuse_what_they_do_not_hold(sphere24):
     with pytest.raises(ValueError, match="outside"):
         s.gather_recorded(tab, vals, np.array([len(fams)], np.int64), False, 1)
     with pytest.raises(ValueError, match="stand-in"):
-        s.gather(ds.families, ds.weights, vals, fams, False, 1, stand_in=rec["back"].copy(),
-                 record=tab)
-    with pytest.raises(ValueError, match="one-pass"):
-        s.gather(ds.families, ds.weights, vals, fams, False, 1, "sort", record=tab)
+        s.gather(
+            ds.families, ds.weights, vals, fams, False, 1, stand_in=rec["back"].copy(), record=tab
+        )
     other = all_families(5)[0]
     with pytest.raises(ValueError, match="other families"):
         s.gather(other.families, other.weights, vals, fams, False, 1, record=tab)
@@ -556,10 +557,10 @@ def test_recorded_pairs_refuse_what_they_do_not_hold(sphere24):
         small.gather_recorded(tab, np.ones((small.size, 3), np.float32), half, False, 1)
 
 
-@pytest.mark.parametrize("algorithm", ["onepass", "sort"])
-def test_transposed_gathering_is_the_adjoint(sphere24, algorithm):
+@pytest.mark.parametrize("walk", ["onepass", "sort"])
+def test_transposed_gathering_is_the_adjoint(sphere24, walk):
     # <x, K y> == <K^T x, y> for the gathering operator K (same pairs, the
-    # weight of the record that receives in K)
+    # weight of the record that receives in K), K from either walk
     rec, s = sphere24
     n = len(rec["ijk"])
     rng = np.random.default_rng(9)
@@ -568,9 +569,15 @@ def test_transposed_gathering_is_the_adjoint(sphere24, algorithm):
     ds, fams = all_families(5)
     sb = rec["back"].copy()
     for stand in (None, sb):
-        Ky, _, _ = s.gather(ds.families, ds.weights, y, fams, False, 2, algorithm, stand_in=stand)
-        KTx, _, _ = s.gather(ds.families, ds.weights, x, fams, False, 2, algorithm,
-                             stand_in=stand, transpose=True)
+        if walk == "onepass":
+            Ky, _, _ = s.gather(ds.families, ds.weights, y, fams, False, 2, stand_in=stand)
+        else:
+            Ky, _, _ = testing.gather_sorted(
+                s, ds.families, ds.weights, y, fams, False, 2, stand_in=stand
+            )
+        KTx, _, _ = testing.gather_sorted(
+            s, ds.families, ds.weights, x, fams, False, 2, stand_in=stand, transpose=True
+        )
         lhs = np.sum(x.astype(np.float64) * Ky)
         assert lhs > 0
         assert np.sum(KTx * y) == pytest.approx(lhs, rel=1e-12)
@@ -608,8 +615,12 @@ def test_bad_input_is_an_error_not_a_crash():
         s.gather(ds.families, ds.weights[:-1], v, fams)
     with pytest.raises(ValueError, match="emitter"):
         s.shoot(np.array([7], np.int32), ds.families, ds.weights, v)
-    with pytest.raises(ValueError, match="algorithm"):
-        s.gather(ds.families, ds.weights, v, fams, False, 1, "quick")
+    with pytest.raises(ValueError, match="family_indices"):
+        testing.gather_sorted(s, ds.families, ds.weights, v, np.array([-1], np.int64))
+    with pytest.raises(ValueError, match="send_scale"):
+        testing.shoot_sender_side(
+            s, fams[:1].astype(np.int32), ds.families, ds.weights, v, np.ones(3), np.ones(4)
+        )
 
 
 def test_sender_side_deposit_conserves_power(sphere24):
@@ -624,7 +635,9 @@ def test_sender_side_deposit_conserves_power(sphere24):
     S = s.normalisation(ds.families, ds.weights)
     area = np.ascontiguousarray(rec["area"], np.float64)
     idx = np.flatnonzero(emit).astype(np.int32)
-    hd, unfound, _, _ = s.shoot(idx, ds.families, ds.weights, E, 0, area / S, area)
+    hd, unfound, _, _ = testing.shoot_sender_side(
+        s, idx, ds.families, ds.weights, E, area / S, area
+    )
     emitted = area[emit].sum()
     lost = (area[idx] * unfound / S[idx]).sum()
     # (rel 1e-7: directions with |n·σ| < 1e-6 count in S but cast no ray)
@@ -647,12 +660,16 @@ def test_ctrl_c_stops_a_long_kernel(kernel):
     timer = threading.Timer(0.3, _thread.interrupt_main)
     timer.start()
     t = time.perf_counter()
-    with pytest.raises(KeyboardInterrupt):
+
+    def run():
         if kernel == "gather":
             for _ in range(20):
                 s.gather(ds.families, ds.weights, vals, fams, False, 2)
         else:
             s.shoot(np.arange(len(vals), dtype=np.int32), ds.families, ds.weights, vals, 2)
+
+    with pytest.raises(KeyboardInterrupt):
+        run()
     timer.join()
     assert time.perf_counter() - t < 1.5
 
@@ -663,13 +680,17 @@ def _grazing_run_records():
     voxel: one in front of the face (outside the object), one behind it."""
     v = np.array([-1, 16, 0], np.int32)  # main axis y; an emitter facing -y marches +x, -y
     grid = np.array([(x, y, 0) for x in range(-1, 6) for y in range(0, 41)], np.int32)
-    probe = _core.LineSystem(grid, np.tile([0.0, 1.0, 0.0], (len(grid), 1)).astype(np.float32),
-                             (grid + 0.5).astype(np.float32))
+    probe = _core.LineSystem(
+        grid,
+        np.tile([0.0, 1.0, 0.0], (len(grid), 1)).astype(np.float32),
+        (grid + 0.5).astype(np.float32),
+    )
     keys = probe.keys(v)
     e0 = int(np.flatnonzero((grid == [0, 40, 0]).all(1))[0])
     line = grid[keys == keys[e0]]
     line = line[np.argsort(-line[:, 1])]
-    assert len(line) == 41 and line[-1, 1] == 0
+    assert len(line) == 41
+    assert line[-1, 1] == 0
     nf = np.array([-0.05, 0.0, -1.0])
     nf /= np.linalg.norm(nf)
     ijk, nrm, pt = [line[0]], [[0.0, -1.0, 0.0]], [line[0] + 0.5]
@@ -682,9 +703,14 @@ def _grazing_run_records():
     floor = line[40]
     ijk += [floor, floor]
     nrm += [[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]]
-    pt += [floor + [0.5, 0.3, 0.2], floor + [0.5, 0.2, 0.99]]  # outside, then inside the object
-    return (np.array(ijk, np.int32), np.array(nrm, np.float32), np.array(pt, np.float32),
-            np.ascontiguousarray(v[None, :]))
+    # outside, then inside the object (floor is an array: element-wise sums)
+    pt += [floor + [0.5, 0.3, 0.2], floor + [0.5, 0.2, 0.99]]  # noqa: RUF005
+    return (
+        np.array(ijk, np.int32),
+        np.array(nrm, np.float32),
+        np.array(pt, np.float32),
+        np.ascontiguousarray(v[None, :]),
+    )
 
 
 def test_shooting_past_a_long_grazing_run_reaches_the_floor():
@@ -705,7 +731,8 @@ def test_shooting_past_a_long_grazing_run_reaches_the_floor():
     hd, unfound, rays, _ = s.shoot(np.array([0], np.int32), fam, w, E)
     d = fam[0] / np.linalg.norm(fam[0])
     lit, inside = n - 2, n - 1
-    assert rays == 1 and unfound[0] == 0.0
+    assert rays == 1
+    assert unfound[0] == 0.0
     # the floor record in front of the face sees the emitter: its whole deposit
     assert hd[lit, 0] == pytest.approx(abs(d[1]) * w[0], rel=1e-6)
     # the one behind the face (inside the object) stays dark

@@ -30,10 +30,17 @@ def test_shapes_and_dtypes():
     out = _core.voxelize(**args())
     n = len(out["area"])
     assert n > 0
-    want = {"ijk": (np.int32, (n, 3)), "normal": (np.float32, (n, 3)), "area": (np.float32, (n,)),
-            "albedo": (np.float32, (n, 3)), "emission": (np.float32, (n, 3)),
-            "centroid": (np.float64, (n, 3)), "object_id": (np.int32, (n,)),
-            "back": (np.bool_, (n,)), "side": (np.int8, (n,))}
+    want = {
+        "ijk": (np.int32, (n, 3)),
+        "normal": (np.float32, (n, 3)),
+        "area": (np.float32, (n,)),
+        "albedo": (np.float32, (n, 3)),
+        "emission": (np.float32, (n, 3)),
+        "centroid": (np.float64, (n, 3)),
+        "object_id": (np.int32, (n,)),
+        "back": (np.bool_, (n,)),
+        "side": (np.int8, (n,)),
+    }
     for name, (dtype, shape) in want.items():
         assert out[name].dtype == dtype, name
         assert out[name].shape == shape, name
@@ -57,17 +64,20 @@ def test_no_triangles_gives_empty_arrays():
     assert out["area"].shape == (0,)
 
 
-@pytest.mark.parametrize(("name", "bad"), [
-    ("triangles", lambda a: a.astype(np.float32)),
-    ("triangles", lambda a: a.tolist()),
-    ("triangles", lambda a: np.asfortranarray(a)),
-    ("tri_object", lambda a: a.astype(np.int64)),
-    ("two_sided", lambda a: a.astype(np.uint8)),
-    ("albedo", lambda a: a.astype(np.float64)),
-    ("emission", lambda a: a.astype(np.float64)),
-    ("origin", lambda a: a.astype(np.float32)),
-    ("dims", lambda a: a.astype(np.int64)),
-])
+@pytest.mark.parametrize(
+    ("name", "bad"),
+    [
+        ("triangles", lambda a: a.astype(np.float32)),
+        ("triangles", lambda a: a.tolist()),
+        ("triangles", lambda a: np.asfortranarray(a)),
+        ("tri_object", lambda a: a.astype(np.int64)),
+        ("two_sided", lambda a: a.astype(np.uint8)),
+        ("albedo", lambda a: a.astype(np.float64)),
+        ("emission", lambda a: a.astype(np.float64)),
+        ("origin", lambda a: a.astype(np.float32)),
+        ("dims", lambda a: a.astype(np.int64)),
+    ],
+)
 def test_wrong_dtype_or_layout_is_a_type_error(name, bad):
     a = args()
     a[name] = bad(a[name])
@@ -75,17 +85,20 @@ def test_wrong_dtype_or_layout_is_a_type_error(name, bad):
         _core.voxelize(**a)
 
 
-@pytest.mark.parametrize(("name", "bad"), [
-    ("triangles", lambda a: np.ascontiguousarray(a.reshape(-1, 9))),
-    ("triangles", lambda a: np.ascontiguousarray(a[:, :2])),
-    ("tri_object", lambda a: a[:-1].copy()),
-    ("tri_object", lambda a: a.reshape(-1, 1).copy()),
-    ("two_sided", lambda a: a.reshape(1, 2).copy()),
-    ("albedo", lambda a: a[:1].copy()),
-    ("emission", lambda a: np.ascontiguousarray(a[:, :2])),
-    ("origin", lambda a: a[:2].copy()),
-    ("dims", lambda a: a[:2].copy()),
-])
+@pytest.mark.parametrize(
+    ("name", "bad"),
+    [
+        ("triangles", lambda a: np.ascontiguousarray(a.reshape(-1, 9))),
+        ("triangles", lambda a: np.ascontiguousarray(a[:, :2])),
+        ("tri_object", lambda a: a[:-1].copy()),
+        ("tri_object", lambda a: a.reshape(-1, 1).copy()),
+        ("two_sided", lambda a: a.reshape(1, 2).copy()),
+        ("albedo", lambda a: a[:1].copy()),
+        ("emission", lambda a: np.ascontiguousarray(a[:, :2])),
+        ("origin", lambda a: a[:2].copy()),
+        ("dims", lambda a: a[:2].copy()),
+    ],
+)
 def test_wrong_shape_is_a_value_error(name, bad):
     a = args()
     a[name] = bad(a[name])
@@ -93,22 +106,25 @@ def test_wrong_shape_is_a_value_error(name, bad):
         _core.voxelize(**a)
 
 
-@pytest.mark.parametrize(("change", "match"), [
-    (lambda a: a["tri_object"].__setitem__(0, 2), "tri_object"),
-    (lambda a: a["tri_object"].__setitem__(1, -1), "tri_object"),
-    (lambda a: a["triangles"].__setitem__((0, 0, 0), np.nan), "non-finite"),
-    (lambda a: a["triangles"].__setitem__((1, 2, 1), 1.5), "outside the grid"),
-    (lambda a: a["triangles"].__setitem__((1, 2, 1), -0.01), "outside the grid"),
-    (lambda a: a.__setitem__("pitch", 0.0), "pitch"),
-    (lambda a: a.__setitem__("pitch", float("nan")), "pitch"),
-    (lambda a: a["dims"].__setitem__(0, 0), "dims"),
-    (lambda a: a["origin"].__setitem__(0, np.inf), "origin"),
-    (lambda a: a["albedo"].__setitem__((0, 0), 1.5), "albedo"),
-    (lambda a: a["emission"].__setitem__((1, 0), -1.0), "emission"),
-    (lambda a: a.__setitem__("cos_cluster", 2.0), "cos_cluster"),
-    (lambda a: a.__setitem__("eps", -1.0), "eps"),
-    (lambda a: a.__setitem__("threads", -1), "threads"),
-])
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (lambda a: a["tri_object"].__setitem__(0, 2), "tri_object"),
+        (lambda a: a["tri_object"].__setitem__(1, -1), "tri_object"),
+        (lambda a: a["triangles"].__setitem__((0, 0, 0), np.nan), "non-finite"),
+        (lambda a: a["triangles"].__setitem__((1, 2, 1), 1.5), "outside the grid"),
+        (lambda a: a["triangles"].__setitem__((1, 2, 1), -0.01), "outside the grid"),
+        (lambda a: a.__setitem__("pitch", 0.0), "pitch"),
+        (lambda a: a.__setitem__("pitch", float("nan")), "pitch"),
+        (lambda a: a["dims"].__setitem__(0, 0), "dims"),
+        (lambda a: a["origin"].__setitem__(0, np.inf), "origin"),
+        (lambda a: a["albedo"].__setitem__((0, 0), 1.5), "albedo"),
+        (lambda a: a["emission"].__setitem__((1, 0), -1.0), "emission"),
+        (lambda a: a.__setitem__("cos_cluster", 2.0), "cos_cluster"),
+        (lambda a: a.__setitem__("eps", -1.0), "eps"),
+        (lambda a: a.__setitem__("threads", -1), "threads"),
+    ],
+)
 def test_bad_values_are_value_errors(change, match):
     a = args()
     change(a)
@@ -129,11 +145,22 @@ def test_inputs_are_not_modified_and_threads_do_not_matter():
         np.testing.assert_array_equal(one[k], three[k])
 
 
-def test_progress_callable_is_called_or_harmless():
+def test_progress_callable_hears_the_end():
     calls = []
     out = _core.voxelize(**args(n_tris=20), progress=lambda *x: calls.append(x))
     assert len(out["area"]) > 0
-    assert all(len(c) == 3 for c in calls)
+    assert calls, "the progress callable was never called"
+    assert all(len(c) == 3 and 0 <= c[1] <= c[2] for c in calls)
+    _, done, total = calls[-1]
+    assert done == total > 0
+
+
+def test_progress_callable_errors_propagate():
+    def fail(*_):
+        raise RuntimeError("from progress")
+
+    with pytest.raises(RuntimeError, match="from progress"):
+        _core.voxelize(**args(n_tris=20), progress=fail)
 
 
 def test_area_matches_triangle_area():
@@ -146,8 +173,13 @@ def test_area_matches_triangle_area():
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(n=st.integers(0, 6), scale=st.sampled_from([1e-6, 1e-3, 1.0]),
-       seed=st.integers(0, 2**31 - 1), flat=st.booleans(), pitch=st.sampled_from([0.05, 0.1, 0.3]))
+@given(
+    n=st.integers(0, 6),
+    scale=st.sampled_from([1e-6, 1e-3, 1.0]),
+    seed=st.integers(0, 2**31 - 1),
+    flat=st.booleans(),
+    pitch=st.sampled_from([0.05, 0.1, 0.3]),
+)
 def test_fuzz_never_crashes_or_returns_nan(n, scale, seed, flat, pitch):
     # Tiny, flat (axis-aligned, on voxel faces) and slivered triangles: either
     # a valid result or a ValueError, never a crash, never NaN.
@@ -158,8 +190,12 @@ def test_fuzz_never_crashes_or_returns_nan(n, scale, seed, flat, pitch):
         tris[:, :, 2] = np.round(tris[:, :, 2] / pitch) * pitch  # exactly on a grid plane
     tris = np.clip(tris, 0.0, 1.0)
     a = args()
-    a.update(triangles=np.ascontiguousarray(tris), tri_object=np.zeros(n, np.int32),
-             pitch=pitch, dims=np.full(3, int(np.ceil(1.0 / pitch)) + 1, np.int32))
+    a.update(
+        triangles=np.ascontiguousarray(tris),
+        tri_object=np.zeros(n, np.int32),
+        pitch=pitch,
+        dims=np.full(3, int(np.ceil(1.0 / pitch)) + 1, np.int32),
+    )
     out = _core.voxelize(**a)
     for k in ("normal", "area", "centroid"):
         assert np.all(np.isfinite(out[k]))
@@ -197,8 +233,7 @@ def _sat_overlap(tri, centres, half):
     v = tri[None] - centres[:, None, :]
     e = [tri[1] - tri[0], tri[2] - tri[1], tri[0] - tri[2]]
     ok = np.ones(len(centres), bool)
-    for ax in [*np.eye(3), np.cross(e[0], e[1]),
-               *[np.cross(a, b) for a in np.eye(3) for b in e]]:
+    for ax in [*np.eye(3), np.cross(e[0], e[1]), *[np.cross(a, b) for a in np.eye(3) for b in e]]:
         if not np.any(ax):
             continue
         r = half * np.abs(ax).sum()
@@ -220,8 +255,12 @@ def test_touching_cubes_are_included_exactly(seed):
     area2 = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
     tris = np.ascontiguousarray(tris[area2 > 0])
     a = args()
-    a.update(triangles=tris, tri_object=np.zeros(len(tris), np.int32), pitch=pitch,
-             dims=np.array([8, 8, 8], np.int32))
+    a.update(
+        triangles=tris,
+        tri_object=np.zeros(len(tris), np.int32),
+        pitch=pitch,
+        dims=np.array([8, 8, 8], np.int32),
+    )
     out = _core.voxelize(**a)
     cells = np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), -1).reshape(-1, 3)
     centres = (cells + 0.5) * pitch
@@ -231,6 +270,8 @@ def test_touching_cubes_are_included_exactly(seed):
     have = np.zeros((8, 8, 8), bool)
     have[tuple(out["ijk"].T)] = True
     np.testing.assert_array_equal(have.reshape(-1), closed)
-    want = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]),
-                                axis=1).sum()
+    want = (
+        0.5
+        * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1).sum()
+    )
     assert out["area"][out["side"] == 0].sum(dtype=np.float64) == pytest.approx(want, rel=1e-6)

@@ -172,3 +172,13 @@ def test_box_enclosure_edges_stay_bounded():
     ratio = E[front, 0] / math.pi
     assert np.sum(vox.area[front] * ratio) / np.sum(vox.area[front]) == pytest.approx(1.0, abs=3e-3)
     assert np.all(np.abs(ratio - 1.0) < 0.1)
+
+
+def test_thread_count_changes_nothing():
+    # each record's samples are summed by one task, and the sample points do
+    # not depend on how the records are split over threads
+    sc = voxgi.scenes.cornell_box(width=16, height=16)
+    vox = voxgi.voxelize(sc, resolution=16)
+    one, _ = direct_irradiance(sc, vox, samples=16, threads=1)
+    two, _ = direct_irradiance(sc, vox, samples=16, threads=2)
+    assert np.array_equal(one, two)

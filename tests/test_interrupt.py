@@ -1,7 +1,7 @@
 """Ctrl-C during voxelize, solve and render returns control within a second.
 
 SIGINT is sent to this process from a timer thread, as a terminal would on
-Ctrl-C. The kernels poll ``PyErr_CheckSignals`` every 50 ms (csrc/pycommon.h),
+Ctrl-C. The kernels poll ``PyErr_CheckSignals`` every 50 ms (csrc/bind_common.h),
 so the ``KeyboardInterrupt`` must surface well inside a second (0.04-0.10 s
 for voxelize, 0.04-0.05 s for solve, 0.001 s for render on a 2-core machine
 shared with other jobs). render catches it and returns the frames done so far.

@@ -1,4 +1,4 @@
-// pybind11 helpers shared by the bind_*.cpp files.
+// pybind11 conversions and checks shared by the bind_*.cpp files.
 #pragma once
 
 #include <pybind11/numpy.h>
@@ -7,7 +7,7 @@
 #include <chrono>
 #include <string>
 
-#include "common.h"
+#include "util/parallel.h"
 
 namespace voxgi::py_helpers {
 namespace py = pybind11;
@@ -23,8 +23,8 @@ using U8 = py::array_t<uint8_t, py::array::c_style>;
 // is pending. The pending KeyboardInterrupt stays set and is raised when
 // the binding returns through `error_already_set`.
 inline voxgi::StopCheck make_stop_check() {
-    auto last = std::make_shared<std::chrono::steady_clock::time_point>(
-        std::chrono::steady_clock::now());
+    auto last =
+        std::make_shared<std::chrono::steady_clock::time_point>(std::chrono::steady_clock::now());
     auto flagged = std::make_shared<bool>(false);
     return [last, flagged]() -> bool {
         if (*flagged) return true;
@@ -42,14 +42,14 @@ inline voxgi::StopCheck make_stop_check() {
 
 // Check shape of a 2-D array: (n, cols), n == -1 accepts any n.
 template <class A>
-void check_2d(const A &a, py::ssize_t n, py::ssize_t cols, const char *name) {
+void check_2d(const A& a, py::ssize_t n, py::ssize_t cols, const char* name) {
     if (a.ndim() != 2 || a.shape(1) != cols || (n >= 0 && a.shape(0) != n))
         throw py::value_error(std::string(name) + " must have shape (" +
                               (n >= 0 ? std::to_string(n) : std::string("N")) + ", " +
                               std::to_string(cols) + ")");
 }
 template <class A>
-void check_1d(const A &a, py::ssize_t n, const char *name) {
+void check_1d(const A& a, py::ssize_t n, const char* name) {
     if (a.ndim() != 1 || (n >= 0 && a.shape(0) != n))
         throw py::value_error(std::string(name) + " must have shape (" +
                               (n >= 0 ? std::to_string(n) : std::string("N")) + ",)");

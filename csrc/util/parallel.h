@@ -1,14 +1,19 @@
-// Shared plumbing for the voxgi kernels: cancellation, threads, errors.
-// No pybind11 here: kernels stay testable and timeable without Python.
+// The parallel loop of the kernels, its cancellation, and the in-order
+// combination of per-task results that keeps every sum independent of the
+// thread count. No pybind11 here: kernels stay testable and timeable without
+// Python.
 #pragma once
 
 #include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <map>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 namespace voxgi {
@@ -37,7 +42,7 @@ inline int resolve_threads(int threads) {
 // started and Interrupted is thrown after all workers have joined.
 // Exceptions from workers are rethrown on the calling thread.
 template <class Body>
-void parallel_for(int64_t n_tasks, int threads, const StopCheck &stop, Body &&body) {
+void parallel_for(int64_t n_tasks, int threads, const StopCheck& stop, Body&& body) {
     threads = std::max(1, std::min<int>(threads, static_cast<int>(std::max<int64_t>(n_tasks, 1))));
     std::atomic<int64_t> next{0};
     std::atomic<bool> cancel{false};
@@ -62,10 +67,35 @@ void parallel_for(int64_t n_tasks, int threads, const StopCheck &stop, Body &&bo
     std::vector<std::thread> pool;
     for (int t = 1; t < threads; ++t) pool.emplace_back(worker, t);
     worker(0);
-    for (auto &th : pool) th.join();
-    for (auto &e : errors)
+    for (auto& th : pool) th.join();
+    for (auto& e : errors)
         if (e) std::rethrow_exception(e);
     if (cancel) throw Interrupted();  // only stop() can have set it without an error
 }
+
+// Hands the results of tasks 0, 1, 2, ... to `combine` in task order,
+// whichever order the tasks finish in: floating-point sums made from
+// per-task partials then come out the same for any number of threads.
+// Results that finish early wait here (moved in, not copied); `combine`
+// runs under the lock, one result at a time.
+template <class Result>
+class InOrder {
+   public:
+    template <class Combine>
+    void finish(int64_t task, Result&& r, Combine&& combine) {
+        std::lock_guard<std::mutex> lock(mu_);
+        waiting_.emplace(task, std::move(r));
+        for (auto it = waiting_.begin(); it != waiting_.end() && it->first == next_;) {
+            combine(it->second);
+            it = waiting_.erase(it);
+            ++next_;
+        }
+    }
+
+   private:
+    std::mutex mu_;
+    int64_t next_ = 0;
+    std::map<int64_t, Result> waiting_;
+};
 
 }  // namespace voxgi

@@ -1,0 +1,41 @@
+// The order of records along a line and the facing rule (docs/design.md §4),
+// shared by the gathering walks and the shooting march.
+#pragma once
+
+#include <cstdint>
+
+namespace voxgi {
+
+constexpr float kTiny = 1e-6f;  // |n.d| below this: the record is parallel to d (neither F nor B)
+constexpr int kMaxHistory = 32;
+
+// A record met on a line: its position (in some axis order or global), the
+// depth of its surface point along d, and n.d.
+struct Hit {
+    int32_t p;
+    float depth;
+    float c;
+};
+
+// Order records of one voxel along d: by depth, then B (c < 0) before F.
+inline void sort_group(Hit* g, int n) {
+    for (int i = 1; i < n; ++i) {
+        Hit h = g[i];
+        int j = i - 1;
+        while (j >= 0 && (g[j].depth > h.depth || (g[j].depth == h.depth && g[j].c > h.c))) {
+            g[j + 1] = g[j];
+            --j;
+        }
+        g[j + 1] = h;
+    }
+}
+
+// B at pb (normal nb) and F at pf (normal nf) see each other when each lies
+// strictly in front of the other's plane (by more than eps).
+inline bool facing(const float* pf, const float* nf, const float* pb, const float* nb, float eps) {
+    const float d0 = pb[0] - pf[0], d1 = pb[1] - pf[1], d2 = pb[2] - pf[2];
+    return (d0 * nf[0] + d1 * nf[1] + d2 * nf[2] > eps) &&
+           (-(d0 * nb[0] + d1 * nb[1] + d2 * nb[2]) > eps);
+}
+
+}  // namespace voxgi
