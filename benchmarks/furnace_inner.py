@@ -69,7 +69,8 @@ def main():
     out = []
     print(f"res {a.res} R {a.R} closed={a.closed}")
     print(
-        f"{'scene':15s} {'inner':5s} {'rho':>5s} {'object':8s} {'mean err':>9s} {'|err| mean':>10s} {'max err':>8s} "
+        f"{'scene':15s} {'inner':5s} {'rho':>5s} {'object':8s} {'mean err':>9s} "
+        f"{'|err| mean':>10s} {'max err':>8s} "
         f"{'lost':>8s} {'back':>8s} {'back max':>8s} {'iters':>5s} {'s':>5s}"
     )
     for kind in a.scenes:
@@ -80,7 +81,8 @@ def main():
                     fmt = lambda x: f"{x:8.2e}" if x is not None else f"{'-':>8s}"  # noqa: E731
                     print(
                         f"{r['scene']:15s} {r['inner']!s:5s} {r['rho']:5.2f} {r['object']:8s} "
-                        f"{r['mean']:+9.4%} {r['abs_mean']:10.4%} {r['max']:8.3%} {fmt(r['lost'])} {fmt(r['back'])} "
+                        f"{r['mean']:+9.4%} {r['abs_mean']:10.4%} {r['max']:8.3%} "
+                        f"{fmt(r['lost'])} {fmt(r['back'])} "
                         f"{fmt(r['back_max'])} {r['iters']:5d} {r['seconds']:5.1f}",
                         flush=True,
                     )

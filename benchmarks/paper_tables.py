@@ -158,7 +158,7 @@ def _resolution_for(scene, target: int) -> tuple[int, voxgi.VoxelSet]:
     for _ in range(3):
         vox = voxgi.voxelize(scene, res)
         n = int((~vox.back).sum())
-        new = int(round(res * np.sqrt(target / max(n, 1))))
+        new = round(res * np.sqrt(target / max(n, 1)))
         if abs(new - res) <= 1:
             break
         res = max(8, min(new, 1024))

@@ -348,7 +348,7 @@ def _gather_time(vox, R, threads, iters=2, repeats=1):
 def linear(args) -> None:
     rows = []
     base = 48 if args.quick else 64
-    for res, R in ((base, 11), (int(round(base * 2**0.5)), 11), (2 * base, 11), (base, 16)):
+    for res, R in ((base, 11), (round(base * 2**0.5), 11), (2 * base, 11), (base, 16)):
         vox = _bunny(res)
         dt, rays = _gather_time(vox, R, 1)
         rows.append(

@@ -11,6 +11,7 @@ from it on an NVIDIA H100 (22 s each); ``reference.py`` renders the same on
 the CPU (256x256 at 4096 spp agreed with it to relMSE 8.2e-5, that
 render's own noise).
 """
+
 import json
 import os
 import sys
@@ -26,26 +27,46 @@ mi.set_variant(variant)
 d = json.load(open(os.path.join(os.path.dirname(__file__), "cornell.json")))
 out = os.environ.get("OUT", ".")
 
+
 def mesh(name, v, f, bsdf, emitter=None):
     props = mi.Properties()
     props["bsdf"] = bsdf
     if emitter is not None:
         props["emitter"] = emitter
-    m = mi.Mesh(name, len(v), len(f), props=props, has_vertex_normals=False, has_vertex_texcoords=False)
+    m = mi.Mesh(
+        name, len(v), len(f), props=props, has_vertex_normals=False, has_vertex_texcoords=False
+    )
     p = mi.traverse(m)
     p["vertex_positions"] = np.ascontiguousarray(v, np.float32).ravel()
     p["faces"] = np.ascontiguousarray(f, np.uint32).ravel()
     p.update()
     return m
 
+
 def scene(size, spp):
     c = d["camera"]
-    sd = {"type": "scene", "integrator": {"type": "path", "max_depth": -1},
-          "sensor": {"type": "perspective", "fov": c["fov"], "fov_axis": "y", "near_clip": 1e-4,
-                     "to_world": mi.ScalarTransform4f().look_at(origin=c["eye"], target=c["target"], up=c["up"]),
-                     "sampler": {"type": "independent", "sample_count": spp},
-                     "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"},
-                              "pixel_format": "rgb", "component_format": "float32"}}}
+    sd = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": -1},
+        "sensor": {
+            "type": "perspective",
+            "fov": c["fov"],
+            "fov_axis": "y",
+            "near_clip": 1e-4,
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=c["eye"], target=c["target"], up=c["up"]
+            ),
+            "sampler": {"type": "independent", "sample_count": spp},
+            "film": {
+                "type": "hdrfilm",
+                "width": size,
+                "height": size,
+                "rfilter": {"type": "box"},
+                "pixel_format": "rgb",
+                "component_format": "float32",
+            },
+        },
+    }
     for i, o in enumerate(d["objects"]):
         b = {"type": "diffuse", "reflectance": {"type": "rgb", "value": o["albedo"]}}
         if o["two_sided"]:
@@ -56,7 +77,12 @@ def scene(size, spp):
         sd[f"o{i}"] = mesh(f"o{i}", np.array(o["v"]), np.array(o["f"]), mi.load_dict(b), em)
     return mi.load_dict(sd)
 
-plan = [(256, 65536, 4096), (512, 16384, 1024)] if variant.startswith("cuda") else [(256, 2048, 512), (512, 1024, 256)]
+
+plan = (
+    [(256, 65536, 4096), (512, 16384, 1024)]
+    if variant.startswith("cuda")
+    else [(256, 2048, 512), (512, 1024, 256)]
+)
 for size, spp, per in plan:
     sc = scene(size, per)
     acc = np.zeros((size, size, 3))
@@ -66,4 +92,7 @@ for size, spp, per in plan:
     img = (acc / (spp // per)).astype(np.float32)
     np.save(os.path.join(out, f"ref_{size}.npy"), img)
     print(size, spp, variant, round(time.time() - t0, 1), "s", img.mean(axis=(0, 1)), flush=True)
-json.dump({"variant": variant, "plan": plan, "fingerprint": d["fingerprint"]}, open(os.path.join(out, "info.json"), "w"))
+json.dump(
+    {"variant": variant, "plan": plan, "fingerprint": d["fingerprint"]},
+    open(os.path.join(out, "info.json"), "w"),
+)

@@ -89,8 +89,10 @@ def main() -> None:
     ok["propagation"] = run(["benchmarks/propagation.py", *q])
     ok["paper_tables"] = run(["benchmarks/paper_tables.py", *q])
     if importlib.util.find_spec("mitsuba") is None:
-        print("\nmitsuba not installed: time-vs-error against Mitsuba 3 skipped "
-              '(pip install "voxgi[bench]")')
+        print(
+            "\nmitsuba not installed: time-vs-error against Mitsuba 3 skipped "
+            '(pip install "voxgi[bench]")'
+        )
     else:
         sizes = ["256"] if args.quick else ["256", "512"]
         spp = ["1024"] if args.quick else ["4096"]
@@ -102,8 +104,9 @@ def main() -> None:
         ok["time_vs_error"] = run(["benchmarks/time_vs_error.py", "--size", *sizes, "--split"])
         if not args.quick:
             for scene in ("shadow", "geometric"):
-                ok[f"time_vs_error_{scene}"] = run(["benchmarks/time_vs_error.py", "--scene",
-                                                    scene, "--size", "256", "--high"])
+                ok[f"time_vs_error_{scene}"] = run(
+                    ["benchmarks/time_vs_error.py", "--scene", scene, "--size", "256", "--high"]
+                )
     linear_plot()
     print("\nsummary:", ", ".join(f"{k}: {'ok' if v else 'FAILED'}" for k, v in ok.items()))
     sys.exit(0 if all(ok.values()) else 1)

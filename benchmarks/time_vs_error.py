@@ -39,6 +39,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import os
@@ -202,7 +203,7 @@ def run_mitsuba(size: int, spps, variant=None, name: str = CORNELL) -> list[dict
 def time_to_error(rows: list[dict], target: float) -> float | None:
     """Interpolated (log-log) time at which a method's relMSE reaches ``target``."""
     pts = sorted((r["seconds"], r["rel_mse"]) for r in rows)
-    for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
+    for (t0, e0), (t1, e1) in itertools.pairwise(pts):
         if e0 >= target >= e1 and e0 > e1:
             a = math.log(e0 / target) / math.log(e0 / e1)
             return math.exp(math.log(t0) + a * math.log(t1 / t0))
@@ -442,7 +443,8 @@ def main(argv=None) -> int:
                         f"ref {r['rel_mse_vs_ref']:.2e} (noise est {r['est_noise_rel_mse']:.1e})"
                     )
                 print(
-                    f"split: {row['label']} vs {same['frames']}-frame render at the same resolution "
+                    f"split: {row['label']} vs {same['frames']}-frame render at the same "
+                    "resolution "
                     f"(display noise) {noise:.2e}"
                 )
                 result["split"] = {

@@ -230,7 +230,7 @@ def test_line_keys_are_naive_lines(v):
 
 @pytest.mark.parametrize("p", [(3, 1, 0), (2, -1, 1), (1, 1, 1), (4, 3, -2)])
 def test_multiples_give_the_same_lines(p):
-    # DESIGN-NOTES §3: k·p partitions space into the same lines as p
+    # docs/design.md §3: k·p partitions space into the same lines as p
     g = _grid(11)
     s = _core.LineSystem(
         g, np.tile(np.float32([0, 0, 1]), (len(g), 1)), (g + 0.5).astype(np.float32)

@@ -78,11 +78,13 @@ def test_furnace_sphere_analytic_radiosity(rho):
     out = voxgi.render(scene, sol, progress=False, max_frames=32, tol=0.0)
     expect = le / (1 - rho)
     err = np.abs(out.image / expect - 1.0)
-    assert out.image.shape == (32, 32, 3) and out.image.dtype == np.float32
+    assert out.image.shape == (32, 32, 3)
+    assert out.image.dtype == np.float32
     assert err.max() < 0.01, err.max()
     assert out.frames == 32
     assert out.stats["vpl_split"] == [16, 0]  # all records emit: one set only
-    assert out.stderr is not None and out.stderr.shape == out.image.shape
+    assert out.stderr is not None
+    assert out.stderr.shape == out.image.shape
     # The estimated error must be of the size of the actual one (within 3x).
     rms_rel = float(np.sqrt(np.mean((out.image / expect - 1.0) ** 2)))
     est_rel = float(np.sqrt(np.mean(out.stderr**2)) / expect)
@@ -178,7 +180,8 @@ def test_cap_sphere_nonuniform_emission():
         scene, lambda v: math.pi * (v.emission.astype(np.float64) + rho * le_mean / (1 - rho))
     )
     out = voxgi.render(scene, sol, progress=False, max_frames=128, tol=0.0)
-    assert out.stats["vpl_split"][0] >= 1 and out.stats["vpl_split"][1] >= 1
+    assert out.stats["vpl_split"][0] >= 1
+    assert out.stats["vpl_split"][1] >= 1
     # Which object each pixel sees (centre rays of the pinhole camera).
     from voxgi.display import _Tracer
 
@@ -197,7 +200,8 @@ def test_cap_sphere_nonuniform_emission():
     border[1:] |= obj[:-1] != obj[1:]
     border[:, :-1] |= obj[:, :-1] != obj[:, 1:]
     border[:, 1:] |= obj[:, :-1] != obj[:, 1:]
-    assert (obj == 0).sum() > 20 and (obj == 1).sum() > 20
+    assert (obj == 0).sum() > 20
+    assert (obj == 1).sum() > 20
     assert rel[~border].max() < 0.02, rel[~border].max()
 
 
@@ -311,12 +315,14 @@ def test_frame_samples_stratified_and_in_range():
 
 def test_camera_rays_conventions():
     cam = voxgi.Camera(eye=(0, 0, 0), target=(0, 0, -1), up=(0, 1, 0), fov=90.0, width=4, height=2)
-    org, d = camera_rays(cam)
+    _org, d = camera_rays(cam)
     d = d.reshape(2, 4, 3)
     right, up, fwd = cam.frame()
     assert np.allclose(np.linalg.norm(d, axis=2), 1.0)
-    assert d[0, 0] @ right < 0 and d[0, 0] @ up > 0  # top-left
-    assert d[1, 3] @ right > 0 and d[1, 3] @ up < 0  # bottom-right
+    assert d[0, 0] @ right < 0
+    assert d[0, 0] @ up > 0
+    assert d[1, 3] @ right > 0
+    assert d[1, 3] @ up < 0
     # fov: the top edge of the image is 45° above the axis.
     _, dtop = camera_rays(cam, offset=(0.5, 0.0))
     t = dtop.reshape(2, 4, 3)[0, 1]
@@ -421,7 +427,8 @@ def test_glossy_highlight_and_skipped_when_absent():
     assert any(s.startswith("glossy") for s in rb.stats["skipped"])
     assert not any(s.startswith("glossy") for s in rg.stats["skipped"])
     assert rg.image.max() > 3 * rb.image.max()
-    assert np.all(np.isfinite(rg.image)) and rg.image.min() >= 0
+    assert np.all(np.isfinite(rg.image))
+    assert rg.image.min() >= 0
 
 
 # -- bad input, edge cases ----------------------------------------------------------------
@@ -488,7 +495,8 @@ def test_one_sided_back_is_black_and_inputs_untouched():
     before = sol.radiosity.copy(), sol.vox.centroid.copy()
     out = voxgi.render(scene, sol, progress=False, max_frames=2)
     assert np.all(out.image == 0.0)
-    assert np.array_equal(before[0], sol.radiosity) and np.array_equal(before[1], sol.vox.centroid)
+    assert np.array_equal(before[0], sol.radiosity)
+    assert np.array_equal(before[1], sol.vox.centroid)
 
 
 def test_same_result_for_any_thread_count():
@@ -523,7 +531,8 @@ def test_ctrl_c_returns_the_image_so_far():
         timer.cancel()
     assert out.stats["interrupted"]
     assert 1 <= out.frames < 1_000_000
-    assert np.all(np.isfinite(out.image)) and out.image.mean() > 1.5
+    assert np.all(np.isfinite(out.image))
+    assert out.image.mean() > 1.5
 
 
 def test_direct_light_matches_mitsuba_path_tracer():

@@ -83,8 +83,9 @@ def test_ctrl_c_during_render_returns_partial_image(cornell):
     import numpy as np
 
     vox = voxgi.voxelize(cornell, resolution=24, progress=False)
-    sol = voxgi.solve(vox, directions=4, progress=False,
-                      tuning=voxgi.SolveTuning(shoot_directions=4))
+    sol = voxgi.solve(
+        vox, directions=4, progress=False, tuning=voxgi.SolveTuning(shoot_directions=4)
+    )
     with _CtrlC() as c:
         out = voxgi.render(
             cornell,

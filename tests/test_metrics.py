@@ -37,4 +37,6 @@ def test_error_time_record(rng):
     ref = rng.random((8, 8, 3))
     r = metrics.ErrorTime.measure("voxgi", 1.0, ref * 1.01, ref, resolution=64)
     d = r.to_dict()
-    assert d["method"] == "voxgi" and d["params"] == {"resolution": 64} and d["rel_mse"] > 0
+    assert d["method"] == "voxgi"
+    assert d["params"] == {"resolution": 64}
+    assert d["rel_mse"] > 0

@@ -17,7 +17,7 @@ import trimesh
 import voxgi
 from voxgi.voxels import estimate_memory
 
-# ---------------------------------------------------------------- helpers
+# ---------------------------------------------------------------- builders
 
 
 def scene_of(*meshes, two_sided=False, materials=None):

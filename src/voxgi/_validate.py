@@ -1,6 +1,6 @@
 """Shared argument checks: every public entry point validates through here.
 
-Each helper names the offending argument (``what``) in its message so that a
+Each check names the offending argument (``what``) in its message so that a
 user sees which mesh, field or value was wrong.
 """
 

@@ -29,6 +29,7 @@ __all__ = [
     "names",
     "shadow",
     "sponza_atrium",
+    "window_room",
 ]
 
 # Cornell box reflectances and light radiance as in Mitsuba 3's
@@ -175,7 +176,7 @@ def _furnace_camera(width: int, height: int, eye=(0.0, 0.0, 0.0)) -> Camera:
     eye = np.asarray(eye, dtype=np.float64)
     return Camera(
         eye=tuple(eye),
-        target=tuple(eye + [0.3, -0.2, -1.0]),
+        target=tuple(eye + np.array([0.3, -0.2, -1.0])),
         up=(0, 1, 0),
         fov=90.0,
         width=width,
@@ -630,6 +631,78 @@ def sponza_atrium(
     return s
 
 
+def _quad(corners, toward) -> trimesh.Trimesh:
+    """A planar quad (4, 3) wound so that its normal points toward a point."""
+    c = np.asarray(corners, dtype=np.float64)
+    if np.dot(np.cross(c[1] - c[0], c[2] - c[0]), np.asarray(toward) - c.mean(axis=0)) < 0:
+        c = c[::-1]
+    return trimesh.Trimesh(c, [[0, 1, 2], [0, 2, 3]], process=False)
+
+
+def _slab(lo, hi) -> trimesh.Trimesh:
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    return _box(hi - lo, (lo + hi) / 2)
+
+
+def window_room(
+    width: int = 256, height: int = 256, bar: float = 0.02, window_radiance: float = 6.0
+) -> Scene:
+    """A 4 x 2.6 x 5 m room lit only through a barred window, with a thin-legged table.
+
+    The window (1.6 x 1.2 m, in the wall z = 0) is a diffuse emitter 0.3 m
+    outside the opening, seen through a reveal (the wall's thickness) and
+    four sash bars ``bar`` metres wide, thinner than a voxel at the default
+    resolution (5 m / 64 = 0.078 m). Every surface is diffuse (walls 0.75,
+    reveal 0.5). It shows what sub-voxel occluders in front of an aperture
+    do to direct light carried along discrete lines (``docs/design.md`` §5).
+    """
+    W, H, D = 4.0, 2.6, 5.0
+    x0, x1, y0, y1, t = 1.2, 2.8, 0.9, 2.1, -0.3
+    inside = (W / 2, H / 2, D / 2)
+    white, grey = Material(albedo=0.75), Material(albedo=0.5)
+    cam = Camera(
+        eye=(W / 2, 1.3, D - 0.1), target=(W / 2, 1.0, 0.0), fov=70, width=width, height=height
+    )
+    scene = Scene(camera=cam)
+    walls = {
+        "floor": [(0, 0, 0), (W, 0, 0), (W, 0, D), (0, 0, D)],
+        "ceiling": [(0, H, 0), (W, H, 0), (W, H, D), (0, H, D)],
+        "left": [(0, 0, 0), (0, H, 0), (0, H, D), (0, 0, D)],
+        "right": [(W, 0, 0), (W, H, 0), (W, H, D), (W, 0, D)],
+        "front": [(0, 0, D), (W, 0, D), (W, H, D), (0, H, D)],
+        "wall_below": [(0, 0, 0), (W, 0, 0), (W, y0, 0), (0, y0, 0)],
+        "wall_above": [(0, y1, 0), (W, y1, 0), (W, H, 0), (0, H, 0)],
+        "wall_left": [(0, y0, 0), (x0, y0, 0), (x0, y1, 0), (0, y1, 0)],
+        "wall_right": [(x1, y0, 0), (W, y0, 0), (W, y1, 0), (x1, y1, 0)],
+    }
+    for name, q in walls.items():
+        scene.add(_quad(q, inside), white, name=name)
+    middle = ((x0 + x1) / 2, (y0 + y1) / 2, t / 2)
+    reveal = [
+        [(x0, y0, t), (x1, y0, t), (x1, y0, 0), (x0, y0, 0)],
+        [(x0, y1, t), (x1, y1, t), (x1, y1, 0), (x0, y1, 0)],
+        [(x0, y0, t), (x0, y1, t), (x0, y1, 0), (x0, y0, 0)],
+        [(x1, y0, t), (x1, y1, t), (x1, y1, 0), (x1, y0, 0)],
+    ]
+    scene.add(trimesh.util.concatenate([_quad(q, middle) for q in reveal]), grey, name="reveal")
+    window = _quad([(x0, y0, t), (x1, y0, t), (x1, y1, t), (x0, y1, t)], inside)
+    scene.add(window, Material(albedo=0.0, emission=window_radiance), name="window")
+    z0, z1, xm, ym = -0.08, -0.04, (x0 + x1) / 2, (y0 + y1) / 2
+    bars = [
+        _slab((xm - bar / 2, y0, z0), (xm + bar / 2, y1, z1)),
+        _slab((x0, ym - bar / 2, z0), (x1, ym + bar / 2, z1)),
+    ]
+    for x in (x0 + (x1 - x0) / 4, x0 + 3 * (x1 - x0) / 4):
+        bars.append(_slab((x - bar / 2, y0, z0), (x + bar / 2, y1, z1)))
+    scene.add(trimesh.util.concatenate(bars), white, name="bars")
+    scene.add(_slab((1.3, 0.72, 1.6), (2.7, 0.76, 2.6)), white, name="table_top")
+    legs = [
+        _slab((x, 0, z), (x + 0.04, 0.72, z + 0.04)) for x in (1.35, 2.61) for z in (1.65, 2.51)
+    ]
+    scene.add(trimesh.util.concatenate(legs), white, name="table_legs")
+    return scene
+
+
 _REGISTRY = {
     "cornell-box": cornell_box,
     "furnace-sphere": furnace_sphere,
@@ -641,6 +714,7 @@ _REGISTRY = {
     "shadow": shadow,
     "geometric": geometric,
     "sponza-atrium": sponza_atrium,
+    "window-room": window_room,
 }
 
 
