@@ -1059,15 +1059,21 @@ def _direct_light(p: _Problem):
 
 
 def _exact_direct_light(p: _Problem):
-    """Direct irradiance by shadow rays from every record with area (black
-    ones too, for the energy balance); what the records do not receive
-    escapes."""
+    """Direct irradiance by shadow rays (``docs/design.md`` §5); what the
+    records do not receive of the emitted power escapes. The black records
+    (albedo 0) reflect nothing, so they are lit only for the energy balance
+    of a solve with diagnostics."""
     t = time.perf_counter()
+    receivers = "all" if p.opt.diagnostics else "reflecting"
     Hd, st = direct_irradiance(
-        p.vox.scene, p.vox, samples=p.opt.direct_samples, threads=p.opt.threads, receivers="all"
+        p.vox.scene, p.vox, samples=p.opt.direct_samples, threads=p.opt.threads, receivers=receivers
     )
     p.seconds["direct"] = time.perf_counter() - t
-    p.stats["direct_light"] = {"method": "exact", **st}
+    p.stats["direct_light"] = {"method": "exact", "receivers": receivers, **st}
+    if receivers == "reflecting":
+        p.stats["skipped"]["direct_light_on_black_records"] = (
+            "diagnostics=False: what they absorb counts as escaping in stats['energy']"
+        )
     received = (Hd * p.area[:, None]).sum(axis=0)
     escape = (p.E * p.area[:, None]).sum(axis=0) - received
     return Hd, escape, 0
