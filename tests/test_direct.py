@@ -182,3 +182,20 @@ def test_thread_count_changes_nothing():
     one, _ = direct_irradiance(sc, vox, samples=16, threads=1)
     two, _ = direct_irradiance(sc, vox, samples=16, threads=2)
     assert np.array_equal(one, two)
+
+
+def test_far_from_the_origin_gives_the_same_light():
+    # the rays are traced in a frame centred on the scene: moving it by 1e7
+    # (float32 spacing there: 1) changes nothing but rounding
+    near = _lamp_over_floor(blocker=True)
+    far = voxgi.Scene()
+    for o in near.objects:
+        far.add(
+            trimesh.Trimesh(o.vertices + 1e7, o.faces, process=False),
+            o.material,
+            name=o.name,
+            two_sided=o.two_sided,
+        )
+    e_near, _ = direct_irradiance(near, voxgi.voxelize(near, resolution=16), samples=32)
+    e_far, _ = direct_irradiance(far, voxgi.voxelize(far, resolution=16), samples=32)
+    assert np.allclose(e_far, e_near, rtol=1e-3, atol=1e-6)

@@ -187,7 +187,7 @@ def test_cap_sphere_nonuniform_emission():
 
     tr = _Tracer(scene, 1)
     org, d = camera_rays(scene.camera)
-    prim = tr.intersect(org.astype(np.float32), d.astype(np.float32))
+    prim = tr.intersect((org - tr.centre).astype(np.float32), d.astype(np.float32))
     tr.close()
     obj = tr.obj[prim].reshape(24, 24)
     ref = np.where(obj == 0, le, 0.0) + rho * le_mean / (1 - rho)
@@ -609,3 +609,43 @@ def test_shading_normals_approach_the_smooth_surface():
         for k, s in (("flat", lo_flat), ("smooth", lo_smooth))
     }
     assert err["smooth"] < 0.35 * err["flat"]
+
+
+def _moved_cornell(shift: float, scale: float) -> voxgi.Scene:
+    """The Cornell box scaled by ``scale`` and moved by ``shift`` along (1, 1, 1)."""
+    import trimesh
+
+    base = voxgi.scenes.cornell_box(width=24, height=24)
+    move = np.full(3, float(shift))
+    out = voxgi.Scene()
+    for o in base.objects:
+        mesh = trimesh.Trimesh(o.vertices * scale + move, o.faces, process=False)
+        out.add(mesh, o.material, name=o.name, two_sided=o.two_sided)
+    c = base.camera
+    out.camera = c.replace(
+        eye=tuple(np.asarray(c.eye) * scale + move),
+        target=tuple(np.asarray(c.target) * scale + move),
+    )
+    return out
+
+
+@pytest.mark.parametrize(
+    ("shift", "scale"), [(1e7, 1.0), (-1e6, 1.0), (0.0, 1e-6), (0.0, 1e12), (1e5, 1e3)]
+)
+def test_image_does_not_depend_on_the_scene_position_or_scale(shift, scale):
+    # Radiance does not change when a scene is moved or scaled (its camera
+    # with it). The rays are traced in a frame centred on the scene, and the
+    # offsets scale with it, so the picture stays the one at the origin
+    # (float32 rounding of the triangles aside); before that, a box moved by
+    # 1e6 rendered at a tenth of its brightness and by 1e7 black.
+    def picture(scene):
+        vox = voxgi.voxelize(scene, resolution=16, progress=False)
+        sol = voxgi.solve(
+            vox, directions=4, progress=False, tuning=voxgi.SolveTuning(shoot_directions=6)
+        )
+        return voxgi.render(scene, sol, max_frames=8, tol=0, seed=3, progress=False).image
+
+    ref = picture(_moved_cornell(0.0, 1.0))
+    img = picture(_moved_cornell(shift, scale))
+    assert img.mean() == pytest.approx(ref.mean(), rel=0.01)
+    assert voxgi.metrics.rel_mse(img, ref) < 1e-3

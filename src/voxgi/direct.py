@@ -140,11 +140,13 @@ class EmitterSampler:
 class _ShadowRays:
     """Occlusion queries on the scene's triangles (Embree), split over threads."""
 
-    def __init__(self, scene: Scene, threads: int):
+    def __init__(self, scene: Scene, threads: int, centre: np.ndarray):
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 
-        tri = np.concatenate([o.vertices[o.faces] for o in scene.objects])
+        # in a frame centred on the scene: float32 keeps its precision for a
+        # scene far from the origin
+        tri = np.concatenate([o.vertices[o.faces] for o in scene.objects]) - centre
         self._tri32 = np.ascontiguousarray(tri, dtype=np.float32)
         self._scene = rtcore_scene.EmbreeScene()
         self._mesh = TriangleMesh(self._scene, self._tri32)
@@ -287,8 +289,10 @@ def direct_irradiance(
         return out, stats
     if offset is None:
         offset = 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
-    tracer = _ShadowRays(scene, nthreads)
-    point = np.asarray(vox.centroid, np.float64)
+    centre = scene.bounds.mean(axis=0)
+    tracer = _ShadowRays(scene, nthreads, centre)
+    local = (emit.arrays[0] - centre, *emit.arrays[1:])  # the emitters in the tracer's frame
+    point = np.asarray(vox.centroid, np.float64) - centre
     normal = np.asarray(vox.normal, np.float64)
     pool = ThreadPoolExecutor(nthreads) if nthreads > 1 else None
     rng = np.random.default_rng([seed, 1])
@@ -304,7 +308,8 @@ def direct_irradiance(
                 for a in range(0, len(todo), per_batch):
                     rec = todo[a : a + per_batch]
                     m, sq = _batch(
-                        emit,
+                        local,
+                        emit.emitter_of,
                         tracer,
                         pool,
                         point[rec],
@@ -360,7 +365,8 @@ def _noisy(
 
 
 def _batch(
-    emit: EmitterSampler,
+    emitters: tuple,
+    emitter_of: np.ndarray,
     tracer: _ShadowRays,
     pool,
     x: np.ndarray,
@@ -377,7 +383,7 @@ def _batch(
     luminance (R,), from which the caller judges each record's noise.
     """
     args = (
-        emit.arrays,
+        emitters,
         np.ascontiguousarray(x),
         np.ascontiguousarray(nx),
         np.ascontiguousarray(shift),
@@ -399,6 +405,6 @@ def _batch(
         hit,
         np.ascontiguousarray(u, np.float32),
         np.ascontiguousarray(v, np.float32),
-        emit.emitter_of,
+        emitter_of,
         threads=nthreads,
     )

@@ -80,7 +80,10 @@ class _Tracer:
         from embreex.mesh_construction import TriangleMesh
 
         tri = scene.triangles()
-        self.tris = tri["triangles"]  # (F, 3, 3) float64
+        # Rays are traced in a frame centred on the scene (float32 in Embree):
+        # a scene far from the origin keeps the precision of one at it.
+        self.centre = scene.bounds.mean(axis=0)
+        self.tris = tri["triangles"] - self.centre  # (F, 3, 3) float64, scene-centred
         self.obj = tri["object"]  # (F,) int32
         e1 = self.tris[:, 1] - self.tris[:, 0]
         e2 = self.tris[:, 2] - self.tris[:, 0]
@@ -431,7 +434,7 @@ class _FrameShader:
         self.gather_rays = 0
         self.seconds = {"primary": 0.0, "shade": 0.0, "shadow": 0.0, "gather": 0.0}
         if self.gather:
-            self._grid = self._record_grid(sampler)
+            self._grid = self._record_grid(sampler, tracer.centre)
             self._tri = {
                 "tri_v": tracer.tris,
                 "tri_object": tracer.obj,
@@ -440,8 +443,9 @@ class _FrameShader:
             }
 
     @staticmethod
-    def _record_grid(sampler: VPLSampler) -> dict:
-        """Records sorted by voxel key, to find the record under a gather hit."""
+    def _record_grid(sampler: VPLSampler, centre: np.ndarray) -> dict:
+        """Records sorted by voxel key, to find the record under a gather hit
+        (positions in the tracer's frame, centred on ``centre``)."""
         vox = sampler.vox
         ijk = np.asarray(vox.ijk, dtype=np.int64)
         lo = ijk.min(axis=0)
@@ -461,14 +465,14 @@ class _FrameShader:
             "rec_sorted_key": sorted_key,
             "rec_order": order.astype(np.int32),
             "rec_cell_start": start,
-            "rec_centroid": sampler.pos,
+            "rec_centroid": np.ascontiguousarray(sampler.pos - centre),
             "rec_normal": sampler.normal,
             "rec_object": np.ascontiguousarray(vox.object_id, dtype=np.int32),
             "rec_radiance": np.ascontiguousarray(sampler.B / math.pi, dtype=np.float32),
             "rec_pa": sampler.record_pa,
             "grid_dims": dims.astype(np.int64),
             "grid_lo": lo.astype(np.int64),
-            "grid_origin": np.asarray(vox.origin, dtype=np.float64).reshape(3),
+            "grid_origin": np.asarray(vox.origin, dtype=np.float64).reshape(3) - centre,
             "pitch": float(vox.pitch),
         }
 
@@ -646,9 +650,11 @@ class _FrameShader:
         offset, lens = frame_samples(f, seed)
         t0 = time.perf_counter()
         org, dirs = camera_rays(self.cam, offset, lens)
-        h = self.hits(org, dirs)
+        h = self.hits(org - self.tracer.centre, dirs)
         self.seconds["primary"] += time.perf_counter() - t0
         vpl = None if self.sampler.empty else self.sampler.frame(f)
+        if vpl is not None:  # into the tracer's scene-centred frame
+            vpl = {**vpl, "pos": np.ascontiguousarray(vpl["pos"] - self.tracer.centre)}
         return self.shade(h, vpl)
 
     def close(self) -> None:
