@@ -951,14 +951,28 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
     cam = opt.cam
     acc = _Mean(np.zeros((cam.height * cam.width, 3)), np.zeros((cam.height * cam.width, 3)))
     interrupted = False
+    # With a tolerance the bar follows the error, not the frame cap that is
+    # rarely reached: the share of the way, in log scale, from the first
+    # estimate to tol (or the share of the frames, whichever is further).
     bar = tqdm(
-        total=opt.max_frames, disable=not progress, desc="display", unit="frame", leave=False
+        total=100,
+        disable=not progress,
+        desc="display",
+        unit="%",
+        leave=False,
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}{postfix}",
     )
+    first = None
     try:
         for f in range(opt.max_frames):
             acc.add(source.frame(f, opt.seed).astype(np.float64))
-            bar.update(1)
-            bar.set_postfix_str(f"est relMSE {acc.est:.2e}")
+            share = (f + 1) / opt.max_frames
+            if opt.tol > 0 and np.isfinite(acc.est) and acc.est > 0:
+                first = acc.est if first is None else first
+                if first > opt.tol:
+                    share = max(share, math.log(first / acc.est) / math.log(first / opt.tol))
+            bar.update(int(100 * min(share, 1.0)) - bar.n)
+            bar.set_postfix_str(f"frame {f + 1}, est relMSE {acc.est:.2e}")
             if acc.done(opt):
                 break
     except KeyboardInterrupt:
