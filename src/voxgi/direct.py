@@ -258,6 +258,35 @@ def direct_irradiance(
     inside a closed emitting enclosure (every direction sees ``L_e``:
     ``E = π L_e``).
     """
+    samples, seed, nthreads = _check(scene, vox, samples, seed, threads, receivers)
+    t0 = time.perf_counter()
+    est = _Estimate(len(vox))
+    emit = EmitterSampler(scene)
+    area = np.asarray(vox.area, np.float64)
+    lit = np.flatnonzero(area > 0)
+    if receivers == "reflecting":
+        lit = lit[np.any(np.asarray(vox.albedo)[lit] > 0, axis=1)]
+    stats = {"rays": 0, "samples": samples, "emitter_triangles": len(emit), "records_lit": len(lit)}
+    if len(emit) and len(lit):
+        if offset is None:
+            offset = 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
+        with _Rays(scene, vox, emit, float(offset), nthreads) as rays:
+            rng = np.random.default_rng([seed, 1])
+            groups = [(lit, samples)]
+            for _ in range(_ROUNDS):
+                for todo, per in groups:
+                    stats["rays"] += rays.estimate(est, todo, per, rng, max_rays)
+                groups = _noisy(est, lit, rel_error, samples)
+                if not groups:
+                    break
+    stats["refined_records"] = int(np.count_nonzero(est.counts > samples))
+    stats["max_samples"] = int(est.counts.max(initial=0))
+    stats["seconds"] = time.perf_counter() - t0
+    return est.irradiance, stats
+
+
+def _check(scene, vox, samples, seed, threads, receivers) -> tuple[int, int, int]:
+    """Validate the arguments of :func:`direct_irradiance`; the checked numbers."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
     if not isinstance(vox, VoxelSet):
@@ -268,82 +297,78 @@ def direct_irradiance(
             f"(fingerprint {vox.scene_fingerprint!r}, the scene's is "
             f"{scene.fingerprint()!r})"
         )
-    samples = _validate.integer(samples, "samples", low=1, high=1 << 16)
     if receivers not in ("reflecting", "all"):
         raise ValueError(f"receivers: expected 'reflecting' or 'all', got {receivers!r}")
-    seed = _validate.integer(seed, "seed")
-    nthreads = _validate.threads(threads)
-    t0 = time.perf_counter()
-    n = len(vox)
-    out = np.zeros((n, 3))
-    emit = EmitterSampler(scene)
-    area = np.asarray(vox.area, np.float64)
-    lit = (
-        np.flatnonzero(area > 0)
-        if receivers == "all"
-        else np.flatnonzero(np.any(np.asarray(vox.albedo) > 0, axis=1) & (area > 0))
+    return (
+        _validate.integer(samples, "samples", low=1, high=1 << 16),
+        _validate.integer(seed, "seed"),
+        _validate.threads(threads),
     )
-    stats = {"rays": 0, "samples": samples, "emitter_triangles": len(emit), "records_lit": len(lit)}
-    if len(emit) == 0 or len(lit) == 0:
-        stats["seconds"] = time.perf_counter() - t0
-        return out, stats
-    if offset is None:
-        offset = 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
-    centre = scene.bounds.mean(axis=0)
-    tracer = _ShadowRays(scene, nthreads, centre)
-    local = (emit.arrays[0] - centre, *emit.arrays[1:])  # the emitters in the tracer's frame
-    point = np.asarray(vox.centroid, np.float64) - centre
-    normal = np.asarray(vox.normal, np.float64)
-    pool = ThreadPoolExecutor(nthreads) if nthreads > 1 else None
-    rng = np.random.default_rng([seed, 1])
-    counts = np.zeros(n, np.int64)
-    mean_sq = np.zeros(n)
-    try:
-        groups = [(lit, samples)]
-        for _ in range(_ROUNDS):
-            for todo, per in groups:
-                base = _sequence(per, int(rng.integers(1 << 31)))
-                shifts = rng.random((len(todo), 5))
-                per_batch = max(1, max_rays // per)
-                for a in range(0, len(todo), per_batch):
-                    rec = todo[a : a + per_batch]
-                    m, sq = _batch(
-                        local,
-                        emit.emitter_of,
-                        tracer,
-                        pool,
-                        point[rec],
-                        normal[rec],
-                        shifts[a : a + per_batch],
-                        base,
-                        offset,
-                        nthreads,
-                    )
-                    # running means over the rounds, weighted by sample counts
-                    w_old = counts[rec] / (counts[rec] + per)
-                    out[rec] = w_old[:, None] * out[rec] + (1 - w_old)[:, None] * m
-                    mean_sq[rec] = w_old * mean_sq[rec] + (1 - w_old) * sq
-                    counts[rec] += per
-                stats["rays"] += len(todo) * per
-            groups = _noisy(out, mean_sq, counts, lit, rel_error, samples)
-            if not groups:
-                break
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    stats["refined_records"] = int(np.count_nonzero(counts > samples))
-    stats["max_samples"] = int(counts.max())
-    stats["seconds"] = time.perf_counter() - t0
-    return out, stats
+
+
+class _Estimate:
+    """Per record: the running mean irradiance, the mean square of the
+    luminance of its samples, and how many samples it took."""
+
+    def __init__(self, n: int):
+        self.irradiance = np.zeros((n, 3))
+        self.mean_sq = np.zeros(n)
+        self.counts = np.zeros(n, np.int64)
+
+    def add(self, rec: np.ndarray, mean: np.ndarray, sq: np.ndarray, per: int) -> None:
+        """Fold the means of ``per`` more samples of records ``rec`` in."""
+        w_old = self.counts[rec] / (self.counts[rec] + per)
+        self.irradiance[rec] = w_old[:, None] * self.irradiance[rec] + (1 - w_old)[:, None] * mean
+        self.mean_sq[rec] = w_old * self.mean_sq[rec] + (1 - w_old) * sq
+        self.counts[rec] += per
+
+
+class _Rays:
+    """The records' points and the emitters in a frame centred on the scene
+    (float32 keeps its precision for a scene far from the origin), the
+    Embree scene and the worker threads."""
+
+    def __init__(
+        self, scene: Scene, vox: VoxelSet, emit: EmitterSampler, offset: float, threads: int
+    ):
+        centre = scene.bounds.mean(axis=0)
+        self.tracer = _ShadowRays(scene, threads, centre)
+        self.emitters = (emit.arrays[0] - centre, *emit.arrays[1:])
+        self.emitter_of = emit.emitter_of
+        self.point = np.asarray(vox.centroid, np.float64) - centre
+        self.normal = np.asarray(vox.normal, np.float64)
+        self.offset, self.threads = offset, threads
+        self.pool = ThreadPoolExecutor(threads) if threads > 1 else None
+
+    def __enter__(self) -> _Rays:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.pool is not None:
+            self.pool.shutdown()
+
+    def estimate(self, est: _Estimate, todo: np.ndarray, per: int, rng, max_rays: int) -> int:
+        """``per`` more samples for each record of ``todo``, in batches of at
+        most ``max_rays`` rays; returns the sample pairs taken."""
+        base = _sequence(per, int(rng.integers(1 << 31)))
+        shifts = rng.random((len(todo), 5))
+        step = max(1, max_rays // per)
+        for a in range(0, len(todo), step):
+            rec = todo[a : a + step]
+            args = (
+                self.emitters,
+                self.point[rec],
+                self.normal[rec],
+                shifts[a : a + step],
+                base,
+                self.offset,
+            )
+            est.add(rec, *_batch(args, self.emitter_of, self.tracer, self.pool, self.threads), per)
+        return len(todo) * per
 
 
 def _noisy(
-    out: np.ndarray,
-    mean_sq: np.ndarray,
-    counts: np.ndarray,
-    lit: np.ndarray,
-    rel_error: float,
-    samples: int,
+    est: _Estimate, lit: np.ndarray, rel_error: float, samples: int
 ) -> list[tuple[np.ndarray, int]]:
     """Records whose standard error exceeds ``rel_error`` of their estimate,
     grouped by the samples each still needs.
@@ -353,43 +378,26 @@ def _noisy(
     term varies most, get the samples they need in a few batches and the rest
     of the scene keeps ``samples``.
     """
-    lum = out[lit] @ _LUMINANCE
-    var = np.maximum(mean_sq[lit] - lum * lum, 0.0) / counts[lit]
+    lum = est.irradiance[lit] @ _LUMINANCE
+    var = np.maximum(est.mean_sq[lit] - lum * lum, 0.0) / est.counts[lit]
     need = var / np.maximum((rel_error * lum) ** 2, np.finfo(np.float64).tiny)
     bad = (lum > 0) & (need > 1.0)
     if not np.any(bad):
         return []
-    extra = np.clip((need[bad] - 1.0) * counts[lit][bad], samples, 16 * samples)
+    extra = np.clip((need[bad] - 1.0) * est.counts[lit][bad], samples, 16 * samples)
     size = np.minimum(2 ** np.ceil(np.log2(extra)).astype(np.int64), 16 * samples)
     return [(lit[bad][size == k], int(k)) for k in np.unique(size)]
 
 
 def _batch(
-    emitters: tuple,
-    emitter_of: np.ndarray,
-    tracer: _ShadowRays,
-    pool,
-    x: np.ndarray,
-    nx: np.ndarray,
-    shift: np.ndarray,
-    base: np.ndarray,
-    offset: float,
-    nthreads: int,
+    args: tuple, emitter_of: np.ndarray, tracer: _ShadowRays, pool, nthreads: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Estimates of the records at ``x`` (R, 3) from the samples ``base``
-    (S, 5) shifted per record by ``shift`` (R, 5).
+    """Trace one batch: ``args`` are the kernels' (emitters, points, normals,
+    shifts, sequence, offset) for R records and S samples.
 
     Returns the mean RGB irradiance (R, 3) and the mean square of its
     luminance (R,), from which the caller judges each record's noise.
     """
-    args = (
-        emitters,
-        np.ascontiguousarray(x),
-        np.ascontiguousarray(nx),
-        np.ascontiguousarray(shift),
-        base,
-        float(offset),
-    )
     lo, ld, length, contribution, ho, hd = _core.direct_light_rays(*args, threads=nthreads)
     # light rays that cannot contribute (a back face at either end) have length 0
     live = np.flatnonzero(length > 0)
