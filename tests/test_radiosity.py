@@ -367,6 +367,7 @@ def test_cornell_box_energy_balance_to_1e3_at_res256():
     assert np.all(np.abs(e["imbalance"]) < 1e-3)
 
 
+@pytest.mark.slow  # 13 s; test_cap_sphere_and_acceleration keeps rho 0.99 in the default run
 def test_furnace_sphere_rho099_at_res96():
     # The furnace at rho 0.99: 0.5% mean needs a lost fraction δ under
     # about 5e-5 (the error is about 99 δ), which the sphere reaches at
