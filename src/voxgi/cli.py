@@ -76,8 +76,7 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .pipeline import RENDER_DIRECTIONS, RENDER_RESOLUTION
-
+    """The ``voxgi`` argument parser with its ``render`` and ``scenes`` subcommands."""
     p = argparse.ArgumentParser(
         prog="voxgi",
         formatter_class=_HelpFormatter,
@@ -96,6 +95,20 @@ def build_parser() -> argparse.ArgumentParser:
         "work), 130 interrupted by Ctrl-C (a partial image is written only if a "
         "frame finished; its EXR header says so).",
     )
+    _add_render_arguments(r)
+    sub.add_parser(
+        "scenes",
+        formatter_class=_HelpFormatter,
+        help="list the built-in scenes",
+        description="List the built-in scenes that 'voxgi render NAME' accepts.",
+    )
+    return p
+
+
+def _add_render_arguments(r: argparse.ArgumentParser) -> None:
+    """Add the ``render`` subcommand's arguments to its parser ``r``."""
+    from .pipeline import RENDER_DIRECTIONS, RENDER_RESOLUTION
+
     r.add_argument("scene", help="scene TOML file, or a built-in scene name (see 'voxgi scenes')")
     r.add_argument(
         "-o",
@@ -120,6 +133,28 @@ def build_parser() -> argparse.ArgumentParser:
         default=RENDER_DIRECTIONS,
         help="radius R of the solve's gathering direction set",
     )
+    _add_display_arguments(r)
+    r.add_argument(
+        "--threads",
+        metavar="N",
+        type=_at_least(1),
+        default=None,
+        help="worker threads (default: all hardware threads)",
+    )
+    talk = r.add_mutually_exclusive_group()
+    talk.add_argument(
+        "-q", "--quiet", action="store_true", help="no progress bars (the summary lines stay)"
+    )
+    talk.add_argument(
+        "-v",
+        "--verbose",
+        action="store_true",
+        help="also print diagnostics: what each stage skipped and why",
+    )
+
+
+def _add_display_arguments(r: argparse.ArgumentParser) -> None:
+    """Add the ``render`` options of the display and its image (frames to seed)."""
     r.add_argument(
         "--frames",
         "--spp",
@@ -161,30 +196,6 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--seed", metavar="S", type=int, default=0, help="seed of the display's sample sequences"
     )
-    r.add_argument(
-        "--threads",
-        metavar="N",
-        type=_at_least(1),
-        default=None,
-        help="worker threads (default: all hardware threads)",
-    )
-    talk = r.add_mutually_exclusive_group()
-    talk.add_argument(
-        "-q", "--quiet", action="store_true", help="no progress bars (the summary lines stay)"
-    )
-    talk.add_argument(
-        "-v",
-        "--verbose",
-        action="store_true",
-        help="also print diagnostics: what each stage skipped and why",
-    )
-    sub.add_parser(
-        "scenes",
-        formatter_class=_HelpFormatter,
-        help="list the built-in scenes",
-        description="List the built-in scenes that 'voxgi render NAME' accepts.",
-    )
-    return p
 
 
 def output_paths(output: str | Path) -> tuple[Path, Path]:
@@ -243,21 +254,26 @@ def _scene_source(spec: str) -> tuple[Path | None, str]:
     return None, spec
 
 
-def run_render(args) -> int:
-    """``voxgi render``: decide and check the outputs, load the scene, voxelize,
-    solve, display, write EXR + PNG; print what was done and each phase's seconds."""
-    from . import io
-    from .display import render
-    from .pipeline import solve_for_display
-    from .voxels import voxelize
+def _say(text: str) -> None:
+    """Print one line of progress on stdout at once."""
+    print(text, flush=True)
 
-    def say(text: str) -> None:
-        print(text, flush=True)
 
-    def note(text: str) -> None:
-        if args.verbose:
-            say(f"  {text}")
+def _note(args, text: str) -> None:
+    """Print an indented diagnostic line, only with ``--verbose``."""
+    if args.verbose:
+        _say(f"  {text}")
 
+
+def _interrupted(text: str) -> int:
+    """Report an interrupted render on stderr; returns its exit code."""
+    print(f"voxgi render: {text}", file=sys.stderr, flush=True)
+    return EXIT_INTERRUPTED
+
+
+def _prepare_render(args):
+    """Resolve the scene and outputs (checked writable), load the scene and size its
+    camera; returns ``(scene, name, exr, png)``."""
     from . import scenes
     from .scene import Scene
 
@@ -270,74 +286,81 @@ def run_render(args) -> int:
     changes = {k: v for k, v in (("width", args.width), ("height", args.height)) if v is not None}
     if changes:
         scene.camera = scene.camera.replace(**changes)
-    cam = scene.camera
-    progress = not args.quiet
-    say(
-        f"scene {name}: {len(scene.objects)} objects, {scene.n_triangles} triangles, "
-        f"{cam.width}x{cam.height} pixels"
+    return scene, name, exr, png
+
+
+def _run_voxelize(args, scene):
+    """Voxelize the scene and report it; returns ``(vox, seconds)``."""
+    from .voxels import voxelize
+
+    t0 = time.perf_counter()
+    vox = voxelize(scene, resolution=args.resolution, threads=args.threads, progress=not args.quiet)
+    t_vox = time.perf_counter() - t0
+    _say(f"voxelize: {len(vox)} records (resolution {vox.resolution}) in {t_vox:.2f} s")
+    for key in ("skipped_degenerate", "polygon_overflows", "cut_limit_hits"):
+        if vox.stats.get(key):
+            _note(args, f"voxelize {key}: {vox.stats[key]}")
+    return vox, t_vox
+
+
+def _run_solve(args, vox):
+    """Solve the radiosity for the display and report it; returns ``(sol, seconds)``."""
+    from .pipeline import solve_for_display
+
+    t0 = time.perf_counter()
+    sol = solve_for_display(
+        vox, directions=args.directions, threads=args.threads, progress=not args.quiet
+    )
+    t_sol = time.perf_counter() - t0
+    _say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in {t_sol:.2f} s")
+    for what, why in sol.stats.get("skipped", {}).items():
+        _note(args, f"solve skipped {what}: {why}")
+    return sol, t_sol
+
+
+def _run_display(args, scene, sol):
+    """Render the image by progressive display frames."""
+    from .display import render
+
+    return render(
+        scene,
+        sol,
+        max_frames=args.frames,
+        tol=args.tol,
+        seed=args.seed,
+        progress=not args.quiet,
+        threads=args.threads,
     )
 
-    phase = "voxelize"
-    try:
-        t0 = time.perf_counter()
-        vox = voxelize(scene, resolution=args.resolution, threads=args.threads, progress=progress)
-        t_vox = time.perf_counter() - t0
-        say(f"voxelize: {len(vox)} records (resolution {vox.resolution}) in {t_vox:.2f} s")
-        for key in ("skipped_degenerate", "polygon_overflows", "cut_limit_hits"):
-            if vox.stats.get(key):
-                note(f"voxelize {key}: {vox.stats[key]}")
-        phase = "solve"
-        t0 = time.perf_counter()
-        sol = solve_for_display(
-            vox, directions=args.directions, threads=args.threads, progress=progress
-        )
-        t_sol = time.perf_counter() - t0
-        say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in {t_sol:.2f} s")
-        for what, why in sol.stats.get("skipped", {}).items():
-            note(f"solve skipped {what}: {why}")
-        phase = "display"
-        res = render(
-            scene,
-            sol,
-            max_frames=args.frames,
-            tol=args.tol,
-            seed=args.seed,
-            progress=progress,
-            threads=args.threads,
-        )
-    except KeyboardInterrupt:
-        print(
-            f"voxgi render: interrupted during {phase}; nothing written",
-            file=sys.stderr,
-            flush=True,
-        )
-        return EXIT_INTERRUPTED
 
+def _report_display(args, res, interrupted: bool) -> None:
+    """Print the display's summary line and, with ``--verbose``, what it skipped."""
     s = res.stats
-    sec = s["seconds"]
-    interrupted = bool(s.get("interrupted"))
-    if interrupted and res.frames == 0:
-        print(
-            "voxgi render: interrupted before the first display frame finished; nothing written",
-            file=sys.stderr,
-            flush=True,
-        )
-        return EXIT_INTERRUPTED
-    say(
+    _say(
         f"display: {res.frames} frames{' (interrupted)' if interrupted else ''}, "
         f"{s['vpls']} VPLs/pixel, {s['primary_rays']:.3g} primary + {s['shadow_rays']:.3g} "
-        f"shadow + {s['gather_rays']:.3g} gather rays in {sec['display']:.2f} s "
+        f"shadow + {s['gather_rays']:.3g} gather rays in {s['seconds']['display']:.2f} s "
         f"(estimated relMSE of the noise {s['est_rel_mse']:.2e})"
     )
     for why in s.get("skipped", []):
-        note(f"display skipped {why}")
+        _note(args, f"display skipped {why}")
+
+
+def _timings(t_vox: float, t_sol: float, sec: dict) -> dict:
+    """Seconds of each phase, the display's own phases, and the total."""
     timings = {
         "voxelize": t_vox,
         "solve": t_sol,
         **{k: v for k, v in sec.items() if k not in ("voxelize", "solve", "total")},
     }
     timings["total"] = t_vox + t_sol + sec["display"]
-    meta = {
+    return timings
+
+
+def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
+    """The EXR header's record of the render: its settings, sizes and timings."""
+    s = res.stats
+    return {
         "scene": name,
         "width": cam.width,
         "height": cam.height,
@@ -351,27 +374,51 @@ def run_render(args) -> int:
         "vpls_per_pixel": s["vpls"],
         "seed": args.seed,
         "exposure": args.exposure,
-        "interrupted": interrupted,
+        "interrupted": bool(s.get("interrupted")),
         "seconds": timings,
         "skipped": s["skipped"],
     }
+
+
+def run_render(args) -> int:
+    """``voxgi render``: decide and check the outputs, load the scene, voxelize,
+    solve, display, write EXR + PNG; print what was done and each phase's seconds."""
+    from . import io
+
+    scene, name, exr, png = _prepare_render(args)
+    cam = scene.camera
+    _say(
+        f"scene {name}: {len(scene.objects)} objects, {scene.n_triangles} triangles, "
+        f"{cam.width}x{cam.height} pixels"
+    )
+    phase = "voxelize"
+    try:
+        vox, t_vox = _run_voxelize(args, scene)
+        phase = "solve"
+        sol, t_sol = _run_solve(args, vox)
+        phase = "display"
+        res = _run_display(args, scene, sol)
+    except KeyboardInterrupt:
+        return _interrupted(f"interrupted during {phase}; nothing written")
+
+    interrupted = bool(res.stats.get("interrupted"))
+    if interrupted and res.frames == 0:
+        return _interrupted("interrupted before the first display frame finished; nothing written")
+    _report_display(args, res, interrupted)
+    timings = _timings(t_vox, t_sol, res.stats["seconds"])
+    meta = _render_metadata(args, name, cam, vox, res, timings)
     # Each write is atomic (voxgi.io.atomic_path): a Ctrl-C here leaves every
     # file either as it was or complete.
     try:
         io.write_exr(exr, res.image, metadata=meta)
         io.write_png(png, res.image, exposure=args.exposure)
     except KeyboardInterrupt:
-        print(
-            "voxgi render: interrupted while writing; the outputs are whole (old or new)",
-            file=sys.stderr,
-            flush=True,
-        )
-        return EXIT_INTERRUPTED
+        return _interrupted("interrupted while writing; the outputs are whole (old or new)")
     if interrupted:
-        say(f"interrupted: wrote a partial image ({res.frames} frames) to {exr} and {png}")
+        _say(f"interrupted: wrote a partial image ({res.frames} frames) to {exr} and {png}")
     else:
-        say(f"wrote {exr} and {png}")
-    say("seconds: " + ", ".join(f"{k} {v:.2f}" for k, v in timings.items()))
+        _say(f"wrote {exr} and {png}")
+    _say("seconds: " + ", ".join(f"{k} {v:.2f}" for k, v in timings.items()))
     return EXIT_INTERRUPTED if interrupted else 0
 
 

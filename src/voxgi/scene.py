@@ -488,88 +488,16 @@ class Scene:
     def from_dict(cls, data: dict, base_dir=".", source: str = "<dict>") -> Scene:
         """Build a scene from the parsed contents of a scene file (see :meth:`load`)."""
         base_dir = Path(base_dir)
-        if not isinstance(data, dict):
-            raise TypeError(f"{source}: expected a table at the top level")
-        unknown = set(data) - {"camera", "materials", "object"}
-        if unknown:
-            raise ValueError(
-                f"{source}: unknown top-level key(s) {sorted(unknown)}; "
-                "expected camera, materials, object"
-            )
+        _check_top_level(data, source)
         scene = cls()
         if "camera" in data:
-            cam = data["camera"]
-            if not isinstance(cam, dict):
-                raise ValueError(f"{source}: [camera] must be a table")
-            try:
-                scene.camera = Camera(**cam)
-            except TypeError as exc:
-                raise ValueError(f"{source}: [camera]: {exc}") from None
-            except ValueError as exc:
-                raise ValueError(f"{source}: [camera]: {exc}") from None
-        materials = {}
-        mats = data.get("materials", {})
-        if not isinstance(mats, dict):
-            raise ValueError(f"{source}: [materials] must be a table of tables")
-        for mname, m in mats.items():
-            materials[mname] = _material_from_dict(m, f"{source}: [materials.{mname}]")
+            scene.camera = _camera_from_dict(data["camera"], source)
+        materials = _materials_from_dict(data.get("materials", {}), source)
         objs = data.get("object", [])
         if not isinstance(objs, list):
             raise ValueError(f"{source}: 'object' must be an array of tables ([[object]])")
-        mat_keys = {"albedo", "emission", "specular"}
-        allowed = {
-            "mesh",
-            "material",
-            "name",
-            "two_sided",
-            "translate",
-            "rotate",
-            "scale",
-            "matrix",
-        } | mat_keys
         for k, o in enumerate(objs):
-            where = f"{source}: object #{k}"
-            if not isinstance(o, dict):
-                raise ValueError(f"{where}: must be a table")
-            if "name" in o:
-                where += f" ({o['name']!r})"
-            bad = set(o) - allowed
-            if bad:
-                raise ValueError(f"{where}: unknown key(s) {sorted(bad)}")
-            if "mesh" not in o:
-                raise ValueError(f"{where}: missing key 'mesh'")
-            for key in ("mesh", "material", "name"):
-                if key in o and not isinstance(o[key], str):
-                    raise ValueError(
-                        f"{where}: '{key}' must be a string, got {type(o[key]).__name__} {o[key]!r}"
-                    )
-            if "material" in o:
-                if set(o) & mat_keys:
-                    raise ValueError(f"{where}: give either 'material' or inline albedo/emission")
-                if o["material"] not in materials:
-                    raise ValueError(
-                        f"{where}: unknown material {o['material']!r}; defined: {sorted(materials)}"
-                    )
-                mat = materials[o["material"]]
-            else:
-                mat = _material_from_dict({kk: o[kk] for kk in mat_keys if kk in o}, where)
-            mesh_path = Path(o["mesh"])
-            if not mesh_path.is_absolute():
-                mesh_path = base_dir / mesh_path
-            if not mesh_path.exists():
-                raise ValueError(f"{where}: mesh file not found: {mesh_path}")
-            mesh = _load_mesh(mesh_path, where)
-            matrix = _transform_from_dict(o, where)
-            if matrix is not None:
-                mesh = mesh.copy()
-                mesh.apply_transform(matrix)
-            name = o.get("name", mesh_path.stem)
-            try:
-                obj = scene.add(mesh, mat, name=name, two_sided=o.get("two_sided", False))
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"{where}: {exc}") from None
-            obj.source = str(o["mesh"])
-            obj.transform = matrix
+            _add_object_from_dict(scene, o, f"{source}: object #{k}", materials, base_dir)
         return scene
 
     def save(self, path) -> Path:
@@ -623,6 +551,111 @@ class Scene:
 # Mesh formats that are text only: trimesh guesses the encoding of any
 # other bytes with an optional package and reports that package missing.
 _TEXT_MESH_FORMATS = {".obj", ".off"}
+
+
+#: Keys of an ``[[object]]`` table that give its material inline.
+_OBJECT_MATERIAL_KEYS = {"albedo", "emission", "specular"}
+#: Every key an ``[[object]]`` table may have.
+_OBJECT_KEYS = {
+    "mesh",
+    "material",
+    "name",
+    "two_sided",
+    "translate",
+    "rotate",
+    "scale",
+    "matrix",
+} | _OBJECT_MATERIAL_KEYS
+
+
+def _check_top_level(data, source: str) -> None:
+    """Raise unless ``data`` is a table with only the known top-level keys."""
+    if not isinstance(data, dict):
+        raise TypeError(f"{source}: expected a table at the top level")
+    unknown = set(data) - {"camera", "materials", "object"}
+    if unknown:
+        raise ValueError(
+            f"{source}: unknown top-level key(s) {sorted(unknown)}; "
+            "expected camera, materials, object"
+        )
+
+
+def _camera_from_dict(cam, source: str) -> Camera:
+    """The :class:`Camera` of a ``[camera]`` table."""
+    if not isinstance(cam, dict):
+        raise ValueError(f"{source}: [camera] must be a table")
+    try:
+        return Camera(**cam)
+    except TypeError as exc:
+        raise ValueError(f"{source}: [camera]: {exc}") from None
+    except ValueError as exc:
+        raise ValueError(f"{source}: [camera]: {exc}") from None
+
+
+def _materials_from_dict(mats, source: str) -> dict[str, Material]:
+    """The named materials of a ``[materials]`` table."""
+    if not isinstance(mats, dict):
+        raise ValueError(f"{source}: [materials] must be a table of tables")
+    return {
+        mname: _material_from_dict(m, f"{source}: [materials.{mname}]") for mname, m in mats.items()
+    }
+
+
+def _check_object_keys(o, where: str) -> str:
+    """Check an ``[[object]]`` table's keys and types; returns ``where`` with its name."""
+    if not isinstance(o, dict):
+        raise ValueError(f"{where}: must be a table")
+    if "name" in o:
+        where += f" ({o['name']!r})"
+    bad = set(o) - _OBJECT_KEYS
+    if bad:
+        raise ValueError(f"{where}: unknown key(s) {sorted(bad)}")
+    if "mesh" not in o:
+        raise ValueError(f"{where}: missing key 'mesh'")
+    for key in ("mesh", "material", "name"):
+        if key in o and not isinstance(o[key], str):
+            raise ValueError(
+                f"{where}: '{key}' must be a string, got {type(o[key]).__name__} {o[key]!r}"
+            )
+    return where
+
+
+def _object_material(o: dict, where: str, materials: dict[str, Material]) -> Material:
+    """An object's material: a named one from ``[materials]`` or its inline keys."""
+    if "material" not in o:
+        return _material_from_dict({k: o[k] for k in _OBJECT_MATERIAL_KEYS if k in o}, where)
+    if set(o) & _OBJECT_MATERIAL_KEYS:
+        raise ValueError(f"{where}: give either 'material' or inline albedo/emission")
+    if o["material"] not in materials:
+        raise ValueError(
+            f"{where}: unknown material {o['material']!r}; defined: {sorted(materials)}"
+        )
+    return materials[o["material"]]
+
+
+def _add_object_from_dict(
+    scene: Scene, o, where: str, materials: dict[str, Material], base_dir: Path
+) -> None:
+    """Load, transform and add to ``scene`` the mesh of one ``[[object]]`` table."""
+    where = _check_object_keys(o, where)
+    mat = _object_material(o, where, materials)
+    mesh_path = Path(o["mesh"])
+    if not mesh_path.is_absolute():
+        mesh_path = base_dir / mesh_path
+    if not mesh_path.exists():
+        raise ValueError(f"{where}: mesh file not found: {mesh_path}")
+    mesh = _load_mesh(mesh_path, where)
+    matrix = _transform_from_dict(o, where)
+    if matrix is not None:
+        mesh = mesh.copy()
+        mesh.apply_transform(matrix)
+    name = o.get("name", mesh_path.stem)
+    try:
+        obj = scene.add(mesh, mat, name=name, two_sided=o.get("two_sided", False))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    obj.source = str(o["mesh"])
+    obj.transform = matrix
 
 
 def _load_mesh(mesh_path: Path, where: str) -> trimesh.Trimesh:

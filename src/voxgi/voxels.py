@@ -244,6 +244,142 @@ def _is_closed(obj) -> bool:
     return bool(m.is_watertight and m.is_winding_consistent)
 
 
+def _check_arguments(scene, resolution, max_memory, threads, progress, cut):
+    """Validate :func:`voxelize`'s arguments; returns ``(resolution, max_memory, threads)``."""
+    from .scene import Scene
+
+    if not isinstance(scene, Scene):
+        raise TypeError(f"voxelize: expected a voxgi.Scene, got {type(scene).__name__}")
+    resolution = _validate.integer(resolution, "voxelize: resolution", low=2, high=1 << 20)
+    if max_memory is not None:
+        max_memory = _validate.integer(max_memory, "voxelize: max_memory", low=1)
+    nthreads = _validate.threads(threads, "voxelize: threads")
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"voxelize: progress must be a bool, got {progress!r}")
+    if not isinstance(cut, (bool, np.bool_)):
+        raise TypeError(f"voxelize: cut must be a bool, got {cut!r}")
+    scene.check_nonempty()
+    return resolution, max_memory, nthreads
+
+
+def _grid(triangles: np.ndarray, resolution: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """The voxel grid ``(pitch, origin, dims)`` around the triangles' bounding box."""
+    lo = triangles.reshape(-1, 3).min(axis=0)
+    hi = triangles.reshape(-1, 3).max(axis=0)
+    longest = float(np.max(hi - lo))
+    if not longest > 0:
+        raise ValueError("voxelize: the scene's bounding box has zero size")
+    pitch = longest / resolution
+    # Areas and normals are float32 (API): a voxel face must be representable
+    # with room to spare (normal float32 range ~1e-38 .. 3e38).
+    if not 1e-30 <= pitch * pitch <= 1e30:
+        raise ValueError(
+            f"voxelize: voxel pitch {pitch:.3g} (scene size {longest:.3g} over "
+            f"resolution {resolution}) gives voxel areas outside float32's range; "
+            "rescale the scene"
+        )
+    origin = lo - 0.5 * pitch
+    dims = (np.floor((hi - origin) / pitch) + 1).astype(np.int32)
+    return pitch, origin, dims
+
+
+def _check_memory(triangles: np.ndarray, pitch: float, resolution: int, max_memory) -> dict:
+    """Estimate the peak memory and raise if it is over the budget; returns the estimate."""
+    est = estimate_memory(triangles, pitch)
+    budget = max_memory if max_memory is not None else _available_memory() // 2
+    if est["bytes"] > budget:
+        raise ValueError(
+            f"voxelize: resolution {resolution} needs up to {est['bytes']:,} bytes "
+            f"(estimated with a 25% margin from {est['expected_pairs']:,} voxel-triangle pairs, "
+            f"{est['expected_records']:,} records for {len(triangles):,} triangles), over the "
+            f"budget of {budget:,} bytes "
+            f"({'max_memory' if max_memory is not None else 'half the available memory'}); "
+            "lower the resolution or raise max_memory"
+        )
+    return est
+
+
+def _run_kernel(tri: dict, origin, pitch: float, dims, *, cut, threads: int, progress) -> dict:
+    """Run the C++ voxelization kernel on the scene's triangles, with a progress bar."""
+    from . import _core
+
+    callback, close = _progress_bar(bool(progress))
+    try:
+        return _core.voxelize(
+            tri["triangles"],
+            tri["object"],
+            tri["two_sided"],
+            tri["albedo"],
+            tri["emission"],
+            np.ascontiguousarray(origin, dtype=np.float64),
+            float(pitch),
+            dims,
+            cut=bool(cut),
+            threads=threads,
+            progress=callback,
+        )
+    finally:
+        close()
+
+
+def _voxelize_stats(
+    st: dict, triangles: np.ndarray, est: dict, scene, *, cut, seconds: float
+) -> dict:
+    """:attr:`VoxelSet.stats` from the kernel's counters and the memory estimate."""
+    return {
+        "triangles": int(st["triangles"]),
+        "records": int(st["records"]),
+        "back_records": int(st["back_records"]),
+        "two_sided_records": int(st["two_sided_records"]),
+        "cells": int(st["cells"]),
+        "pairs": int(st["pairs"]),
+        "skipped_degenerate": int(st["skipped_degenerate"]),
+        "touch_records": int(st["touch_records"]),
+        "clusters": int(st["clusters"]),
+        "cut_clusters": int(st["cut_clusters"]),
+        "cut_records": int(st["cut_records"]),
+        "cut_limit_hits": int(st["cut_limit_hits"]),
+        "polygon_overflows": int(st["polygon_overflows"]),
+        "peak_bytes": int(st["peak_bytes"] + triangles.nbytes),
+        "estimate_bytes": est["bytes"],
+        "estimate_pairs": est["pairs"],
+        "expected_pairs": est["expected_pairs"],
+        "expected_records": est["expected_records"],
+        "threads": int(st["threads"]),
+        "cut": bool(cut),
+        # Objects whose mesh is closed (watertight, consistently wound): their
+        # inside can never be seen, which voxgi.solve uses (closed=None).
+        "closed_objects": [i for i, o in enumerate(scene.objects) if _is_closed(o)],
+        "seconds": seconds,
+        "phase_seconds": {
+            "pairs": st["seconds_pairs"],
+            "sort": st["seconds_sort"],
+            "records": st["seconds_records"],
+        },
+    }
+
+
+def _voxel_set(res: dict, pitch: float, origin, resolution: int, scene, stats: dict) -> VoxelSet:
+    """The :class:`VoxelSet` of the kernel's record arrays on the grid."""
+    return VoxelSet(
+        ijk=res["ijk"],
+        normal=res["normal"],
+        area=res["area"],
+        albedo=res["albedo"],
+        emission=res["emission"],
+        centroid=res["centroid"],
+        object_id=res["object_id"],
+        back=res["back"],
+        pitch=float(pitch),
+        origin=np.asarray(origin, dtype=np.float64),
+        resolution=resolution,
+        scene_fingerprint=scene.fingerprint(),
+        stats=stats,
+        side=res["side"],
+        scene=scene,
+    )
+
+
 def voxelize(
     scene,
     resolution: int = 128,
@@ -325,117 +461,15 @@ def voxelize(
     >>> vox.ijk.dtype, vox.area.dtype
     (dtype('int32'), dtype('float32'))
     """
-    from . import _core
-    from .scene import Scene
-
     t_start = time.perf_counter()
-    if not isinstance(scene, Scene):
-        raise TypeError(f"voxelize: expected a voxgi.Scene, got {type(scene).__name__}")
-    resolution = _validate.integer(resolution, "voxelize: resolution", low=2, high=1 << 20)
-    if max_memory is not None:
-        max_memory = _validate.integer(max_memory, "voxelize: max_memory", low=1)
-    nthreads = _validate.threads(threads, "voxelize: threads")
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"voxelize: progress must be a bool, got {progress!r}")
-    if not isinstance(cut, (bool, np.bool_)):
-        raise TypeError(f"voxelize: cut must be a bool, got {cut!r}")
-    scene.check_nonempty()
-
+    resolution, max_memory, nthreads = _check_arguments(
+        scene, resolution, max_memory, threads, progress, cut
+    )
     tri = scene.triangles()
     triangles = tri["triangles"]
-    lo = triangles.reshape(-1, 3).min(axis=0)
-    hi = triangles.reshape(-1, 3).max(axis=0)
-    longest = float(np.max(hi - lo))
-    if not longest > 0:
-        raise ValueError("voxelize: the scene's bounding box has zero size")
-    pitch = longest / resolution
-    # Areas and normals are float32 (API): a voxel face must be representable
-    # with room to spare (normal float32 range ~1e-38 .. 3e38).
-    if not 1e-30 <= pitch * pitch <= 1e30:
-        raise ValueError(
-            f"voxelize: voxel pitch {pitch:.3g} (scene size {longest:.3g} over "
-            f"resolution {resolution}) gives voxel areas outside float32's range; "
-            "rescale the scene"
-        )
-    origin = lo - 0.5 * pitch
-    dims = (np.floor((hi - origin) / pitch) + 1).astype(np.int32)
-
-    est = estimate_memory(triangles, pitch)
-    budget = max_memory if max_memory is not None else _available_memory() // 2
-    if est["bytes"] > budget:
-        raise ValueError(
-            f"voxelize: resolution {resolution} needs up to {est['bytes']:,} bytes "
-            f"(estimated with a 25% margin from {est['expected_pairs']:,} voxel-triangle pairs, "
-            f"{est['expected_records']:,} records for {len(triangles):,} triangles), over the "
-            f"budget of {budget:,} bytes "
-            f"({'max_memory' if max_memory is not None else 'half the available memory'}); "
-            "lower the resolution or raise max_memory"
-        )
-
-    callback, close = _progress_bar(bool(progress))
-    try:
-        res = _core.voxelize(
-            triangles,
-            tri["object"],
-            tri["two_sided"],
-            tri["albedo"],
-            tri["emission"],
-            np.ascontiguousarray(origin, dtype=np.float64),
-            float(pitch),
-            dims,
-            cut=bool(cut),
-            threads=nthreads,
-            progress=callback,
-        )
-    finally:
-        close()
-    st = dict(res["stats"])
+    pitch, origin, dims = _grid(triangles, resolution)
+    est = _check_memory(triangles, pitch, resolution, max_memory)
+    res = _run_kernel(tri, origin, pitch, dims, cut=cut, threads=nthreads, progress=progress)
     seconds = time.perf_counter() - t_start
-    stats = {
-        "triangles": int(st["triangles"]),
-        "records": int(st["records"]),
-        "back_records": int(st["back_records"]),
-        "two_sided_records": int(st["two_sided_records"]),
-        "cells": int(st["cells"]),
-        "pairs": int(st["pairs"]),
-        "skipped_degenerate": int(st["skipped_degenerate"]),
-        "touch_records": int(st["touch_records"]),
-        "clusters": int(st["clusters"]),
-        "cut_clusters": int(st["cut_clusters"]),
-        "cut_records": int(st["cut_records"]),
-        "cut_limit_hits": int(st["cut_limit_hits"]),
-        "polygon_overflows": int(st["polygon_overflows"]),
-        "peak_bytes": int(st["peak_bytes"] + triangles.nbytes),
-        "estimate_bytes": est["bytes"],
-        "estimate_pairs": est["pairs"],
-        "expected_pairs": est["expected_pairs"],
-        "expected_records": est["expected_records"],
-        "threads": int(st["threads"]),
-        "cut": bool(cut),
-        # Objects whose mesh is closed (watertight, consistently wound): their
-        # inside can never be seen, which voxgi.solve uses (closed=None).
-        "closed_objects": [i for i, o in enumerate(scene.objects) if _is_closed(o)],
-        "seconds": seconds,
-        "phase_seconds": {
-            "pairs": st["seconds_pairs"],
-            "sort": st["seconds_sort"],
-            "records": st["seconds_records"],
-        },
-    }
-    return VoxelSet(
-        ijk=res["ijk"],
-        normal=res["normal"],
-        area=res["area"],
-        albedo=res["albedo"],
-        emission=res["emission"],
-        centroid=res["centroid"],
-        object_id=res["object_id"],
-        back=res["back"],
-        pitch=float(pitch),
-        origin=np.asarray(origin, dtype=np.float64),
-        resolution=resolution,
-        scene_fingerprint=scene.fingerprint(),
-        stats=stats,
-        side=res["side"],
-        scene=scene,
-    )
+    stats = _voxelize_stats(dict(res["stats"]), triangles, est, scene, cut=cut, seconds=seconds)
+    return _voxel_set(res, pitch, origin, resolution, scene, stats)
