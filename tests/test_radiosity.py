@@ -534,7 +534,7 @@ def test_memory_estimate_is_checked_before_the_solve(sphere32, monkeypatch):
     assert est["records"] > 100 * len(vox)
     # more threads, more line tables
     assert voxgi.radiosity.solve_memory(vox, directions=4, threads=4)["threads"] > est["threads"]
-    monkeypatch.setattr(voxgi.radiosity, "_available_memory", lambda: est["total"] // 2)
+    monkeypatch.setattr(voxgi.radiosity, "available_memory", lambda: est["total"] // 2)
     with pytest.raises(MemoryError, match=r"need about [0-9.]+ GiB"):
         voxgi.solve(
             vox, directions=4, threads=2, progress=False, tuning=SolveTuning(shoot_directions=4)

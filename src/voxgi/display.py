@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -23,6 +22,7 @@ import numpy as np
 from . import _core, _validate
 from .radiosity import Solution
 from .scene import Camera, Scene
+from .voxels import available_memory
 
 __all__ = [
     "FrameExecutor",
@@ -783,21 +783,6 @@ class _RenderSettings:
     threads: int
 
 
-def _available_memory() -> int:
-    """Bytes of memory available now (MemAvailable, else free physical pages)."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:  # pragma: no cover - not Linux
-        pass
-    try:  # pragma: no cover - not Linux
-        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):  # pragma: no cover
-        return 1 << 32
-
-
 def _check_render(
     scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads, tuning
 ) -> _RenderSettings:
@@ -840,7 +825,7 @@ def _check_image_memory(cam: Camera) -> None:
     holds about 950 bytes per pixel (running mean and variance, hit records,
     frame buffers) plus about 30 MB of tile buffers."""
     need = 1000 * cam.width * cam.height + (32 << 20)
-    budget = _available_memory() // 2
+    budget = available_memory() // 2
     if need > budget:
         raise ValueError(
             f"render: a {cam.width}x{cam.height} image needs about {need:,} bytes "

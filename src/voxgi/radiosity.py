@@ -30,7 +30,6 @@ with the :class:`voxgi._core.LineSystem` methods ``size``, ``normalisation``,
 from __future__ import annotations
 
 import json
-import os
 import time
 import warnings
 import zipfile
@@ -44,7 +43,7 @@ import numpy as np
 from . import _core, _validate
 from .direct import direct_irradiance
 from .directions import DirectionSet, direction_set
-from .voxels import VoxelSet
+from .voxels import VoxelSet, available_memory
 
 __all__ = [
     "LineExecutor",
@@ -267,21 +266,6 @@ def _json_default(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
     raise TypeError(f"cannot store {type(o).__name__} in Solution stats")
-
-
-def _available_memory() -> int:
-    """Bytes of memory available now (MemAvailable, else free physical pages)."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:  # pragma: no cover - not Linux
-        pass
-    try:  # pragma: no cover - not Linux
-        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):  # pragma: no cover
-        return 1 << 32
 
 
 # ----------------------------------------------------------------------------- inputs
@@ -687,7 +671,7 @@ def solve_memory(
         want = sum(pair_table_bytes(n, direction_set(r).families) for r in {opt.R, opt.Rl} - {None})
         cap = opt.cache_cap
         if cap is None and opt.pair_cache is None:
-            cap = _available_memory() // 4
+            cap = available_memory() // 4
         pairs = want if cap is None else min(want, cap)
         # recording: each thread fills one tile of 16 columns of 4 bytes
         per_thread += 16 * 4 * n
@@ -704,7 +688,7 @@ def solve_memory(
 def _check_memory(vox: VoxelSet, opt: _Settings, tuning) -> dict:
     """Refuse a local solve whose estimate exceeds the memory available now."""
     est = solve_memory(vox, opt.R, opt.threads, tuning=tuning)
-    avail = _available_memory()
+    avail = available_memory()
     if est["total"] > avail:
         parts = ", ".join(f"{k} {v / 2**30:.2f} GiB" for k, v in est.items() if k != "total")
         raise MemoryError(
@@ -1119,7 +1103,7 @@ def _gatherer(p: _Problem) -> _Gatherer:
     elif opt.cache_cap is not None:
         budget = opt.cache_cap
     else:
-        budget = _available_memory() // 4 if opt.pair_cache is None else 1 << 62
+        budget = available_memory() // 4 if opt.pair_cache is None else 1 << 62
     limit, la = p.limit, opt.later_after
     extra = 1 if opt.diagnostics else 0
     passes = {id(p.gds): (min(limit, la) if p.lds is not None else limit) + extra}

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import dataclass, field
 
@@ -190,25 +189,12 @@ def estimate_memory(triangles: np.ndarray, pitch: float) -> dict:
     }
 
 
-def _available_memory() -> int:
-    """Bytes of memory available to new allocations now (psutil's ``available``)."""
-    try:
-        import psutil
-    except ImportError:  # pragma: no cover - psutil is a dependency
-        psutil = None
-    if psutil is not None:
-        return int(psutil.virtual_memory().available)
-    try:  # pragma: no cover
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:  # pragma: no cover
-        pass
-    try:  # pragma: no cover
-        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):  # pragma: no cover
-        return 1 << 32
+def available_memory() -> int:
+    """Bytes of memory available to new allocations now (psutil's ``available``);
+    the stages check their estimates against it before allocating."""
+    import psutil
+
+    return int(psutil.virtual_memory().available)
 
 
 def _progress_bar(enabled: bool):
@@ -286,7 +272,7 @@ def _grid(triangles: np.ndarray, resolution: int) -> tuple[float, np.ndarray, np
 def _check_memory(triangles: np.ndarray, pitch: float, resolution: int, max_memory) -> dict:
     """Estimate the peak memory and raise if it is over the budget; returns the estimate."""
     est = estimate_memory(triangles, pitch)
-    budget = max_memory if max_memory is not None else _available_memory() // 2
+    budget = max_memory if max_memory is not None else available_memory() // 2
     if est["bytes"] > budget:
         raise ValueError(
             f"voxelize: resolution {resolution} needs up to {est['bytes']:,} bytes "
