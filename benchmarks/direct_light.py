@@ -129,7 +129,10 @@ def main() -> int:
     ap.add_argument("--resolution", type=int, default=64)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--no-furnace", action="store_true", help="skip the furnace's shooting")
+    ap.add_argument("--quick", action="store_true", help="resolution 24, no furnace")
     args = ap.parse_args()
+    if args.quick:
+        args.resolution, args.no_furnace = 24, True
     res = {
         "version": voxgi.__version__,
         "scenes": [

@@ -88,6 +88,7 @@ def main() -> None:
     ok["voxelize"] = run(["benchmarks/voxelize.py", *q])
     ok["propagation"] = run(["benchmarks/propagation.py", *q])
     ok["paper_tables"] = run(["benchmarks/paper_tables.py", *q])
+    ok["direct_light"] = run(["benchmarks/direct_light.py", *q])
     if importlib.util.find_spec("mitsuba") is None:
         print(
             "\nmitsuba not installed: time-vs-error against Mitsuba 3 skipped "
@@ -108,6 +109,7 @@ def main() -> None:
                     ["benchmarks/time_vs_error.py", "--scene", scene, "--size", "256", "--high"]
                 )
     linear_plot()
+    ok["performance.md"] = run(["scripts/make_performance.py"])
     print("\nsummary:", ", ".join(f"{k}: {'ok' if v else 'FAILED'}" for k, v in ok.items()))
     sys.exit(0 if all(ok.values()) else 1)
 
