@@ -286,7 +286,7 @@ class Scene:
     --------
     >>> import trimesh, voxgi
     >>> scene = voxgi.Scene()
-    >>> scene.add(trimesh.creation.box(), voxgi.Material(albedo=0.5), name="box")
+    >>> box = scene.add(trimesh.creation.box(), voxgi.Material(albedo=0.5), name="box")
     >>> len(scene.objects)
     1
     """
