@@ -18,13 +18,12 @@ rays, whatever the number of emitter records.
 
 from __future__ import annotations
 
-import itertools
 import time
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from . import _core, _validate
+from .rays import Tracer
 from .scene import Scene
 from .voxels import VoxelSet
 
@@ -135,56 +134,6 @@ class EmitterSampler:
             + ((1.0 - b0 - b1)[..., None] * t[..., 2, :])
         )
         return idx, y
-
-
-class _ShadowRays:
-    """Occlusion queries on the scene's triangles (Embree), split over threads."""
-
-    def __init__(self, scene: Scene, threads: int, centre: np.ndarray):
-        from embreex import rtcore_scene
-        from embreex.mesh_construction import TriangleMesh
-
-        # in a frame centred on the scene: float32 keeps its precision for a
-        # scene far from the origin
-        tri = np.concatenate([o.vertices[o.faces] for o in scene.objects]) - centre
-        self._tri32 = np.ascontiguousarray(tri, dtype=np.float32)
-        self._scene = rtcore_scene.EmbreeScene()
-        self._mesh = TriangleMesh(self._scene, self._tri32)
-        self.threads = max(1, int(threads))
-
-    def occluded(
-        self, org: np.ndarray, dirs: np.ndarray, length: np.ndarray, pool: ThreadPoolExecutor | None
-    ) -> np.ndarray:
-        """(R,) int32: -1 where nothing lies on the segment [org, org + length * dirs)."""
-
-        def one(a: int, b: int) -> np.ndarray:
-            return np.asarray(
-                self._scene.run(org[a:b], dirs[a:b], query="OCCLUDED", dists=length[a:b]), np.int32
-            )
-
-        return self._split(len(org), one, pool, np.concatenate)
-
-    def first_hit(
-        self, org: np.ndarray, dirs: np.ndarray, pool: ThreadPoolExecutor | None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(R,) int32 triangle each ray meets first (-1: none) and its
-        barycentrics u, v there (float32)."""
-
-        def one(a: int, b: int):
-            h = self._scene.run(org[a:b], dirs[a:b], query="INTERSECT", output=1)
-            return np.asarray(h["primID"], np.int32), h["u"], h["v"]
-
-        def join(parts):
-            return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
-
-        return self._split(len(org), one, pool, join)
-
-    def _split(self, n: int, one, pool, join):
-        if pool is None or n < 8192:
-            return one(0, n)
-        cuts = np.linspace(0, n, self.threads + 1).astype(np.int64)
-        futs = [pool.submit(one, int(a), int(b)) for a, b in itertools.pairwise(cuts)]
-        return join([f.result() for f in futs])
 
 
 def _sequence(samples: int, seed: int) -> np.ndarray:
@@ -324,28 +273,25 @@ class _Estimate:
 
 
 class _Rays:
-    """The records' points and the emitters in a frame centred on the scene
-    (float32 keeps its precision for a scene far from the origin), the
-    Embree scene and the worker threads."""
+    """The records' points and the emitters in the tracer's frame, centred
+    on the scene (:mod:`voxgi.rays`), and the tracer."""
 
     def __init__(
         self, scene: Scene, vox: VoxelSet, emit: EmitterSampler, offset: float, threads: int
     ):
-        centre = scene.bounds.mean(axis=0)
-        self.tracer = _ShadowRays(scene, threads, centre)
+        self.tracer = Tracer(scene, threads)
+        centre = self.tracer.centre
         self.emitters = (emit.arrays[0] - centre, *emit.arrays[1:])
         self.emitter_of = emit.emitter_of
         self.point = np.asarray(vox.centroid, np.float64) - centre
         self.normal = np.asarray(vox.normal, np.float64)
         self.offset, self.threads = offset, threads
-        self.pool = ThreadPoolExecutor(threads) if threads > 1 else None
 
     def __enter__(self) -> _Rays:
         return self
 
     def __exit__(self, *exc) -> None:
-        if self.pool is not None:
-            self.pool.shutdown()
+        self.tracer.close()
 
     def estimate(self, est: _Estimate, todo: np.ndarray, per: int, rng, max_rays: int) -> int:
         """``per`` more samples for each record of ``todo``, in batches of at
@@ -363,7 +309,7 @@ class _Rays:
                 base,
                 self.offset,
             )
-            est.add(rec, *_batch(args, self.emitter_of, self.tracer, self.pool, self.threads), per)
+            est.add(rec, *_batch(args, self.emitter_of, self.tracer, self.threads), per)
         return len(todo) * per
 
 
@@ -390,7 +336,7 @@ def _noisy(
 
 
 def _batch(
-    args: tuple, emitter_of: np.ndarray, tracer: _ShadowRays, pool, nthreads: int
+    args: tuple, emitter_of: np.ndarray, tracer: Tracer, nthreads: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """Trace one batch: ``args`` are the kernels' (emitters, points, normals,
     shifts, sequence, offset) for R records and S samples.
@@ -403,8 +349,8 @@ def _batch(
     live = np.flatnonzero(length > 0)
     light_hit = np.full(len(length), -1, np.int32)
     if len(live):
-        light_hit[live] = tracer.occluded(lo[live], ld[live], length[live], pool)
-    hit, u, v = tracer.first_hit(ho, hd, pool)
+        light_hit[live] = tracer.occluded(lo[live], ld[live], length[live])
+    hit, u, v = tracer.first_hit(ho, hd)
     return _core.direct_light_sum(
         *args,
         contribution,

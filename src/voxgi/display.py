@@ -10,10 +10,8 @@ depends on the camera: a new view of a solved scene costs only the display.
 
 from __future__ import annotations
 
-import itertools
 import math
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -21,6 +19,7 @@ import numpy as np
 
 from . import _core, _validate
 from .radiosity import Solution
+from .rays import Tracer
 from .scene import Camera, Scene
 from .voxels import available_memory
 
@@ -69,22 +68,13 @@ class RenderResult:
 # --------------------------------------------------------------------------
 # Ray tracing with Embree (embreex)
 # --------------------------------------------------------------------------
-class _Tracer:
-    """Embree scene of all triangles, with per-triangle data in float64.
-
-    embreex's queries release the GIL, so batches are split across threads.
-    """
+class _Tracer(Tracer):
+    """The scene's tracer with the per-triangle data shading needs: object,
+    winding normal and corner normals, in float64 (scene-centred frame)."""
 
     def __init__(self, scene: Scene, threads: int):
-        from embreex import rtcore_scene
-        from embreex.mesh_construction import TriangleMesh
-
-        tri = scene.triangles()
-        # Rays are traced in a frame centred on the scene (float32 in Embree):
-        # a scene far from the origin keeps the precision of one at it.
-        self.centre = scene.bounds.mean(axis=0)
-        self.tris = tri["triangles"] - self.centre  # (F, 3, 3) float64, scene-centred
-        self.obj = tri["object"]  # (F,) int32
+        super().__init__(scene, threads)
+        self.obj = scene.triangles()["object"]  # (F,) int32
         e1 = self.tris[:, 1] - self.tris[:, 0]
         e2 = self.tris[:, 2] - self.tris[:, 0]
         n = np.cross(e1, e2)
@@ -105,38 +95,10 @@ class _Tracer:
                     vn = np.repeat(g[:, None, :], 3, axis=1)
                 parts.append(vn)
             self.vn = np.concatenate(parts)
-        self._tri32 = np.ascontiguousarray(self.tris, dtype=np.float32)
-        self.embree = rtcore_scene.EmbreeScene()
-        self._mesh = TriangleMesh(self.embree, self._tri32)
-        self.threads = max(1, int(threads))
-        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
-
-    def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown()
-
-    def _run(self, org, dirs, dists, query):
-        n = len(org)
-        if n == 0:
-            return np.zeros(0, np.int32)
-
-        def one(a, b):
-            kw = {} if dists is None else {"dists": dists[a:b]}
-            return np.asarray(self.embree.run(org[a:b], dirs[a:b], query=query, **kw))
-
-        if self._pool is None or n < 4096:
-            return one(0, n)
-        cuts = np.linspace(0, n, self.threads + 1).astype(np.int64)
-        futs = [self._pool.submit(one, int(a), int(b)) for a, b in itertools.pairwise(cuts)]
-        return np.concatenate([f.result() for f in futs])
-
-    def intersect(self, org: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-        """(R,) int32 index of the first triangle hit, -1 for a miss."""
-        return self._run(org, dirs, None, "INTERSECT").astype(np.int32, copy=False)
 
     def occluded(self, org: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
         """(R,) uint8: 1 where something lies on the segment [org, org + length·dir)."""
-        return (self._run(org, dirs, length, "OCCLUDED") != -1).astype(np.uint8)
+        return (super().occluded(org, dirs, length) != -1).astype(np.uint8)
 
 
 # --------------------------------------------------------------------------

@@ -43,6 +43,7 @@ import numpy as np
 from . import _core, _validate
 from .direct import direct_irradiance
 from .directions import DirectionSet, direction_set
+from .io import atomic_path
 from .voxels import VoxelSet, available_memory
 
 __all__ = [
@@ -103,8 +104,6 @@ class Solution:
         Path
             The file written.
         """
-        from .io import atomic_path
-
         path = Path(path)
         if path.suffix != ".npz":
             path = path.with_name(path.name + ".npz")
@@ -917,6 +916,12 @@ class _Problem:
         return len(self.area)
 
     @property
+    def shoots(self) -> bool:
+        """Direct light by shooting: asked for, or exact light asked for but
+        the records carry no scene to trace."""
+        return self.opt.direct_light == "shoot" or getattr(self.vox, "scene", None) is None
+
+    @property
     def limit(self) -> int:
         """Iterations allowed: ``max_bounces``, else ``max_iterations``; 0 if all albedos are 0."""
         if not np.any(self.rho > 0):
@@ -980,10 +985,9 @@ def _normalise(p: _Problem) -> None:
     opt, nt = p.opt, p.opt.threads
     Sg = p.sysm.normalisation(p.gds.families, p.gds.weights, nt)
     # exact direct light shoots nothing: the shooting set needs no S(n)
-    shoots = opt.direct_light == "shoot" or getattr(p.vox, "scene", None) is None
     Ss = (
         Sg
-        if opt.Rs == opt.R or not shoots
+        if opt.Rs == opt.R or not p.shoots
         else p.sysm.normalisation(p.sds.families, p.sds.weights, nt)
     )
     Sl = None
@@ -1033,9 +1037,9 @@ def _direct_light(p: _Problem):
     """Direct irradiance H_d from the emitters, the power that escapes on the
     way and the rays it took: by shadow rays to the exact emitters where the
     tuning asks for it and the records know their scene, else by shooting."""
+    if not p.shoots:
+        return _exact_direct_light(p)
     if p.opt.direct_light == "exact":
-        if getattr(p.vox, "scene", None) is not None:
-            return _exact_direct_light(p)
         p.stats["skipped"]["exact_direct_light"] = (
             "the records carry no scene (vox.scene is None): shot along the lines instead"
         )

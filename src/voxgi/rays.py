@@ -1,0 +1,97 @@
+"""Embree ray queries on a scene's triangles, shared by the direct light and the display.
+
+Rays are traced in a frame centred on the scene: Embree takes float32, whose
+spacing at 1e7 is 1, so a scene far from the origin would lose its detail in
+world coordinates. Callers subtract :attr:`Tracer.centre` from their points.
+"""
+
+from __future__ import annotations
+
+import itertools
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from .scene import Scene
+
+__all__ = ["Tracer"]
+
+
+class Tracer:
+    """Occlusion and first-hit queries on ``scene``'s triangles, split over threads.
+
+    Parameters
+    ----------
+    scene : Scene
+        Its triangles, in the order of :meth:`Scene.triangles`, are the
+        primitives; a query's answer is an index into them.
+    threads : int
+        Worker threads for large batches (1: the calling thread only).
+
+    Attributes
+    ----------
+    centre : (3,) float64
+        The frame's origin in world coordinates (the middle of the scene's bounds).
+    tris : (F, 3, 3) float64
+        The triangles' corners in the centred frame.
+    """
+
+    def __init__(self, scene: Scene, threads: int):
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+
+        self.centre = scene.bounds.mean(axis=0)
+        self.tris = np.concatenate([o.vertices[o.faces] for o in scene.objects]) - self.centre
+        self._tri32 = np.ascontiguousarray(self.tris, dtype=np.float32)
+        self.embree = rtcore_scene.EmbreeScene()
+        self._mesh = TriangleMesh(self.embree, self._tri32)
+        self.threads = max(1, int(threads))
+        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+
+    def close(self) -> None:
+        """Release the worker threads."""
+        if self._pool is not None:
+            self._pool.shutdown()
+
+    def __enter__(self) -> Tracer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def occluded(self, org: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
+        """(R,) int32: -1 where nothing lies on the segment [org, org + length * dirs)."""
+
+        def one(a: int, b: int) -> np.ndarray:
+            hit = self.embree.run(org[a:b], dirs[a:b], query="OCCLUDED", dists=length[a:b])
+            return np.asarray(hit, np.int32)
+
+        return self._split(len(org), one, np.concatenate)
+
+    def intersect(self, org: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+        """(R,) int32 index of the first triangle each ray meets, -1 for a miss."""
+
+        def one(a: int, b: int) -> np.ndarray:
+            return np.asarray(self.embree.run(org[a:b], dirs[a:b], query="INTERSECT"), np.int32)
+
+        return self._split(len(org), one, np.concatenate)
+
+    def first_hit(self, org: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(R,) int32 first triangle (-1: none) and float32 barycentrics u, v there."""
+
+        def one(a: int, b: int):
+            h = self.embree.run(org[a:b], dirs[a:b], query="INTERSECT", output=1)
+            return np.asarray(h["primID"], np.int32), h["u"], h["v"]
+
+        def join(parts):
+            return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
+
+        return self._split(len(org), one, join)
+
+    def _split(self, n: int, one, join):
+        """``one(a, b)`` over [0, n) in one slice per thread (small batches whole)."""
+        if self._pool is None or n < 4096:
+            return one(0, n)
+        cuts = np.linspace(0, n, self.threads + 1).astype(np.int64)
+        futs = [self._pool.submit(one, int(a), int(b)) for a, b in itertools.pairwise(cuts)]
+        return join([f.result() for f in futs])
