@@ -41,7 +41,7 @@ __all__ = [
 _REL_EPS = 0.01
 
 #: Default :attr:`RenderTuning.pixel_factor` (``docs/design.md`` §6).
-PIXEL_FACTOR = 10.0
+PIXEL_FACTOR = 16.0
 
 
 @dataclass
