@@ -41,7 +41,11 @@ __all__ = [
 _REL_EPS = 0.01
 
 #: Default :attr:`RenderTuning.pixel_factor` (``docs/design.md`` §6).
-PIXEL_FACTOR = 16.0
+PIXEL_FACTOR = 10.0
+#: Default :attr:`RenderTuning.pixel_share`: a single pixel (a sliver of a
+#: bright light at a pixel's edge, a rare spike) cannot hold a large image
+#: back, a region of them can.
+PIXEL_SHARE = 1e-3
 
 
 @dataclass
@@ -56,7 +60,8 @@ class RenderResult:
         Progressive frames accumulated.
     stderr : (H, W, 3) float32 or None
         Per-pixel standard error estimate of ``image`` (radiance units), from
-        the spread between frames; None with fewer than two frames.
+        batch means of the frames with a heavy-tail guard (``docs/design.md``
+        §6); None with fewer than two frames.
     stats : dict
         ``seconds`` per phase, ray counts, VPLs used, what was skipped.
     solution : Solution or None
@@ -244,8 +249,9 @@ class VPLSampler:
     Each frame draws its ``n_d`` emitter and ``n_i`` other VPLs stratified
     along the cumulative table, whose records are in Morton (Z-curve) order:
     every draw still has its probability, but a frame's VPLs are spread over
-    the surfaces instead of clumped. Frames are independent, so the spread
-    between frames estimates the error of their mean.
+    the surfaces instead of clumped. Frames draw their VPLs independently;
+    the render estimates the error of their mean from batch means of frames
+    (``docs/design.md`` §6).
 
     The split: ``n_d / K = Φ_d / (Φ_d + Φ_i)`` with Φ the power
     ``Σ ΔA · B`` (luminance) of each set, at least one VPL for a set with
@@ -714,10 +720,12 @@ class RenderTuning:
     min_frames : int
         Frames before the stopping rule is trusted (>= 2; the rule also
         waits for 9 batches, ``docs/design.md`` §6).
-    pixel_factor : float
-        The stopping rule's per-pixel bound: no pixel's estimated relative
-        error ``se / sqrt(L² + 0.01)`` over ``pixel_factor · sqrt(tol)``
-        (``inf``: the mean relMSE alone decides).
+    pixel_factor, pixel_share : float
+        The stopping rule's per-pixel bound: at most a share ``pixel_share``
+        (one in 1000) of the pixels with an estimated relative error
+        ``se / sqrt(L² + 0.01)`` over ``pixel_factor · sqrt(tol)`` (10;
+        ``inf``: the mean relMSE alone decides; ``pixel_share=0``: every
+        pixel).
     emitter_share : float or None
         Share of each frame's VPLs taken from emitters; None splits by power
         (see :class:`VPLSampler`).
@@ -735,6 +743,7 @@ class RenderTuning:
 
     min_frames: int = 4
     pixel_factor: float = PIXEL_FACTOR
+    pixel_share: float = PIXEL_SHARE
     emitter_share: float | None = None
     gather: int = 4
     vpl_pdf: str = "power"
@@ -751,6 +760,7 @@ class _RenderSettings:
     seed: int
     min_frames: int
     pixel_factor: float
+    pixel_share: float
     emitter_share: float | None
     gather: int
     vpl_pdf: str
@@ -790,6 +800,7 @@ def _check_render(
             if t.pixel_factor == math.inf
             else _validate.real(t.pixel_factor, "pixel_factor", low=0.0, low_open=True)
         ),
+        pixel_share=_validate.real(t.pixel_share, "pixel_share", low=0.0, high=1.0, high_open=True),
         emitter_share=_validate.real(
             t.emitter_share, "emitter_share", low=0.0, high=1.0, allow_none=True
         ),
@@ -801,14 +812,15 @@ def _check_render(
 
 def _check_image_memory(cam: Camera) -> None:
     """Refuse an image that cannot fit before allocating anything: a render
-    holds about 950 bytes per pixel (running mean and variance, hit records,
-    frame buffers) plus about 30 MB of tile buffers."""
-    need = 1000 * cam.width * cam.height + (32 << 20)
+    holds about 1350 bytes per pixel (the running sum and 32 batch means,
+    hit records, frame buffers) plus about 30 MB of tile buffers and 50 MB
+    for the batch statistics."""
+    need = 1400 * cam.width * cam.height + (80 << 20)
     budget = available_memory() // 2
     if need > budget:
         raise ValueError(
             f"render: a {cam.width}x{cam.height} image needs about {need:,} bytes "
-            f"(~1000 bytes per pixel), over the budget of {budget:,} bytes (half "
+            f"(~1400 bytes per pixel), over the budget of {budget:,} bytes (half "
             "the available memory); lower Camera.width/height"
         )
 
@@ -955,7 +967,9 @@ class _Mean:
     are correlated. When the store of :data:`_BATCH_SLOTS` batches is full,
     neighbouring batches merge and ``size`` doubles. ``est`` is the
     estimated relMSE ``mean(se² / (L² + 0.01))`` over pixels and channels,
-    ``worst`` the largest per-pixel relative error ``se / sqrt(L² + 0.01)``.
+    ``worst`` the largest per-pixel relative error ``se / sqrt(L² + 0.01)``
+    (largest over a pixel's channels) and ``tail`` the one that all but
+    ``share`` of the pixels stay within.
     """
 
     total: np.ndarray
@@ -966,16 +980,20 @@ class _Mean:
     count: int = 0
     est: float = float("inf")
     worst: float = float("inf")
+    tail: float = float("inf")
+    share: float = PIXEL_SHARE
     flagged: int = 0
     se: np.ndarray | None = None
 
     @classmethod
-    def empty(cls, pixels: int) -> _Mean:
-        """No frames yet for ``pixels`` pixels."""
+    def empty(cls, pixels: int, share: float = PIXEL_SHARE) -> _Mean:
+        """No frames yet for ``pixels`` pixels; ``share`` as
+        :attr:`RenderTuning.pixel_share`."""
         return cls(
             np.zeros((pixels, 3)),
             np.zeros((_BATCH_SLOTS, pixels, 3), np.float32),
             np.zeros((pixels, 3)),
+            share=share,
         )
 
     @property
@@ -1008,20 +1026,23 @@ class _Mean:
         mean /= done
         se, flagged = _batch_statistics(self.batches[: self.count], self.size, done, mean)
         rel = se * se / (mean * mean + _REL_EPS)
+        pixel = rel.max(axis=1)
         self.se = se
         self.est = float(np.mean(rel))
-        self.worst = float(np.sqrt(np.max(rel)))
+        self.worst = float(np.sqrt(np.max(pixel)))
+        self.tail = float(np.sqrt(np.quantile(pixel, 1.0 - self.share, method="higher")))
         self.flagged = int(np.count_nonzero(flagged))
 
     def done(self, opt: _RenderSettings) -> bool:
         """At least ``min_frames`` frames and :data:`_MIN_BATCHES` batches, the
-        estimated relMSE at or under ``tol`` and no pixel's relative error
-        over ``pixel_factor · sqrt(tol)``."""
+        estimated relMSE at or under ``tol`` and at most a share
+        ``pixel_share`` of the pixels with a relative error over
+        ``pixel_factor · sqrt(tol)``."""
         return (
             self.frames >= opt.min_frames
             and self.count >= _MIN_BATCHES
             and self.est <= opt.tol
-            and self.worst <= opt.pixel_factor * math.sqrt(opt.tol)
+            and self.tail <= opt.pixel_factor * math.sqrt(opt.tol)
         )
 
     def stderr(self, shape) -> np.ndarray | None:
@@ -1038,7 +1059,7 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
     from tqdm.auto import tqdm
 
     cam = opt.cam
-    acc = _Mean.empty(cam.height * cam.width)
+    acc = _Mean.empty(cam.height * cam.width, opt.pixel_share)
     interrupted = False
     # With a tolerance the bar follows the error, not the frame cap that is
     # rarely reached: the share of the way, in log scale, from the first
@@ -1086,6 +1107,7 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
         "frames": int(acc.frames),
         "est_rel_mse": acc.est,
         "est_max_rel_err": acc.worst,
+        "est_tail_rel_err": acc.tail,
         "flagged_pixels": acc.flagged,
         "batches": acc.count,
         "batch_frames": acc.size,
