@@ -12,13 +12,13 @@ inside, renders it, and compares both with the known answer:
   discretisation (``docs/design.md §10``);
 * the image's error, which adds the display's noise, against the render's
   own estimate of it (``out.stderr``; ``docs/design.md`` §6). With the
-  defaults the render stops once the estimated relMSE is under 1e-3 and no
-  pixel's estimated relative error exceeds 16·sqrt(1e-3) = 0.51: the worst
-  pixel, one where a VPL landed next to the shaded point, keeps a few
-  percent. ``RenderTuning(pixel_factor=0.22)`` bounds every pixel's estimate
-  by 0.7%, which holds every pixel within about 1% of the answer (plus the
-  records' own error), at the price of more frames. Both are printed, each
-  worst pixel beside its estimate.
+  defaults the render stops once the estimated relMSE is under 1e-3 and 999
+  pixels in 1000 have an estimated relative error under 10·sqrt(1e-3) =
+  0.32: the worst pixel, one where a VPL landed next to the shaded point,
+  keeps a few percent. ``RenderTuning(pixel_factor=0.22, pixel_share=0)``
+  bounds every pixel's estimate by 0.7%, at the price of more frames; with
+  the box inside, its corners' heavy tails keep it to the frame cap (256)
+  here. Both are printed, each worst pixel beside its estimate.
 
 Every surface emits, so every record shoots; the furnace's light is uniform,
 and the shooting radius 8 (``SolveTuning(shoot_directions=8)``) serves as well
@@ -32,7 +32,7 @@ import numpy as np
 import voxgi
 
 LE = 1.0
-STRICT = voxgi.RenderTuning(pixel_factor=0.22)
+STRICT = voxgi.RenderTuning(pixel_factor=0.22, pixel_share=0.0)
 for rho in (0.5, 0.9):
     exact = LE / (1.0 - rho)
     print(f"rho = {rho}: every point should have radiance Le / (1 - rho) = {exact:.4f}")
@@ -49,7 +49,7 @@ for rho in (0.5, 0.9):
         f"on average; error {np.abs(rec_err).mean():.2%} mean, {np.abs(rec_err).max():.2%} max; "
         f"lost fraction {sol.stats['lost_fraction']:.1e}"
     )
-    for label, tuning in (("defaults", None), ("pixel_factor 0.22", STRICT)):
+    for label, tuning in (("defaults", None), ("every pixel's estimate under 0.7%", STRICT)):
         out = voxgi.render(scene, sol, progress=False, tuning=tuning)
         pix_err = np.abs(out.image / exact - 1.0)
         print(
