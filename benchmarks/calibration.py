@@ -23,7 +23,7 @@ Writes ``results/calibration.json``.
 
 Usage::
 
-    python benchmarks/calibration.py [--size 128] [--ref-frames 256]
+    python benchmarks/calibration.py [--size 256] [--ref-frames 256]
 """
 
 from __future__ import annotations
@@ -109,7 +109,7 @@ def measure(name: str, size: int, ref_frames: int) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--size", type=int, default=128)
+    ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--ref-frames", type=int, default=256)
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=SCENES)
     args = ap.parse_args(argv)

@@ -702,7 +702,7 @@ def calibration() -> list[str]:
             phases,
         ),
         "",
-        source("python benchmarks/calibration.py", "calibration.json"),
+        source(f"python benchmarks/calibration.py --size {d['size']}", "calibration.json"),
         "",
     ]
 

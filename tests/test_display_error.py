@@ -150,3 +150,19 @@ def test_render_stderr_goes_to_the_exr(tmp_path):
     assert out.stats["batch_frames"] == 1
     path = voxgi.io.write_exr(tmp_path / "r.exr", out.image, stderr=out.stderr)
     np.testing.assert_array_equal(voxgi.io.read_exr(path, layer="stderr"), out.stderr)
+
+
+@pytest.mark.parametrize(
+    ("tuning", "match"),
+    [
+        ({"pixel_factor": 0.0}, "pixel_factor: must be > 0"),
+        ({"pixel_factor": "10"}, "pixel_factor: expected a number"),
+        ({"pixel_share": 1.0}, "pixel_share: must be < 1"),
+        ({"pixel_share": -0.1}, "pixel_share: must be >= 0"),
+    ],
+)
+def test_bad_stopping_rule_settings_are_named(tuning, match):
+    scene = voxgi.scenes.furnace_sphere(albedo=0.5, width=8, height=6)
+    sol = triangle_solution(scene, lambda v: np.full((len(v), 3), 2 * math.pi))
+    with pytest.raises((TypeError, ValueError), match=match):
+        voxgi.render(scene, sol, progress=False, tuning=voxgi.RenderTuning(**tuning))

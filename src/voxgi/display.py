@@ -720,12 +720,6 @@ class RenderTuning:
     min_frames : int
         Frames before the stopping rule is trusted (>= 2; the rule also
         waits for 9 batches, ``docs/design.md`` §6).
-    pixel_factor, pixel_share : float
-        The stopping rule's per-pixel bound: at most a share ``pixel_share``
-        (one in 1000) of the pixels with an estimated relative error
-        ``se / sqrt(L² + 0.01)`` over ``pixel_factor · sqrt(tol)`` (10;
-        ``inf``: the mean relMSE alone decides; ``pixel_share=0``: every
-        pixel).
     emitter_share : float or None
         Share of each frame's VPLs taken from emitters; None splits by power
         (see :class:`VPLSampler`).
@@ -736,17 +730,23 @@ class RenderTuning:
     vpl_pdf : {"power", "area"}
         VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
         paper); see :class:`VPLSampler`.
+    pixel_factor, pixel_share : float
+        The stopping rule's per-pixel bound: at most a share ``pixel_share``
+        (one in 1000) of the pixels with an estimated relative error
+        ``se / sqrt(L² + 0.01)`` over ``pixel_factor · sqrt(tol)`` (10;
+        ``inf``: the mean relMSE alone decides; ``pixel_share=0``: every
+        pixel).
 
     >>> RenderTuning(gather=0).min_frames
     4
     """
 
     min_frames: int = 4
-    pixel_factor: float = PIXEL_FACTOR
-    pixel_share: float = PIXEL_SHARE
     emitter_share: float | None = None
     gather: int = 4
     vpl_pdf: str = "power"
+    pixel_factor: float = PIXEL_FACTOR
+    pixel_share: float = PIXEL_SHARE
 
 
 @dataclass(frozen=True)
