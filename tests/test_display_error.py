@@ -166,3 +166,17 @@ def test_bad_stopping_rule_settings_are_named(tuning, match):
     sol = triangle_solution(scene, lambda v: np.full((len(v), 3), 2 * math.pi))
     with pytest.raises((TypeError, ValueError), match=match):
         voxgi.render(scene, sol, progress=False, tuning=voxgi.RenderTuning(**tuning))
+
+
+def test_cli_writes_the_stderr_channels(tmp_path):
+    from voxgi import cli
+
+    out = tmp_path / "f.exr"
+    args = ["render", "furnace-sphere", "-o", str(out), "--resolution", "12", "--directions"]
+    args += ["4", "--frames", "6", "--width", "8", "--height", "6", "-q"]
+    assert cli.main(args) == 0
+    se = voxgi.io.read_exr(out, layer="stderr")
+    assert se.shape == (6, 8, 3)
+    assert np.all(np.isfinite(se))
+    assert np.all(se >= 0)
+    assert voxgi.io.read_exr_header(out)["est_max_rel_err"] > 0
