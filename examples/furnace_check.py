@@ -24,7 +24,7 @@ Every surface emits, so every record shoots; the furnace's light is uniform,
 and the shooting radius 8 (``SolveTuning(shoot_directions=8)``) serves as well
 as the default 35 in a fraction of the time.
 
-Run: ``python examples/furnace_check.py`` (several seconds per albedo).
+Run: ``python examples/furnace_check.py`` (up to half a minute per albedo).
 """
 
 import numpy as np
