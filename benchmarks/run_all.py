@@ -19,7 +19,9 @@ Steps (each a script that also runs on its own; results in benchmarks/results/):
                          15-30 minutes each on 2 cores); skipped, and said so,
                          when the ``mitsuba`` package is absent
                          (``pip install "voxgi[bench]"``);
-5. the linear-cost log-log plot ``results/linear_cost.png`` from step 2.
+5. ``calibration.py``    the display's error estimate against the measured
+                         error, five scenes, three seeds;
+6. the linear-cost log-log plot ``results/linear_cost.png`` from step 2.
 
 Never collected by pytest (``testpaths = ["tests"]``).
 """
@@ -89,6 +91,13 @@ def main() -> None:
     ok["propagation"] = run(["benchmarks/propagation.py", *q])
     ok["paper_tables"] = run(["benchmarks/paper_tables.py", *q])
     ok["direct_light"] = run(["benchmarks/direct_light.py", *q])
+    # the display's error estimate against the measured error (--quick: 64x64)
+    ok["calibration"] = run(
+        [
+            "benchmarks/calibration.py",
+            *(["--size", "64", "--ref-frames", "64"] if args.quick else []),
+        ]
+    )
     if importlib.util.find_spec("mitsuba") is None:
         print(
             "\nmitsuba not installed: time-vs-error against Mitsuba 3 skipped "

@@ -257,7 +257,64 @@ directions = notebook(
     ]
 )
 
+display_error = notebook(
+    [
+        "md:# How far off is each pixel? The display's error estimate\n\n"
+        "`voxgi.render` estimates each pixel's standard error from batch means of its frames, "
+        "with a guard against heavy tails (`docs/design.md §6`), returns it as "
+        "`RenderResult.stderr` and stops when the mean relMSE estimate is under `tol` and no "
+        "pixel's relative error estimate exceeds `pixel_factor · sqrt(tol)`. Here the estimate "
+        "is set beside the error measured against a long render of the same solution (the "
+        "estimate is of the display's noise, so the reference keeps the same voxel solution).",
+        COMMON_SETUP,
+        "size = 256 if FULL else 64\n"
+        "res, ref_frames = (64, 512) if FULL else (16, 128)\n"
+        "scene = voxgi.scenes.cornell_box(width=size, height=size)\n"
+        "vox = voxgi.voxelize(scene, resolution=res)\n"
+        "sol = voxgi.pipeline.solve_for_display(vox, progress=False)\n"
+        "t0 = time.perf_counter()\n"
+        "out = voxgi.render(scene, sol, progress=False)\n"
+        "seconds = time.perf_counter() - t0\n"
+        "ref = voxgi.render(scene, sol, max_frames=ref_frames, tol=0.0, seed=1000, "
+        "progress=False)\n"
+        "r = ref.image.astype(np.float64)\n"
+        "den = np.sqrt(r * r + 0.01)\n"
+        "est_rel = out.stderr / den\n"
+        "err_rel = np.abs(out.image - r) / den\n"
+        "measured = float(np.mean(err_rel**2)) - ref.stats['est_rel_mse']\n"
+        "est = out.stats['est_rel_mse']\n"
+        "print(f\"stopped after {out.frames} frames ({out.stats['batches']} batches of \"\n"
+        "      f\"{out.stats['batch_frames']}); {out.stats['flagged_pixels']} pixels flagged \"\n"
+        '      f"heavy-tailed")\n'
+        "print(f'relMSE: estimated {est:.2e}, measured {measured:.2e} '\n"
+        "      f'(ratio {est / measured:.2f}); display {seconds:.2f} s')\n"
+        "print(f'worst pixel: estimated {est_rel.max():.3f}, measured {err_rel.max():.3f}')\n"
+        "summary['cornell'] = dict(frames=out.frames, est=est, measured=measured,\n"
+        "                          est_worst=float(est_rel.max()),\n"
+        "                          worst=float(err_rel.max()))",
+        "md:Left, the estimated relative error of each pixel (mean of the channels); right, the "
+        "error measured against the reference, on the same colour scale. A calibrated estimate "
+        "shows the same regions, the measured map being one noisy draw of them.",
+        "vmax = float(np.quantile(est_rel.mean(axis=2), 0.99))\n"
+        "fig, axes = plt.subplots(1, 3, figsize=(12, 4))\n"
+        "axes[0].imshow(np.clip(out.image, 0, 1) ** (1 / 2.2))\n"
+        "axes[0].set_title(f'image, {out.frames} frames')\n"
+        "for ax, m, title in ((axes[1], est_rel, 'estimated relative error'),\n"
+        "                     (axes[2], err_rel, 'measured relative error')):\n"
+        "    im = ax.imshow(m.mean(axis=2), cmap='magma', vmin=0, vmax=vmax)\n"
+        "    ax.set_title(title)\n"
+        "    fig.colorbar(im, ax=ax, fraction=0.046)\n"
+        "for ax in axes:\n"
+        "    ax.set_axis_off()\n"
+        "plt.show()",
+    ]
+)
+
 if __name__ == "__main__":
     nbf.write(resolution, HERE / "voxel_resolution.ipynb")
     nbf.write(directions, HERE / "direction_counts.ipynb")
-    print("wrote", HERE / "voxel_resolution.ipynb", HERE / "direction_counts.ipynb")
+    nbf.write(display_error, HERE / "display_error.ipynb")
+    print(
+        "wrote",
+        *(HERE / f"{n}.ipynb" for n in ("voxel_resolution", "direction_counts", "display_error")),
+    )

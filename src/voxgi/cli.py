@@ -90,6 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=_HelpFormatter,
         help="voxelize, solve and render a scene to EXR + PNG",
         description="Render a scene to a linear EXR and a tone-mapped PNG preview beside it. "
+        "The EXR also holds each pixel's estimated standard error in the channels "
+        "stderr.R, stderr.G, stderr.B. "
         "Exit codes: 0 done, 1 a scene or value that cannot be used, 2 a bad "
         "command line or an output that cannot be written (checked before any "
         "work), 130 interrupted by Ctrl-C (a partial image is written only if a "
@@ -340,7 +342,8 @@ def _report_display(args, res, interrupted: bool) -> None:
         f"display: {res.frames} frames{' (interrupted)' if interrupted else ''}, "
         f"{s['vpls']} VPLs/pixel, {s['primary_rays']:.3g} primary + {s['shadow_rays']:.3g} "
         f"shadow + {s['gather_rays']:.3g} gather rays in {s['seconds']['display']:.2f} s "
-        f"(estimated relMSE of the noise {s['est_rel_mse']:.2e})"
+        f"(estimated relMSE of the noise {s['est_rel_mse']:.2e}, worst pixel "
+        f"{s['est_max_rel_err']:.1%})"
     )
     for why in s.get("skipped", []):
         _note(args, f"display skipped {why}")
@@ -371,6 +374,7 @@ def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
         "max_frames": args.frames,
         "tol": args.tol,
         "est_rel_mse": s["est_rel_mse"],
+        "est_max_rel_err": s["est_max_rel_err"],
         "vpls_per_pixel": s["vpls"],
         "seed": args.seed,
         "exposure": args.exposure,
@@ -410,7 +414,7 @@ def run_render(args) -> int:
     # Each write is atomic (voxgi.io.atomic_path): a Ctrl-C here leaves every
     # file either as it was or complete.
     try:
-        io.write_exr(exr, res.image, metadata=meta)
+        io.write_exr(exr, res.image, metadata=meta, stderr=res.stderr)
         io.write_png(png, res.image, exposure=args.exposure)
     except KeyboardInterrupt:
         return _interrupted("interrupted while writing; the outputs are whole (old or new)")

@@ -13,9 +13,11 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Protocol
 
 import numpy as np
+from scipy.stats import t as student_t
 
 from . import _core, _validate
 from .radiosity import Solution
@@ -38,6 +40,13 @@ __all__ = [
 #: relMSE's epsilon (voxgi.metrics.rel_mse), used by the stopping rule too.
 _REL_EPS = 0.01
 
+#: Default :attr:`RenderTuning.pixel_factor` (``docs/design.md`` §6).
+PIXEL_FACTOR = 10.0
+#: Default :attr:`RenderTuning.pixel_share`: a single pixel (a sliver of a
+#: bright light at a pixel's edge, a rare spike) cannot hold a large image
+#: back, a region of them can.
+PIXEL_SHARE = 1e-3
+
 
 @dataclass
 class RenderResult:
@@ -51,7 +60,8 @@ class RenderResult:
         Progressive frames accumulated.
     stderr : (H, W, 3) float32 or None
         Per-pixel standard error estimate of ``image`` (radiance units), from
-        the spread between frames; None with fewer than two frames.
+        batch means of the frames with a heavy-tail guard (``docs/design.md``
+        §6); None with fewer than two frames.
     stats : dict
         ``seconds`` per phase, ray counts, VPLs used, what was skipped.
     solution : Solution or None
@@ -239,8 +249,9 @@ class VPLSampler:
     Each frame draws its ``n_d`` emitter and ``n_i`` other VPLs stratified
     along the cumulative table, whose records are in Morton (Z-curve) order:
     every draw still has its probability, but a frame's VPLs are spread over
-    the surfaces instead of clumped. Frames are independent, so the spread
-    between frames estimates the error of their mean.
+    the surfaces instead of clumped. Frames draw their VPLs independently;
+    the render estimates the error of their mean from batch means of frames
+    (``docs/design.md`` §6).
 
     The split: ``n_d / K = Φ_d / (Φ_d + Φ_i)`` with Φ the power
     ``Σ ΔA · B`` (luminance) of each set, at least one VPL for a set with
@@ -788,7 +799,8 @@ class RenderTuning:
     Attributes
     ----------
     min_frames : int
-        Frames before the stopping rule is trusted (>= 2).
+        Frames before the stopping rule is trusted (>= 2; the rule also
+        waits for 9 batches, ``docs/design.md`` §6).
     emitter_share : float or None
         Share of each frame's VPLs taken from emitters; None splits by power
         (see :class:`VPLSampler`).
@@ -802,6 +814,12 @@ class RenderTuning:
     vpl_on_surface : bool
         Each frame places every VPL at a fresh point of its record's surface
         (default); False keeps it at the record's centroid (the paper).
+    pixel_factor, pixel_share : float
+        The stopping rule's per-pixel bound: at most a share ``pixel_share``
+        (one in 1000) of the pixels with an estimated relative error
+        ``se / sqrt(L² + 0.01)`` over ``pixel_factor · sqrt(tol)`` (10;
+        ``inf``: the mean relMSE alone decides; ``pixel_share=0``: every
+        pixel).
 
     >>> RenderTuning(gather=0).min_frames
     4
@@ -812,6 +830,8 @@ class RenderTuning:
     gather: int = 4
     vpl_pdf: str = "power"
     vpl_on_surface: bool = True
+    pixel_factor: float = PIXEL_FACTOR
+    pixel_share: float = PIXEL_SHARE
 
 
 @dataclass(frozen=True)
@@ -824,6 +844,8 @@ class _RenderSettings:
     tol: float
     seed: int
     min_frames: int
+    pixel_factor: float
+    pixel_share: float
     emitter_share: float | None
     gather: int
     vpl_pdf: str
@@ -859,6 +881,12 @@ def _check_render(
         tol=1e-3 if tol is None else tol,
         seed=_validate.integer(seed, "seed"),
         min_frames=_validate.integer(t.min_frames, "min_frames", low=2),
+        pixel_factor=(
+            math.inf
+            if t.pixel_factor == math.inf
+            else _validate.real(t.pixel_factor, "pixel_factor", low=0.0, low_open=True)
+        ),
+        pixel_share=_validate.real(t.pixel_share, "pixel_share", low=0.0, high=1.0, high_open=True),
         emitter_share=_validate.real(
             t.emitter_share, "emitter_share", low=0.0, high=1.0, allow_none=True
         ),
@@ -871,14 +899,15 @@ def _check_render(
 
 def _check_image_memory(cam: Camera) -> None:
     """Refuse an image that cannot fit before allocating anything: a render
-    holds about 950 bytes per pixel (running mean and variance, hit records,
-    frame buffers) plus about 30 MB of tile buffers."""
-    need = 1000 * cam.width * cam.height + (32 << 20)
+    holds about 1350 bytes per pixel (the running sum and 32 batch means,
+    hit records, frame buffers) plus about 30 MB of tile buffers and 50 MB
+    for the batch statistics."""
+    need = 1400 * cam.width * cam.height + (80 << 20)
     budget = available_memory() // 2
     if need > budget:
         raise ValueError(
             f"render: a {cam.width}x{cam.height} image needs about {need:,} bytes "
-            f"(~1000 bytes per pixel), over the budget of {budget:,} bytes (half "
+            f"(~1400 bytes per pixel), over the budget of {budget:,} bytes (half "
             "the available memory); lower Camera.width/height"
         )
 
@@ -948,38 +977,172 @@ def _skipped(spec: FrameShaderSpec) -> list[str]:
     return skipped
 
 
+#: Batch means kept per pixel: between half this and this many once there
+#: are that many frames (pairs merge when the store is full, doubling the
+#: batch size), so the error estimate always rests on at least 16 batches.
+_BATCH_SLOTS = 32
+
+#: Batches before the stopping rule is trusted: the variance estimate from k
+#: batches has a relative standard deviation of sqrt(2 / (k - 1)) (normal
+#: batches), at most 1/2 from 9 batches on.
+_MIN_BATCHES = 9
+
+#: Significance of the heavy-tail test over a pixel's batches (Bonferroni over
+#: the batches, two-sided): a normal pixel is flagged with this probability.
+_OUTLIER_ALPHA = 1e-3
+
+#: Pixels per block when the batch statistics are computed (bounds the
+#: temporary float64 arrays to about 25 MB).
+_STAT_BLOCK = 1 << 15
+
+
+@lru_cache(maxsize=64)
+def _outlier_threshold(k: int) -> float:
+    """Critical externally studentized residual for ``k`` batch means: under
+    normal batches each residual follows Student's t with ``k - 2`` degrees
+    of freedom; Bonferroni over the ``k`` batches, two-sided."""
+    return float(student_t.ppf(1.0 - _OUTLIER_ALPHA / (2 * k), k - 2))
+
+
+def _batch_statistics(batches: np.ndarray, size: int, frames: int, mean: np.ndarray):
+    """Per-pixel error of the running mean from ``k`` batch means.
+
+    Parameters
+    ----------
+    batches : (k, P, 3) float32
+        Means of ``size`` consecutive frames each, ``k >= 2`` (the
+        heavy-tail test needs ``k >= 4``).
+    size, frames : int
+        Frames per batch; frames in the running mean.
+    mean : (P, 3) float64
+        The running mean of all ``frames`` frames.
+
+    Returns
+    -------
+    stderr : (P, 3) float64
+        ``sqrt(s_b² · size / frames)``, ``s_b²`` the variance between batch
+        means, raised for a flagged pixel to the largest single-batch jump
+        ``max_j |m_j - M| · size / frames``.
+    flagged : (P,) bool
+        Pixels one of whose batches lies beyond what the others' spread
+        allows (``docs/design.md`` §6).
+    """
+    k = len(batches)
+    stderr = np.empty(mean.shape)
+    flagged = np.zeros(len(mean), bool)
+    crit = _outlier_threshold(k) if k >= 4 else math.inf
+    for lo in range(0, len(mean), _STAT_BLOCK):
+        hi = min(lo + _STAT_BLOCK, len(mean))
+        b = batches[:, lo:hi].astype(np.float64)
+        dev = b - b.mean(axis=0)
+        ss = np.einsum("kpc,kpc->pc", dev, dev)
+        se = np.sqrt(ss / (k - 1) * (size / frames))
+        if k >= 4:
+            jump = np.abs(dev).max(axis=0)
+            # Externally studentized largest residual: the deviation of the
+            # farthest batch against the spread of the other k - 1.
+            ss_rest = np.maximum(ss - jump * jump * (k / (k - 1.0)), 0.0)
+            scale = np.sqrt(ss_rest / (k - 2) * (k - 1.0) / k)
+            tail = jump > crit * scale
+            se = np.where(tail, np.maximum(se, jump * (size / frames)), se)
+            flagged[lo:hi] = tail.any(axis=1)
+        stderr[lo:hi] = se
+    return stderr, flagged
+
+
 @dataclass
 class _Mean:
-    """The progressive mean of the frames (Welford) and its stopping rule.
+    """The progressive mean of the frames, its error by batch means, and
+    the stopping rule (``docs/design.md`` §6).
 
-    The estimated relMSE of the remaining noise is ``mean(se² / (L² + 0.01))``
-    over pixels and channels, ``se`` the standard error of the running mean
-    from the spread between frames (``docs/design.md`` §6)."""
+    Frames go into batches of ``size`` consecutive frames; the variance
+    between batch means estimates the variance of the mean even where frames
+    are correlated. When the store of :data:`_BATCH_SLOTS` batches is full,
+    neighbouring batches merge and ``size`` doubles. ``est`` is the
+    estimated relMSE ``mean(se² / (L² + 0.01))`` over pixels and channels,
+    ``worst`` the largest per-pixel relative error ``se / sqrt(L² + 0.01)``
+    (largest over a pixel's channels) and ``tail`` the one that all but
+    ``share`` of the pixels stay within.
+    """
 
-    mean: np.ndarray
-    m2: np.ndarray
+    total: np.ndarray
+    batches: np.ndarray
+    current: np.ndarray
     frames: int = 0
+    size: int = 1
+    count: int = 0
     est: float = float("inf")
+    worst: float = float("inf")
+    tail: float = float("inf")
+    share: float = PIXEL_SHARE
+    flagged: int = 0
+    se: np.ndarray | None = None
+
+    @classmethod
+    def empty(cls, pixels: int, share: float = PIXEL_SHARE) -> _Mean:
+        """No frames yet for ``pixels`` pixels; ``share`` as
+        :attr:`RenderTuning.pixel_share`."""
+        return cls(
+            np.zeros((pixels, 3)),
+            np.zeros((_BATCH_SLOTS, pixels, 3), np.float32),
+            np.zeros((pixels, 3)),
+            share=share,
+        )
+
+    @property
+    def mean(self) -> np.ndarray:
+        """(P, 3) float64 mean of the frames so far."""
+        return self.total / max(self.frames, 1)
 
     def add(self, x: np.ndarray) -> None:
-        """Fold one frame in and update the estimate."""
+        """Fold one frame in; on completing a batch, update the estimate."""
         self.frames += 1
-        delta = x - self.mean
-        self.mean += delta / self.frames
-        self.m2 += delta * (x - self.mean)
-        if self.frames >= 2:
-            se2 = self.m2 / (self.frames - 1) / self.frames
-            self.est = float(np.mean(se2 / (self.mean * self.mean + _REL_EPS)))
+        self.total += x
+        self.current += x
+        if self.frames - self.count * self.size < self.size:
+            return
+        self.batches[self.count] = self.current / self.size
+        self.current[:] = 0.0
+        self.count += 1
+        if self.count == _BATCH_SLOTS:
+            half = _BATCH_SLOTS // 2
+            self.batches[:half] = 0.5 * (self.batches[0::2] + self.batches[1::2])
+            self.count, self.size = half, 2 * self.size
+        if self.count >= 2:
+            self._estimate()
+
+    def _estimate(self) -> None:
+        done = self.count * self.size
+        # The estimate speaks for the mean of the complete batches; the open
+        # batch's frames only add to the image.
+        mean = self.total - self.current
+        mean /= done
+        se, flagged = _batch_statistics(self.batches[: self.count], self.size, done, mean)
+        rel = se * se / (mean * mean + _REL_EPS)
+        pixel = rel.max(axis=1)
+        self.se = se
+        self.est = float(np.mean(rel))
+        self.worst = float(np.sqrt(np.max(pixel)))
+        self.tail = float(np.sqrt(np.quantile(pixel, 1.0 - self.share, method="higher")))
+        self.flagged = int(np.count_nonzero(flagged))
 
     def done(self, opt: _RenderSettings) -> bool:
-        """At least ``min_frames`` frames and the estimate at or under ``tol``."""
-        return self.frames >= opt.min_frames and self.est <= opt.tol
+        """At least ``min_frames`` frames and :data:`_MIN_BATCHES` batches, the
+        estimated relMSE at or under ``tol`` and at most a share
+        ``pixel_share`` of the pixels with a relative error over
+        ``pixel_factor · sqrt(tol)``."""
+        return (
+            self.frames >= opt.min_frames
+            and self.count >= _MIN_BATCHES
+            and self.est <= opt.tol
+            and self.tail <= opt.pixel_factor * math.sqrt(opt.tol)
+        )
 
     def stderr(self, shape) -> np.ndarray | None:
-        """Per-pixel standard error (None with fewer than two frames)."""
-        if self.frames < 2:
+        """Per-pixel standard error (None before two batches)."""
+        if self.se is None:
             return None
-        return np.sqrt(self.m2 / (self.frames - 1) / self.frames).reshape(shape).astype(np.float32)
+        return self.se.reshape(shape).astype(np.float32)
 
 
 def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Mean, bool]:
@@ -989,7 +1152,7 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
     from tqdm.auto import tqdm
 
     cam = opt.cam
-    acc = _Mean(np.zeros((cam.height * cam.width, 3)), np.zeros((cam.height * cam.width, 3)))
+    acc = _Mean.empty(cam.height * cam.width, opt.pixel_share)
     interrupted = False
     # With a tolerance the bar follows the error, not the frame cap that is
     # rarely reached: the share of the way, in log scale, from the first
@@ -1036,6 +1199,11 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
         "vpl_pdf": spec.sampler.pdf,
         "frames": int(acc.frames),
         "est_rel_mse": acc.est,
+        "est_max_rel_err": acc.worst,
+        "est_tail_rel_err": acc.tail,
+        "flagged_pixels": acc.flagged,
+        "batches": acc.count,
+        "batch_frames": acc.size,
         "tol": opt.tol,
         "eps": spec.eps,
         "skipped": skipped,

@@ -91,7 +91,7 @@ def _check_image(image, what: str = "image") -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
-def write_exr(path, image, metadata: dict | None = None) -> Path:
+def write_exr(path, image, metadata: dict | None = None, *, stderr=None) -> Path:
     """Write a linear RGB float32 OpenEXR file (ZIP compression).
 
     Parameters
@@ -102,15 +102,27 @@ def write_exr(path, image, metadata: dict | None = None) -> Path:
     metadata : dict, optional
         Extra header attributes, stored as ``voxgi_<key>`` strings (values
         that are not strings are JSON-encoded): settings and timings.
+    stderr : array of ``image``'s shape, optional
+        Per-pixel standard error of ``image`` (``RenderResult.stderr``),
+        written as the channels ``stderr.R``, ``stderr.G``, ``stderr.B``
+        (read back with ``read_exr(path, layer="stderr")``).
     """
     import OpenEXR
 
     img = _check_image(image)
+    channels = {"RGB": img}
+    if stderr is not None:
+        se = _check_image(stderr, "stderr")
+        if se.shape != img.shape:
+            raise ValueError(f"stderr: expected the image's shape {img.shape}, got {se.shape}")
+        channels.update(
+            {f"stderr.{c}": np.ascontiguousarray(se[:, :, i]) for i, c in enumerate("RGB")}
+        )
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for k, v in (metadata or {}).items():
         header[f"voxgi_{k}"] = v if isinstance(v, str) else json.dumps(v, default=float)
     path = Path(path)
-    with atomic_path(path) as tmp, OpenEXR.File(header, {"RGB": img}) as f:
+    with atomic_path(path) as tmp, OpenEXR.File(header, channels) as f:
         try:
             f.write(str(tmp))
         except RuntimeError as exc:  # OpenEXR reports a failed write (disk full...) this way
@@ -130,12 +142,23 @@ def _open_exr(path: Path):
         raise ValueError(f"{path}: cannot be read as OpenEXR ({exc})") from None
 
 
-def read_exr(path) -> np.ndarray:
-    """Read an OpenEXR file's RGB channels as (H, W, 3) float32."""
+def read_exr(path, layer: str | None = None) -> np.ndarray:
+    """Read an OpenEXR file's RGB channels as (H, W, 3) float32.
+
+    ``layer`` reads the channels ``<layer>.R``, ``<layer>.G``, ``<layer>.B``
+    instead (``"stderr"``: the error estimate :func:`write_exr` stores).
+    """
     path = Path(path)
     with _open_exr(path) as f:
         ch = f.channels()
-        if "RGB" in ch:
+        if layer is not None:
+            if layer in ch and ch[layer].pixels.ndim == 3:
+                px = ch[layer].pixels
+            elif all(f"{layer}.{c}" in ch for c in "RGB"):
+                px = np.stack([ch[f"{layer}.{c}"].pixels for c in "RGB"], axis=-1)
+            else:
+                raise ValueError(f"{path}: no {layer}.R/G/B channels (has {sorted(ch)})")
+        elif "RGB" in ch:
             px = ch["RGB"].pixels
         elif all(c in ch for c in "RGB"):
             px = np.stack([ch[c].pixels for c in "RGB"], axis=-1)

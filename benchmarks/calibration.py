@@ -1,0 +1,130 @@
+"""How well the display knows its own error: estimated against measured noise.
+
+Per scene (the Cornell box, ``shadow``, ``geometric``, the furnace sphere at
+albedo 0.9, ``window_room``) at ``--size`` pixels square: one voxelize + solve
+with the defaults of ``voxgi.render(scene)``; a reference render of that same
+solution with ``--ref-frames`` frames (``tol=0``, seed 1000); then
+``voxgi.render`` with its defaults at seeds 0, 1, 2. The estimate is of the
+display's noise only, so the reference is the long render of the same
+solution, not a path-traced image (whose difference would add the voxel
+solution's bias):
+
+* measured relMSE: ``rel_mse(image, reference)`` less the reference's own
+  estimated relMSE (its noise adds to the difference);
+* estimated relMSE: ``stats["est_rel_mse"]`` at the stopping point, and
+  their ratio (1 is a calibrated estimate);
+* the worst pixel: the estimated largest relative error
+  (``stats["est_max_rel_err"]``) and the measured largest
+  ``|image - reference| / sqrt(reference² + 0.01)``;
+* the display's seconds per phase (primary rays, shadow rays, gather rays,
+  shading) of the reference render.
+
+Writes ``results/calibration.json``.
+
+Usage::
+
+    python benchmarks/calibration.py [--size 256] [--ref-frames 256]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+
+import numpy as np
+from time_vs_error import RESULTS, git_commit
+
+import voxgi
+from voxgi.metrics import rel_mse
+
+SCENES = ("cornell_box", "shadow", "geometric", "furnace_sphere", "window_room")
+SEEDS = (0, 1, 2)
+
+
+def make_scene(name: str, size: int) -> voxgi.Scene:
+    if name == "furnace_sphere":
+        return voxgi.scenes.furnace_sphere(albedo=0.9, width=size, height=size)
+    return voxgi.scenes.get(name, width=size, height=size)
+
+
+def measure(name: str, size: int, ref_frames: int) -> dict:
+    scene = make_scene(name, size)
+    t0 = time.perf_counter()
+    vox = voxgi.voxelize(scene, resolution=voxgi.pipeline.RENDER_RESOLUTION)
+    sol = voxgi.pipeline.solve_for_display(vox, progress=False)
+    solve_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    ref = voxgi.render(scene, sol, max_frames=ref_frames, tol=0.0, seed=1000, progress=False)
+    row = {
+        "scene": name,
+        "records": len(vox),
+        "solve_s": solve_s,
+        "reference": {
+            "frames": ref.frames,
+            "seconds": time.perf_counter() - t0,
+            "est_rel_mse": ref.stats["est_rel_mse"],
+            "phases": {
+                k: ref.stats["seconds"][k] for k in ("primary", "shadow", "gather", "shade")
+            },
+            "rays": {
+                k: ref.stats[f"{k}_rays"] / ref.frames for k in ("primary", "shadow", "gather")
+            },
+        },
+        "seeds": [],
+    }
+    r = ref.image.astype(np.float64)
+    for seed in SEEDS:
+        t0 = time.perf_counter()
+        out = voxgi.render(scene, sol, seed=seed, progress=False)
+        secs = time.perf_counter() - t0
+        measured = rel_mse(out.image, ref.image) - ref.stats["est_rel_mse"]
+        worst = float(np.max(np.abs(out.image - r) / np.sqrt(r * r + 0.01)))
+        row["seeds"].append(
+            {
+                "seed": seed,
+                "frames": out.frames,
+                "seconds": secs,
+                "est_rel_mse": out.stats["est_rel_mse"],
+                "rel_mse": measured,
+                "ratio": out.stats["est_rel_mse"] / measured,
+                "est_max_rel_err": out.stats["est_max_rel_err"],
+                "max_rel_err": worst,
+                "flagged_pixels": out.stats["flagged_pixels"],
+            }
+        )
+        if name == "furnace_sphere":
+            exact = 1.0 / (1.0 - 0.9)
+            row["seeds"][-1]["max_err_vs_exact"] = float(np.max(np.abs(out.image / exact - 1)))
+        s = row["seeds"][-1]
+        print(
+            f"{name} seed {seed}: {s['frames']} frames {secs:.2f} s, relMSE est "
+            f"{s['est_rel_mse']:.2e} measured {s['rel_mse']:.2e} (ratio {s['ratio']:.2f}); "
+            f"worst pixel est {s['est_max_rel_err']:.3f} measured {s['max_rel_err']:.3f}",
+            flush=True,
+        )
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--ref-frames", type=int, default=256)
+    ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=SCENES)
+    args = ap.parse_args(argv)
+    res = {
+        "size": args.size,
+        "ref_frames": args.ref_frames,
+        "tol": 1e-3,
+        "pixel_factor": voxgi.RenderTuning().pixel_factor,
+        "commit": git_commit(),
+        "cores": os.cpu_count(),
+        "rows": [measure(name, args.size, args.ref_frames) for name in args.scenes],
+    }
+    (RESULTS / "calibration.json").write_text(json.dumps(res, indent=2, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,182 @@
+"""The display's error estimate (batch means, heavy-tail guard), its stopping
+rule and the EXR channels that carry it (docs/design.md §6)."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from test_display import triangle_solution
+
+import voxgi
+from voxgi.display import _Mean
+
+
+def fold(frames: np.ndarray) -> _Mean:
+    """All of ``frames`` (n, P, 3) into a fresh running mean."""
+    acc = _Mean.empty(frames.shape[1])
+    for x in frames:
+        acc.add(x)
+    return acc
+
+
+def test_iid_frames_give_the_variance_of_the_mean(rng):
+    # 64 frames of N(1, 0.1²) per pixel and channel: the mean's variance is
+    # 0.01 / 64. The store then holds 16 batches of 4 frames; each pixel's
+    # estimate has a relative sd of sqrt(2/15) = 0.37, so the average over
+    # 6,000 estimates has 0.47%: 3% is six of those.
+    n, p, sigma = 64, 2000, 0.1
+    acc = fold(1.0 + sigma * rng.standard_normal((n, p, 3)))
+    assert (acc.count, acc.size) == (16, 4)
+    ratio = np.mean(acc.se**2) / (sigma**2 / n)
+    assert abs(ratio - 1.0) < 0.03, ratio
+    assert acc.est == pytest.approx(np.mean(acc.se**2 / (acc.mean**2 + 0.01)))
+
+
+def test_correlated_frames_batch_variance_is_unbiased(rng):
+    # Groups of 4 consecutive frames share a component c ~ N(0, tau²) (as
+    # frames that share a sequence's strata or samples), plus iid N(0, s²).
+    # Over n = 64 frames (16 groups) the mean's variance is tau²/16 + s²/64;
+    # the spread between single frames would give (tau² + s²)/64, about a
+    # third of it here. The batches of 4 are aligned with the groups; the
+    # average of 6,000 estimates from 16 batches is good to 0.47%.
+    n, p, tau, s = 64, 2000, 0.1, 0.05
+    shared = np.repeat(tau * rng.standard_normal((n // 4, p, 3)), 4, axis=0)
+    acc = fold(1.0 + shared + s * rng.standard_normal((n, p, 3)))
+    truth = tau**2 / 16 + s**2 / 64
+    ratio = np.mean(acc.se**2) / truth
+    assert abs(ratio - 1.0) < 0.03, ratio
+
+
+def test_one_outlier_batch_is_flagged_and_bounds_the_error(rng):
+    # 200 pixels of N(1, 0.01²) over 64 frames; pixel 7 gets +1 in one frame.
+    # Its mean is then 1/64 off, 25 of its own standard errors: the guard
+    # flags it and its error estimate covers that jump.
+    n, p = 64, 200
+    frames = 1.0 + 0.01 * rng.standard_normal((n, p, 3))
+    frames[37, 7] += 1.0
+    acc = fold(frames)
+    err = np.abs(acc.mean - 1.0)
+    assert 1 <= acc.flagged <= 3  # the pixel, and at most a rare chance flag (0.3% each)
+    assert np.all(acc.se[7] >= 0.9 * err[7]), (acc.se[7], err[7])
+    # the same batch store without the outlier flags nothing that large
+    clean = fold(np.delete(frames, 7, axis=1))
+    assert clean.flagged < acc.flagged
+    assert np.max(clean.se) < 0.2 * np.min(acc.se[7])
+    assert acc.worst == pytest.approx(np.max(acc.se / np.sqrt(acc.mean**2 + 0.01)))
+
+
+def test_stopping_rule_waits_for_batches_and_the_worst_pixel():
+    opt = SimpleNamespace(min_frames=2, tol=1e-3, pixel_factor=1.0)
+    acc = _Mean.empty(4)
+    for f in range(8):  # the estimate after 8 batches is not yet trusted
+        acc.add(np.full((4, 3), 1.0 + 1e-6 * (-1) ** f))
+        assert not acc.done(opt)
+    acc.add(np.ones((4, 3)))
+    assert acc.done(opt)  # 9 batches, tiny relMSE, no pixel off
+    # one pixel of four alternates by ±20%: the mean relMSE (6.6e-4) is
+    # within tol, that pixel's (2.6e-3) is not
+    frames = np.ones((16, 4, 3))
+    frames[:, 2] += 0.2 * (-1.0) ** np.arange(16)[:, None]
+    acc = fold(frames)
+    assert acc.est <= 1e-3 < acc.worst**2
+    assert not acc.done(opt)
+    assert acc.done(SimpleNamespace(min_frames=2, tol=1e-3, pixel_factor=math.inf))
+
+
+def test_stopping_rule_lets_one_pixel_in_1000_exceed_the_bound():
+    # 2000 pixels, 16 frames: one noisy pixel (±20%) may stay over the bound
+    # (at most 1 in 1000 may), two may not; pixel_share 0 asks every pixel.
+    opt = SimpleNamespace(min_frames=2, tol=1e-3, pixel_factor=1.0)
+    frames = np.ones((16, 2000, 3))
+    frames[:, 5] += 0.2 * (-1.0) ** np.arange(16)[:, None]
+    assert fold(frames).done(opt)
+    every = _Mean.empty(2000, share=0.0)
+    for x in frames:
+        every.add(x)
+    assert not every.done(opt)
+    frames[:, 9] += 0.2 * (-1.0) ** np.arange(16)[:, None]
+    assert not fold(frames).done(opt)
+
+
+@pytest.mark.parametrize("rho", [0.5, 0.9])
+def test_furnace_stops_with_every_pixel_within_the_rule(rho):
+    # Exact radiosity on the triangles, so the only error is the display's
+    # noise (and the bounded-G loss near contact, < 0.1%). The rule, asked for
+    # every pixel (pixel_share 0), stops when no pixel's estimated relative
+    # error exceeds c = pixel_factor·sqrt(tol) = 0.63%; the worst pixel of the
+    # furnace is one where a VPL landed next to the shaded point, whose error
+    # its estimate covers (error ≈ estimate, docs/design.md §6), so no pixel
+    # may be off by more than 2c.
+    le, tol, factor = 1.0, 1e-3, 0.2
+    scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=le, width=32, height=24)
+    scene.camera = scene.camera.replace(eye=(0.5, 0.1, 0.2), target=(1.0, 0.0, 0.1))
+    sol = triangle_solution(scene, lambda v: np.full((len(v), 3), math.pi * le / (1 - rho)))
+    out = voxgi.render(
+        scene,
+        sol,
+        tol=tol,
+        progress=False,
+        tuning=voxgi.RenderTuning(pixel_factor=factor, pixel_share=0.0),
+    )
+    c = factor * math.sqrt(tol)
+    assert out.frames < 256  # stopped by the rule, not the cap
+    assert out.stats["est_max_rel_err"] <= c
+    err = np.abs(out.image * (1 - rho) / le - 1.0)
+    assert err.max() < 2 * c, (err.max(), out.frames)
+
+
+def test_exr_stderr_channels_round_trip(tmp_path, rng):
+    img = rng.random((5, 7, 3)).astype(np.float32)
+    se = (0.01 * rng.random((5, 7, 3))).astype(np.float32)
+    path = voxgi.io.write_exr(tmp_path / "a.exr", img, stderr=se)
+    np.testing.assert_array_equal(voxgi.io.read_exr(path), img)
+    np.testing.assert_array_equal(voxgi.io.read_exr(path, layer="stderr"), se)
+    plain = voxgi.io.write_exr(tmp_path / "b.exr", img)
+    with pytest.raises(ValueError, match=r"no stderr\.R/G/B channels"):
+        voxgi.io.read_exr(plain, layer="stderr")
+    with pytest.raises(ValueError, match="stderr: expected the image's shape"):
+        voxgi.io.write_exr(tmp_path / "c.exr", img, stderr=se[:4])
+
+
+def test_render_stderr_goes_to_the_exr(tmp_path):
+    scene = voxgi.scenes.furnace_sphere(albedo=0.5, width=12, height=10)
+    sol = triangle_solution(scene, lambda v: np.full((len(v), 3), 2 * math.pi))
+    out = voxgi.render(scene, sol, max_frames=12, tol=0.0, progress=False)
+    assert out.stderr.shape == out.image.shape
+    assert out.stats["batches"] == 12
+    assert out.stats["batch_frames"] == 1
+    path = voxgi.io.write_exr(tmp_path / "r.exr", out.image, stderr=out.stderr)
+    np.testing.assert_array_equal(voxgi.io.read_exr(path, layer="stderr"), out.stderr)
+
+
+@pytest.mark.parametrize(
+    ("tuning", "match"),
+    [
+        ({"pixel_factor": 0.0}, "pixel_factor: must be > 0"),
+        ({"pixel_factor": "10"}, "pixel_factor: expected a number"),
+        ({"pixel_share": 1.0}, "pixel_share: must be < 1"),
+        ({"pixel_share": -0.1}, "pixel_share: must be >= 0"),
+    ],
+)
+def test_bad_stopping_rule_settings_are_named(tuning, match):
+    scene = voxgi.scenes.furnace_sphere(albedo=0.5, width=8, height=6)
+    sol = triangle_solution(scene, lambda v: np.full((len(v), 3), 2 * math.pi))
+    with pytest.raises((TypeError, ValueError), match=match):
+        voxgi.render(scene, sol, progress=False, tuning=voxgi.RenderTuning(**tuning))
+
+
+def test_cli_writes_the_stderr_channels(tmp_path):
+    from voxgi import cli
+
+    out = tmp_path / "f.exr"
+    args = ["render", "furnace-sphere", "-o", str(out), "--resolution", "12", "--directions"]
+    args += ["4", "--frames", "6", "--width", "8", "--height", "6", "-q"]
+    assert cli.main(args) == 0
+    se = voxgi.io.read_exr(out, layer="stderr")
+    assert se.shape == (6, 8, 3)
+    assert np.all(np.isfinite(se))
+    assert np.all(se >= 0)
+    assert voxgi.io.read_exr_header(out)["est_max_rel_err"] > 0
