@@ -273,6 +273,9 @@ class VPLSampler:
         Each VPL of a frame sits at a point drawn uniformly on its record's
         own surface (``docs/design.md`` §6) instead of at the
         record's fixed centroid.
+    mis_emitters : bool
+        With ``mis``, the emitter VPLs are combined with the gather rays too
+        (which then take the light of the emitters they hit).
     """
 
     def __init__(
@@ -284,6 +287,7 @@ class VPLSampler:
         mis: bool = False,
         pdf: str = "power",
         on_surface: bool = True,
+        mis_emitters: bool = True,
     ):
         if pdf not in ("power", "area"):
             raise ValueError(f"pdf: expected 'power' or 'area', got {pdf!r}")
@@ -312,7 +316,7 @@ class VPLSampler:
                 dens[idx] = (lum[idx] if pdf == "power" else 1.0) / cum[-1]
             self.sets.append((idx, cum, power, dens))
         self.K = int(vpls_per_frame)
-        (_, cum_d, pd, _), (_, cum_i, pi, dens_i) = self.sets
+        (_, cum_d, pd, dens_d), (_, cum_i, pi, dens_i) = self.sets
         has_d, has_i = len(cum_d) > 0 and pd > 0, len(cum_i) > 0 and pi > 0
         if emitter_share is None:
             share = pd / (pd + pi) if (pd + pi) > 0 else 0.0
@@ -328,12 +332,17 @@ class VPLSampler:
             nd = self.K if has_d else 0
         self.counts = (nd, self.K - nd if has_i else 0)
         self.seed = int(seed)
-        self.mis = bool(mis) and self.counts[1] > 0
-        #: (N,) float32 n_i p(y) of every record (0 outside the non-emitter set):
-        #: the VPL side of the MIS weights, for VPLs and gather hits alike.
-        self.record_pa = (
-            (self.counts[1] * dens_i).astype(np.float32) if self.mis else np.zeros(n, np.float32)
-        )
+        self.mis = bool(mis) and sum(self.counts) > 0
+        #: Whether the emitter set joins the MIS with the gather rays too.
+        self.mis_emitters = self.mis and bool(mis_emitters)
+        self.mis = self.mis and (self.counts[1] > 0 or self.mis_emitters)
+        #: (N,) float32 n p(y) of every record in an MIS set (n its set's VPLs
+        #: per frame, 0 elsewhere): the VPL side of the MIS weights, for VPLs
+        #: and gather hits alike.
+        pa = self.counts[1] * dens_i if self.mis else np.zeros(n)
+        if self.mis_emitters:
+            pa = pa + self.counts[0] * dens_d
+        self.record_pa = pa.astype(np.float32)
         self.pos = np.ascontiguousarray(vox.centroid, dtype=np.float64)
         self.normal = np.ascontiguousarray(vox.normal, dtype=np.float32)
         self.area32 = area.astype(np.float32)
@@ -355,7 +364,7 @@ class VPLSampler:
             u = (np.arange(k) + rng.random(k)) / k * float(cum[-1])  # stratified along the table
             pick = idx[np.minimum(np.searchsorted(cum, u, side="right"), len(idx) - 1)]
             idx_all.append(pick)
-            if s == 1 and self.mis:
+            if self.mis and (s == 1 or self.mis_emitters):
                 # An MIS VPL carries B/π; the kernel divides by n_i p(y) + the gather pdf.
                 w_all.append(np.ones(k))
                 pa_all.append(self.record_pa[pick])
@@ -418,7 +427,11 @@ class _FrameShader:
                 "tri_v": tracer.tris,
                 "tri_object": tracer.obj,
                 "obj_two_sided": self.two_sided.astype(np.uint8),
-                "obj_emitter": np.array([o.material.is_emitter for o in objs], np.uint8),
+                # Objects whose records are VPLs only; none when the emitters
+                # join the MIS.
+                "obj_emitter": np.array(
+                    [o.material.is_emitter and not sampler.mis_emitters for o in objs], np.uint8
+                ),
             }
 
     @staticmethod
