@@ -107,6 +107,31 @@ def test_transformed_rectangle_lands_where_mitsuba_puts_it(tmp_path):
         )
 
 
+def test_mirrored_shapes_face_as_in_mitsuba(tmp_path):
+    # A mesh's front follows the winding of its transformed vertices: the
+    # mirror x -> -x turns the triangle's +z normal to -z. The analytic
+    # rectangle transforms its normal as a normal: diag(-1, 1, 1) keeps +z.
+    (tmp_path / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    mirror = '<transform name="to_world"><scale x="-1"/></transform>'
+    path = _xml(
+        tmp_path,
+        f"""<shape type="obj" id="tri"><string name="filename" value="tri.obj"/>{mirror}</shape>
+            <shape type="rectangle" id="rect">{mirror}</shape>""",
+    )
+    normals = {}
+    for o in voxgi.Scene.load(path).objects:
+        t = o.vertices[o.faces[0]]
+        n = np.cross(t[1] - t[0], t[2] - t[0])
+        normals[o.name] = n / np.linalg.norm(n)
+    np.testing.assert_allclose(normals["tri"], [0, 0, -1])
+    np.testing.assert_allclose(normals["rect"], [0, 0, 1])
+
+    mi = _mitsuba()
+    for sh in mi.load_file(str(path)).shapes():
+        ps = sh.sample_position(0.0, mi.Point2f(0.3, 0.3))
+        np.testing.assert_allclose(np.array(ps.n).ravel(), normals[sh.id()], atol=1e-6)
+
+
 def test_canonical_shapes(tmp_path):
     path = _xml(
         tmp_path,
@@ -176,7 +201,7 @@ def test_fov_axis_becomes_vertical_fov(tmp_path, axis):
         tmp_path,
         f"""<sensor type="perspective">
               <float name="fov" value="{fov}"/><string name="fov_axis" value="{axis}"/>
-              <film type="hdrfilm"><integer name="width" value="{w}"/><integer name="height" value="{h}"/></film>
+              <film type="hdrfilm"><integer name="width" value="{w}"/><integer name="height" value="{h}"/><rfilter type="box"/></film>
             </sensor>
             <shape type="rectangle"/>""",
     )
@@ -200,7 +225,7 @@ def test_camera_frame_and_handedness(tmp_path):
              <float name="fov" value="40"/><string name="fov_axis" value="y"/>
              <float name="aperture_radius" value="0.1"/><float name="focus_distance" value="7"/>
              <transform name="to_world"><lookat origin="1, 2, 3" target="1, 2, 13" up="0, 1, 0"/></transform>
-             <film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="32"/></film>
+             <film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="32"/><rfilter type="box"/></film>
            </sensor>
            <shape type="rectangle"/>""",
     )
@@ -332,7 +357,7 @@ def test_defaults_variables_includes_and_refs(tmp_path):
         """<default name="r" value="0.25"/><default name="res" value="40"/>
            <include filename="frag.xml"/>
            <sensor type="perspective">
-             <film type="hdrfilm"><integer name="width" value="$res"/><integer name="height" value="$res"/></film>
+             <film type="hdrfilm"><integer name="width" value="$res"/><integer name="height" value="$res"/><rfilter type="box"/></film>
            </sensor>
            <shape type="rectangle"><ref id="red"/></shape>""",
     )
@@ -561,7 +586,8 @@ def test_cbox_xml_matches_mitsuba():
         pytest.skip("set VOXGI_MITSUBA_DATA to a mitsuba-data checkout")
     mi = _mitsuba()
     xml = Path(data) / "scenes/cbox/cbox.xml"
-    scene = voxgi.Scene.load(xml)
+    with pytest.warns(voxgi.SceneWarning, match=r"max_depth 6 .*rfilter 'gaussian'"):
+        scene = voxgi.Scene.load(xml)
     out = voxgi.render(scene, progress=False)
     spp = 4096
     ref = np.array(mi.render(mi.load_file(str(xml), max_depth=-1, spp=spp), spp=spp, seed=1))[

@@ -661,8 +661,10 @@ def _shape_mesh(p: _Plugin) -> tuple[np.ndarray, np.ndarray, str | None]:
         source = str(mesh_path)
     v = np.asarray(v, np.float64) @ m[:3, :3].T + m[:3, 3]
     f = np.asarray(f, np.int64)
-    # A mirroring transform turns the winding, and Mitsuba's normals with it.
-    if np.linalg.det(m[:3, :3]) < 0:
+    # Mitsuba's analytic rectangle, disk and sphere carry their normal through
+    # to_world as a normal, so a mirroring transform keeps their front; a
+    # mesh's front follows its winding, which the mirror turns (§12).
+    if p.type in ("rectangle", "disk", "sphere") and np.linalg.det(m[:3, :3]) < 0:
         f = f[:, ::-1]
     if p.props.get("flip_normals", False):
         f = f[:, ::-1]
@@ -732,6 +734,10 @@ def _sensor(p: _Plugin, notes: _Notes) -> dict | None:
     height = int(films[0].props.get("height", 576)) if films else 576
     if width < 1 or height < 1:
         raise ValueError(f"{p.where()}: film size {width}x{height} must be positive")
+    filters = [c for c in films[0].children if c.tag == "rfilter"] if films else []
+    rfilter = filters[0].type if filters else "gaussian"  # Mitsuba's default
+    if rfilter != "box":
+        notes.drop(f"film rfilter {rfilter!r} (voxgi's pixels are box-filtered)")
     axis = str(p.props.get("fov_axis", "x")).lower()
     if axis not in ("x", "y", "smaller", "larger", "diagonal"):
         raise ValueError(
@@ -820,8 +826,13 @@ def load_mitsuba(path) -> SceneData:
                 reader.notes.drop(f"{p.label()} (only the first sensor is used)")
         elif p.tag == "emitter":
             _scene_emitter(p, reader.notes)
-        elif p.tag == "bsdf" or p.tag == "texture" or p.tag == "integrator":
-            pass  # BSDFs and textures are used through refs; voxgi is its own integrator
+        elif p.tag == "integrator":
+            # voxgi is its own integrator and computes every bounce
+            depth = p.props.get("max_depth", -1)
+            if depth != -1:
+                reader.notes.drop(f"{p.label()}: max_depth {depth} (voxgi computes every bounce)")
+        elif p.tag in ("bsdf", "texture"):
+            pass  # used through refs
         else:
             reader.notes.drop(f"{p.label()} at line {p.line}")
     if not data.meshes:
