@@ -589,10 +589,12 @@ def test_cbox_xml_matches_mitsuba():
     with pytest.warns(voxgi.SceneWarning, match=r"max_depth 6 .*rfilter 'gaussian'"):
         scene = voxgi.Scene.load(xml)
     out = voxgi.render(scene, progress=False)
+    # The same XML with a box pixel filter (docs/design.md §9: the file's
+    # Gaussian blurs the luminaire's edges across pixels) and every bounce.
+    text = xml.read_text().replace('<rfilter type="gaussian"/>', '<rfilter type="box"/>')
+    mi.Thread.thread().file_resolver().prepend(str(xml.parent))
     spp = 4096
-    ref = np.array(mi.render(mi.load_file(str(xml), max_depth=-1, spp=spp), spp=spp, seed=1))[
-        ..., :3
-    ]
-    # the reference's own noise at 4096 spp is about 1e-4 relMSE; voxgi's
-    # defaults reach 1e-3 against a converged reference (README)
-    assert voxgi.metrics.rel_mse(out.image, ref) < 1e-3
+    ref = mi.render(mi.load_string(text, max_depth=-1, spp=spp), spp=spp, seed=1)
+    # voxgi's defaults reach 1e-3 against a converged reference (README); the
+    # reference's own noise at 4096 spp is about 5e-5 (two seeds compared)
+    assert voxgi.metrics.rel_mse(out.image, np.array(ref)[..., :3]) < 1e-3

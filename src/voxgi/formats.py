@@ -287,6 +287,15 @@ class _XmlReader:
         self.defaults: dict[str, str] = {}
         self.ids: dict[str, _Plugin] = {}
         self.notes = _Notes(path)
+        self.search: list[Path] = []  # <path> folders, searched after the file's own
+        self.pending: dict[str, tuple[Path, _Node]] = {}  # top-level ids not read yet
+
+    def resolve(self, file: Path, name: str) -> Path:
+        """A file named in ``file``: beside it, the scene or a ``<path>`` folder."""
+        for folder in [file.parent, self.path.parent, *self.search]:
+            if (folder / name).exists():
+                return folder / name
+        return file.parent / name
 
     def fail(self, file: Path, node: _Node, msg: str):
         ident = "".join(
@@ -329,10 +338,12 @@ class _XmlReader:
             if node.tag == "default":
                 name = self.need(file, node, "name")
                 self.defaults.setdefault(name, self.need(file, node, "value"))
+            elif node.tag == "path":
+                self.search.append(file.parent / self.need(file, node, "value"))
             elif node.tag == "include":
                 if depth > 8:
                     self.fail(file, node, "includes nested more than 8 deep")
-                sub = file.parent / self.need(file, node, "filename")
+                sub = self.resolve(file, self.need(file, node, "filename"))
                 if not sub.exists():
                     self.fail(file, node, f"included file not found: {sub}")
                 out += self.scene_children(sub, _parse_xml(sub), depth + 1)
@@ -357,6 +368,8 @@ class _XmlReader:
                     p.props[name] = sub
             elif child.tag == "ref":
                 ref_id = self.need(file, child, "id")
+                if ref_id not in self.ids and ref_id in self.pending:
+                    self.plugin(*self.pending.pop(ref_id))  # a reference ahead of its object
                 if ref_id not in self.ids:
                     self.fail(file, child, f"unknown id {ref_id!r}; defined: {sorted(self.ids)}")
                 if name is None:
@@ -371,6 +384,8 @@ class _XmlReader:
                 if name is None:
                     self.fail(file, child, "missing attribute 'name'")
                 p.props[name] = self.value(file, child, emitter)
+                if name == "filename" and child.tag == "string":
+                    p.props[name] = str(self.resolve(file, p.props[name]))
             else:
                 self.fail(file, child, f"unknown element <{child.tag}> inside <{node.tag}>")
         if p.id is not None:
@@ -391,7 +406,7 @@ class _XmlReader:
             return v
         text = self.attr(file, node, "value")
         if tag == "spectrum" and text is None and "filename" in node.attrs:
-            spd = file.parent / self.attr(file, node, "filename")
+            spd = self.resolve(file, self.attr(file, node, "filename"))
             try:
                 pairs = np.loadtxt(spd, comments="#", ndmin=2)
             except (OSError, ValueError) as exc:
@@ -813,10 +828,19 @@ def load_mitsuba(path) -> SceneData:
     if version and not version.startswith("3"):
         reader.notes.approx(f"scene version {version} read as Mitsuba 3 XML")
     data = SceneData()
-    for file, node in reader.scene_children(path, root):
+    children = reader.scene_children(path, root)
+    for file, node in children:
+        if node.tag in _PLUGIN_TAGS and "id" in node.attrs:
+            reader.pending[reader.attr(file, node, "id")] = (file, node)
+    for file, node in children:
         if node.tag not in _PLUGIN_TAGS:
             reader.fail(file, node, "unknown top-level element")
-        p = reader.plugin(file, node)
+        ident = reader.attr(file, node, "id")
+        if ident in reader.ids and ident not in reader.pending:
+            p = reader.ids[ident]  # read already, through a reference
+        else:
+            reader.pending.pop(ident, None)
+            p = reader.plugin(file, node)
         if p.tag == "shape":
             data.meshes += _shape(p, len(data.meshes), reader.notes)
         elif p.tag == "sensor":
@@ -825,7 +849,8 @@ def load_mitsuba(path) -> SceneData:
             else:
                 reader.notes.drop(f"{p.label()} (only the first sensor is used)")
         elif p.tag == "emitter":
-            _scene_emitter(p, reader.notes)
+            if p.type != "area":  # (an area emitter is attached to shapes by reference)
+                _scene_emitter(p, reader.notes)
         elif p.tag == "integrator":
             # voxgi is its own integrator and computes every bounce
             depth = p.props.get("max_depth", -1)
@@ -850,8 +875,9 @@ def read_serialized(path, shape_index: int = 0) -> tuple[np.ndarray, np.ndarray]
     vertex and triangle counts, positions (float32, or float64 with flag
     0x2000), optional normals (0x0001), texture coordinates (0x0002) and
     colours (0x0008), then ``uint32`` indices (``uint64`` past 2^32
-    vertices). The file ends with each mesh's byte offset (``uint64``;
-    ``uint32`` in version 3) and a ``uint32`` mesh count.
+    vertices). Meshes are found by walking the streams from the start (each
+    zlib stream knows its end), so the optional table of offsets at the end
+    of the file is not needed.
     """
     path = Path(path)
     buf = path.read_bytes()
@@ -859,25 +885,25 @@ def read_serialized(path, shape_index: int = 0) -> tuple[np.ndarray, np.ndarray]
     def bad(msg):
         raise ValueError(f"serialized mesh {path}: {msg}")
 
-    if len(buf) < 8 or struct.unpack_from("<H", buf, 0)[0] != 0x041C:
-        bad("not a Mitsuba serialized file (no 0x041C header)")
-    version = struct.unpack_from("<H", buf, 2)[0]
-    if version not in (3, 4):
-        bad(f"unsupported version {version}")
-    count = struct.unpack_from("<I", buf, len(buf) - 4)[0]
-    if not 0 <= shape_index < count:
-        bad(f"shape_index {shape_index} out of range: the file holds {count} mesh(es)")
-    osize = 8 if version == 4 else 4
-    table = len(buf) - 4 - osize * count
-    if table < 0:
-        bad("truncated offset table")
-    offset = struct.unpack_from("<Q" if version == 4 else "<I", buf, table + osize * shape_index)[0]
-    if offset + 4 > table or struct.unpack_from("<H", buf, offset)[0] != 0x041C:
-        bad(f"mesh {shape_index} does not start with the 0x041C header")
-    try:
-        raw = zlib.decompressobj().decompress(buf[offset + 4 : table])
-    except zlib.error as exc:
-        bad(f"mesh {shape_index}: corrupt zlib stream ({exc})")
+    if shape_index < 0:
+        bad(f"shape_index {shape_index} must be >= 0")
+    offset, raw, version = 0, b"", 0
+    for k in range(shape_index + 1):
+        if offset + 4 > len(buf) or struct.unpack_from("<H", buf, offset)[0] != 0x041C:
+            if k == 0:
+                bad("not a Mitsuba serialized file (no 0x041C header)")
+            bad(f"shape_index {shape_index} out of range: the file holds {k} mesh(es)")
+        version = struct.unpack_from("<H", buf, offset + 2)[0]
+        if version not in (3, 4):
+            bad(f"mesh {k}: unsupported version {version}")
+        stream = zlib.decompressobj()
+        try:
+            raw = stream.decompress(buf[offset + 4 :])
+        except zlib.error as exc:
+            bad(f"mesh {k}: corrupt zlib stream ({exc})")
+        if not stream.eof:
+            bad(f"mesh {k}: truncated zlib stream")
+        offset = len(buf) - len(stream.unused_data)
     pos = 0
 
     def take(n):
