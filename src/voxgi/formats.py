@@ -968,6 +968,35 @@ def _parse_mtl(path: Path, notes: _Notes) -> dict[str, dict]:
     return mats
 
 
+def _absolute_obj_indices(text: str) -> str:
+    """OBJ text with relative (negative) face indices made absolute.
+
+    In OBJ, ``f -4 -3 -2 -1`` names the last four vertices defined *before*
+    the face; trimesh counts them back from the end of the file instead.
+    Only the face lines holding a negative index are rewritten.
+    """
+    if not re.search(r"^f[ \t][^\n]*(?<![\d/])-\d", text, flags=re.MULTILINE):
+        return text
+    starts = [
+        np.array([m.start() for m in re.finditer(rf"^{k}[ \t]", text, flags=re.MULTILINE)])
+        for k in ("v", "vt", "vn")
+    ]
+
+    def line(m):
+        # counts of v, vt, vn defined before this face
+        n = [int(np.searchsorted(s, m.start())) for s in starts]
+
+        def token(t):
+            parts = t.group(0).split("/")
+            return "/".join(
+                str(int(q) + n[i] + 1) if q.startswith("-") else q for i, q in enumerate(parts)
+            )
+
+        return m.group(1) + re.sub(r"\S+", token, m.group(2))
+
+    return re.sub(r"^(f[ \t]+)([^\n]*)", line, text, flags=re.MULTILINE)
+
+
 def load_obj(path) -> SceneData:
     """Read an OBJ file and its MTL materials: one mesh per material.
 
@@ -1000,7 +1029,12 @@ def load_obj(path) -> SceneData:
                     notes.approx(f"material library {name} not found: grey 0.5")
     try:
         loaded = trimesh.load(
-            path, file_type="obj", process=False, group_material=True, maintain_order=True
+            trimesh.util.wrap_as_stream(_absolute_obj_indices(text)),
+            file_type="obj",
+            resolver=trimesh.resolvers.FilePathResolver(path),
+            process=False,
+            group_material=True,
+            maintain_order=True,
         )
     except Exception as exc:
         raise ValueError(f"scene file {path}: cannot load OBJ: {exc}") from None
