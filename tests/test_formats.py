@@ -506,6 +506,10 @@ BAD_XML = [
     ("<shape/>", r"line 2: <shape>: missing attribute 'type'"),
     ("<widget type='x'/>", r"line 2: <widget type=\"x\">: unknown top-level element"),
     (
+        "<shape type='rectangle'><bsdf type='difuse'/></shape>",
+        r"line 2: <bsdf type=\"difuse\">: unknown bsdf plugin 'difuse'",
+    ),
+    (
         "<shape type='rectangle'><ref id='nope'/></shape>",
         r"line 2: <ref id=\"nope\">: unknown id 'nope'",
     ),

@@ -258,6 +258,29 @@ _PLUGIN_TAGS = {
     "texture",
     "volume",
 }
+#: Mitsuba 3's plugins of the kinds voxgi reads (a name outside them is an
+#: error, a known one voxgi cannot represent a warning).
+_MITSUBA_PLUGINS = {
+    "shape": {
+        "obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk", "cylinder",
+        "shapegroup", "instance", "bsplinecurve", "linearcurve", "sdfgrid", "ellipsoids",
+        "ellipsoidsmesh", "merge",
+    },
+    "bsdf": {
+        "diffuse", "twosided", "plastic", "roughplastic", "conductor", "roughconductor",
+        "dielectric", "roughdielectric", "thindielectric", "principled", "principledthin",
+        "pplastic", "measured", "measured_polarized", "mask", "bumpmap", "normalmap",
+        "blendbsdf", "null", "polarizer", "retarder", "circular", "hair",
+    },
+    "emitter": {
+        "area", "point", "spot", "directional", "directionalarea", "constant", "envmap",
+        "projector", "sunsky",
+    },
+    "sensor": {
+        "perspective", "thinlens", "orthographic", "radiancemeter", "irradiancemeter",
+        "distant", "batch",
+    },
+}  # fmt: skip
 _VALUE_TAGS = {"float", "integer", "boolean", "string", "rgb", "spectrum", "point", "vector"}
 
 
@@ -356,6 +379,9 @@ class _XmlReader:
         kind = self.attr(file, node, "type")
         if kind is None:
             self.fail(file, node, "missing attribute 'type'")
+        known = _MITSUBA_PLUGINS.get(node.tag)
+        if known is not None and kind not in known:
+            self.fail(file, node, f"unknown {node.tag} plugin {kind!r}")
         p = _Plugin(node.tag, kind, self.attr(file, node, "id"), node.line, file)
         emitter = emitter or node.tag == "emitter"
         for child in node.children:
@@ -405,6 +431,8 @@ class _XmlReader:
                 self.fail(file, node, f"expected 3 coordinates, got {v.tolist()}")
             return v
         text = self.attr(file, node, "value")
+        if tag == "spectrum" and "type" in node.attrs:
+            self.fail(file, node, f"spectrum plugin {node.attrs['type']!r} is not supported")
         if tag == "spectrum" and text is None and "filename" in node.attrs:
             spd = self.resolve(file, self.attr(file, node, "filename"))
             try:
