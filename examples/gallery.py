@@ -99,7 +99,7 @@ def front_camera(scene: voxgi.Scene, size: int) -> voxgi.Camera:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     ap.add_argument(
         "names", nargs="*", help=f"scenes to render (default: all): {', '.join(SCENES)}"
     )

@@ -569,6 +569,14 @@ def test_bad_files_of_each_kind(tmp_path):
     (tmp_path / "bad.gltf").write_text('{"asset": {"version": "2.0"}, "meshes": [')
     with pytest.raises(ValueError, match=r"bad\.gltf: malformed glTF JSON"):
         voxgi.Scene.load(tmp_path / "bad.gltf")
+    (tmp_path / "refs.gltf").write_text(
+        '{"asset": {"version": "2.0"}, "meshes": [{"primitives": [{"attributes": {"POSITION": 5}}]}]}'
+    )
+    with pytest.raises(
+        ValueError,
+        match=r"refs\.gltf: meshes\[0\]\.primitives\[0\]\.attributes\.POSITION: accessor 5",
+    ):
+        voxgi.Scene.load(tmp_path / "refs.gltf")
     (tmp_path / "broken.glb").write_bytes(b"glTF\x02\x00\x00\x00")
     with pytest.raises(ValueError, match=r"broken\.glb: truncated GLB header"):
         voxgi.Scene.load(tmp_path / "broken.glb")

@@ -1200,6 +1200,45 @@ def _gltf_camera(doc: dict, path: Path) -> dict | None:
     return None
 
 
+def _check_gltf_references(doc: dict, path: Path) -> None:
+    """ValueError naming the element when a mesh or buffer points nowhere."""
+
+    def table(key):
+        t = doc.get(key, [])
+        if not isinstance(t, list):
+            raise ValueError(f"scene file {path}: '{key}' must be an array")
+        return t
+
+    accessors, views, buffers = table("accessors"), table("bufferViews"), table("buffers")
+
+    def need(index, items, key, where):
+        if not isinstance(index, int) or not 0 <= index < len(items):
+            raise ValueError(
+                f"scene file {path}: {where}: {key} {index!r} not in '{key}s' "
+                f"({len(items)} of them)"
+            )
+
+    for m, mesh in enumerate(table("meshes")):
+        for k, prim in enumerate(mesh.get("primitives", [])):
+            where = f"meshes[{m}].primitives[{k}]"
+            for name, index in prim.get("attributes", {}).items():
+                need(index, accessors, "accessor", f"{where}.attributes.{name}")
+            if "indices" in prim:
+                need(prim["indices"], accessors, "accessor", f"{where}.indices")
+    for a, acc in enumerate(accessors):
+        if "bufferView" in acc:
+            need(acc["bufferView"], views, "bufferView", f"accessors[{a}]")
+    for v, view in enumerate(views):
+        need(view.get("buffer"), buffers, "buffer", f"bufferViews[{v}]")
+    for b, buf in enumerate(buffers):
+        uri = buf.get("uri")
+        if isinstance(uri, str) and not uri.startswith("data:"):
+            if not (path.parent / uri).exists():
+                raise ValueError(
+                    f"scene file {path}: buffers[{b}]: file not found: {path.parent / uri}"
+                )
+
+
 def load_gltf(path) -> SceneData:
     """Read a glTF 2.0 scene (``.gltf`` or ``.glb``): one mesh per primitive.
 
@@ -1218,6 +1257,7 @@ def load_gltf(path) -> SceneData:
     if not path.exists():
         raise FileNotFoundError(f"scene file not found: {path}")
     doc, _ = _gltf_json(path)
+    _check_gltf_references(doc, path)
     notes = _Notes(path)
     by_name: dict[str, list] = {}
     for k, m in enumerate(doc.get("materials", [])):
