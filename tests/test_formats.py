@@ -515,7 +515,7 @@ BAD_XML = [
     ),
     (
         "<shape type='obj' id='m'><string name='filename' value='gone.obj'/></shape>",
-        r"line 2: <shape type=\"obj\" id='m'>: mesh file not found: .*gone\.obj",
+        r"line 2: <shape type=\"obj\" id=\"m\">: mesh file not found: .*gone\.obj",
     ),
     (
         "<shape type='rectangle'><bsdf type='diffuse'><float name='reflectance' value='abc'/></bsdf></shape>",

@@ -295,7 +295,7 @@ class _Plugin:
     children: list = field(default_factory=list)
 
     def where(self) -> str:
-        ident = f" id={self.id!r}" if self.id else ""
+        ident = f' id="{self.id}"' if self.id else ""
         return f'{self.file}: line {self.line}: <{self.tag} type="{self.type}"{ident}>'
 
     def label(self) -> str:
@@ -853,8 +853,16 @@ def load_mitsuba(path) -> SceneData:
     reader = _XmlReader(path)
     root = _parse_xml(path)
     version = root.attrs.get("version", "")
-    if version and not version.startswith("3"):
+    # Mitsuba 2 and 3 share their XML; 0.x spelled property names differently
+    if version and not version.startswith(("2.", "3.")):
         reader.notes.approx(f"scene version {version} read as Mitsuba 3 XML")
+    try:
+        return _read_mitsuba(reader, path, root)
+    except RecursionError:
+        raise ValueError(f"scene file {path}: elements nested too deeply") from None
+
+
+def _read_mitsuba(reader: _XmlReader, path: Path, root: _Node) -> SceneData:
     data = SceneData()
     children = reader.scene_children(path, root)
     for file, node in children:
