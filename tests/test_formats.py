@@ -589,6 +589,25 @@ def test_bad_files_of_each_kind(tmp_path):
         formats.read_serialized(tmp_path / "n.serialized")
 
 
+def test_cli_takes_scene_files_of_other_renderers(tmp_path, monkeypatch, capsys):
+    from voxgi import cli
+
+    monkeypatch.chdir(tmp_path)
+    for name in ("missing.xml", "missing.obj", "missing.glb"):
+        with pytest.raises(SystemExit) as exc:
+            cli.main(["render", name])
+        assert exc.value.code == 2
+        assert f"scene file not found: {name}" in capsys.readouterr().err
+    # a broken file is one line naming it, no traceback
+    (tmp_path / "bad.xml").write_text("<scene><shape type='rectangle'></scene>")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["render", "bad.xml", "-q"])
+    # (exits as a TOML file that cannot be loaded does: with the message)
+    assert str(exc.value.code) == (
+        "voxgi render: error: scene file bad.xml: malformed XML: mismatched tag (line 1, column 34)"
+    )
+
+
 # -- acceptance: Mitsuba's Cornell box -----------------------------------------
 
 
