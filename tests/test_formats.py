@@ -434,7 +434,7 @@ def _gltf(tmp_path: Path) -> Path:
     doc["materials"] = [
         {
             "name": "glow",
-            "pbrMetallicRoughness": {"baseColorFactor": [0.73, 0.2, 0.1, 1.0]},
+            "pbrMetallicRoughness": {"baseColorFactor": [0.73, 0.2, 0.1, 1.0], "metallicFactor": 0},
             "emissiveFactor": [1.0, 0.5, 0.25],
             "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 4.0}},
             "doubleSided": True,
@@ -456,7 +456,7 @@ def _gltf(tmp_path: Path) -> Path:
 
 
 def test_gltf_material_transform_camera(tmp_path):
-    scene = voxgi.Scene.load(_gltf(tmp_path))
+    scene = voxgi.Scene.load(_gltf(tmp_path))  # (a dielectric: no warning)
     (obj,) = scene.objects
     np.testing.assert_allclose(obj.vertices.min(axis=0), [0, 1, 2], atol=1e-6)
     np.testing.assert_allclose(obj.vertices.max(axis=0), [2, 3, 4], atol=1e-6)
@@ -471,6 +471,21 @@ def test_gltf_material_transform_camera(tmp_path):
     np.testing.assert_allclose(right, [0, 0, -1], atol=1e-12)  # glTF: +x is right
     assert cam.fov == pytest.approx(math.degrees(0.5))
     assert (cam.width, cam.height) == (768, 512)
+
+
+def test_gltf_metals_and_lights_are_listed(tmp_path):
+    path = _gltf(tmp_path)
+    doc = json.loads(path.read_text())
+    doc["materials"][0]["pbrMetallicRoughness"]["metallicFactor"] = 0.5
+    doc["materials"][0]["extensions"]["KHR_materials_transmission"] = {"transmissionFactor": 1}
+    doc["extensions"] = {"KHR_lights_punctual": {"lights": [{"type": "point"}, {"type": "spot"}]}}
+    path.write_text(json.dumps(doc))
+    with pytest.warns(voxgi.SceneWarning) as rec:
+        voxgi.Scene.load(path)
+    approx, dropped = (str(w.message) for w in rec)
+    assert "material 'glow': metallic 0.5 read as diffuse" in approx
+    assert "material 'glow': KHR_materials_transmission left out" in approx
+    assert "KHR_lights_punctual light 0 (point); KHR_lights_punctual light 1 (spot)" in dropped
 
 
 # -- round trip --------------------------------------------------------------

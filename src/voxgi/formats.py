@@ -1276,6 +1276,10 @@ def load_gltf(path) -> SceneData:
     except Exception as exc:
         raise ValueError(f"scene file {path}: malformed glTF: {exc}") from None
     data = SceneData(camera=_gltf_camera(doc, path))
+    lights = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
+    for k, light in enumerate(lights):
+        # (where punctual lights would become voxgi lights)
+        notes.drop(f"KHR_lights_punctual light {k} ({light.get('type', '?')})")
     for k, g in enumerate(geoms):
         if not isinstance(g, trimesh.Trimesh) or len(g.faces) == 0:
             continue
@@ -1291,6 +1295,16 @@ def load_gltf(path) -> SceneData:
             strength = m.get("extensions", {}).get("KHR_materials_emissive_strength", {})
             emission = emission * float(strength.get("emissiveStrength", 1.0))
             two_sided = bool(m.get("doubleSided", False))
+            # glTF's metallicFactor defaults to 1: a metal, read as diffuse
+            metallic = pbr.get("metallicFactor", 1.0)
+            if metallic or "metallicRoughnessTexture" in pbr:
+                notes.approx(f"{where}: metallic {metallic} read as diffuse base colour")
+            extra = sorted(
+                {*m.get("extensions", {}), "emissiveTexture" in m and "emissiveTexture"}
+                - {"KHR_materials_emissive_strength", False}
+            )
+            if extra:
+                notes.approx(f"{where}: {', '.join(extra)} left out")
             if (
                 base.shape != (3,)
                 or emission.shape != (3,)
