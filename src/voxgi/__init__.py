@@ -18,8 +18,9 @@ from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
 
-from . import _core, io, metrics, scenes
+from . import _core, formats, io, metrics, scenes
 from .display import RenderResult, RenderTuning
+from .formats import SceneWarning
 from .pipeline import render, solve
 from .radiosity import Solution, SolveTuning
 from .scene import AshikhminShirley, Camera, Material, Scene, SceneObject
@@ -38,10 +39,12 @@ __all__ = [
     "RenderTuning",
     "Scene",
     "SceneObject",
+    "SceneWarning",
     "Solution",
     "SolveTuning",
     "VoxelSet",
     "__version__",
+    "formats",
     "io",
     "metrics",
     "render",

@@ -111,7 +111,11 @@ def _add_render_arguments(r: argparse.ArgumentParser) -> None:
     """Add the ``render`` subcommand's arguments to its parser ``r``."""
     from .pipeline import RENDER_DIRECTIONS, RENDER_RESOLUTION
 
-    r.add_argument("scene", help="scene TOML file, or a built-in scene name (see 'voxgi scenes')")
+    r.add_argument(
+        "scene",
+        help="scene file (TOML, Mitsuba 3 XML, OBJ, glTF), "
+        "or a built-in scene name (see 'voxgi scenes')",
+    )
     r.add_argument(
         "-o",
         "--output",
@@ -240,18 +244,18 @@ def check_writable(paths) -> None:
 
 
 def _scene_source(spec: str) -> tuple[Path | None, str]:
-    """``(TOML path or None for a built-in scene, name)``, checked without loading."""
-    from . import scenes
+    """``(scene file or None for a built-in scene, name)``, checked without loading."""
+    from . import formats, scenes
 
     src = Path(spec)
-    if src.suffix.lower() == ".toml" or src.exists():
+    if src.suffix.lower() in {".toml", *formats.LOADERS} or src.exists():
         if not src.is_file():
             raise UsageError(f"scene file not found: {src}")
         return src, src.stem
     if spec.replace("_", "-").lower() not in scenes.names():
         raise UsageError(
             f"unknown built-in scene {spec!r}; known: {', '.join(scenes.names())} "
-            "(or give a scene .toml file)"
+            "(or give a scene file: .toml, .xml, .obj, .gltf, .glb)"
         )
     return None, spec
 

@@ -8,6 +8,7 @@ so nothing the user passes in is modified later.
 from __future__ import annotations
 
 import hashlib
+import io
 import math
 import sys
 import warnings
@@ -17,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from . import _validate
+from . import _validate, formats
 from .io import atomic_path
 
 if sys.version_info >= (3, 11):
@@ -429,7 +430,12 @@ class Scene:
     # -- files --------------------------------------------------------------
     @classmethod
     def load(cls, path) -> Scene:
-        """Load a TOML scene file; meshes are read through trimesh.
+        """Load a scene file: voxgi's TOML, Mitsuba 3 XML, OBJ with MTL or glTF 2.0.
+
+        The suffix picks the reader: ``.toml`` (below), ``.xml``, ``.obj``,
+        ``.gltf`` and ``.glb`` (:mod:`voxgi.formats`, docs/design.md §12;
+        what they approximate or leave out is listed in a
+        :class:`voxgi.formats.SceneWarning`).
 
         The file has an optional ``[camera]`` table (the :class:`Camera`
         fields), optional ``[materials.NAME]`` tables and ``[[object]]``
@@ -462,6 +468,9 @@ class Scene:
             (naming the object and key), missing mesh files.
         """
         path = Path(path)
+        loader = formats.LOADERS.get(path.suffix.lower())
+        if loader is not None:
+            return cls._from_data(loader(path), str(path))
         try:
             text = path.read_text(encoding="utf-8")
         except FileNotFoundError:
@@ -483,6 +492,26 @@ class Scene:
             if line is None:
                 raise
             raise ValueError(f"{exc} (line {line})") from None
+
+    @classmethod
+    def _from_data(cls, data: formats.SceneData, source: str) -> Scene:
+        """The scene of what a :mod:`voxgi.formats` loader read."""
+        scene = cls()
+        if data.camera is not None:
+            scene.camera = _camera_from_dict(data.camera, source)
+        for m in data.meshes:
+            try:
+                mat = Material(albedo=m.albedo, emission=m.emission)
+                obj = scene.add(
+                    trimesh.Trimesh(m.vertices, m.faces, process=False),
+                    mat,
+                    name=m.name,
+                    two_sided=m.two_sided,
+                )
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"{source}: mesh {m.name!r}: {exc}") from None
+            obj.source = m.source
+        return scene
 
     @classmethod
     def from_dict(cls, data: dict, base_dir=".", source: str = "<dict>") -> Scene:
@@ -524,7 +553,7 @@ class Scene:
         for i, o in enumerate(self.objects):
             fname = f"{path.stem}_{i:03d}.obj"
             with atomic_path(path.parent / fname) as tmp:
-                tmp.write_text(o.to_trimesh().export(file_type="obj", digits=17))
+                tmp.write_text(_obj_text(o.vertices, o.faces))
             entry = {
                 "name": o.name,
                 "mesh": fname,
@@ -546,6 +575,18 @@ class Scene:
         with atomic_path(path) as tmp:
             tmp.write_text(text, encoding="utf-8")
         return path
+
+
+def _obj_text(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """OBJ text of a mesh, every float with 17 significant digits.
+
+    ``%.17g`` reads back as the same float64 at any magnitude (a fixed
+    number of decimals would not, below 0.1).
+    """
+    buf = io.StringIO()
+    np.savetxt(buf, vertices, fmt="v %.17g %.17g %.17g")
+    np.savetxt(buf, faces + 1, fmt="f %d %d %d")
+    return buf.getvalue()
 
 
 # Mesh formats that are text only: trimesh guesses the encoding of any
