@@ -736,3 +736,23 @@ def test_vpls_on_the_record_surface_leave_no_streaks_behind_a_grille():
     # centroids, which more frames do not lower (3.1% at 64 frames).
     assert on < 0.016
     assert fixed > 0.025
+
+
+def test_emitter_vpls_share_the_balance_heuristic_with_gather_rays():
+    # In a furnace every record emits, so every VPL is an emitter VPL. Alone,
+    # their bounded geometry term loses the light of the VPLs that land
+    # within √ΔA of a pixel's point (a bias of about -0.25% here, 0.29% mean
+    # error measured) and one drawn next to a pixel spikes it. Combined with
+    # the gather rays by the balance heuristic (docs/design.md §6) neither
+    # happens: measured mean 0.096% and worst 0.50% (seeds 0-3: worst
+    # 0.47-0.63%), against the VPL-only display's 0.20-0.29% and 0.64-0.82%.
+    rho = 0.9
+    scene = voxgi.scenes.furnace_sphere(albedo=rho, width=32, height=24)
+    scene.camera = scene.camera.replace(eye=(0.5, 0.1, 0.2), target=(1.0, 0.0, 0.1))
+    vox = voxgi.voxelize(scene, resolution=32)
+    sol = Solution(vox, np.full((len(vox), 3), math.pi / (1 - rho), np.float32))
+    out = voxgi.render(scene, sol, seed=0, progress=False, max_frames=64, tol=0)
+    err = out.image / (1 / (1 - rho)) - 1
+    assert abs(err.mean()) < 1e-3
+    assert np.abs(err).mean() < 1.5e-3
+    assert np.abs(err).max() < 7e-3
