@@ -131,7 +131,7 @@ def run_voxgi(
         if resolution is None
         else {
             "tol": voxgi.pipeline.RENDER_SOLVE_TOL,
-            "tuning": voxgi.SolveTuning(diagnostics=False),
+            "tuning": voxgi.pipeline.RENDER_SOLVE_TUNING,
         }
     )
     sol = voxgi.solve(

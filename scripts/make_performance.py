@@ -707,6 +707,58 @@ def calibration() -> list[str]:
     ]
 
 
+def interiors() -> list[str]:
+    out = []
+    for path in sorted(RESULTS.glob("interiors_*.json")):
+        d = json.loads(path.read_text())
+        rows = []
+        for r in d["scenes"]:
+            tm = r["mitsuba_seconds_at_voxgi_error"]
+            rows.append(
+                [
+                    r["scene"],
+                    f"{r['triangles']:,}",
+                    secs(r["voxgi_seconds"]),
+                    r["voxgi_frames"],
+                    sci(r["voxgi_rel_mse"]),
+                    " / ".join(f"{b:.3f}" for b in r["voxgi_brightness"]),
+                    secs(tm),
+                    "" if tm is None else f"{tm / r['voxgi_seconds']:.1f}x",
+                    sci(r["reference_noise_rel_mse"]),
+                ]
+            )
+        size = d["size"]
+        out += [
+            f"## Interiors against a path tracer ({size}x{size})",
+            "",
+            "`voxgi.render(scene)` with every default (voxelize, solve and display timed "
+            "together) against Mitsuba 3's path tracer on the same exported scene: relMSE "
+            "against a high-spp Mitsuba reference (its own noise in the last column), the "
+            "brightness ratio per channel (R / G / B) of the pixels whose primary ray meets a "
+            "surface that does not emit, and the seconds Mitsuba needs to reach voxgi's relMSE "
+            "(doubling spp, log-log interpolation), in the same run.",
+            "",
+            table(
+                [
+                    "scene",
+                    "triangles",
+                    "voxgi s",
+                    "frames",
+                    "voxgi relMSE",
+                    "brightness",
+                    "Mitsuba s at that relMSE",
+                    "Mitsuba / voxgi",
+                    "reference noise",
+                ],
+                rows,
+            ),
+            "",
+            source(f"python benchmarks/interiors.py --size {size}", path.name),
+            "",
+        ]
+    return out
+
+
 def distributed() -> list[str]:
     d = load("distributed.json")
     if d is None:
@@ -773,7 +825,7 @@ def build() -> str:
         "",
         "Contents: furnaces, the emitting-cap sphere, direct light on the records, coarser "
         "later bounces, energy balance, linear cost, throughput, the paper's work unit, "
-        "voxelization, the paper's tables, time against error versus Mitsuba 3, "
+        "voxelization, the paper's tables, time against error versus Mitsuba 3, interiors, "
         "the display's error estimate, distribution.",
         "",
     ]
@@ -788,6 +840,7 @@ def build() -> str:
         voxelize,
         paper_tables,
         versus_mitsuba,
+        interiors,
         calibration,
         distributed,
     ):
