@@ -22,6 +22,7 @@ from . import _core, io, metrics, scenes
 from .display import RenderResult, RenderTuning
 from .pipeline import render, solve
 from .radiosity import Solution, SolveTuning
+from .lights import DirectionalLight, Environment, PointLight, SpotLight
 from .scene import AshikhminShirley, Camera, Material, Scene, SceneObject
 from .voxels import VoxelSet, voxelize
 
@@ -33,13 +34,17 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
 __all__ = [
     "AshikhminShirley",
     "Camera",
+    "DirectionalLight",
+    "Environment",
     "Material",
+    "PointLight",
     "RenderResult",
     "RenderTuning",
     "Scene",
     "SceneObject",
     "Solution",
     "SolveTuning",
+    "SpotLight",
     "VoxelSet",
     "__version__",
     "io",
