@@ -20,9 +20,9 @@ from importlib.metadata import PackageNotFoundError, version
 
 from . import _core, io, metrics, scenes
 from .display import RenderResult, RenderTuning
+from .lights import DirectionalLight, Environment, PointLight, SpotLight
 from .pipeline import render, solve
 from .radiosity import Solution, SolveTuning
-from .lights import DirectionalLight, Environment, PointLight, SpotLight
 from .scene import AshikhminShirley, Camera, Material, Scene, SceneObject
 from .voxels import VoxelSet, voxelize
 

@@ -484,7 +484,9 @@ def _light_batch(scene, tracer, x, nrm, samples, rng, offset) -> tuple[np.ndarra
     contrib = np.zeros((r * s, 3))
     contrib[free] = env.eval(we[free]) * (cos_e[free] * wgt)[:, None]
     wc = _cosine_dirs(nn, rng.random((r * s, 2)))
-    hit = tracer.intersect(np.ascontiguousarray(oo, np.float32), np.ascontiguousarray(wc, np.float32))
+    hit = tracer.intersect(
+        np.ascontiguousarray(oo, np.float32), np.ascontiguousarray(wc, np.float32)
+    )
     rays += len(wc)
     esc = np.flatnonzero(hit == -1)
     cos_c = np.maximum(np.einsum("ij,ij->i", wc[esc], nn[esc]), 0.0)

@@ -604,9 +604,7 @@ class _FrameShader:
             rng = np.random.default_rng([self.seed, self._frame, a, 0xE4F])
             w, _ = self.env.sample(rng.random((len(pix) * k, 3)))
             cos = np.einsum("ij,ij->i", w, np.repeat(n, k, axis=0))
-            parts.append(
-                (np.repeat(pix, k), w, np.full(len(w), np.inf), self._env_weight(w, cos))
-            )
+            parts.append((np.repeat(pix, k), w, np.full(len(w), np.inf), self._env_weight(w, cos)))
         p_all = np.concatenate([q[0] for q in parts])
         order = np.argsort(p_all, kind="stable")  # pixel-major, as the kernel takes them
         w_all = np.concatenate([q[1] for q in parts])[order]

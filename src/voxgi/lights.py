@@ -334,7 +334,9 @@ def _rotation(to_world) -> np.ndarray:
         return np.eye(3)
     m = np.asarray(to_world, dtype=np.float64)
     if m.shape not in ((3, 3), (4, 4)) or not np.all(np.isfinite(m)):
-        raise ValueError(f"Environment.to_world: expected a finite 3x3 or 4x4 matrix, got {m.shape}")
+        raise ValueError(
+            f"Environment.to_world: expected a finite 3x3 or 4x4 matrix, got {m.shape}"
+        )
     r = np.ascontiguousarray(m[:3, :3])
     if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
         raise ValueError("Environment.to_world: its 3x3 part must be a rotation")

@@ -667,9 +667,7 @@ def _light_from_dict(entry, where: str):
         raise ValueError(f"{where}: must be a table")
     kind = entry.get("type")
     if kind not in _LIGHT_TYPES:
-        raise ValueError(
-            f"{where}: 'type' must be one of {sorted(_LIGHT_TYPES)}, got {kind!r}"
-        )
+        raise ValueError(f"{where}: 'type' must be one of {sorted(_LIGHT_TYPES)}, got {kind!r}")
     cls = _LIGHT_TYPES[kind]
     fields = {k: v for k, v in entry.items() if k != "type"}
     allowed = set(cls.__dataclass_fields__)
@@ -699,8 +697,9 @@ def _environment_from_dict(env, source: str, base_dir: Path) -> Environment:
         raise ValueError(f"{where} must be a table")
     bad = set(env) - {"radiance", "image", "scale", "to_world"}
     if bad:
-        raise ValueError(f"{where}: unknown key(s) {sorted(bad)}; expected radiance or image, "
-                         "scale, to_world")
+        raise ValueError(
+            f"{where}: unknown key(s) {sorted(bad)}; expected radiance or image, scale, to_world"
+        )
     if ("radiance" in env) == ("image" in env):
         raise ValueError(f"{where}: give exactly one of 'radiance' (RGB) and 'image' (a path)")
     try:
