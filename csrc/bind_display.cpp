@@ -321,7 +321,8 @@ auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I3
                          I64 ray_count, F32 ray_dir, F32 ray_weight, U8 occluded, F32 out,
                          int threads) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
-    voxgi::ShadeHits hits = make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
     const py::ssize_t P = hits.count;
     check_1d(ray_count, P, "ray_count");
     check_2d(ray_dir, -1, 3, "ray_dir");

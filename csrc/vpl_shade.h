@@ -124,7 +124,7 @@ void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
 
 // Light arriving along known directions: point, spot and directional lights
 // (one shadow ray each), environment samples and gather rays that leave the
-// scene (docs/design.md §12). Rays are pixel-major, `ray_count` (P,) per
+// scene (docs/design.md §11). Rays are pixel-major, `ray_count` (P,) per
 // pixel; each has a unit direction wi (R, 3) and an RGB weight (R, 3): the
 // irradiance on a surface facing it for a delta light, or the radiance over
 // its MIS-combined density for a sampled one. Adds f(wi, wo) max(0, n·wi)

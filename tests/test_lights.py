@@ -1,4 +1,4 @@
-"""Point, spot and directional lights and the environment (voxgi.lights, docs/design.md §12).
+"""Point, spot and directional lights and the environment (voxgi.lights, docs/design.md §11).
 
 Closed forms: a point light over a plane gives ``I cos θ / r²``, a sun
 ``E cos θ``; a constant environment of radiance L over an unoccluded plane

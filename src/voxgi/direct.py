@@ -404,7 +404,7 @@ def light_irradiance(
     The environment's ``∫ L(ω) cos θ dω`` over the directions whose ray
     leaves the scene is estimated from ``samples`` directions drawn from the
     environment (luminance × solid angle) and ``samples`` drawn in
-    proportion to cos θ, combined by the power heuristic (``docs/design.md`` §12).
+    proportion to cos θ, combined by the power heuristic (``docs/design.md`` §11).
     """
     samples, seed, nthreads = _check(scene, vox, samples, seed, threads, receivers)
     t0 = time.perf_counter()

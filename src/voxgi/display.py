@@ -391,7 +391,7 @@ class _FrameShader:
         self.lights = list(scene.lights)
         self.env = scene.environment
         # environment samples per pixel and frame: as many as the gather rays
-        # they are MIS-combined with (docs/design.md §12)
+        # they are MIS-combined with (docs/design.md §11)
         self.n_env = max(1, self.gather) if self.env is not None else 0
         self.light_rays = 0
         self.tile = 1 << 16
@@ -575,7 +575,7 @@ class _FrameShader:
     def _env_weight(self, dirs: np.ndarray, cos: np.ndarray) -> np.ndarray:
         """(R, 3) environment radiance over the balance heuristic's combined
         density of the environment samples and the gather rays,
-        ``n_e p_e(ω) + n_g cos θ / π`` (docs/design.md §12)."""
+        ``n_e p_e(ω) + n_g cos θ / π`` (docs/design.md §11)."""
         dens = self.n_env * self.env.pdf(dirs) + self._gathering * np.maximum(cos, 0.0) / math.pi
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = np.where(dens > 0, 1.0 / dens, 0.0)
@@ -583,7 +583,7 @@ class _FrameShader:
 
     def _direct_lights(self, h: dict, a: int, b: int, out: np.ndarray) -> None:
         """Add the delta lights (one shadow ray each) and the environment
-        samples of pixels [a, b) (docs/design.md §12)."""
+        samples of pixels [a, b) (docs/design.md §11)."""
         t0 = time.perf_counter()
         mat = h["material"][a:b]
         pix = np.flatnonzero(mat >= 0)
@@ -692,7 +692,7 @@ class _FrameShader:
         )
         if self.env is not None:
             # gather rays that leave the scene see the environment, MIS-combined
-            # with its samples (docs/design.md §12)
+            # with its samples (docs/design.md §11)
             pix = np.repeat(np.arange(b - a), count)
             esc = np.flatnonzero(prim < 0)
             w = dir_buf[:n][esc].astype(np.float64)

@@ -1,7 +1,7 @@
 """Lights besides emissive triangles: point, spot and directional lights, and an environment.
 
 Their units and conventions are Mitsuba 3's, so that :func:`voxgi.mitsuba.to_mitsuba`
-maps each one to a Mitsuba emitter without conversion (``docs/design.md`` §12):
+maps each one to a Mitsuba emitter without conversion (``docs/design.md`` §11):
 
 - :class:`PointLight`: radiant intensity ``I`` (W/sr per RGB channel); a
   surface at distance r whose normal makes the angle θ with the direction to
@@ -95,7 +95,7 @@ def spot_falloff(cos_theta, cutoff_angle: float, beam_width: float) -> np.ndarra
     1 for θ <= ``beam_width``, ``(cutoff − θ) / (cutoff − beam_width)`` up to
     ``cutoff_angle`` and 0 beyond (angles in degrees).
 
-    >>> float(spot_falloff(np.cos(np.radians(15.0)), 20.0, 10.0))
+    >>> round(float(spot_falloff(np.cos(np.radians(15.0)), 20.0, 10.0)), 12)
     0.5
     """
     c = np.asarray(cos_theta, np.float64)
@@ -213,7 +213,7 @@ class Environment:
 
     Notes
     -----
-    Image convention (``docs/design.md`` §12, Mitsuba's): in the image frame
+    Image convention (``docs/design.md`` §11, Mitsuba's): in the image frame
     y is up; the direction ``(sin θ sin φ, cos θ, −sin θ cos φ)`` reads the
     pixel at ``u = φ / 2π`` (column ``u W``) and ``v = θ / π`` (row ``v H``,
     row 0 the +y pole). voxgi reads the texel under a direction (piecewise

@@ -19,7 +19,7 @@ The translation keeps voxgi's conventions:
   as voxgi's);
 - lights as Mitsuba's ``point``, ``spot``, ``directional``, ``constant`` and
   ``envmap`` emitters with the same parameters (voxgi's lights use Mitsuba's
-  units and conventions, ``docs/design.md`` §12);
+  units and conventions, ``docs/design.md`` §11);
 - a ``box`` pixel filter (the default Gaussian blurs across pixels) and a
   ``path`` integrator with ``max_depth = -1`` (no depth limit; Russian
   roulette keeps it unbiased).

@@ -929,7 +929,7 @@ class _Problem:
         the records carry no scene to trace. This is the one place that
         decides: lights other than emitting triangles have no records to
         shoot from, so a scene with any is always lit exactly
-        (``docs/design.md`` §12)."""
+        (``docs/design.md`` §11)."""
         if self.lights:
             return False
         return self.opt.direct_light == "shoot" or getattr(self.vox, "scene", None) is None
