@@ -719,13 +719,13 @@ def window_room(
 def point_lit_box(width: int = 256, height: int = 256) -> Scene:
     """The Cornell box lit by a point light instead of its area light.
 
-    The point light hangs 5 cm under the centre of the ceiling with the
+    The point light hangs 15 cm under the centre of the ceiling with the
     on-axis intensity of the area light it replaces (its radiance times its
     area, W/sr): the same light straight down, more to the sides.
     """
     s = cornell_box(width, height, area_light=False)
     area = 0.130 * 0.105
-    s.add_light(PointLight((0.278, 0.4988, 0.2795), tuple(area * c for c in CORNELL_LIGHT)))
+    s.add_light(PointLight((0.278, 0.40, 0.2795), tuple(area * c for c in CORNELL_LIGHT)))
     return s
 
 
