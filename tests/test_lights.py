@@ -295,3 +295,24 @@ def test_to_mitsuba_lights_match_mitsuba(kind):
     assert err < (2e-4 if kind in ("point", "spot", "sun") else 3e-3), err
     ratio = out.image.mean(axis=(0, 1)) / ref.mean(axis=(0, 1))
     np.testing.assert_allclose(ratio, 1.0, atol=0.02)
+
+
+def _hdr_header(h: int, w: int) -> bytes:
+    return b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y %d +X %d\n" % (h, w)
+
+
+def test_environment_reads_radiance_hdr_files(tmp_path):
+    # value = mantissa * 2^(exponent - 136) (Ward's RGBE, as stb_image reads it)
+    g = np.arange(8, dtype=np.uint8) * 16
+    b = np.array([64, 64, 64, 64, 1, 2, 3, 4], np.uint8)
+    row = [2, 2, 0, 8, 136, 128, 8, *g, 132, 64, 4, 1, 2, 3, 4, 136, 129]  # run-length encoded
+    flat = [255, 0, 0, 130] * 8  # row 2: flat RGBE, 255 * 2^-6 in red
+    (tmp_path / "sky.hdr").write_bytes(_hdr_header(2, 8) + bytes(row) + bytes(flat))
+    env = voxgi.Environment(tmp_path / "sky.hdr")
+    want = np.zeros((2, 8, 3))
+    want[0, :, 0], want[0, :, 1], want[0, :, 2] = 1.0, g / 128.0, b / 128.0
+    want[1, :, 0] = 255 / 64
+    np.testing.assert_array_equal(env.image, want)
+    (tmp_path / "bad.hdr").write_bytes(b"P6\n")
+    with pytest.raises(ValueError, match="not a Radiance HDR"):
+        voxgi.Environment(tmp_path / "bad.hdr")

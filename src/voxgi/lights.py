@@ -203,8 +203,9 @@ class Environment:
     ----------
     radiance : float, (3,) float, (H, W, 3) array or path
         A constant radiance (Mitsuba's ``constant``), or a latitude-longitude
-        image (Mitsuba's ``envmap``), given as an array or an EXR/HDR file
-        (read with ``voxgi.io.read_exr`` or imageio). Linear radiance, >= 0.
+        image (Mitsuba's ``envmap``), given as an array or a file: OpenEXR
+        (``voxgi.io.read_exr``), Radiance RGBE ``.hdr``, or another format
+        imageio reads. Linear radiance, >= 0.
     to_world : (3, 3) or (4, 4) array or None
         Rotation from the image's frame to the scene (its translation, if any,
         is ignored: the environment is infinitely far).
@@ -352,6 +353,8 @@ def _read_image(path: Path) -> np.ndarray:
             from .io import read_exr
 
             img = read_exr(path)
+        elif path.suffix.lower() in (".hdr", ".pic"):
+            img = _read_radiance_hdr(path)
         else:
             import imageio.v3 as iio
 
@@ -367,3 +370,52 @@ def _read_image(path: Path) -> np.ndarray:
     if not np.all(np.isfinite(img)):
         raise ValueError(f"Environment: image {path} holds non-finite values")
     return img
+
+
+def _read_radiance_hdr(path: Path) -> np.ndarray:
+    """(H, W, 3) float64 radiance of a Radiance RGBE file (``-Y H +X W`` only).
+
+    Scanlines are flat RGBE or the run-length encoding of Greg Ward's
+    ``fprintf`` writer: ``2 2 W>>8 W&255``, then each of the four channels as
+    runs (count > 128: the next byte ``count − 128`` times; else ``count``
+    literal bytes). The loop runs once per run, not per pixel.
+    """
+    data = path.read_bytes()
+    end = data.find(b"\n\n")
+    if not data.startswith((b"#?RADIANCE", b"#?RGBE")) or end < 0:
+        raise ValueError("not a Radiance HDR file (no '#?RADIANCE' header)")
+    if b"FORMAT=32-bit_rle_rgbe" not in data[:end]:
+        raise ValueError("only FORMAT=32-bit_rle_rgbe is supported")
+    eol = data.find(b"\n", end + 2)
+    dims = data[end + 2 : eol].split()
+    if len(dims) != 4 or dims[0] != b"-Y" or dims[2] != b"+X":
+        raise ValueError(f"unsupported resolution line {data[end + 2 : eol]!r} (want -Y H +X W)")
+    h, w = int(dims[1]), int(dims[3])
+    buf = np.frombuffer(data, np.uint8, offset=eol + 1)
+    rgbe = np.empty((h, w, 4), np.uint8)
+    pos = 0
+    for row in range(h):
+        head = buf[pos : pos + 4]
+        rle = 8 <= w < 32768 and len(head) == 4 and head[0] == 2 and head[1] == 2
+        if not rle or (int(head[2]) << 8 | int(head[3])) != w:
+            rgbe[row] = buf[pos : pos + 4 * w].reshape(w, 4)
+            pos += 4 * w
+            continue
+        pos += 4
+        for ch in range(4):
+            x = 0
+            while x < w:
+                count = int(buf[pos])
+                if count > 128:
+                    count -= 128
+                    rgbe[row, x : x + count, ch] = buf[pos + 1]
+                    pos += 2
+                else:
+                    rgbe[row, x : x + count, ch] = buf[pos + 1 : pos + 1 + count]
+                    pos += 1 + count
+                if count == 0:
+                    raise ValueError(f"corrupt run-length data in scanline {row}")
+                x += count
+    e = rgbe[..., 3].astype(np.int32)
+    scale = np.where(e > 0, np.ldexp(1.0, e - 136), 0.0)  # 2^(e - 128) / 256
+    return rgbe[..., :3] * scale[..., None]
