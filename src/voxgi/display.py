@@ -361,6 +361,24 @@ class VPLSampler:
 # --------------------------------------------------------------------------
 # Shading of one frame
 # --------------------------------------------------------------------------
+def _stratified(rng, n: int, k: int) -> np.ndarray:
+    """(n * k, 3) points of [0, 1)³, k per pixel and jittered in strata: the
+    first coordinate (the environment's texel) in k strata, the other two
+    (the direction inside it) in a √k x √k grid when k is a square. The first
+    coordinate's strata are shuffled per pixel (Latin-hypercube pairing), so
+    each point is uniform in the cube and the mean stays unbiased for any
+    integrand, not only for one separable in the two groups."""
+    u = rng.random((n, k, 3))
+    i = np.arange(k)
+    shuffled = np.argsort(rng.random((n, k)), axis=1)
+    u[..., 0] = (shuffled + u[..., 0]) / k
+    s = math.isqrt(k)
+    if s * s == k and k > 1:
+        u[..., 1] = (i % s + u[..., 1]) / s
+        u[..., 2] = (i // s + u[..., 2]) / s
+    return u.reshape(-1, 3)
+
+
 class _FrameShader:
     """Everything a frame needs that does not change between frames."""
 
@@ -602,7 +620,7 @@ class _FrameShader:
         if self.env is not None:
             k = self.n_env
             rng = np.random.default_rng([self.seed, self._frame, a, 0xE4F])
-            w, _ = self.env.sample(rng.random((len(pix) * k, 3)))
+            w, _ = self.env.sample(_stratified(rng, len(pix), k))
             cos = np.einsum("ij,ij->i", w, np.repeat(n, k, axis=0))
             parts.append((np.repeat(pix, k), w, np.full(len(w), np.inf), self._env_weight(w, cos)))
         p_all = np.concatenate([q[0] for q in parts])
