@@ -1074,6 +1074,8 @@ def _exact_direct_light(p: _Problem):
     kw = dict(samples=p.opt.direct_samples, threads=p.opt.threads, receivers=receivers)
     Hd, st = direct_irradiance(p.vox.scene, p.vox, **kw)
     p.stats["direct_light"] = {"method": "exact", "receivers": receivers, **st}
+    # what the records receive of the emitting triangles' power (the rest escapes)
+    received = (Hd * p.area[:, None]).sum(axis=0)
     if p.lights:
         # the lights' power is what the records receive: it counts as emitted
         # in the energy balance, and none of it escapes on the way
@@ -1087,7 +1089,6 @@ def _exact_direct_light(p: _Problem):
         p.stats["skipped"]["direct_light_on_black_records"] = (
             "diagnostics=False: what they absorb counts as escaping in stats['energy']"
         )
-    received = (Hd * p.area[:, None]).sum(axis=0)
     escape = (p.E * p.area[:, None]).sum(axis=0) - received
     return Hd, escape, 0
 
