@@ -347,3 +347,14 @@ def test_closed_box_receives_all_of_a_point_lights_power():
     np.testing.assert_allclose(e["escaping_shoot"], 0.0, atol=1e-12)
     # the gathering's imbalance at this resolution (docs/design.md §10): ~1.5%
     assert max(abs(x) for x in e["imbalance"]) < 0.03
+
+
+def test_unit_directions_survive_a_reload_bit_for_bit():
+    # a saved direction is already unit: loading it must not move its last
+    # bits, or the reloaded scene's fingerprint no longer matches its solution
+    rng = np.random.default_rng(0)
+    for d in rng.normal(size=(300, 3)):
+        sun = voxgi.DirectionalLight(d, 1.0)
+        assert voxgi.DirectionalLight(sun.direction, 1.0) == sun
+        spot = voxgi.SpotLight((0, 0, 0), d, 1.0)
+        assert voxgi.SpotLight((0, 0, 0), spot.direction, 1.0) == spot

@@ -41,7 +41,11 @@ def _unit(value, what: str) -> tuple[float, float, float]:
     n = float(np.linalg.norm(v))
     if not n > 0.0:
         raise ValueError(f"{what}: expected a non-zero vector, got {list(v)}")
-    return tuple(float(x) for x in v / n)
+    # a unit vector stays bit for bit itself (saved and loaded scenes keep
+    # their fingerprint): normalising again could move its last bits
+    if abs(n - 1.0) > 4 * np.finfo(np.float64).eps:
+        v = v / n
+    return tuple(float(x) for x in v)
 
 
 def _point(value, what: str) -> tuple[float, float, float]:
