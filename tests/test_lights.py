@@ -213,7 +213,7 @@ def test_toml_round_trip(tmp_path):
     sc.add_light(voxgi.SpotLight((0, 2, 0), (0, -1, 0.1), 5.0, cutoff_angle=40, beam_width=20))
     sc.add_light(voxgi.DirectionalLight((0.1, -1, 0), 2.5))
     rot = trimesh.transformations.rotation_matrix(0.5, [0, 1, 0])
-    img = np.random.default_rng(0).random((4, 8, 3)).astype(np.float32)
+    img = np.random.default_rng(0).random((4, 8, 3))  # float64: kept as float32 values
     sc.environment = voxgi.Environment(img, to_world=rot)
     back = voxgi.Scene.load(sc.save(tmp_path / "lit.toml"))
     assert back.lights == sc.lights

@@ -252,7 +252,12 @@ class Environment:
         if np.any(image < 0):
             raise ValueError("Environment.radiance: negative radiance in the image")
         self.scale = _validate.real(scale, "Environment.scale", low=0.0)
-        self.image = np.ascontiguousarray(image * self.scale)
+        scaled = image * self.scale
+        if self.constant is None:
+            # images hold float32 values (as Mitsuba's and the EXR a saved
+            # scene writes), so a saved and reloaded scene is the same scene
+            scaled = scaled.astype(np.float32).astype(np.float64)
+        self.image = np.ascontiguousarray(scaled)
         self.image.flags.writeable = False
         self.to_world = _rotation(to_world)
         self._tables = None
