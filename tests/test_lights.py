@@ -358,3 +358,20 @@ def test_unit_directions_survive_a_reload_bit_for_bit():
         assert voxgi.DirectionalLight(sun.direction, 1.0) == sun
         spot = voxgi.SpotLight((0, 0, 0), d, 1.0)
         assert voxgi.SpotLight((0, 0, 0), spot.direction, 1.0) == spot
+
+
+def test_bad_light_in_a_file_names_its_line(tmp_path):
+    text = '[[object]]\nmesh = "m.obj"\n\n[[light]]\ntype = "point"\nposition = [0, 1, 0]\n'
+    text += '\n[[light]]\ntype = "spot"\nposition = [0, 2, 0]\ndirection = [0, -1, 0]\n'
+    text += "cutoff_angle = 120\n\n[environment]\nradiance = 1\n"
+    (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 0 1\nf 1 3 2\n")
+    (tmp_path / "s.toml").write_text(text)
+    with pytest.raises(
+        ValueError, match=r"light #1 \(spot\): SpotLight\.cutoff_angle.*\(line 12\)"
+    ):
+        voxgi.Scene.load(tmp_path / "s.toml")
+    (tmp_path / "s.toml").write_text(
+        text.replace("120", "30").replace("radiance = 1", "scale = -2")
+    )
+    with pytest.raises(ValueError, match=r"\[environment\]: give exactly one.*\(line 14\)"):
+        voxgi.Scene.load(tmp_path / "s.toml")

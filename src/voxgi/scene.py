@@ -843,10 +843,10 @@ def _error_line(text: str, data, msg: str) -> int | None:
     """
     import re
 
-    m = re.search(r"object #(\d+)", msg)
+    m = re.search(r"(object|light) #(\d+)", msg)
     if m:
-        want, table = ("object", int(m.group(1))), None
-        objs = data.get("object") if isinstance(data, dict) else None
+        want, table = (m.group(1), int(m.group(2))), None
+        objs = data.get(m.group(1)) if isinstance(data, dict) else None
         table = objs[want[1]] if isinstance(objs, list) and want[1] < len(objs) else None
     elif m := re.search(r"\[materials\.([^\]]+)\]", msg):
         want = ("materials", m.group(1))
@@ -854,6 +854,9 @@ def _error_line(text: str, data, msg: str) -> int | None:
         table = mats.get(want[1]) if isinstance(mats, dict) else None
     elif "[camera]" in msg:
         want, table = ("camera",), data.get("camera") if isinstance(data, dict) else None
+    elif "[environment]" in msg:
+        want = ("environment",)
+        table = data.get("environment") if isinstance(data, dict) else None
     else:
         want, table = (None,), data
     # the key named in the message (longest first, so "focus_distance" beats "focus")
@@ -867,17 +870,17 @@ def _error_line(text: str, data, msg: str) -> int | None:
         None,
     )
     section: tuple = (None,)
-    n_obj = -1
+    n_obj = {"object": -1, "light": -1}
     header = None
     for i, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
-        if re.match(r"^\[\[\s*object\s*\]\]", line):
-            n_obj += 1
-            section = ("object", n_obj)
+        if h := re.match(r"^\[\[\s*(object|light)\s*\]\]", line):
+            n_obj[h.group(1)] += 1
+            section = (h.group(1), n_obj[h.group(1)])
         elif h := re.match(r"^\[\s*materials\.\s*[\"']?([^\]\"']+)[\"']?\s*\]", line):
             section = ("materials", h.group(1).strip())
-        elif re.match(r"^\[\s*camera\s*\]", line):
-            section = ("camera",)
+        elif h := re.match(r"^\[\s*(camera|environment)\s*\]", line):
+            section = (h.group(1),)
         elif line.startswith("["):
             section = ("other",)
         else:
