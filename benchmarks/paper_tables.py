@@ -201,14 +201,15 @@ def run_scene(key: str, args) -> dict:
         tol=1e-12,
         threads=args.threads,
         progress=False,
-        tuning=voxgi.SolveTuning(shoot_directions=sr),
+        tuning=voxgi.SolveTuning(shoot_directions=sr, direct_light=args.direct_light),
     )
     out = voxgi.render(
         scene, sol, threads=args.threads, progress=False, max_frames=8 if args.quick else None
     )
     wall = time.perf_counter() - t0
     s = sol.stats
-    st = s["seconds"].get("shoot", 0.0)
+    # ST: the first bounce's time, the shooting or the exact direct light
+    st = s["seconds"].get("shoot", s["seconds"].get("direct", 0.0))
     lt = s["seconds"].get("gather", 0.0)
     rtt = out.stats["seconds"]["display"]
     crays = out.stats["primary_rays"] + out.stats["shadow_rays"] + out.stats.get("gather_rays", 0)
@@ -229,11 +230,14 @@ def run_scene(key: str, args) -> dict:
         "RTT": rtt,
         "TT": t_vox + s["seconds"]["total"] + rtt,
         "wall_s": wall,
-        "SRays": s["shoot_rays"],
+        "direct_light": args.direct_light,
+        "SRays": s["shoot_rays"] if args.direct_light == "shoot" else s["direct_light"]["rays"],
         "LRays": s["gather_rays"],
         "CRays": crays,
         "frames": out.frames,
-        "DSR": s["shoot_rays"] / st if st > 0 else float("nan"),
+        "DSR": (s["shoot_rays"] if args.direct_light == "shoot" else s["direct_light"]["rays"]) / st
+        if st > 0
+        else float("nan"),
         "DLR": s["gather_rays"] / lt if lt > 0 else float("nan"),
         "CR": crays / rtt if rtt > 0 else float("nan"),
         "paper": {
@@ -302,6 +306,13 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="small sizes (a smoke run)")
     ap.add_argument("--threads", type=int, default=None, help="threads (default: all)")
     ap.add_argument("--scenes", nargs="+", default=list(PAPER), choices=list(PAPER))
+    ap.add_argument(
+        "--direct-light",
+        choices=["shoot", "exact"],
+        default="shoot",
+        help="the first bounce: the paper's shooting (default) or exact direct light "
+        "(SRays then counts its shadow and hemisphere rays)",
+    )
     ap.add_argument(
         "--out",
         type=Path,

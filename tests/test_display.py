@@ -69,19 +69,22 @@ def test_furnace_sphere_analytic_radiosity(rho):
     # Every record of the closed furnace has B = pi Le / (1 - rho); the display
     # must give L = Le + (rho/pi) E = Le / (1 - rho) in every pixel. Inside a
     # closed enclosure the estimator is unbiased (∫ G dA = pi), so what is left
-    # is VPL noise, shared by all pixels: after 32 frames × 16 VPLs it is
-    # well under 1% per pixel at rho 0.9, plus the
-    # bounded-G loss near contact (< 0.1% for these triangle areas).
+    # is VPL noise, shared by all pixels: after 128 frames × 16 VPLs it is
+    # under 1% per pixel at rho 0.9 (0.75% measured), plus the bounded-G loss
+    # near contact: VPLs drawn anywhere on the surface come within √ΔA of
+    # every pixel's point in some frames, about ΔA/(4R²) ln(4πR²/ΔA) ≈ 0.2%
+    # for these triangles (0.33% measured at rho 0.9).
     le = 1.0
     scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=le, width=32, height=32)
     sol = triangle_solution(scene, lambda v: np.full((len(v), 3), math.pi * le / (1 - rho)))
-    out = voxgi.render(scene, sol, progress=False, max_frames=32, tol=0.0)
+    out = voxgi.render(scene, sol, progress=False, max_frames=128, tol=0.0)
     expect = le / (1 - rho)
     err = np.abs(out.image / expect - 1.0)
     assert out.image.shape == (32, 32, 3)
     assert out.image.dtype == np.float32
     assert err.max() < 0.01, err.max()
-    assert out.frames == 32
+    assert abs(np.mean(out.image / expect - 1.0)) < 0.005
+    assert out.frames == 128
     assert out.stats["vpl_split"] == [16, 0]  # all records emit: one set only
     assert out.stderr is not None
     assert out.stderr.shape == out.image.shape
@@ -649,3 +652,87 @@ def test_image_does_not_depend_on_the_scene_position_or_scale(shift, scale):
     img = picture(_moved_cornell(shift, scale))
     assert img.mean() == pytest.approx(ref.mean(), rel=0.01)
     assert voxgi.metrics.rel_mse(img, ref) < 1e-3
+
+
+def _grille_scene(n: int) -> voxgi.Scene:
+    """A 1 m² lamp 1 m above a floor, a grille of thin black bars half-way."""
+
+    def quad(c):
+        return trimesh.Trimesh(np.array(c, float), [[0, 1, 2], [0, 2, 3]], process=False)
+
+    cam = voxgi.Camera(eye=(0, 0.45, 0), target=(0, 0, 0), up=(0, 0, 1), fov=70, width=n, height=n)
+    s = voxgi.Scene(cam)
+    s.add(quad([(-1, 0, -1), (-1, 0, 1), (1, 0, 1), (1, 0, -1)]), voxgi.Material(albedo=0.5))
+    lamp = quad([(-0.5, 1, -0.5), (0.5, 1, -0.5), (0.5, 1, 0.5), (-0.5, 1, 0.5)])
+    s.add(lamp, voxgi.Material(albedo=0.0, emission=1.0), name="lamp")
+    bars = [
+        trimesh.creation.box(extents=(0.015, 0.015, 1.2)).apply_translation((x, 0.5, 0))
+        for x in np.arange(-0.6, 0.61, 0.1)
+    ]
+    s.add(trimesh.util.concatenate(bars), voxgi.Material(albedo=0.0), name="bars")
+    return s
+
+
+def _grille_direct_light(scene: voxgi.Scene, samples: int = 48) -> tuple[np.ndarray, np.ndarray]:
+    """The exact floor radiance ρ/π E(x) of the grille scene at every pixel
+    centre: E integrated over the lamp on a samples² grid jittered anew for
+    every pixel (one fixed set of points would itself cast striped shadows),
+    with Embree shadow rays. Returns the image and the mask of floor pixels."""
+    from voxgi.rays import Tracer
+
+    cam = scene.camera
+    org, d = camera_rays(cam)
+    x = org - (org[:, 1] / d[:, 1])[:, None] * d  # the floor y = 0
+    floor = np.all(np.abs(x[:, [0, 2]]) < 1, axis=1)
+    cells = np.stack(np.meshgrid(np.arange(samples), np.arange(samples)), -1).reshape(-1, 2)
+    g = (cells + np.random.default_rng(5).random((len(x), len(cells), 2))) / samples - 0.5
+    lamp = np.stack([g[..., 0], np.ones(g.shape[:2]), g[..., 1]], axis=2)
+    v = lamp - x[:, None]
+    r = np.linalg.norm(v, axis=2)
+    w = v / r[..., None]
+    with Tracer(scene, 2) as tr:
+        o = np.repeat(x - tr.centre + [0, 1e-6, 0], len(cells), axis=0)
+        # 1e-4 short of the lamp: a float32 ray of length 1 ends within ~1e-7 of it.
+        free = (
+            tr.occluded(
+                o.astype(np.float32),
+                w.reshape(-1, 3).astype(np.float32),
+                (r * (1 - 1e-4)).reshape(-1).astype(np.float32),
+            )
+            == -1
+        )
+    E = np.mean(w[..., 1] ** 2 / r**2 * free.reshape(r.shape), axis=1)  # cos θx = cos θy = w_y
+    return (0.5 / math.pi * E).reshape(cam.height, cam.width), floor.reshape(cam.height, cam.width)
+
+
+def test_vpls_on_the_record_surface_leave_no_streaks_behind_a_grille():
+    # A VPL fixed at its record's centroid is a point light: each casts sharp
+    # shadows of the bars, and the lamp's few hundred of them add up to a
+    # striped floor that no number of frames removes. Drawn on the record's
+    # surface every frame, they converge to the area integral (docs/design.md
+    # §6). The solution carries the lamp's light only, so the display is the
+    # direct light, known exactly.
+    scene = _grille_scene(32)
+    ref, floor = _grille_direct_light(scene)
+    vox = voxgi.voxelize(scene, 32)
+    B = np.where(vox.is_emitter[:, None], np.pi * np.asarray(vox.emission), 0.0)
+    sol = Solution(vox, B.astype(np.float32))
+
+    def error(on_surface):
+        out = voxgi.render(
+            scene,
+            sol,
+            max_frames=256,
+            tol=0,
+            progress=False,
+            tuning=voxgi.RenderTuning(vpl_on_surface=on_surface),
+        )
+        img = out.image.mean(axis=2)
+        return np.sqrt(np.mean((img - ref)[floor] ** 2)) / ref[floor].mean()
+
+    on, fixed = error(True), error(False)
+    # Measured over seeds 0-2: 0.8-1.3% on the surface (the noise of 256
+    # frames x 16 VPLs and of the 2,304-sample reference), 3.0-3.4% at the
+    # centroids, which more frames do not lower (3.1% at 64 frames).
+    assert on < 0.016
+    assert fixed > 0.025

@@ -258,6 +258,10 @@ class VPLSampler:
         The non-emitter VPLs are combined with gather rays (their weight is
         then ``B/π`` and ``pa`` carries ``n_i p(y)``).
     pdf : {"power", "area"}
+    on_surface : bool
+        Each VPL of a frame sits at a point drawn uniformly on its record's
+        own surface (``docs/design.md`` §6) instead of at the
+        record's fixed centroid.
     """
 
     def __init__(
@@ -268,6 +272,7 @@ class VPLSampler:
         emitter_share: float | None = None,
         mis: bool = False,
         pdf: str = "power",
+        on_surface: bool = True,
     ):
         if pdf not in ("power", "area"):
             raise ValueError(f"pdf: expected 'power' or 'area', got {pdf!r}")
@@ -323,6 +328,7 @@ class VPLSampler:
         self.area32 = area.astype(np.float32)
         self.B = B
         self.vox = vox
+        self.on_surface = bool(on_surface)
 
     @property
     def empty(self) -> bool:
@@ -741,8 +747,83 @@ class _FrameShader:
         self.seconds["primary"] += time.perf_counter() - t0
         vpl = None if self.sampler.empty else self.sampler.frame(f)
         if vpl is not None:  # into the tracer's scene-centred frame
-            vpl = {**vpl, "pos": np.ascontiguousarray(vpl["pos"] - self.tracer.centre)}
+            pos = vpl["pos"] - self.tracer.centre
+            if self.sampler.on_surface:
+                pos = self.place_vpls(vpl["index"], pos, f)
+            vpl = {**vpl, "pos": np.ascontiguousarray(pos)}
         return self.shade(h, vpl)
+
+    #: Candidate points per VPL and frame; each lands on the record's surface
+    #: with probability about 1/3 for a flat record (its polygon against the
+    #: square of side √3 pitch the candidates are drawn from).
+    _PLACE_TRIES = 12
+
+    def place_vpls(self, index: np.ndarray, centroid: np.ndarray, f: int) -> np.ndarray:
+        """(K, 3) points drawn uniformly on each VPL's record surface (centred frame).
+
+        A VPL fixed at its record's centroid makes the image converge to the
+        lighting of a finite set of point lights: each casts a sharp shadow of
+        every thin occluder, and the shadows line up into streaks. A point
+        drawn anew each frame on the record's own surface converges to the
+        area integral of the piecewise-constant radiosity instead
+        (``docs/design.md`` §6). Candidates are drawn in a square of the
+        record's tangent plane around the voxel, projected onto the scene's
+        triangles along the normal, and kept when the hit is the record's own
+        object, facing within 60° of its normal (the voxelization's clustering),
+        inside its voxel, and in sight of the centroid (a record cut at a thin
+        wall keeps to its own side). A record none of whose candidates lands
+        keeps its centroid.
+        """
+        sampler, tr, T = self.sampler, self.tracer, self._PLACE_TRIES
+        vox, K = sampler.vox, len(index)
+        rng = np.random.default_rng([self.seed, int(f), 0x5EA])
+        h = float(vox.pitch)
+        n = sampler.normal[index].astype(np.float64)
+        lo = np.asarray(vox.origin, np.float64) + np.asarray(vox.ijk, np.float64)[index] * h
+        lo -= tr.centre
+        mid = lo + 0.5 * h
+        # The voxel centre projected onto the record's plane: the polygon lies
+        # within √3/2 pitch of it.
+        mid -= np.einsum("ij,ij->i", mid - centroid, n)[:, None] * n
+        a = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        t1 = np.cross(n, a)
+        t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+        t2 = np.cross(n, t1)
+        uv = (rng.random((T, K, 2)) - 0.5) * (math.sqrt(3.0) * h)
+        cand = mid + uv[..., :1] * t1 + uv[..., 1:] * t2 + h * n  # (T, K, 3)
+        org = cand.reshape(-1, 3)
+        dirs = np.broadcast_to(-n, (T, K, 3)).reshape(-1, 3)
+        prim = tr.intersect(org.astype(np.float32), dirs.astype(np.float32))
+        ok = prim >= 0
+        tri = np.where(ok, prim, 0)
+        ng = tr.ng[tri]
+        dn = np.einsum("ij,ij->i", dirs, ng)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.einsum("ij,ij->i", tr.tris[tri, 0] - org, ng) / dn
+        q = org + np.where(np.isfinite(t), t, 0.0)[:, None] * dirs
+        obj = np.broadcast_to(np.asarray(vox.object_id)[index], (T, K)).reshape(-1)
+        slack = 1e-6 * h
+        inside = np.all((q >= np.repeat(lo[None], T, 0).reshape(-1, 3) - slack), axis=1) & np.all(
+            (q <= np.repeat(lo[None], T, 0).reshape(-1, 3) + h + slack), axis=1
+        )
+        ok &= (tr.obj[tri] == obj) & (np.abs(dn) > 0.5) & inside
+        # In sight of the centroid, both lifted by the shadow-ray offset.
+        c = np.broadcast_to(centroid, (T, K, 3)).reshape(-1, 3) + self.eps * -dirs
+        seg = q + self.eps * -dirs - c
+        dist = np.linalg.norm(seg, axis=1)
+        check = np.flatnonzero(ok & (dist > self.eps))
+        if len(check):
+            d = seg[check] / dist[check, None]
+            blocked = tr.occluded(
+                c[check].astype(np.float32), d.astype(np.float32), dist[check].astype(np.float32)
+            )
+            ok[check[blocked != 0]] = False
+        ok = ok.reshape(T, K)
+        first = np.argmax(ok, axis=0)
+        found = ok[first, np.arange(K)]
+        out = centroid.copy()
+        out[found] = q.reshape(T, K, 3)[first[found], np.flatnonzero(found)]
+        return out
 
     def close(self) -> None:
         """Release the tracer's threads."""
@@ -843,6 +924,9 @@ class RenderTuning:
     vpl_pdf : {"power", "area"}
         VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
         paper); see :class:`VPLSampler`.
+    vpl_on_surface : bool
+        Each frame places every VPL at a fresh point of its record's surface
+        (default); False keeps it at the record's centroid (the paper).
 
     >>> RenderTuning(gather=0).min_frames
     4
@@ -852,6 +936,7 @@ class RenderTuning:
     emitter_share: float | None = None
     gather: int = 4
     vpl_pdf: str = "power"
+    vpl_on_surface: bool = True
 
 
 @dataclass(frozen=True)
@@ -867,6 +952,7 @@ class _RenderSettings:
     emitter_share: float | None
     gather: int
     vpl_pdf: str
+    vpl_on_surface: bool
     threads: int
 
 
@@ -903,6 +989,7 @@ def _check_render(
         ),
         gather=_validate.integer(t.gather, "gather", low=0, high=4096),
         vpl_pdf=t.vpl_pdf,
+        vpl_on_surface=bool(t.vpl_on_surface),
         threads=_validate.threads(threads),
     )
 
@@ -955,7 +1042,13 @@ def _check_executor(executor) -> FrameExecutor:
 def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
     """The VPL sampler and the shadow-ray offset of this scene and solution."""
     sampler = VPLSampler(
-        sol, opt.K, opt.seed, opt.emitter_share, mis=opt.gather > 0, pdf=opt.vpl_pdf
+        sol,
+        opt.K,
+        opt.seed,
+        opt.emitter_share,
+        mis=opt.gather > 0,
+        pdf=opt.vpl_pdf,
+        on_surface=opt.vpl_on_surface,
     )
     diag = float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
     # Shadow-ray offsets: well above float32 rounding of the coordinates

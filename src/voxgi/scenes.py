@@ -762,6 +762,59 @@ def sky_objects(width: int = 256, height: int = 256, sky: float = 1.0) -> Scene:
     return s
 
 
+def door_room(width: int = 256, height: int = 256, gap: float = 0.05) -> Scene:
+    """Two 4 x 2.6 x 4 m rooms joined by a door left ajar; the lamp is in the far one.
+
+    A 1 x 2 m doorway in the 10 cm wall between the rooms holds a 4 cm door
+    swung open by ``gap`` metres at its edge, so the lit room's light reaches
+    the camera's room only through a slit narrower than a voxel at the default
+    resolution (8 m / 64 = 0.125 m), mostly after bounces. The lamp is a 1 x 1
+    m ceiling panel; every surface is diffuse (0.7). It shows what gaps
+    thinner than a voxel do to light carried along discrete lines
+    (``docs/design.md`` §5).
+    """
+    W, H, D, t = 4.0, 2.6, 4.0, 0.1  # each room W x H x D; the wall spans z in [D, D + t]
+    Z = 2 * D + t
+    white = Material(albedo=0.7)
+    cam = Camera(eye=(0.4, 1.5, 0.3), target=(2.6, 1.0, D), fov=75, width=width, height=height)
+    scene = Scene(camera=cam)
+    mid = (W / 2, H / 2, Z / 2)
+    shell = {
+        "floor": [(0, 0, 0), (W, 0, 0), (W, 0, Z), (0, 0, Z)],
+        "ceiling": [(0, H, 0), (W, H, 0), (W, H, Z), (0, H, Z)],
+        "left": [(0, 0, 0), (0, H, 0), (0, H, Z), (0, 0, Z)],
+        "right": [(W, 0, 0), (W, H, 0), (W, H, Z), (W, 0, Z)],
+        "near": [(0, 0, 0), (W, 0, 0), (W, H, 0), (0, H, 0)],
+        "far": [(0, 0, Z), (W, 0, Z), (W, H, Z), (0, H, Z)],
+    }
+    for name, q in shell.items():
+        scene.add(_quad(q, mid), white, name=name)
+    x0, x1, dh = 2.0, 3.0, 2.0  # the doorway
+    wall = [
+        _slab((0, 0, D), (x0, H, D + t)),
+        _slab((x1, 0, D), (W, H, D + t)),
+        _slab((x0, dh, D), (x1, H, D + t)),
+    ]
+    scene.add(trimesh.util.concatenate(wall), white, name="wall")
+    # The door, hinged at x1 on the lit side, its free edge `gap` from the wall.
+    angle = math.asin(min(1.0, gap / (x1 - x0)))
+    door = _box((x1 - x0, dh - 0.01, 0.04), ((x1 - x0) / 2, dh / 2, 0.02))
+    rot = trimesh.transformations.rotation_matrix(-angle, (0, 1, 0))
+    door.apply_transform(rot).apply_translation((x0 - 0.0, 0.0, D + t))
+    scene.add(door, white, name="door")
+    lamp = _quad(
+        [
+            (1.5, H - 0.01, D + t + 1.5),
+            (2.5, H - 0.01, D + t + 1.5),
+            (2.5, H - 0.01, D + t + 2.5),
+            (1.5, H - 0.01, D + t + 2.5),
+        ],
+        (2.0, 0.0, D + 2),
+    )
+    scene.add(lamp, Material(albedo=0.0, emission=60.0), name="lamp")
+    return scene
+
+
 _REGISTRY = {
     "cornell-box": cornell_box,
     "furnace-sphere": furnace_sphere,
@@ -777,6 +830,7 @@ _REGISTRY = {
     "point-lit-box": point_lit_box,
     "sun-room": sun_room,
     "sky-objects": sky_objects,
+    "door-room": door_room,
 }
 
 
