@@ -100,9 +100,9 @@ def run_voxgi(scene: voxgi.Scene) -> tuple[np.ndarray, float, dict]:
 
 def run_mitsuba(scene: voxgi.Scene, ref: np.ndarray, target: float) -> list[dict]:
     """Mitsuba at doubling spp until its relMSE is under ``target`` (or 65,536 spp)."""
-    from voxgi.mitsuba import import_mitsuba, to_mitsuba
+    from voxgi.mitsuba import mitsuba_module, to_mitsuba
 
-    mi = import_mitsuba()
+    mi = mitsuba_module()
     sc = mi.load_dict(to_mitsuba(scene, spp=4))
     np.array(mi.render(sc, spp=1, seed=999))  # warm-up: JIT compilation
     rows, spp = [], 4

@@ -42,7 +42,7 @@ import numpy as np
 
 import voxgi
 from voxgi.metrics import rel_mse
-from voxgi.mitsuba import import_mitsuba, to_mitsuba
+from voxgi.mitsuba import mitsuba_module, to_mitsuba
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -67,7 +67,7 @@ def render_reference(
     independent renders of ``spp / passes`` samples are averaged (bounds memory).
     With two passes or more, the even and odd passes' means are compared
     (``info["half_vs_half_rel_mse"]``, ``info["noise_rel_mse_est"]``)."""
-    mi = import_mitsuba(variant)
+    mi = mitsuba_module(variant)
     scene = voxgi.scenes.get(scene_name, width=size, height=size)
     per = max(1, spp // passes)
     sc = mi.load_dict(to_mitsuba(scene, spp=per))

@@ -184,9 +184,9 @@ def second_view(
 
 
 def run_mitsuba(size: int, spps, variant=None, name: str = CORNELL) -> list[dict]:
-    from voxgi.mitsuba import import_mitsuba, to_mitsuba
+    from voxgi.mitsuba import mitsuba_module, to_mitsuba
 
-    mi = import_mitsuba(variant)
+    mi = mitsuba_module(variant)
     scene = make_scene(name, size)
     sc = mi.load_dict(to_mitsuba(scene, spp=max(spps)))
     np.array(mi.render(sc, spp=1, seed=999))  # warm-up: JIT compilation

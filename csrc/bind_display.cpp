@@ -316,6 +316,39 @@ auto shade_brdf_py(F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_gl
     return out;
 }
 
+auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                         F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
+                         I64 ray_count, F32 ray_dir, F32 ray_weight, U8 occluded, F32 out,
+                         int threads) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    const py::ssize_t P = hits.count;
+    check_1d(ray_count, P, "ray_count");
+    check_2d(ray_dir, -1, 3, "ray_dir");
+    const py::ssize_t R = ray_dir.shape(0);
+    check_2d(ray_weight, R, 3, "ray_weight");
+    if (occluded.size() != 0) check_1d(occluded, R, "occluded");
+    check_2d(out, P, 3, "out");
+    const int64_t* pc = ray_count.data();
+    int64_t total = 0;
+    for (py::ssize_t p = 0; p < P; ++p) {
+        if (pc[p] < 0) throw py::value_error("ray_count: negative count");
+        total += pc[p];
+    }
+    if (total != R)
+        throw py::value_error("ray_count sums to " + std::to_string(total) + ", expected " +
+                              std::to_string(R) + " rays");
+    const float *pd = ray_dir.data(), *pw = ray_weight.data();
+    const uint8_t* po = occluded.size() != 0 ? occluded.data() : nullptr;
+    float* pout = out.mutable_data();
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::light_accumulate(hits, mats, pc, pd, pw, po, pout, threads, stop);
+    }
+}
+
 }  // namespace
 
 void bind_display(py::module_& m) {
@@ -370,6 +403,16 @@ out (P, 3) float32.)doc");
           "ray_contrib"_a.noconvert(), "occluded"_a.noconvert(), "threads"_a = 0,
           R"doc(Pass 2 of a display frame: per pixel, the sum of the contributions of the
 rays not occluded (uint8 (R,)), in ray order. Returns (P, 3) float32.)doc");
+
+    m.def("light_accumulate", &light_accumulate_py, "hit_pos"_a.noconvert(),
+          "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(),
+          "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(),
+          "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(),
+          "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(), "ray_weight"_a.noconvert(),
+          "occluded"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0,
+          R"doc(Light along known directions (delta lights, environment samples, escaped
+gather rays): adds f(wi, wo) max(0, n.wi) weight into out (P, 3) for each ray
+(pixel-major, ray_count (P,) int64) not occluded (uint8 (R,), or empty: none).)doc");
 
     m.def("shade_brdf", &shade_brdf_py, "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(),
           "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(),

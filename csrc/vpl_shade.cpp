@@ -348,4 +348,32 @@ void vpl_accumulate(int64_t n_pixels, const int64_t* ray_count, const float* ray
     });
 }
 
+void light_accumulate(const ShadeHits& hits, const ShadeMaterials& mats, const int64_t* ray_count,
+                      const float* ray_dir, const float* ray_weight, const uint8_t* occluded,
+                      float* out, int threads, const StopCheck& stop) {
+    const int64_t P = hits.count;
+    std::vector<int64_t> offset(P + 1, 0);
+    for (int64_t p = 0; p < P; ++p) offset[p + 1] = offset[p] + ray_count[p];
+    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
+    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
+        const int64_t p1 = std::min(P, (c + 1) * kChunk);
+        for (int64_t p = c * kChunk; p < p1; ++p) {
+            const int32_t m = hits.material[p];
+            if (m < 0 || m >= mats.count) continue;
+            const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
+            float sum[3] = {0.f, 0.f, 0.f};
+            for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
+                if (occluded && occluded[r]) continue;
+                const float* wi = ray_dir + 3 * r;
+                const float cos_x = dot3(n, wi);
+                if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) continue;
+                float f[3];
+                shade_brdf(mats, m, n, wi, wo, f);
+                for (int ch = 0; ch < 3; ++ch) sum[ch] += f[ch] * cos_x * ray_weight[3 * r + ch];
+            }
+            for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += sum[ch];
+        }
+    });
+}
+
 }  // namespace voxgi

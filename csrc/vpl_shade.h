@@ -122,6 +122,18 @@ void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                   const float* ray_dir, const int32_t* prim, float* out, int threads,
                   const StopCheck& stop);
 
+// Light arriving along known directions: point, spot and directional lights
+// (one shadow ray each), environment samples and gather rays that leave the
+// scene (docs/design.md §11). Rays are pixel-major, `ray_count` (P,) per
+// pixel; each has a unit direction wi (R, 3) and an RGB weight (R, 3): the
+// irradiance on a surface facing it for a delta light, or the radiance over
+// its MIS-combined density for a sampled one. Adds f(wi, wo) max(0, n·wi)
+// weight into out (P, 3) for each ray not occluded (`occluded` (R,) non-zero:
+// blocked; null: none) whose wi lies above the geometric surface.
+void light_accumulate(const ShadeHits& hits, const ShadeMaterials& mats, const int64_t* ray_count,
+                      const float* ray_dir, const float* ray_weight, const uint8_t* occluded,
+                      float* out, int threads, const StopCheck& stop);
+
 // Index of the record that stands for the surface point y on object `obj`
 // seen from the side of normal n, or -1.
 int64_t lookup_record(const RecordGrid& grid, const double y[3], const float n[3], int32_t obj);

@@ -546,7 +546,7 @@ def test_direct_light_matches_mitsuba_path_tracer():
     # (an optional benchmark dependency). Against 256 spp the bound is
     # Mitsuba's noise.
     pytest.importorskip("mitsuba")
-    from voxgi.mitsuba import import_mitsuba, to_mitsuba
+    from voxgi.mitsuba import mitsuba_module, to_mitsuba
 
     scene = voxgi.scenes.cornell_box(width=32, height=32)
     vox = voxgi.voxelize(scene, resolution=32)
@@ -554,7 +554,7 @@ def test_direct_light_matches_mitsuba_path_tracer():
     out = voxgi.render(
         scene, Solution(vox=vox, radiosity=b), progress=False, max_frames=32, tol=0.0
     )
-    mi = import_mitsuba()
+    mi = mitsuba_module()
     ref = np.array(
         mi.render(mi.load_dict(to_mitsuba(scene, spp=256, max_depth=2)), spp=256, seed=1),
         dtype=np.float32,

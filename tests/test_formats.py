@@ -28,9 +28,9 @@ from voxgi import formats
 def _mitsuba():
     """Mitsuba 3 with an RGB variant, or skip."""
     pytest.importorskip("mitsuba")
-    from voxgi.mitsuba import import_mitsuba
+    from voxgi.mitsuba import mitsuba_module
 
-    return import_mitsuba()
+    return mitsuba_module()
 
 
 def _xml(tmp_path: Path, body: str, name: str = "scene.xml") -> Path:

@@ -110,11 +110,13 @@ def test_no_module_imports_a_private_name_of_another():
 @pytest.mark.parametrize(
     ("stage", "later"),
     [
+        ("lights", ["scene", "voxels", "radiosity", "display", "pipeline", "compare", "cli"]),
         ("scene", ["voxels", "radiosity", "display", "pipeline", "distributed", "cli"]),
         ("voxels", ["radiosity", "display", "pipeline", "distributed", "cli"]),
         ("radiosity", ["display", "pipeline", "distributed", "cli"]),
-        ("display", ["pipeline", "distributed", "cli"]),
-        ("distributed", ["pipeline", "cli"]),
+        ("display", ["pipeline", "distributed", "compare", "cli"]),
+        ("distributed", ["pipeline", "compare", "cli"]),
+        ("pipeline", ["compare", "cli"]),
     ],
 )
 def test_stages_import_only_those_before_them(stage, later):

@@ -21,6 +21,7 @@ from importlib.metadata import PackageNotFoundError, version
 from . import _core, formats, io, metrics, scenes
 from .display import RenderResult, RenderTuning
 from .formats import SceneWarning
+from .lights import DirectionalLight, Environment, PointLight, SpotLight
 from .pipeline import render, solve
 from .radiosity import Solution, SolveTuning
 from .scene import AshikhminShirley, Camera, Material, Scene, SceneObject
@@ -34,7 +35,10 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
 __all__ = [
     "AshikhminShirley",
     "Camera",
+    "DirectionalLight",
+    "Environment",
     "Material",
+    "PointLight",
     "RenderResult",
     "RenderTuning",
     "Scene",
@@ -42,6 +46,7 @@ __all__ = [
     "SceneWarning",
     "Solution",
     "SolveTuning",
+    "SpotLight",
     "VoxelSet",
     "__version__",
     "formats",

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'direct_light_rays', 'direct_light_sum', 'gather_families', 'gather_rays', 'gather_shade', 'hardware_threads', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_prepare']
+__all__: list[str] = ['LineSystem', 'PairTable', 'direct_light_rays', 'direct_light_sum', 'gather_families', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_prepare']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -165,6 +165,12 @@ def gather_shade(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy
 def hardware_threads() -> int:
     """
     Number of hardware threads the kernels use when threads=None.
+    """
+def light_accumulate(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], ray_count: numpy.typing.NDArray[numpy.int64], ray_dir: numpy.typing.NDArray[numpy.float32], ray_weight: numpy.typing.NDArray[numpy.float32], occluded: numpy.typing.NDArray[numpy.uint8], out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
+    """
+    Light along known directions (delta lights, environment samples, escaped
+    gather rays): adds f(wi, wo) max(0, n.wi) weight into out (P, 3) for each ray
+    (pixel-major, ray_count (P,) int64) not occluded (uint8 (R,), or empty: none).
     """
 def shade_brdf(mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], material: numpy.typing.NDArray[numpy.int32], n: numpy.typing.NDArray[numpy.float32], k1: numpy.typing.NDArray[numpy.float32], k2: numpy.typing.NDArray[numpy.float32]) -> numpy.typing.NDArray[numpy.float32]:
     """

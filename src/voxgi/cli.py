@@ -1,4 +1,4 @@
-"""Command line: ``voxgi render SCENE -o out.exr`` and ``voxgi scenes``.
+"""Command line: ``voxgi render SCENE -o out.exr``, ``voxgi compare SCENE`` and ``voxgi scenes``.
 
 Exit codes: 0 done; 1 a scene file or value that cannot be used; 2 a bad
 command line or an output that cannot be written (both checked before any
@@ -76,7 +76,7 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``voxgi`` argument parser with its ``render`` and ``scenes`` subcommands."""
+    """The ``voxgi`` argument parser with its ``render``, ``compare`` and ``scenes`` subcommands."""
     p = argparse.ArgumentParser(
         prog="voxgi",
         formatter_class=_HelpFormatter,
@@ -98,6 +98,16 @@ def build_parser() -> argparse.ArgumentParser:
         "frame finished; its EXR header says so).",
     )
     _add_render_arguments(r)
+    c = sub.add_parser(
+        "compare",
+        formatter_class=_HelpFormatter,
+        help="render a scene with voxgi and with Mitsuba 3 and compare them",
+        description="Render a scene with voxgi's defaults and with Mitsuba 3 (a reference "
+        "at --spp, and Mitsuba's time to voxgi's relMSE at doubling spp); print relMSE, "
+        "brightness ratios of non-emitter pixels and seconds; write both EXRs and a "
+        "difference PNG. Needs Mitsuba (pip install 'voxgi[bench]').",
+    )
+    _add_compare_arguments(c)
     sub.add_parser(
         "scenes",
         formatter_class=_HelpFormatter,
@@ -156,6 +166,35 @@ def _add_render_arguments(r: argparse.ArgumentParser) -> None:
         "--verbose",
         action="store_true",
         help="also print diagnostics: what each stage skipped and why",
+    )
+
+
+def _add_compare_arguments(c: argparse.ArgumentParser) -> None:
+    """Add the ``compare`` subcommand's arguments to its parser ``c``."""
+    c.add_argument("scene", help="scene TOML file, or a built-in scene name (see 'voxgi scenes')")
+    c.add_argument(
+        "--spp", metavar="N", type=_at_least(2), default=1024, help="spp of Mitsuba's reference"
+    )
+    c.add_argument(
+        "--resolution",
+        metavar="N",
+        type=_at_least(2),
+        default=None,
+        help="voxgi's voxel resolution (default: the pipeline's)",
+    )
+    c.add_argument("--width", metavar="PX", type=_at_least(1), default=None, help="image width")
+    c.add_argument("--height", metavar="PX", type=_at_least(1), default=None, help="image height")
+    c.add_argument(
+        "-o",
+        "--out-dir",
+        metavar="DIR",
+        default=None,
+        help="folder for voxgi.exr, reference.exr, difference.png (default: compare_SCENE)",
+    )
+    c.add_argument("--plot", action="store_true", help="also plot relMSE against seconds")
+    c.add_argument("--seed", metavar="S", type=int, default=0, help="voxgi's seed")
+    c.add_argument(
+        "--threads", metavar="N", type=_at_least(1), default=None, help="voxgi's threads"
     )
 
 
@@ -430,6 +469,38 @@ def run_render(args) -> int:
     return EXIT_INTERRUPTED if interrupted else 0
 
 
+def run_compare(args) -> int:
+    """``voxgi compare``: voxgi against Mitsuba 3 on one scene; prints the table."""
+    from . import scenes
+    from .compare import compare
+    from .scene import Scene
+
+    src, name = _scene_source(args.scene)
+    out_dir = Path(args.out_dir if args.out_dir else f"compare_{name}")
+    check_writable([out_dir / "voxgi.exr"])
+    scene = Scene.load(src) if src is not None else scenes.get(name)
+    if scene.camera is None:
+        raise UsageError(f"scene {name!r} has no camera")
+    try:
+        res = compare(
+            scene,
+            spp=args.spp,
+            resolution=args.resolution,
+            width=args.width,
+            height=args.height,
+            seed=args.seed,
+            threads=args.threads,
+            out_dir=out_dir,
+            plot=args.plot,
+        )
+    except ImportError as exc:
+        raise SystemExit(f"voxgi compare: error: {exc}") from None
+    _say(f"scene {name}")
+    _say(res.table())
+    _say("wrote " + ", ".join(res.files.values()))
+    return 0
+
+
 def run_scenes(args) -> int:
     """``voxgi scenes``: each built-in scene's name and the first line of its description."""
     from . import scenes
@@ -449,7 +520,7 @@ def main(argv: list[str] | None = None) -> int:
     else the one-line message, which exits with 1)."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    run = {"render": run_render, "scenes": run_scenes}[args.command]
+    run = {"render": run_render, "compare": run_compare, "scenes": run_scenes}[args.command]
     try:
         return run(args)
     except UsageError as exc:

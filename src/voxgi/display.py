@@ -387,6 +387,24 @@ class VPLSampler:
 # --------------------------------------------------------------------------
 # Shading of one frame
 # --------------------------------------------------------------------------
+def _stratified(rng, n: int, k: int) -> np.ndarray:
+    """(n * k, 3) points of [0, 1)³, k per pixel and jittered in strata: the
+    first coordinate (the environment's texel) in k strata, the other two
+    (the direction inside it) in a √k x √k grid when k is a square. The first
+    coordinate's strata are shuffled per pixel (Latin-hypercube pairing), so
+    each point is uniform in the cube and the mean stays unbiased for any
+    integrand, not only for one separable in the two groups."""
+    u = rng.random((n, k, 3))
+    i = np.arange(k)
+    shuffled = np.argsort(rng.random((n, k)), axis=1)
+    u[..., 0] = (shuffled + u[..., 0]) / k
+    s = math.isqrt(k)
+    if s * s == k and k > 1:
+        u[..., 1] = (i % s + u[..., 1]) / s
+        u[..., 2] = (i // s + u[..., 2]) / s
+    return u.reshape(-1, 3)
+
+
 class _FrameShader:
     """Everything a frame needs that does not change between frames."""
 
@@ -414,6 +432,12 @@ class _FrameShader:
         self.mat_rs = np.array([s.rs if s else (0.0, 0.0, 0.0) for s in spec], np.float32)
         self.mat_nu = np.array([s.nu if s else 1.0 for s in spec], np.float32)
         self.mat_nv = np.array([s.nv if s else 1.0 for s in spec], np.float32)
+        self.lights = list(scene.lights)
+        self.env = scene.environment
+        # environment samples per pixel and frame: as many as the gather rays
+        # they are MIS-combined with (docs/design.md §11)
+        self.n_env = max(1, self.gather) if self.env is not None else 0
+        self.light_rays = 0
         self.tile = 1 << 16
         self._buffers = None
         self._gbuffers = None
@@ -514,6 +538,10 @@ class _FrameShader:
         ng_out = np.zeros((P, 3), np.float32)
         ng_out[hit] = ngf
         wo = np.ascontiguousarray(-dirs, dtype=np.float32)
+        if self.env is not None:
+            # camera rays that leave the scene see the environment
+            miss = np.flatnonzero(prim < 0)
+            le[miss] = self.env.eval(dirs[miss])
         return {
             "pos": pos,
             "normal": n_out,
@@ -527,6 +555,11 @@ class _FrameShader:
         """(P, 3) float32 radiance: emission seen + VPL estimate of the reflected light."""
         P = len(h["material"])
         out = h["emission"].astype(np.float32, copy=True)
+        # the gather rays run only with VPLs to combine with
+        self._gathering = self.gather if vpl is not None and len(vpl["index"]) else 0
+        if self.lights or self.env is not None:
+            for a in range(0, P, self.tile):
+                self._direct_lights(h, a, min(P, a + self.tile), out)
         if vpl is None or len(vpl["index"]) == 0:
             return out
         K = len(vpl["index"])
@@ -584,6 +617,77 @@ class _FrameShader:
                 self._gather(h, a, b, out)
         return out
 
+    def _materials(self) -> tuple:
+        return self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv, self.mat_glossy
+
+    def _env_weight(self, dirs: np.ndarray, cos: np.ndarray) -> np.ndarray:
+        """(R, 3) environment radiance over the balance heuristic's combined
+        density of the environment samples and the gather rays,
+        ``n_e p_e(ω) + n_g cos θ / π`` (docs/design.md §11)."""
+        dens = self.n_env * self.env.pdf(dirs) + self._gathering * np.maximum(cos, 0.0) / math.pi
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = np.where(dens > 0, 1.0 / dens, 0.0)
+        return self.env.eval(dirs) * inv[:, None]
+
+    def _direct_lights(self, h: dict, a: int, b: int, out: np.ndarray) -> None:
+        """Add the delta lights (one shadow ray each) and the environment
+        samples of pixels [a, b) (docs/design.md §11)."""
+        t0 = time.perf_counter()
+        mat = h["material"][a:b]
+        pix = np.flatnonzero(mat >= 0)
+        if len(pix) == 0:
+            return
+        pos = h["pos"][a:b][pix]
+        ng = h["ng"][a:b][pix].astype(np.float64)
+        n = h["normal"][a:b][pix].astype(np.float64)
+        org = pos + self.eps * ng
+        world = pos + self.tracer.centre
+        parts = []  # (pixel, direction, length, weight) per kind of ray
+        for light in self.lights:
+            w, dist, e = light.incident(world)
+            length = np.where(np.isfinite(dist), np.maximum(dist - 2 * self.eps, 0.0), np.inf)
+            parts.append((pix, w, length, e))
+        if self.env is not None:
+            k = self.n_env
+            rng = np.random.default_rng([self.seed, self._frame, a, 0xE4F])
+            w, _ = self.env.sample(_stratified(rng, len(pix), k))
+            cos = np.einsum("ij,ij->i", w, np.repeat(n, k, axis=0))
+            parts.append((np.repeat(pix, k), w, np.full(len(w), np.inf), self._env_weight(w, cos)))
+        p_all = np.concatenate([q[0] for q in parts])
+        order = np.argsort(p_all, kind="stable")  # pixel-major, as the kernel takes them
+        w_all = np.concatenate([q[1] for q in parts])[order]
+        len_all = np.concatenate([q[2] for q in parts])[order]
+        wt_all = np.concatenate([q[3] for q in parts])[order]
+        o_all = org[np.searchsorted(pix, p_all[order])]
+        # only rays that can add light are traced
+        cos_g = np.einsum("ij,ij->i", w_all, ng[np.searchsorted(pix, p_all[order])])
+        live = (cos_g > 0) & np.any(wt_all > 0, axis=1)
+        occ = np.ones(len(w_all), np.uint8)
+        if np.any(live):
+            occ[live] = self.tracer.occluded(
+                np.ascontiguousarray(o_all[live], np.float32),
+                np.ascontiguousarray(w_all[live], np.float32),
+                np.ascontiguousarray(len_all[live], np.float32),
+            )
+        self.light_rays += int(np.count_nonzero(live))
+        count = np.bincount(p_all, minlength=b - a).astype(np.int64)
+        hh = {k: h[k][a:b] for k in ("pos", "normal", "ng", "wo", "material")}
+        _core.light_accumulate(
+            hh["pos"],
+            hh["normal"],
+            hh["ng"],
+            hh["wo"],
+            hh["material"],
+            *self._materials(),
+            count,
+            np.ascontiguousarray(w_all, np.float32),
+            np.ascontiguousarray(wt_all, np.float32),
+            occ,
+            out[a:b],
+            self.threads,
+        )
+        self.seconds["lights"] = self.seconds.get("lights", 0.0) + time.perf_counter() - t0
+
     def _gather(self, h: dict, a: int, b: int, out: np.ndarray) -> None:
         """Add the gather rays' MIS-weighted share of the non-emitter light."""
         t0 = time.perf_counter()
@@ -634,6 +738,27 @@ class _FrameShader:
             out=out[a:b],
             threads=self.threads,
         )
+        if self.env is not None:
+            # gather rays that leave the scene see the environment, MIS-combined
+            # with its samples (docs/design.md §11)
+            pix = np.repeat(np.arange(b - a), count)
+            esc = np.flatnonzero(prim < 0)
+            w = dir_buf[:n][esc].astype(np.float64)
+            cos = np.einsum("ij,ij->i", w, hh["normal"][pix[esc]].astype(np.float64))
+            _core.light_accumulate(
+                hh["pos"],
+                hh["normal"],
+                hh["ng"],
+                hh["wo"],
+                hh["material"],
+                *self._materials(),
+                np.bincount(pix[esc], minlength=b - a).astype(np.int64),
+                np.ascontiguousarray(w, np.float32),
+                np.ascontiguousarray(self._env_weight(w, cos), np.float32),
+                np.zeros(0, np.uint8),
+                out[a:b],
+                self.threads,
+            )
         self.seconds["gather"] += time.perf_counter() - t0
 
     def frame(self, f: int, seed: int) -> np.ndarray:
@@ -1205,6 +1330,7 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
         "seconds": seconds,
         "primary_rays": int(source.primary_rays),
         "shadow_rays": int(source.shadow_rays),
+        "light_rays": int(getattr(source, "light_rays", 0)),
         "gather_rays": int(source.gather_rays),
         "gather_per_frame": spec.gather_per_frame,
         "vpls": int(acc.frames * sum(spec.sampler.counts)),

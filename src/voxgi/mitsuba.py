@@ -17,6 +17,9 @@ The translation keeps voxgi's conventions:
 - the camera as ``perspective`` (or ``thinlens`` with an aperture), vertical
   field of view, ``look_at`` (Mitsuba's image x axis is ``forward x up``,
   as voxgi's);
+- lights as Mitsuba's ``point``, ``spot``, ``directional``, ``constant`` and
+  ``envmap`` emitters with the same parameters (voxgi's lights use Mitsuba's
+  units and conventions, ``docs/design.md`` §11);
 - a ``box`` pixel filter (the default Gaussian blurs across pixels) and a
   ``path`` integrator with ``max_depth = -1`` (no depth limit; Russian
   roulette keeps it unbiased).
@@ -29,13 +32,15 @@ from pathlib import Path
 
 import numpy as np
 
+from .lights import DirectionalLight, Environment, SpotLight
 from .scene import Camera, Scene
 
-__all__ = ["import_mitsuba", "render_mitsuba", "to_mitsuba"]
+__all__ = ["mitsuba_module", "render_mitsuba", "to_mitsuba"]
 
 
-def import_mitsuba(variant: str | None = None):
-    """Import Mitsuba 3 and set a variant.
+def mitsuba_module(variant: str | None = None):
+    """The ``mitsuba`` module with a variant set (it imports no scene: see
+    :func:`to_mitsuba` for that).
 
     Parameters
     ----------
@@ -129,7 +134,7 @@ def to_mitsuba(
     -------
     dict
         ``{"type": "scene", "integrator": ..., "sensor": ..., "<object>": mesh, ...}``.
-        Mitsuba must already have a variant set (:func:`import_mitsuba`).
+        Mitsuba must already have a variant set (:func:`mitsuba_module`).
     """
     import mitsuba as mi
 
@@ -143,7 +148,52 @@ def to_mitsuba(
     }
     for i, o in enumerate(scene.objects):
         d.update(_shape(mi, i, o))
+    for i, light in enumerate(scene.lights):
+        d[f"light{i:03d}"] = _light(mi, light)
+    if scene.environment is not None:
+        d["environment"] = _environment(mi, scene.environment)
     return d
+
+
+def _rgb(v) -> dict:
+    return {"type": "rgb", "value": [float(x) for x in v]}
+
+
+def _light(mi, light) -> dict:
+    """The Mitsuba emitter of a point, spot or directional light (same units)."""
+    if isinstance(light, DirectionalLight):
+        return {
+            "type": "directional",
+            "direction": list(light.direction),
+            "irradiance": _rgb(light.irradiance),
+        }
+    if isinstance(light, SpotLight):
+        pos, axis = np.asarray(light.position), np.asarray(light.direction)
+        up = np.array([0.0, 1.0, 0.0]) if abs(axis[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        return {
+            "type": "spot",
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=list(pos), target=list(pos + axis), up=list(up)
+            ),
+            "intensity": _rgb(light.intensity),
+            "cutoff_angle": float(light.cutoff_angle),
+            "beam_width": float(light.beam_width),
+        }
+    return {"type": "point", "position": list(light.position), "intensity": _rgb(light.intensity)}
+
+
+def _environment(mi, env: Environment) -> dict:
+    """``constant`` for a uniform environment, else ``envmap`` with the same
+    lat-long image (already scaled) and rotation."""
+    if env.image.shape[:2] == (1, 1):
+        return {"type": "constant", "radiance": _rgb(env.image[0, 0])}
+    m = np.eye(4)
+    m[:3, :3] = env.to_world
+    return {
+        "type": "envmap",
+        "bitmap": mi.Bitmap(np.ascontiguousarray(env.image, np.float32)),
+        "to_world": mi.ScalarTransform4f(m.tolist()),
+    }
 
 
 def _sensor(mi, scene: Scene, cam: Camera, spp: int, sampler: str, seed: int) -> dict:
@@ -206,7 +256,7 @@ def render_mitsuba(
 ) -> np.ndarray:
     """Render ``scene`` with Mitsuba's path tracer; returns (H, W, 3) float32
     linear radiance, ``image[0, 0]`` top-left (as voxgi's images)."""
-    mi = import_mitsuba(variant)
+    mi = mitsuba_module(variant)
     sc = mi.load_dict(to_mitsuba(scene, spp=spp, camera=camera, seed=seed))
     img = mi.render(sc, spp=int(spp), seed=int(seed))
     return np.ascontiguousarray(np.array(img, dtype=np.float32)[..., :3])

@@ -41,7 +41,7 @@ from typing import Protocol
 import numpy as np
 
 from . import _core, _validate
-from .direct import direct_irradiance
+from .direct import direct_irradiance, light_irradiance
 from .directions import DirectionSet, direction_set
 from .io import atomic_path
 from .voxels import VoxelSet, available_memory
@@ -910,15 +910,28 @@ class _Problem:
     sds: DirectionSet | None = None
     lds: DirectionSet | None = None
     S: dict = field(default_factory=dict)
+    #: power the records receive from lights other than emitting triangles
+    light_power: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def n(self) -> int:
         return len(self.area)
 
     @property
+    def lights(self) -> bool:
+        """The records' scene has point, spot or directional lights or an environment."""
+        scene = getattr(self.vox, "scene", None)
+        return scene is not None and scene.has_lights
+
+    @property
     def shoots(self) -> bool:
         """Direct light by shooting: asked for, or exact light asked for but
-        the records carry no scene to trace."""
+        the records carry no scene to trace. This is the one place that
+        decides: lights other than emitting triangles have no records to
+        shoot from, so a scene with any is always lit exactly
+        (``docs/design.md`` §11)."""
+        if self.lights:
+            return False
         return self.opt.direct_light == "shoot" or getattr(self.vox, "scene", None) is None
 
     @property
@@ -1038,6 +1051,11 @@ def _direct_light(p: _Problem):
     way and the rays it took: by shadow rays to the exact emitters where the
     tuning asks for it and the records know their scene, else by shooting."""
     if not p.shoots:
+        if p.lights and p.opt.direct_light == "shoot":
+            p.stats["skipped"]["shooting"] = (
+                "the scene has point, spot or directional lights or an environment, "
+                "which shooting cannot represent: exact direct light instead"
+            )
         return _exact_direct_light(p)
     if p.opt.direct_light == "exact":
         p.stats["skipped"]["exact_direct_light"] = (
@@ -1053,16 +1071,24 @@ def _exact_direct_light(p: _Problem):
     of a solve with diagnostics."""
     t = time.perf_counter()
     receivers = "all" if p.opt.diagnostics else "reflecting"
-    Hd, st = direct_irradiance(
-        p.vox.scene, p.vox, samples=p.opt.direct_samples, threads=p.opt.threads, receivers=receivers
-    )
-    p.seconds["direct"] = time.perf_counter() - t
+    kw = dict(samples=p.opt.direct_samples, threads=p.opt.threads, receivers=receivers)
+    Hd, st = direct_irradiance(p.vox.scene, p.vox, **kw)
     p.stats["direct_light"] = {"method": "exact", "receivers": receivers, **st}
+    # what the records receive of the emitting triangles' power (the rest escapes)
+    received = (Hd * p.area[:, None]).sum(axis=0)
+    if p.lights:
+        # the lights' power is what the records receive: it counts as emitted
+        # in the energy balance, and none of it escapes on the way
+        H_lights, st_l = light_irradiance(p.vox.scene, p.vox, **kw)
+        Hd = Hd + H_lights
+        p.light_power = (H_lights * p.area[:, None]).sum(axis=0)
+        p.stats["direct_light"]["lights"] = st_l
+        p.stats["direct_light"]["rays"] += st_l["rays"]
+    p.seconds["direct"] = time.perf_counter() - t
     if receivers == "reflecting":
         p.stats["skipped"]["direct_light_on_black_records"] = (
             "diagnostics=False: what they absorb counts as escaping in stats['energy']"
         )
-    received = (Hd * p.area[:, None]).sum(axis=0)
     escape = (p.E * p.area[:, None]).sum(axis=0) - received
     return Hd, escape, 0
 
@@ -1357,7 +1383,7 @@ def _energy(p: _Problem, Hd, s: _State, found, shoot_escape) -> dict:
     """Emitted, absorbed and escaping power per channel and their imbalance
     (escaping counted on the sender side; ``docs/design.md`` §5)."""
     area = p.area
-    emitted = (p.E * area[:, None]).sum(axis=0)
+    emitted = (p.E * area[:, None]).sum(axis=0) + p.light_power
     absorbed = ((1 - p.rho) * (Hd + s.Hg) * area[:, None]).sum(axis=0)
     gather_escape = (s.R * (area * (1 - found))[:, None]).sum(axis=0)
     escaping = shoot_escape + gather_escape
@@ -1453,7 +1479,7 @@ def solve(
     opt = _settings(directions, max_bounces, tol, threads, tuning)
     executor = _check_executor(executor, vox, opt, tuning)
     p = _problem(vox, a, opt)
-    if p.stats["emitters"] == 0:
+    if p.stats["emitters"] == 0 and not p.lights:
         return _no_emitter(p)
     _open_backend(p, executor, progress)
     try:

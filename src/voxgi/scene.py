@@ -20,13 +20,24 @@ import trimesh
 
 from . import _validate, formats
 from .io import atomic_path
+from .lights import DELTA_LIGHTS, DirectionalLight, Environment, PointLight, SpotLight
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
 
-__all__ = ["AshikhminShirley", "Camera", "Material", "Scene", "SceneObject"]
+__all__ = [
+    "AshikhminShirley",
+    "Camera",
+    "DirectionalLight",
+    "Environment",
+    "Material",
+    "PointLight",
+    "Scene",
+    "SceneObject",
+    "SpotLight",
+]
 
 
 @dataclass(frozen=True)
@@ -294,7 +305,45 @@ class Scene:
 
     def __init__(self, camera: Camera | None = None):
         self.objects: list[SceneObject] = []
+        #: Point, spot and directional lights (:meth:`add_light`).
+        self.lights: list[PointLight | SpotLight | DirectionalLight] = []
         self.camera = camera
+        self.environment = None
+
+    # -- lights -------------------------------------------------------------
+    def add_light(self, light: PointLight | SpotLight | DirectionalLight):
+        """Add a point, spot or directional light (``voxgi.lights``); returns it.
+
+        >>> import voxgi
+        >>> scene = voxgi.Scene()
+        >>> scene.add_light(voxgi.PointLight((0, 1, 0), 5.0)).intensity
+        (5.0, 5.0, 5.0)
+        """
+        if not isinstance(light, DELTA_LIGHTS):
+            raise TypeError(
+                "Scene.add_light: expected voxgi.PointLight, SpotLight or DirectionalLight "
+                f"(an environment goes in Scene.environment), got {type(light).__name__}"
+            )
+        self.lights.append(light)
+        return light
+
+    @property
+    def environment(self) -> Environment | None:
+        """The radiance from infinitely far away (:class:`voxgi.Environment`) or None."""
+        return self._environment
+
+    @environment.setter
+    def environment(self, env: Environment | None) -> None:
+        if env is not None and not isinstance(env, Environment):
+            raise TypeError(
+                f"Scene.environment: expected voxgi.Environment or None, got {type(env).__name__}"
+            )
+        self._environment = env
+
+    @property
+    def has_lights(self) -> bool:
+        """Whether the scene has delta lights or an environment (besides emitting meshes)."""
+        return bool(self.lights) or self.environment is not None
 
     # -- camera -------------------------------------------------------------
     @property
@@ -363,8 +412,10 @@ class Scene:
         return len(self.objects)
 
     def __repr__(self) -> str:
+        extra = f", {len(self.lights)} lights" if self.lights else ""
+        extra += ", environment" if self.environment is not None else ""
         return (
-            f"Scene({len(self.objects)} objects, {self.n_triangles} triangles, "
+            f"Scene({len(self.objects)} objects, {self.n_triangles} triangles{extra}, "
             f"camera={'set' if self.camera else 'None'})"
         )
 
@@ -412,7 +463,7 @@ class Scene:
         }
 
     def fingerprint(self) -> str:
-        """Hash of geometry and materials: tells a solution which scene it belongs to.
+        """Hash of geometry, materials and lights: tells a solution which scene it belongs to.
 
         The camera is not part of it: a new view reuses a solution.
         """
@@ -421,6 +472,10 @@ class Scene:
             h.update(o.vertices.tobytes())
             h.update(o.faces.tobytes())
             h.update(repr((o.material.albedo, o.material.emission, o.two_sided)).encode())
+        for light in self.lights:
+            h.update(repr(light).encode())
+        if self.environment is not None:
+            h.update(b"environment" + self.environment.digest().encode())
         return h.hexdigest()[:16]
 
     @property
@@ -460,6 +515,17 @@ class Scene:
             rotate = [90, 1, 0, 0]  # degrees about an axis
             scale = 1.0             # or [sx, sy, sz]
             # matrix = [[...4x4...]] instead of the three above
+
+            [[light]]               # point, spot or directional (voxgi.lights)
+            type = "spot"
+            position = [0, 2, 0]
+            direction = [0, -1, 0]
+            intensity = [5, 5, 5]   # W/sr; "irradiance" for a directional light
+            cutoff_angle = 30       # degrees; beam_width optional
+
+            [environment]
+            radiance = [1, 1, 1]    # or image = "sky.exr" (lat-long, relative path)
+            scale = 1.0             # optional; to_world = [[...3x3 or 4x4...]] optional
 
         Raises
         ------
@@ -527,6 +593,13 @@ class Scene:
             raise ValueError(f"{source}: 'object' must be an array of tables ([[object]])")
         for k, o in enumerate(objs):
             _add_object_from_dict(scene, o, f"{source}: object #{k}", materials, base_dir)
+        lights = data.get("light", [])
+        if not isinstance(lights, list):
+            raise ValueError(f"{source}: 'light' must be an array of tables ([[light]])")
+        for k, entry in enumerate(lights):
+            scene.add_light(_light_from_dict(entry, f"{source}: light #{k}"))
+        if "environment" in data:
+            scene.environment = _environment_from_dict(data["environment"], source, base_dir)
         return scene
 
     def save(self, path) -> Path:
@@ -571,6 +644,10 @@ class Scene:
             objects.append(entry)
         if objects:
             doc["object"] = objects
+        if self.lights:
+            doc["light"] = [_light_to_dict(light) for light in self.lights]
+        if self.environment is not None:
+            doc["environment"] = _environment_to_dict(self.environment, path)
         text = tomli_w.dumps(doc)
         with atomic_path(path) as tmp:
             tmp.write_text(text, encoding="utf-8")
@@ -613,12 +690,86 @@ def _check_top_level(data, source: str) -> None:
     """Raise unless ``data`` is a table with only the known top-level keys."""
     if not isinstance(data, dict):
         raise TypeError(f"{source}: expected a table at the top level")
-    unknown = set(data) - {"camera", "materials", "object"}
+    unknown = set(data) - {"camera", "materials", "object", "light", "environment"}
     if unknown:
         raise ValueError(
             f"{source}: unknown top-level key(s) {sorted(unknown)}; "
-            "expected camera, materials, object"
+            "expected camera, materials, object, light, environment"
         )
+
+
+#: The ``[[light]]`` types and the class of each.
+_LIGHT_TYPES = {"point": PointLight, "spot": SpotLight, "directional": DirectionalLight}
+
+
+def _light_from_dict(entry, where: str):
+    """The light of one ``[[light]]`` table: ``type`` and the class's fields."""
+    if not isinstance(entry, dict):
+        raise ValueError(f"{where}: must be a table")
+    kind = entry.get("type")
+    if kind not in _LIGHT_TYPES:
+        raise ValueError(f"{where}: 'type' must be one of {sorted(_LIGHT_TYPES)}, got {kind!r}")
+    cls = _LIGHT_TYPES[kind]
+    fields = {k: v for k, v in entry.items() if k != "type"}
+    allowed = set(cls.__dataclass_fields__)
+    bad = set(fields) - allowed
+    if bad:
+        raise ValueError(
+            f"{where} ({kind}): unknown key(s) {sorted(bad)}; expected {sorted(allowed)}"
+        )
+    try:
+        return cls(**fields)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where} ({kind}): {exc}") from None
+
+
+def _light_to_dict(light) -> dict:
+    kind = next(k for k, c in _LIGHT_TYPES.items() if isinstance(light, c))
+    out: dict = {"type": kind}
+    for name in light.__dataclass_fields__:
+        v = getattr(light, name)
+        out[name] = [float(x) for x in v] if isinstance(v, tuple) else float(v)
+    return out
+
+
+def _environment_from_dict(env, source: str, base_dir: Path) -> Environment:
+    where = f"{source}: [environment]"
+    if not isinstance(env, dict):
+        raise ValueError(f"{where} must be a table")
+    bad = set(env) - {"radiance", "image", "scale", "to_world"}
+    if bad:
+        raise ValueError(
+            f"{where}: unknown key(s) {sorted(bad)}; expected radiance or image, scale, to_world"
+        )
+    if ("radiance" in env) == ("image" in env):
+        raise ValueError(f"{where}: give exactly one of 'radiance' (RGB) and 'image' (a path)")
+    try:
+        if "image" in env:
+            if not isinstance(env["image"], str):
+                raise ValueError(f"'image' must be a path string, got {env['image']!r}")
+            img = Path(env["image"])
+            radiance = img if img.is_absolute() else base_dir / img
+        else:
+            radiance = env["radiance"]
+        return Environment(radiance, to_world=env.get("to_world"), scale=env.get("scale", 1.0))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def _environment_to_dict(env: Environment, path: Path) -> dict:
+    """An ``[environment]`` table; an image is written as an EXR beside the scene file."""
+    out: dict = {}
+    if env.constant is not None and env.image.shape[:2] == (1, 1):
+        out["radiance"] = [float(x) for x in env.image[0, 0]]
+    else:
+        from .io import write_exr
+
+        fname = f"{path.stem}_environment.exr"
+        write_exr(path.parent / fname, env.image.astype(np.float32))
+        out["image"] = fname
+    if not np.array_equal(env.to_world, np.eye(3)):
+        out["to_world"] = [[float(x) for x in row] for row in env.to_world]
+    return out
 
 
 def _camera_from_dict(cam, source: str) -> Camera:
@@ -733,10 +884,10 @@ def _error_line(text: str, data, msg: str) -> int | None:
     """
     import re
 
-    m = re.search(r"object #(\d+)", msg)
+    m = re.search(r"(object|light) #(\d+)", msg)
     if m:
-        want, table = ("object", int(m.group(1))), None
-        objs = data.get("object") if isinstance(data, dict) else None
+        want, table = (m.group(1), int(m.group(2))), None
+        objs = data.get(m.group(1)) if isinstance(data, dict) else None
         table = objs[want[1]] if isinstance(objs, list) and want[1] < len(objs) else None
     elif m := re.search(r"\[materials\.([^\]]+)\]", msg):
         want = ("materials", m.group(1))
@@ -744,6 +895,9 @@ def _error_line(text: str, data, msg: str) -> int | None:
         table = mats.get(want[1]) if isinstance(mats, dict) else None
     elif "[camera]" in msg:
         want, table = ("camera",), data.get("camera") if isinstance(data, dict) else None
+    elif "[environment]" in msg:
+        want = ("environment",)
+        table = data.get("environment") if isinstance(data, dict) else None
     else:
         want, table = (None,), data
     # the key named in the message (longest first, so "focus_distance" beats "focus")
@@ -757,17 +911,17 @@ def _error_line(text: str, data, msg: str) -> int | None:
         None,
     )
     section: tuple = (None,)
-    n_obj = -1
+    n_obj = {"object": -1, "light": -1}
     header = None
     for i, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
-        if re.match(r"^\[\[\s*object\s*\]\]", line):
-            n_obj += 1
-            section = ("object", n_obj)
+        if h := re.match(r"^\[\[\s*(object|light)\s*\]\]", line):
+            n_obj[h.group(1)] += 1
+            section = (h.group(1), n_obj[h.group(1)])
         elif h := re.match(r"^\[\s*materials\.\s*[\"']?([^\]\"']+)[\"']?\s*\]", line):
             section = ("materials", h.group(1).strip())
-        elif re.match(r"^\[\s*camera\s*\]", line):
-            section = ("camera",)
+        elif h := re.match(r"^\[\s*(camera|environment)\s*\]", line):
+            section = (h.group(1),)
         elif line.startswith("["):
             section = ("other",)
         else:

@@ -13,6 +13,7 @@ import numpy as np
 import trimesh
 
 from . import _validate
+from .lights import DirectionalLight, Environment, PointLight
 from .scene import Camera, Material, Scene
 
 __all__ = [
@@ -27,8 +28,11 @@ __all__ = [
     "labyrinth",
     "load_bunny",
     "names",
+    "point_lit_box",
     "shadow",
+    "sky_objects",
     "sponza_atrium",
+    "sun_room",
     "window_room",
 ]
 
@@ -109,6 +113,7 @@ def cornell_box(
     *,
     blocks: bool = True,
     closed: bool = False,
+    area_light: bool = True,
 ) -> Scene:
     """The Cornell box with its published dimensions, in metres.
 
@@ -130,6 +135,9 @@ def cornell_box(
         Close the box with a white fourth wall at z = 0 (object ``front``):
         nothing escapes, so every emitted watt must be absorbed (energy
         studies; the camera then sees the wall's black back).
+    area_light : bool
+        Include the emitting quad under the ceiling (default; without it the
+        box is dark until lights are added, as in :func:`point_lit_box`).
 
     Returns
     -------
@@ -156,6 +164,8 @@ def cornell_box(
             s.add(_mesh(quads, outside=np.array(centre)), white, name=name)
     if closed:
         s.add(_mesh([_CORNELL_FRONT], inside=_CORNELL_CENTRE), white, name="front")
+    if not area_light:
+        return s
     y = 548.8 - light_offset * 1e3
     light = [[[343.0, y, 227.0], [343.0, y, 332.0], [213.0, y, 332.0], [213.0, y, 227.0]]]
     s.add(
@@ -645,7 +655,7 @@ def _slab(lo, hi) -> trimesh.Trimesh:
 
 
 def window_room(
-    width: int = 256, height: int = 256, bar: float = 0.02, window_radiance: float = 6.0
+    width: int = 256, height: int = 256, bar: float = 0.02, window_radiance: float | None = 6.0
 ) -> Scene:
     """A 4 x 2.6 x 5 m room lit only through a barred window, with a thin-legged table.
 
@@ -655,6 +665,8 @@ def window_room(
     resolution (5 m / 64 = 0.078 m). Every surface is diffuse (walls 0.75,
     reveal 0.5). It shows what sub-voxel occluders in front of an aperture
     do to direct light carried along discrete lines (``docs/design.md`` §5).
+    ``window_radiance=None`` leaves the opening open, for a sun or sky
+    outside (:func:`sun_room`).
     """
     W, H, D = 4.0, 2.6, 5.0
     x0, x1, y0, y1, t = 1.2, 2.8, 0.9, 2.1, -0.3
@@ -685,8 +697,9 @@ def window_room(
         [(x1, y0, t), (x1, y1, t), (x1, y1, 0), (x1, y0, 0)],
     ]
     scene.add(trimesh.util.concatenate([_quad(q, middle) for q in reveal]), grey, name="reveal")
-    window = _quad([(x0, y0, t), (x1, y0, t), (x1, y1, t), (x0, y1, t)], inside)
-    scene.add(window, Material(albedo=0.0, emission=window_radiance), name="window")
+    if window_radiance is not None:
+        window = _quad([(x0, y0, t), (x1, y0, t), (x1, y1, t), (x0, y1, t)], inside)
+        scene.add(window, Material(albedo=0.0, emission=window_radiance), name="window")
     z0, z1, xm, ym = -0.08, -0.04, (x0 + x1) / 2, (y0 + y1) / 2
     bars = [
         _slab((xm - bar / 2, y0, z0), (xm + bar / 2, y1, z1)),
@@ -701,6 +714,52 @@ def window_room(
     ]
     scene.add(trimesh.util.concatenate(legs), white, name="table_legs")
     return scene
+
+
+def point_lit_box(width: int = 256, height: int = 256) -> Scene:
+    """The Cornell box lit by a point light instead of its area light.
+
+    The point light hangs 15 cm under the centre of the ceiling with the
+    on-axis intensity of the area light it replaces (its radiance times its
+    area, W/sr): the same light straight down, more to the sides.
+    """
+    s = cornell_box(width, height, area_light=False)
+    area = 0.130 * 0.105
+    s.add_light(PointLight((0.278, 0.40, 0.2795), tuple(area * c for c in CORNELL_LIGHT)))
+    return s
+
+
+def sun_room(width: int = 256, height: int = 256, irradiance: float = 20.0) -> Scene:
+    """:func:`window_room` with its window open and a sun shining in.
+
+    The sun (:class:`voxgi.DirectionalLight`, ``irradiance`` W/m² on a
+    surface facing it) comes in through the window at about 30° below the
+    horizon, so a patch of sunlight, striped by the sash bars' shadows, falls
+    on the floor and the table; the rest of the room is lit by its bounces.
+    """
+    s = window_room(width, height, window_radiance=None)
+    s.add_light(DirectionalLight((0.25, -0.55, 1.0), irradiance))
+    return s
+
+
+def sky_objects(width: int = 256, height: int = 256, sky: float = 1.0) -> Scene:
+    """A box and a sphere on a square ground plane under a uniform white sky.
+
+    Ground 8 x 8 m (albedo 0.5), a 1 m box (0.7, reddish) and a sphere of
+    radius 0.6 m (0.7, bluish), lit only by a constant environment of
+    radiance ``sky``; the camera sees the horizon, so some pixels see the sky.
+    """
+    cam = Camera(eye=(0.0, 1.6, 4.5), target=(0.0, 0.4, 0.0), fov=45, width=width, height=height)
+    s = Scene(camera=cam)
+    ground = _quad([(-4, 0, -4), (4, 0, -4), (4, 0, 4), (-4, 0, 4)], (0.0, 1.0, 0.0))
+    s.add(ground, Material(albedo=0.5), name="ground")
+    box = _box((1.0, 1.0, 1.0), (-0.8, 0.5, 0.0), rotate_y_deg=25.0)
+    s.add(box, Material(albedo=(0.7, 0.35, 0.3)), name="box")
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.6)
+    ball.apply_translation((0.9, 0.6, 0.3))
+    s.add(ball, Material(albedo=(0.3, 0.4, 0.7)), name="sphere")
+    s.environment = Environment(sky)
+    return s
 
 
 def door_room(width: int = 256, height: int = 256, gap: float = 0.05) -> Scene:
@@ -768,6 +827,9 @@ _REGISTRY = {
     "geometric": geometric,
     "sponza-atrium": sponza_atrium,
     "window-room": window_room,
+    "point-lit-box": point_lit_box,
+    "sun-room": sun_room,
+    "sky-objects": sky_objects,
     "door-room": door_room,
 }
 
