@@ -768,7 +768,7 @@ def door_room(width: int = 256, height: int = 256, gap: float = 0.05) -> Scene:
     A 1 x 2 m doorway in the 10 cm wall between the rooms holds a 4 cm door
     swung open by ``gap`` metres at its edge, so the lit room's light reaches
     the camera's room only through a slit narrower than a voxel at the default
-    resolution (8 m / 64 = 0.125 m), mostly after bounces. The lamp is a 1 x 1
+    resolution (8 m / 64 = 0.125 m), mostly after bounces. The lamp is a 2 x 2
     m ceiling panel; every surface is diffuse (0.7). It shows what gaps
     thinner than a voxel do to light carried along discrete lines
     (``docs/design.md`` §5).
@@ -804,14 +804,14 @@ def door_room(width: int = 256, height: int = 256, gap: float = 0.05) -> Scene:
     scene.add(door, white, name="door")
     lamp = _quad(
         [
-            (1.5, H - 0.01, D + t + 1.5),
-            (2.5, H - 0.01, D + t + 1.5),
-            (2.5, H - 0.01, D + t + 2.5),
-            (1.5, H - 0.01, D + t + 2.5),
+            (1.0, H - 0.01, D + t + 1.0),
+            (3.0, H - 0.01, D + t + 1.0),
+            (3.0, H - 0.01, D + t + 3.0),
+            (1.0, H - 0.01, D + t + 3.0),
         ],
         (2.0, 0.0, D + 2),
     )
-    scene.add(lamp, Material(albedo=0.0, emission=60.0), name="lamp")
+    scene.add(lamp, Material(albedo=0.0, emission=150.0), name="lamp")
     return scene
 
 
