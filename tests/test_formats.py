@@ -325,8 +325,8 @@ def test_one_warning_lists_approximated_bsdfs_another_what_is_left_out(tmp_path)
            <shape type="rectangle" id="a"><ref id="plastic"/></shape>
            <shape type="rectangle" id="b"><ref id="pbr"/></shape>
            <shape type="rectangle" id="c"><bsdf type="conductor" id="metal"/></shape>
-           <emitter type="point" id="bulb"><point name="position" value="0, 1, 0"/></emitter>
-           <emitter type="constant"/>""",
+           <emitter type="projector" id="beamer"/>
+           <emitter type="directionalarea"/>""",
     )
     with pytest.warns(voxgi.SceneWarning) as rec:
         scene = voxgi.Scene.load(path)
@@ -339,12 +339,44 @@ def test_one_warning_lists_approximated_bsdfs_another_what_is_left_out(tmp_path)
         "'conductor' (id 'metal')",
     ):
         assert label in approx
-    assert "emitter 'point' (id 'bulb')" in dropped
-    assert "emitter 'constant'" in dropped
+    assert "emitter 'projector' (id 'beamer')" in dropped
+    assert "emitter 'directionalarea'" in dropped
     a, b, c = scene.objects
     assert a.material.albedo == (0.1, 0.2, 0.3)
     assert b.material.albedo == (0.7, 0.6, 0.5)
     assert c.material.albedo == (0.5, 0.5, 0.5)
+
+
+def test_scene_emitters_become_lights(tmp_path):
+    # Mitsuba's point, spot, directional and constant emitters in their own
+    # units: a spot shines along its local +z (here the lookat's target), a
+    # spot's beam_width defaults to 3/4 of its cutoff angle.
+    path = _xml(
+        tmp_path,
+        """<shape type="rectangle"/>
+           <emitter type="point"><point name="position" value="0, 1, 0"/><rgb name="intensity" value="2, 3, 4"/></emitter>
+           <emitter type="spot">
+             <transform name="to_world"><lookat origin="0, 2, 0" target="0, 0, 0" up="0, 0, 1"/></transform>
+             <rgb name="intensity" value="5"/><float name="cutoff_angle" value="40"/>
+           </emitter>
+           <emitter type="directional"><vector name="direction" value="0, -2, 0"/><rgb name="irradiance" value="7"/></emitter>
+           <emitter type="constant"><rgb name="radiance" value="0.5, 0.25, 1"/></emitter>""",
+    )
+    scene, msgs = _load_quiet(path)
+    assert msgs == []
+    point, spot, sun = scene.lights
+    assert isinstance(point, voxgi.PointLight)
+    np.testing.assert_allclose(point.position, (0, 1, 0))
+    np.testing.assert_allclose(point.intensity, (2, 3, 4))
+    assert isinstance(spot, voxgi.SpotLight)
+    np.testing.assert_allclose(spot.position, (0, 2, 0))
+    np.testing.assert_allclose(spot.direction, (0, -1, 0), atol=1e-12)
+    assert (spot.cutoff_angle, spot.beam_width) == (40.0, 30.0)
+    assert isinstance(sun, voxgi.DirectionalLight)
+    np.testing.assert_allclose(sun.direction, (0, -1, 0))
+    np.testing.assert_allclose(sun.irradiance, (7, 7, 7))
+    assert scene.environment is not None
+    np.testing.assert_allclose(scene.environment.constant, (0.5, 0.25, 1))
 
 
 def test_defaults_variables_includes_and_refs(tmp_path):

@@ -68,10 +68,15 @@ class MeshData:
 
 @dataclass
 class SceneData:
-    """What a loader read: meshes and the keyword arguments of a Camera (or None)."""
+    """What a loader read: meshes, the keyword arguments of a Camera (or None),
+    and the lights in the tables of a TOML scene."""
 
     meshes: list[MeshData] = field(default_factory=list)
     camera: dict | None = None
+    #: ``[[light]]`` tables of a TOML scene (``type`` and the light's fields)
+    lights: list[dict] = field(default_factory=list)
+    #: the ``[environment]`` table of a TOML scene, or None
+    environment: dict | None = None
 
 
 #: Largest albedo a Material holds (below 1 in float32, docs/design.md §12).
@@ -641,13 +646,62 @@ def _emission(p: _Plugin, notes: _Notes) -> np.ndarray:
     return _colour(p.props["radiance"], p, "radiance", notes)
 
 
-def _scene_emitter(p: _Plugin, notes: _Notes) -> None:
-    """A scene-level emitter (point, spot, directional, constant, envmap, ...).
+def _scene_emitter(p: _Plugin, data: SceneData, notes: _Notes) -> None:
+    """A scene-level emitter: Mitsuba's ``point``, ``spot``, ``directional``,
+    ``constant`` and ``envmap`` become voxgi's lights in their own units
+    (``docs/design.md`` §11, §12); any other is listed as left out."""
+    m = np.asarray(p.props.get("to_world", np.eye(4)), np.float64)
 
-    The one place where such emitters would become voxgi lights; the scene
-    holds only emitting surfaces, so they are listed as left out.
-    """
-    notes.drop(f"{p.label()} at line {p.line}")
+    def colour(key: str) -> list[float]:
+        return [float(x) for x in _colour(p.props.get(key, 1.0), p, key, notes)]
+
+    def unit(v) -> list[float]:
+        v = np.asarray(v, np.float64)
+        n = float(np.linalg.norm(v))
+        if not n > 0:
+            raise ValueError(f"{p.where()}: a zero direction")
+        return [float(x) for x in v / n]
+
+    if p.type == "point":
+        pos = p.props.get("position", m[:3, 3])
+        data.lights.append(
+            {"type": "point", "position": [float(x) for x in pos], "intensity": colour("intensity")}
+        )
+    elif p.type == "spot":
+        # Mitsuba's spot shines along its local +z from its local origin.
+        cutoff = float(p.props.get("cutoff_angle", 20.0))
+        data.lights.append(
+            {
+                "type": "spot",
+                "position": [float(x) for x in m[:3, 3]],
+                "direction": unit(m[:3, 2]),
+                "intensity": colour("intensity"),
+                "cutoff_angle": cutoff,
+                "beam_width": float(p.props.get("beam_width", 0.75 * cutoff)),
+            }
+        )
+    elif p.type == "directional":
+        d = p.props.get("direction", m[:3, 2])
+        data.lights.append(
+            {"type": "directional", "direction": unit(d), "irradiance": colour("irradiance")}
+        )
+    elif p.type in ("constant", "envmap"):
+        if data.environment is not None:
+            notes.drop(f"{p.label()} at line {p.line} (only the first environment is used)")
+            return
+        if p.type == "constant":
+            data.environment = {"radiance": colour("radiance")}
+        else:
+            if "filename" not in p.props:
+                raise ValueError(f"{p.where()}: missing property 'filename'")
+            image = p.file.parent / str(p.props["filename"])
+            data.environment = {
+                "image": str(image),
+                "scale": float(p.props.get("scale", 1.0)),
+                "to_world": m.tolist(),
+            }
+    else:
+        notes.drop(f"{p.label()} at line {p.line}")
 
 
 def _unit_disk(n: int = 128) -> tuple[np.ndarray, np.ndarray]:
@@ -886,7 +940,7 @@ def _read_mitsuba(reader: _XmlReader, path: Path, root: _Node) -> SceneData:
                 reader.notes.drop(f"{p.label()} (only the first sensor is used)")
         elif p.tag == "emitter":
             if p.type != "area":  # (an area emitter is attached to shapes by reference)
-                _scene_emitter(p, reader.notes)
+                _scene_emitter(p, data, reader.notes)
         elif p.tag == "integrator":
             # voxgi is its own integrator and computes every bounce
             depth = p.props.get("max_depth", -1)

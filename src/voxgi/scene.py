@@ -577,6 +577,12 @@ class Scene:
             except (TypeError, ValueError) as exc:
                 raise ValueError(f"{source}: mesh {m.name!r}: {exc}") from None
             obj.source = m.source
+        for k, entry in enumerate(data.lights):
+            scene.add_light(_light_from_dict(entry, f"{source}: light #{k}"))
+        if data.environment is not None:
+            scene.environment = _environment_from_dict(
+                data.environment, source, Path(source).parent
+            )
         return scene
 
     @classmethod
