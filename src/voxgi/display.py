@@ -2,9 +2,10 @@
 
 The camera rays are traced with Embree (embreex); every record of the voxel
 solution is a potential virtual point light (VPL); each progressive frame
-shades every pixel with the same few VPLs, drawn with probability
-proportional to area, and with one sub-pixel offset and one lens sample
-shared by all pixels (Piwowar & Malgouyres, section 6). Only this phase
+shades every pixel with a few VPLs, drawn in proportion to power, one
+independent set for each of 16 interleaved pixel groups, and with one
+sub-pixel offset and one lens sample shared by all pixels (Piwowar &
+Malgouyres, section 6; ``docs/design.md`` §6). Only this phase
 depends on the camera: a new view of a solved scene costs only the display.
 """
 
@@ -36,6 +37,9 @@ __all__ = [
     "frame_samples",
     "render",
 ]
+
+#: What the VPL kernels read of a pixel's primary hit.
+_HIT_KEYS = ("pos", "normal", "ng", "wo", "material")
 
 #: relMSE's epsilon (voxgi.metrics.rel_mse), used by the stopping rule too.
 _REL_EPS = 0.01
@@ -354,9 +358,10 @@ class VPLSampler:
     def empty(self) -> bool:
         return sum(self.counts) == 0
 
-    def frame(self, f: int) -> dict:
-        """The VPLs of frame ``f``: the same for every pixel and every view."""
-        rng = np.random.default_rng([self.seed, int(f), 0x1B1])
+    def frame(self, f: int, group: int = 0) -> dict:
+        """The VPLs of frame ``f`` for the pixels of interleaving group
+        ``group``: the same for every view."""
+        rng = np.random.default_rng([self.seed, int(f), 0x1B1, *([int(group)] if group else [])])
         idx_all, w_all, pa_all = [], [], []
         for s, ((idx, cum, _, dens), k) in enumerate(zip(self.sets, self.counts, strict=True)):
             if k == 0:
@@ -439,6 +444,7 @@ class _FrameShader:
         self.n_env = max(1, self.gather) if self.env is not None else 0
         self.light_rays = 0
         self.tile = 1 << 16
+        self._groups = self._pixel_groups(cam, self.INTERLEAVE)
         self._buffers = None
         self._gbuffers = None
         self.primary_rays = 0
@@ -551,18 +557,38 @@ class _FrameShader:
             "emission": le,
         }
 
-    def shade(self, h: dict, vpl: dict) -> np.ndarray:
-        """(P, 3) float32 radiance: emission seen + VPL estimate of the reflected light."""
+    def shade(self, h: dict, vpls: list | None) -> np.ndarray:
+        """(P, 3) float32 radiance: emission seen + VPL estimate of the reflected
+        light, ``vpls[g]`` lighting the pixels of interleaving group g."""
         P = len(h["material"])
         out = h["emission"].astype(np.float32, copy=True)
         # the gather rays run only with VPLs to combine with
-        self._gathering = self.gather if vpl is not None and len(vpl["index"]) else 0
+        has_vpls = vpls is not None and len(vpls[0]["index"]) > 0
+        self._gathering = self.gather if has_vpls else 0
         if self.lights or self.env is not None:
             for a in range(0, P, self.tile):
                 self._direct_lights(h, a, min(P, a + self.tile), out)
-        if vpl is None or len(vpl["index"]) == 0:
+        if not has_vpls:
             return out
-        K = len(vpl["index"])
+        perm, cuts = self._groups
+        if len(vpls) == 1:
+            out += self._vpl_light(h, vpls, cuts)
+        else:  # the hits sorted by group, so that each group is a slice
+            out[perm] += self._vpl_light({k: h[k][perm] for k in _HIT_KEYS}, vpls, cuts)
+        if self.gather:
+            for a in range(0, P, self.tile):
+                self._gather(h, a, min(P, a + self.tile), out)
+        return out
+
+    def _vpl_light(self, h: dict, vpls: list, cuts: np.ndarray) -> np.ndarray:
+        """(P, 3) float32: the VPLs' light at the hits ``h``, ``vpls[g]``
+        lighting the hits ``cuts[g]:cuts[g + 1]``. Each tile of hits makes
+        its shadow rays group by group and traces them in one batch: Embree's
+        worker threads spin for a while after a batch, and a kernel started
+        in that time runs on a shared core."""
+        P = len(h["material"])
+        out = np.zeros((P, 3), np.float32)
+        K = max(len(v["index"]) for v in vpls)
         cap = min(P, self.tile) * K
         if self._buffers is None or len(self._buffers[1]) < cap:
             # Reused by every frame: fresh pages for ~40 bytes x P x K rays
@@ -578,43 +604,45 @@ class _FrameShader:
         for a in range(0, P, self.tile):
             b = min(P, a + self.tile)
             t0 = time.perf_counter()
-            count = cnt_buf[: b - a]
-            n = _core.vpl_prepare(
-                h["pos"][a:b],
-                h["normal"][a:b],
-                h["ng"][a:b],
-                h["wo"][a:b],
-                h["material"][a:b],
-                self.mat_albedo,
-                self.mat_rs,
-                self.mat_nu,
-                self.mat_nv,
-                self.mat_glossy,
-                vpl["pos"],
-                vpl["normal"],
-                vpl["weight"],
-                vpl["area"],
-                vpl["pa"],
-                float(self.gather),
-                self.eps,
-                count,
-                org_buf,
-                dir_buf,
-                len_buf,
-                con_buf,
-                self.threads,
-            )
+            n = 0
+            for g, vpl in enumerate(vpls):
+                lo, hi = max(a, int(cuts[g])), min(b, int(cuts[g + 1]))
+                if lo >= hi:
+                    continue
+                n += _core.vpl_prepare(
+                    h["pos"][lo:hi],
+                    h["normal"][lo:hi],
+                    h["ng"][lo:hi],
+                    h["wo"][lo:hi],
+                    h["material"][lo:hi],
+                    self.mat_albedo,
+                    self.mat_rs,
+                    self.mat_nu,
+                    self.mat_nv,
+                    self.mat_glossy,
+                    vpl["pos"],
+                    vpl["normal"],
+                    vpl["weight"],
+                    vpl["area"],
+                    vpl["pa"],
+                    float(self.gather),
+                    self.eps,
+                    cnt_buf[lo - a : hi - a],
+                    org_buf[n:],
+                    dir_buf[n:],
+                    len_buf[n:],
+                    con_buf[n:],
+                    self.threads,
+                )
             org, dirs, length, contrib = org_buf[:n], dir_buf[:n], len_buf[:n], con_buf[:n]
             t1 = time.perf_counter()
             occ = self.tracer.occluded(org, dirs, length)
             t2 = time.perf_counter()
-            out[a:b] += _core.vpl_accumulate(count, contrib, occ, self.threads)
+            out[a:b] += _core.vpl_accumulate(cnt_buf[: b - a], contrib, occ, self.threads)
             t3 = time.perf_counter()
             self.shadow_rays += len(occ)
             self.seconds["shade"] += (t1 - t0) + (t3 - t2)
             self.seconds["shadow"] += t2 - t1
-            if self.gather:
-                self._gather(h, a, b, out)
         return out
 
     def _materials(self) -> tuple:
@@ -769,20 +797,40 @@ class _FrameShader:
         org, dirs = camera_rays(self.cam, offset, lens)
         h = self.hits(org - self.tracer.centre, dirs)
         self.seconds["primary"] += time.perf_counter() - t0
-        vpl = None if self.sampler.empty else self.sampler.frame(f)
-        if vpl is not None:  # into the tracer's scene-centred frame
-            pos = vpl["pos"] - self.tracer.centre
-            if self.sampler.on_surface:
-                pos = self.place_vpls(vpl["index"], pos, f)
-            vpl = {**vpl, "pos": np.ascontiguousarray(pos)}
-        return self.shade(h, vpl)
+        vpls = None
+        if not self.sampler.empty:
+            vpls = []
+            for g in range(len(self._groups[1]) - 1):
+                vpl = self.sampler.frame(f, g)
+                pos = vpl["pos"] - self.tracer.centre  # the tracer's scene-centred frame
+                if self.sampler.on_surface:
+                    pos = self.place_vpls(vpl["index"], pos, f, g)
+                vpls.append({**vpl, "pos": np.ascontiguousarray(pos)})
+        return self.shade(h, vpls)
+
+    #: Pixels take their VPLs from one of INTERLEAVE² sets per frame, by the
+    #: pixel's row and column modulo INTERLEAVE (interleaved sampling).
+    INTERLEAVE = 4
+
+    @staticmethod
+    def _pixel_groups(cam: Camera, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The row-major pixel indices sorted by interleaving group, and where
+        each group starts in them (one more entry, the end)."""
+        rows, cols = np.divmod(np.arange(cam.height * cam.width), cam.width)
+        key = (rows % n) * n + cols % n
+        perm = np.argsort(key, kind="stable")
+        cuts = np.searchsorted(key[perm], np.arange(n * n + 1))
+        keep = np.concatenate([[True], np.diff(cuts) > 0])  # groups an image too small lacks
+        return perm, cuts[keep]
 
     #: Candidate points per VPL and frame; each lands on the record's surface
     #: with probability about 1/3 for a flat record (its polygon against the
     #: square of side √3 pitch the candidates are drawn from).
     _PLACE_TRIES = 12
 
-    def place_vpls(self, index: np.ndarray, centroid: np.ndarray, f: int) -> np.ndarray:
+    def place_vpls(
+        self, index: np.ndarray, centroid: np.ndarray, f: int, group: int = 0
+    ) -> np.ndarray:
         """(K, 3) points drawn uniformly on each VPL's record surface (centred frame).
 
         A VPL fixed at its record's centroid makes the image converge to the
@@ -800,7 +848,7 @@ class _FrameShader:
         """
         sampler, tr, T = self.sampler, self.tracer, self._PLACE_TRIES
         vox, K = sampler.vox, len(index)
-        rng = np.random.default_rng([self.seed, int(f), 0x5EA])
+        rng = np.random.default_rng([self.seed, int(f), 0x5EA, *([int(group)] if group else [])])
         h = float(vox.pitch)
         n = sampler.normal[index].astype(np.float64)
         lo = np.asarray(vox.origin, np.float64) + np.asarray(vox.ijk, np.float64)[index] * h
@@ -1384,7 +1432,7 @@ def render(
     sol : Solution
         The voxel solution of ``scene`` (``voxgi.render`` also takes None).
     vpls_per_frame : int
-        VPLs per frame (>= 1), shared by all pixels.
+        VPLs per frame and pixel (>= 1).
     max_frames : int or None
         At most this many frames (default 256).
     tol : float or None
