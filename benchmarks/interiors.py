@@ -32,23 +32,17 @@ import argparse
 import json
 import os
 import platform
-import subprocess
+import sys
 from pathlib import Path
 
 import voxgi
 from voxgi.compare import compare
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from time_vs_error import git_commit
+
 RESULTS = Path(__file__).resolve().parent / "results"
 SCENES = ["cornell-box", "window-room", "door-room", "sponza-atrium"]
-
-
-def git_commit() -> str:
-    try:
-        return subprocess.check_output(
-            ["git", "rev-parse", "--short", "HEAD"], text=True, cwd=Path(__file__).parent
-        ).strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def run_scene(name: str, size: int, ref_spp: int) -> dict:

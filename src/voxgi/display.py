@@ -699,7 +699,7 @@ class _FrameShader:
             )
         self.light_rays += int(np.count_nonzero(live))
         count = np.bincount(p_all, minlength=b - a).astype(np.int64)
-        hh = {k: h[k][a:b] for k in ("pos", "normal", "ng", "wo", "material")}
+        hh = {k: h[k][a:b] for k in _HIT_KEYS}
         _core.light_accumulate(
             hh["pos"],
             hh["normal"],
@@ -728,7 +728,7 @@ class _FrameShader:
             )
         cnt_buf, org_buf, dir_buf = self._gbuffers
         count = cnt_buf[: b - a]
-        hh = {k: h[k][a:b] for k in ("pos", "normal", "ng", "wo", "material")}
+        hh = {k: h[k][a:b] for k in _HIT_KEYS}
         n = _core.gather_rays(
             hh["pos"],
             hh["normal"],
