@@ -833,8 +833,14 @@ def _sensor(p: _Plugin, notes: _Notes) -> dict | None:
         raise ValueError(f"{p.where()}: film size {width}x{height} must be positive")
     filters = [c for c in films[0].children if c.tag == "rfilter"] if films else []
     rfilter = filters[0].type if filters else "gaussian"  # Mitsuba's default
-    if rfilter != "box":
-        notes.drop(f"film rfilter {rfilter!r} (voxgi's pixels are box-filtered)")
+    pixel_filter = "box"
+    if (
+        rfilter == "gaussian"
+        and float(filters[0].props.get("stddev", 0.5) if filters else 0.5) == 0.5
+    ):
+        pixel_filter = "gaussian"
+    elif rfilter != "box":
+        notes.approx(f"film rfilter {rfilter!r} (voxgi's pixels are box-filtered)")
     axis = str(p.props.get("fov_axis", "x")).lower()
     if axis not in ("x", "y", "smaller", "larger", "diagonal"):
         raise ValueError(
@@ -868,6 +874,7 @@ def _sensor(p: _Plugin, notes: _Notes) -> dict | None:
         "fov": _fov_y(fov, axis, width, height),
         "width": width,
         "height": height,
+        "pixel_filter": pixel_filter,
     }
     if p.type == "thinlens":
         cam["aperture"] = float(p.props.get("aperture_radius", 0.0))

@@ -20,7 +20,8 @@ The translation keeps voxgi's conventions:
 - lights as Mitsuba's ``point``, ``spot``, ``directional``, ``constant`` and
   ``envmap`` emitters with the same parameters (voxgi's lights use Mitsuba's
   units and conventions, ``docs/design.md`` §11);
-- a ``box`` pixel filter (the default Gaussian blurs across pixels) and a
+- the camera's pixel filter: ``box`` (voxgi's default; Mitsuba's default
+  Gaussian blurs across pixels) or Mitsuba's ``gaussian``; and a
   ``path`` integrator with ``max_depth = -1`` (no depth limit; Russian
   roulette keeps it unbiased).
 """
@@ -211,7 +212,7 @@ def _sensor(mi, scene: Scene, cam: Camera, spp: int, sampler: str, seed: int) ->
             "type": "hdrfilm",
             "width": int(cam.width),
             "height": int(cam.height),
-            "rfilter": {"type": "box"},
+            "rfilter": {"type": "gaussian" if cam.pixel_filter == "gaussian" else "box"},
             "pixel_format": "rgb",
             "component_format": "float32",
         },

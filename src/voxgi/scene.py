@@ -134,6 +134,11 @@ class Camera:
         Thin-lens radius in scene units; 0 gives a pinhole.
     focus_distance : float or None
         Distance to the plane in focus; None means ``|target - eye|``.
+    pixel_filter : {"box", "gaussian"}
+        How samples make a pixel: averaged over the pixel (``"box"``), or
+        weighted by Mitsuba 3's ``gaussian`` reconstruction filter (standard
+        deviation 0.5 pixel, radius 2 pixels), which a Mitsuba scene uses
+        unless its film says otherwise (``docs/design.md`` §6).
 
     Notes
     -----
@@ -149,8 +154,13 @@ class Camera:
     height: int = 512
     aperture: float = 0.0
     focus_distance: float | None = None
+    pixel_filter: str = "box"
 
     def __post_init__(self):
+        if self.pixel_filter not in ("box", "gaussian"):
+            raise ValueError(
+                f"Camera.pixel_filter: expected 'box' or 'gaussian', got {self.pixel_filter!r}"
+            )
         eye = _validate.vec3(self.eye, "Camera.eye")
         target = _validate.vec3(self.target, "Camera.target")
         up = _validate.vec3(self.up, "Camera.up")
@@ -628,6 +638,8 @@ class Scene:
             )
             if c.focus_distance is not None:
                 doc["camera"]["focus_distance"] = float(c.focus_distance)
+            if c.pixel_filter != "box":
+                doc["camera"]["pixel_filter"] = c.pixel_filter
         objects = []
         for i, o in enumerate(self.objects):
             fname = f"{path.stem}_{i:03d}.obj"
