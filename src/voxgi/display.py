@@ -853,13 +853,16 @@ class _FrameShader:
         self.seconds["primary"] += time.perf_counter() - t0
         vpls = None
         if not self.sampler.empty:
-            vpls = []
-            for g in range(len(self._groups[1]) - 1):
-                vpl = self.sampler.frame(f, g)
-                pos = vpl["pos"] - self.tracer.centre  # the tracer's scene-centred frame
-                if self.sampler.on_surface:
-                    pos = self.place_vpls(vpl["index"], pos, f, g)
-                vpls.append({**vpl, "pos": np.ascontiguousarray(pos)})
+            vpls = [self.sampler.frame(f, g) for g in range(len(self._groups[1]) - 1)]
+            # into the tracer's scene-centred frame; every group's VPLs placed at once
+            pos = np.concatenate([v["pos"] for v in vpls]) - self.tracer.centre
+            if self.sampler.on_surface:
+                pos = self.place_vpls(np.concatenate([v["index"] for v in vpls]), pos, f)
+            cuts = np.cumsum([0] + [len(v["index"]) for v in vpls])
+            vpls = [
+                {**v, "pos": np.ascontiguousarray(pos[a:b])}
+                for v, a, b in zip(vpls, cuts[:-1], cuts[1:], strict=True)
+            ]
         img = self.shade(h, vpls)
         if self.cam.pixel_filter == "gaussian":
             img = gaussian_pixel_filter(img, self.cam.width, self.cam.height, offset)
@@ -885,9 +888,7 @@ class _FrameShader:
     #: square of side √3 pitch the candidates are drawn from).
     _PLACE_TRIES = 12
 
-    def place_vpls(
-        self, index: np.ndarray, centroid: np.ndarray, f: int, group: int = 0
-    ) -> np.ndarray:
+    def place_vpls(self, index: np.ndarray, centroid: np.ndarray, f: int) -> np.ndarray:
         """(K, 3) points drawn uniformly on each VPL's record surface (centred frame).
 
         A VPL fixed at its record's centroid makes the image converge to the
@@ -905,7 +906,7 @@ class _FrameShader:
         """
         sampler, tr, T = self.sampler, self.tracer, self._PLACE_TRIES
         vox, K = sampler.vox, len(index)
-        rng = np.random.default_rng([self.seed, int(f), 0x5EA, *([int(group)] if group else [])])
+        rng = np.random.default_rng([self.seed, int(f), 0x5EA])
         h = float(vox.pitch)
         n = sampler.normal[index].astype(np.float64)
         lo = np.asarray(vox.origin, np.float64) + np.asarray(vox.ijk, np.float64)[index] * h
