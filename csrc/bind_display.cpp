@@ -66,12 +66,10 @@ auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit
                     F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa, double n_gather,
                     double eps, I64 ray_count, F32 ray_org, F32 ray_dir, F32 ray_len,
                     F32 ray_contrib, int threads) {
-    check_2d(hit_pos, -1, 3, "hit_pos");
-    const py::ssize_t P = hit_pos.shape(0);
-    check_2d(hit_normal, P, 3, "hit_normal");
-    check_2d(hit_ng, P, 3, "hit_ng");
-    check_2d(hit_wo, P, 3, "hit_wo");
-    check_1d(hit_material, P, "hit_material");
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    const py::ssize_t P = hits.count;
     check_2d(vpl_pos, -1, 3, "vpl_pos");
     const py::ssize_t K = vpl_pos.shape(0);
     check_2d(vpl_normal, K, 3, "vpl_normal");
@@ -89,15 +87,6 @@ auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit
                 throw py::value_error("vpl_pa: MIS VPLs need n_gather > 0");
         }
     }
-    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
-    {
-        const int32_t* mi = hit_material.data();
-        for (py::ssize_t p = 0; p < P; ++p)
-            if (mi[p] >= mats.count)
-                throw py::value_error("hit_material: index " + std::to_string(mi[p]) +
-                                      " out of range (" + std::to_string(mats.count) +
-                                      " materials)");
-    }
     // Output buffers, reused across frames by the caller: room for P*K rays.
     check_1d(ray_count, P, "ray_count");
     check_2d(ray_org, -1, 3, "ray_org");
@@ -111,13 +100,6 @@ auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit
     if (!ray_count.writeable() || !ray_org.writeable() || !ray_dir.writeable() ||
         !ray_len.writeable() || !ray_contrib.writeable())
         throw py::value_error("ray buffers must be writeable");
-    voxgi::ShadeHits hits;
-    hits.count = P;
-    hits.pos = hit_pos.data();
-    hits.normal = hit_normal.data();
-    hits.ng = hit_ng.data();
-    hits.wo = hit_wo.data();
-    hits.material = hit_material.data();
     voxgi::ShadeVPLs vpls;
     vpls.count = K;
     vpls.pos = vpl_pos.data();
@@ -164,7 +146,7 @@ auto gather_rays_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit
 
 auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                      F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
-                     double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided, U8 obj_emitter,
+                     double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided,
                      I64 rec_sorted_key, I32 rec_order, I32 rec_cell_start, F64 rec_centroid,
                      F32 rec_normal, I32 rec_object, F32 rec_radiance, F32 rec_pa, I64 grid_dims,
                      I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count, F32 ray_dir,
@@ -181,7 +163,6 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
     check_1d(tri_object, F, "tri_object");
     check_1d(obj_two_sided, -1, "obj_two_sided");
     const py::ssize_t O = obj_two_sided.shape(0);
-    check_1d(obj_emitter, O, "obj_emitter");
     {
         const int32_t* to = tri_object.data();
         for (py::ssize_t f = 0; f < F; ++f)
@@ -227,7 +208,6 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
     tris.v = tri_v.data();
     tris.object = tri_object.data();
     tris.two_sided = obj_two_sided.data();
-    tris.emitter = obj_emitter.data();
     voxgi::RecordGrid grid;
     grid.count = N;
     grid.sorted_key = rec_sorted_key.data();
@@ -388,13 +368,12 @@ ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc"
           "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
           "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
           "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "tri_v"_a.noconvert(),
-          "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "obj_emitter"_a.noconvert(),
-          "rec_sorted_key"_a.noconvert(), "rec_order"_a.noconvert(), "rec_cell_start"_a.noconvert(),
-          "rec_centroid"_a.noconvert(), "rec_normal"_a.noconvert(), "rec_object"_a.noconvert(),
-          "rec_radiance"_a.noconvert(), "rec_pa"_a.noconvert(), "grid_dims"_a.noconvert(),
-          "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a,
-          "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(), "prim"_a.noconvert(),
-          "out"_a.noconvert(), "threads"_a = 0,
+          "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "rec_sorted_key"_a.noconvert(),
+          "rec_order"_a.noconvert(), "rec_cell_start"_a.noconvert(), "rec_centroid"_a.noconvert(),
+          "rec_normal"_a.noconvert(), "rec_object"_a.noconvert(), "rec_radiance"_a.noconvert(),
+          "rec_pa"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
+          "grid_origin"_a.noconvert(), "pitch"_a, "ray_count"_a.noconvert(),
+          "ray_dir"_a.noconvert(), "prim"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0,
           R"doc(Shade the gather rays (prim: first triangle hit, -1 none) with the radiance
 of the record at each hit point, MIS-weighted against the VPLs; adds into
 out (P, 3) float32.)doc");

@@ -10,6 +10,14 @@ namespace voxgi {
 
 namespace {
 
+// Where each pixel's rays start in pixel-major ray arrays (one more entry,
+// the total), from the per-pixel counts.
+std::vector<int64_t> ray_offsets(const int64_t* ray_count, int64_t n_pixels) {
+    std::vector<int64_t> offset(n_pixels + 1, 0);
+    for (int64_t p = 0; p < n_pixels; ++p) offset[p + 1] = offset[p] + ray_count[p];
+    return offset;
+}
+
 constexpr double kPi = 3.14159265358979323846;
 constexpr int64_t kChunk = 512;  // pixels per task
 
@@ -270,8 +278,7 @@ void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                   const float* ray_dir, const int32_t* prim, float* out, int threads,
                   const StopCheck& stop) {
     const int64_t P = hits.count;
-    std::vector<int64_t> offset(P + 1, 0);
-    for (int64_t p = 0; p < P; ++p) offset[p + 1] = offset[p] + ray_count[p];
+    const std::vector<int64_t> offset = ray_offsets(ray_count, P);
     const int64_t n_chunks = (P + kChunk - 1) / kChunk;
     parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
         const int64_t p1 = std::min(P, (c + 1) * kChunk);
@@ -308,7 +315,6 @@ void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                 const bool front = dn < 0.0;
                 const int32_t obj = tris.object[t];
                 if (!front && !tris.two_sided[obj]) continue;  // black back of a one-sided surface
-                if (tris.emitter[obj]) continue;               // emitters: their own VPL set
                 const float ns[3] = {float(front ? nt[0] : -nt[0]), float(front ? nt[1] : -nt[1]),
                                      float(front ? nt[2] : -nt[2])};
                 const int64_t rec = lookup_record(grid, y, ns, obj);
@@ -332,8 +338,7 @@ void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
 
 void vpl_accumulate(int64_t n_pixels, const int64_t* ray_count, const float* ray_contrib,
                     const uint8_t* occluded, float* out, int threads, const StopCheck& stop) {
-    std::vector<int64_t> offset(n_pixels + 1, 0);
-    for (int64_t p = 0; p < n_pixels; ++p) offset[p + 1] = offset[p] + ray_count[p];
+    const std::vector<int64_t> offset = ray_offsets(ray_count, n_pixels);
     const int64_t n_chunks = (n_pixels + kChunk - 1) / kChunk;
     parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
         const int64_t p1 = std::min(n_pixels, (c + 1) * kChunk);
@@ -352,8 +357,7 @@ void light_accumulate(const ShadeHits& hits, const ShadeMaterials& mats, const i
                       const float* ray_dir, const float* ray_weight, const uint8_t* occluded,
                       float* out, int threads, const StopCheck& stop) {
     const int64_t P = hits.count;
-    std::vector<int64_t> offset(P + 1, 0);
-    for (int64_t p = 0; p < P; ++p) offset[p + 1] = offset[p] + ray_count[p];
+    const std::vector<int64_t> offset = ray_offsets(ray_count, P);
     const int64_t n_chunks = (P + kChunk - 1) / kChunk;
     parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
         const int64_t p1 = std::min(P, (c + 1) * kChunk);

@@ -51,7 +51,7 @@ struct ShadeVPLs {
                                     // the others; or null: none
 };
 
-// Multiple importance sampling of the non-emitter set between VPLs (n_v a
+// Multiple importance sampling of each VPL set (emitters, the rest) between VPLs (n_v a
 // frame, area pdf p_a(y) per unit area, so n_v p_a(y) in all) and n_g
 // cosine-distributed gather rays per pixel (pdf n_g cos_x cos_y / (pi r²)
 // per unit area). Balance heuristic: every sample of either kind adds
@@ -85,7 +85,6 @@ struct ShadeTriangles {
     const double* v = nullptr;           // (F, 3, 3) corners
     const int32_t* object = nullptr;     // (F,)
     const uint8_t* two_sided = nullptr;  // (O,) per object
-    const uint8_t* emitter = nullptr;    // (O,) per object: its records are sampled as VPLs only
 };
 
 // Pass 1. Writes per pixel the number of shadow rays (`ray_count`, (P,)), and
@@ -113,8 +112,9 @@ int64_t gather_rays(const ShadeHits& hits, int n_gather, uint64_t seed, int64_t 
                     const StopCheck& stop);
 
 // Shade the gather rays: `prim` (R,) the first triangle hit (-1: none).
-// Rays that hit the black back of a one-sided surface, an emitter (covered
-// by the emitter VPLs) or nothing add nothing; others look up the record at
+// Rays that hit the black back of a one-sided surface or nothing add
+// nothing; others (emitters too: both VPL sets are MIS-combined with the
+// gather rays) look up the record at
 // the hit point (same voxel or a neighbour, same side and object preferred,
 // nearest centroid) and add the MIS-weighted f L term. Adds into out (P, 3).
 void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,

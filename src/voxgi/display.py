@@ -324,16 +324,13 @@ class VPLSampler:
     seed : int
     emitter_share : float in [0, 1] or None
     mis : bool
-        The non-emitter VPLs are combined with gather rays (their weight is
-        then ``B/π`` and ``pa`` carries ``n_i p(y)``).
+        The VPLs of both sets are combined with gather rays (their weight is
+        then ``B/π`` and ``pa`` carries ``n p(y)`` of their set).
     pdf : {"power", "area"}
     on_surface : bool
         Each VPL of a frame sits at a point drawn uniformly on its record's
         own surface (``docs/design.md`` §6) instead of at the
         record's fixed centroid.
-    mis_emitters : bool
-        With ``mis``, the emitter VPLs are combined with the gather rays too
-        (which then take the light of the emitters they hit).
     """
 
     def __init__(
@@ -345,7 +342,6 @@ class VPLSampler:
         mis: bool = False,
         pdf: str = "power",
         on_surface: bool = True,
-        mis_emitters: bool = True,
     ):
         if pdf not in ("power", "area"):
             raise ValueError(f"pdf: expected 'power' or 'area', got {pdf!r}")
@@ -391,15 +387,10 @@ class VPLSampler:
         self.counts = (nd, self.K - nd if has_i else 0)
         self.seed = int(seed)
         self.mis = bool(mis) and sum(self.counts) > 0
-        #: Whether the emitter set joins the MIS with the gather rays too.
-        self.mis_emitters = self.mis and bool(mis_emitters)
-        self.mis = self.mis and (self.counts[1] > 0 or self.mis_emitters)
         #: (N,) float32 n p(y) of every record in an MIS set (n its set's VPLs
         #: per frame, 0 elsewhere): the VPL side of the MIS weights, for VPLs
         #: and gather hits alike.
-        pa = self.counts[1] * dens_i if self.mis else np.zeros(n)
-        if self.mis_emitters:
-            pa = pa + self.counts[0] * dens_d
+        pa = self.counts[0] * dens_d + self.counts[1] * dens_i if self.mis else np.zeros(n)
         self.record_pa = pa.astype(np.float32)
         self.pos = np.ascontiguousarray(vox.centroid, dtype=np.float64)
         self.normal = np.ascontiguousarray(vox.normal, dtype=np.float32)
@@ -417,14 +408,14 @@ class VPLSampler:
         ``group``: the same for every view."""
         rng = np.random.default_rng([self.seed, int(f), 0x1B1, *([int(group)] if group else [])])
         idx_all, w_all, pa_all = [], [], []
-        for s, ((idx, cum, _, dens), k) in enumerate(zip(self.sets, self.counts, strict=True)):
+        for (idx, cum, _, dens), k in zip(self.sets, self.counts, strict=True):
             if k == 0:
                 continue
             u = (np.arange(k) + rng.random(k)) / k * float(cum[-1])  # stratified along the table
             pick = idx[np.minimum(np.searchsorted(cum, u, side="right"), len(idx) - 1)]
             idx_all.append(pick)
-            if self.mis and (s == 1 or self.mis_emitters):
-                # An MIS VPL carries B/π; the kernel divides by n_i p(y) + the gather pdf.
+            if self.mis:
+                # An MIS VPL carries B/π; the kernel divides by n p(y) + the gather pdf.
                 w_all.append(np.ones(k))
                 pa_all.append(self.record_pa[pick])
             else:
@@ -511,11 +502,6 @@ class _FrameShader:
                 "tri_v": tracer.tris,
                 "tri_object": tracer.obj,
                 "obj_two_sided": self.two_sided.astype(np.uint8),
-                # Objects whose records are VPLs only; none when the emitters
-                # join the MIS.
-                "obj_emitter": np.array(
-                    [o.material.is_emitter and not sampler.mis_emitters for o in objs], np.uint8
-                ),
             }
 
     @staticmethod
@@ -699,6 +685,24 @@ class _FrameShader:
             self.seconds["shadow"] += t2 - t1
         return out
 
+    def _light_sum(self, hh, count, dirs, weight, occluded, out) -> None:
+        """Add into ``out`` each pixel's light rays: BRDF x cos x ``weight``
+        along ``dirs`` (pixel-major, ``count`` a pixel), but the occluded."""
+        _core.light_accumulate(
+            hh["pos"],
+            hh["normal"],
+            hh["ng"],
+            hh["wo"],
+            hh["material"],
+            *self._materials(),
+            count,
+            np.ascontiguousarray(dirs, np.float32),
+            np.ascontiguousarray(weight, np.float32),
+            occluded,
+            out,
+            self.threads,
+        )
+
     def _materials(self) -> tuple:
         return self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv, self.mat_glossy
 
@@ -754,20 +758,7 @@ class _FrameShader:
         self.light_rays += int(np.count_nonzero(live))
         count = np.bincount(p_all, minlength=b - a).astype(np.int64)
         hh = {k: h[k][a:b] for k in _HIT_KEYS}
-        _core.light_accumulate(
-            hh["pos"],
-            hh["normal"],
-            hh["ng"],
-            hh["wo"],
-            hh["material"],
-            *self._materials(),
-            count,
-            np.ascontiguousarray(w_all, np.float32),
-            np.ascontiguousarray(wt_all, np.float32),
-            occ,
-            out[a:b],
-            self.threads,
-        )
+        self._light_sum(hh, count, w_all, wt_all, occ, out[a:b])
         self.seconds["lights"] = self.seconds.get("lights", 0.0) + time.perf_counter() - t0
 
     def _gather(self, h: dict, a: int, b: int, out: np.ndarray) -> None:
@@ -827,20 +818,8 @@ class _FrameShader:
             esc = np.flatnonzero(prim < 0)
             w = dir_buf[:n][esc].astype(np.float64)
             cos = np.einsum("ij,ij->i", w, hh["normal"][pix[esc]].astype(np.float64))
-            _core.light_accumulate(
-                hh["pos"],
-                hh["normal"],
-                hh["ng"],
-                hh["wo"],
-                hh["material"],
-                *self._materials(),
-                np.bincount(pix[esc], minlength=b - a).astype(np.int64),
-                np.ascontiguousarray(w, np.float32),
-                np.ascontiguousarray(self._env_weight(w, cos), np.float32),
-                np.zeros(0, np.uint8),
-                out[a:b],
-                self.threads,
-            )
+            count = np.bincount(pix[esc], minlength=b - a).astype(np.int64)
+            self._light_sum(hh, count, w, self._env_weight(w, cos), np.zeros(0, np.uint8), out[a:b])
         self.seconds["gather"] += time.perf_counter() - t0
 
     def frame(self, f: int, seed: int) -> np.ndarray:
