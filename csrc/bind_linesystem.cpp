@@ -154,7 +154,8 @@ point : (N, 3) float32
 epsilon : float
     Facing-rule margin in voxel units (records of one band on opposite sides fail it).
 history : int
-    F records remembered per line (1..32).
+    F records a receiver passes over in its search along a line (1..32; a
+    run of them in one plane counts once).
 )doc";
 
 constexpr const char* kGatherDoc = R"doc(Jacobi gathering over a subset of direction families.

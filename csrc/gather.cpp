@@ -39,14 +39,24 @@ struct LineState {
 // record, not 64), and keeps the line links in their own array (4 bytes a
 // record, written for every record), so it streams a third of the bytes.
 struct alignas(64) GatherRec {
-    float pt[3];     // surface point (voxel units)
-    float nrm[3];    // unit normal
-    float val[3];    // value sent (RGB)
-    uint32_t stand;  // 1: a stand-in (read by the pairing, which loads this line anyway)
-    double acc[3];   // gathered (RGB), summed over the families of one group
+    float pt[3];   // surface point (voxel units)
+    float nrm[3];  // unit normal
+    float val[3];  // value sent (RGB)
+    // bit 31: a stand-in; bit 30: in a voxel where surfaces cross; bits
+    // 0-29: the B that answered it, + 1 (an F's, valid while it is
+    // answered). Here, not in an array of its own: the pairing has this line
+    // in cache when it reads or writes them.
+    uint32_t tag;
+    double acc[3];  // gathered (RGB), summed over the families of one group
 };
 static_assert(sizeof(GatherRec) == 64, "GatherRec must fill one cache line");
 constexpr uint32_t kAnswered = 0x80000000u;
+constexpr uint32_t kStandIn = 0x80000000u;  // GatherRec::tag
+constexpr uint32_t kCrossing = 0x40000000u;
+constexpr uint32_t kAnswerer = 0x3fffffffu;
+// The most F records one B looks at: a line grazing a face passes one of the
+// face's records per voxel, which count as one against the history.
+constexpr int kMaxChain = 4 * kMaxHistory;
 
 // facing() for the walk's records, B's point and normal held in registers
 // across its chain. With SSE2 the two dot products take one multiply each
@@ -124,11 +134,10 @@ VOXGI_INLINE void add(GatherRec& to, const GatherRec& from, double w) {
 }
 
 // A queued B record receives from the newest F that faces it and answers
-// every facing F back to the first one already answered (which occludes the
-// older ones). rt (nullable): the family's column of a PairTable (rt[p] =
-// sender + 1). Vis, Rec, Stand: vs, rt are set, the records carry stand-in
-// flags (fixed for a family's walk, so they are template arguments, not
-// branches in the chain loop).
+// the facing F records before it that nothing hides (hidden_behind). rt (nullable):
+// the family's column of a PairTable (rt[p] = sender + 1). Vis, Rec, Stand:
+// vs, rt are set, the records carry stand-in flags (fixed for a family's
+// walk, so they are template arguments, not branches in the chain loop).
 template <bool Vis, bool Rec, bool Stand>
 VOXGI_INLINE void pair_record(GatherRec* rec, uint32_t* lnk, const PendingB& q, int K, float eps,
                               double wgt, const float* dh, double* vs, int32_t* rt) {
@@ -136,13 +145,19 @@ VOXGI_INLINE void pair_record(GatherRec* rec, uint32_t* lnk, const PendingB& q, 
     GatherRec& rp = rec[p];
     const double cb = -double(q.c) * wgt;
     bool got = false;
-    const bool sp = Stand && rp.stand;  // two stand-ins never pair
+    const bool sp = Stand && (rp.tag & kStandIn);  // two stand-ins never pair
     int32_t f = q.f;
+    int32_t passed_answered = -1;  // the newest answered facing F passed
     const FacingB fb(rp);
-    for (int h = 0; h < K && f >= 0; ++h) {
+    const GatherRec* passed = nullptr;  // the last F passed over
+    for (int skipped = 0, steps = 0; skipped < K && f >= 0 && steps < kMaxChain; ++steps) {
         GatherRec& rf = rec[f];
         const int32_t older = static_cast<int32_t>(lnk[f] & ~kAnswered) - 1;
-        if ((Stand && sp && rf.stand) || !fb.faces(rf, eps)) {
+        __builtin_prefetch(rec + older, 1, 3);  // (older may be -1: a prefetch does not fault)
+        __builtin_prefetch(lnk + older, 1, 3);
+        if ((Stand && sp && (rf.tag & kStandIn)) || !fb.faces(rf, eps)) {
+            skipped += !(passed && same_plane(rf.pt, rf.nrm, passed->pt, passed->nrm));
+            passed = &rf;
             f = older;
             continue;
         }
@@ -152,12 +167,22 @@ VOXGI_INLINE void pair_record(GatherRec* rec, uint32_t* lnk, const PendingB& q, 
             if (Rec) rt[p] = f + 1;
             got = true;
         }
-        if (lnk[f] & kAnswered) break;  // an answered facing F occludes the older ones
+        if (lnk[f] & kAnswered) {
+            if (passed_answered >= 0 || !(rf.tag & kCrossing)) break;
+            passed_answered = f;
+            f = older;
+            continue;
+        }
+        if (passed_answered >= 0) {
+            const GatherRec& wall = rec[(rec[passed_answered].tag & kAnswerer) - 1];
+            if (hidden_behind(rf.pt, wall.pt, wall.nrm, eps)) break;
+        }
         const double cf = double(dot3(rf.nrm, dh)) * wgt;
         add(rf, rp, cf);
         if (Vis) vs[f] += cf;
         if (Rec) rt[f] = p + 1;
         lnk[f] |= kAnswered;
+        rf.tag = (rf.tag & ~kAnswerer) | static_cast<uint32_t>(p + 1);
         f = older;
     }
 }
@@ -260,7 +285,7 @@ void load_axis(GatherWork& w, const LineSystem::Axis& ax, int m, int64_t n, cons
             r.val[c] = val[3 * i + c];
             r.acc[c] = 0.0;
         }
-        r.stand = stand ? stand[i] : 0;
+        r.tag = (stand && stand[i] ? kStandIn : 0) | (ax.crossing[i] ? kCrossing : 0);
     }
     w.rec_axis = m;
 }
@@ -487,6 +512,8 @@ int64_t LineSystem::gather(const Family* fams, const int64_t* sel, int64_t nsel,
                            const StopCheck& stop) const {
     PairTable* record = opt.record;
     if (record) check_record(fams, sel, nsel, opt);
+    if (n_ >= int64_t(kAnswerer))
+        throw std::invalid_argument("too many records for the gathering (at most 2^30 - 2)");
     const GatherPlan plan = plan_groups(fams, sel, nsel, lo_, hi_, record);
     // values and stand-in flags in each needed axis order
     std::vector<float> valax[3];

@@ -109,10 +109,19 @@ void LineSystem::find_voxels(int m) {
     }
     ax.gslab.push_back(static_cast<int32_t>(ax.gstart.size()));
     ax.gstart.push_back(static_cast<int32_t>(n_));
+    ax.crossing.assign(n_, 0);
     for (size_t k = 0; k + 1 < ax.gstart.size(); ++k) {
-        const int64_t i = ax.gstart[k];
+        const int64_t i = ax.gstart[k], i1 = ax.gstart[k + 1];
         ax.gmax = std::max(ax.gmax, ax.gstart[k + 1] - ax.gstart[k]);
-        if (ax.gstart[k + 1] - i != 2) continue;
+        bool one_plane = true;
+        for (int64_t j = i + 1; j < i1; ++j) {
+            const float *pj = &ax.pt[3 * j], *nj = &ax.nrm[3 * j];
+            const float flip[3] = {-nj[0], -nj[1], -nj[2]};
+            one_plane = one_plane && (same_plane(pj, nj, &ax.pt[3 * i], &ax.nrm[3 * i]) ||
+                                      same_plane(pj, flip, &ax.pt[3 * i], &ax.nrm[3 * i]));
+        }
+        if (!one_plane) std::fill(ax.crossing.begin() + i, ax.crossing.begin() + i1, uint8_t(1));
+        if (i1 - i != 2) continue;
         const float *p0 = &ax.pt[3 * i], *n0 = &ax.nrm[3 * i];
         bool twin = true;
         for (int c = 0; c < 3; ++c) twin = twin && p0[c] == p0[3 + c] && n0[c] == -n0[3 + c];

@@ -173,6 +173,9 @@ class LineSystem {
         static constexpr uint8_t kTwin = 2;
         std::vector<int32_t> gstart;
         std::vector<uint8_t> gflag;
+        // per position: 1 where the record's voxel holds records of more than
+        // one plane (surfaces meet or cross in it)
+        std::vector<uint8_t> crossing;
         std::vector<int32_t> gslab;
         int gmax = 0;  // most records in one voxel
     };

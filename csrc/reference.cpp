@@ -35,13 +35,13 @@ struct SortedLine {
 };
 
 // Walk the records line[j0..j1) of one line in their order along +v: every
-// B receives from the nearest facing F, and answers every facing F back to
-// the first one already answered.
+// B receives from the nearest facing F, and answers the facing F records
+// before it that nothing hides (gather.cpp's pair_record).
 void walk_line(const SortedLine& L, const int32_t* line, int64_t j0, int64_t j1,
                std::vector<Hit>& group) {
-    int32_t hp[kMaxHistory];
-    bool ha[kMaxHistory];
-    int hn = 0;
+    // the line's F records so far, whether each was answered and by which B
+    std::vector<int32_t> hp, hb;
+    std::vector<char> ha;
     double* acc = L.sums.acc.data();
     double* vs = L.vis ? L.sums.vis.data() : nullptr;
     auto add = [&](int32_t to, int32_t from, double w) {  // to takes from's value
@@ -68,14 +68,9 @@ void walk_line(const SortedLine& L, const int32_t* line, int64_t j0, int64_t j1,
             const int32_t p = g[a].p;
             const float c = g[a].c;
             if (c > kTiny) {  // F: sends along +v; remember it
-                if (hn == L.K) {
-                    std::memmove(hp, hp + 1, sizeof(int32_t) * (L.K - 1));
-                    std::memmove(ha, ha + 1, sizeof(bool) * (L.K - 1));
-                    --hn;
-                }
-                hp[hn] = p;
-                ha[hn] = false;
-                ++hn;
+                hp.push_back(p);
+                ha.push_back(0);
+                hb.push_back(-1);
                 continue;
             }
             if (c >= -kTiny) continue;
@@ -84,22 +79,39 @@ void walk_line(const SortedLine& L, const int32_t* line, int64_t j0, int64_t j1,
             const double cb = -double(c) * L.wgt;
             bool got = false;
             const bool sp = L.stand && L.stand[p];  // two stand-ins never pair
-            for (int h = hn - 1; h >= 0; --h) {
+            int32_t wall = -1;  // the answerer of the newest answered facing F passed
+            // F records passed over (at most K; a run in one plane counts once)
+            int skipped = 0, steps = 0;
+            int32_t passed = -1;
+            for (int64_t h = int64_t(hp.size()) - 1;
+                 h >= 0 && skipped < L.K && steps < 4 * kMaxHistory; --h, ++steps) {
                 const int32_t f = hp[h];
-                if (sp && L.stand[f]) continue;
                 const float *pf = L.pn + 8 * int64_t(f), *nf = L.pn + 3 + 8 * int64_t(f);
-                if (!facing(pf, nf, pp, np, L.eps)) continue;
+                if ((sp && L.stand[f]) || !facing(pf, nf, pp, np, L.eps)) {
+                    skipped += !(passed >= 0 && same_plane(pf, nf, L.pn + 8 * int64_t(passed),
+                                                           L.pn + 3 + 8 * int64_t(passed)));
+                    passed = f;
+                    continue;
+                }
                 if (!got) {
                     add(p, f, cb);
                     if (vs) vs[p] += cb;
                     got = true;
                 }
-                if (ha[h]) break;  // an answered facing F occludes the older ones
+                if (ha[h]) {  // it or its answerer hides the older F records
+                    if (wall >= 0 || !L.ax.crossing[f]) break;
+                    wall = hb[h];
+                    continue;
+                }
+                if (wall >= 0 && hidden_behind(pf, L.pn + 8 * int64_t(wall),
+                                               L.pn + 3 + 8 * int64_t(wall), L.eps))
+                    break;
                 // F receives (along -v) from the first B that faces it
                 const double cf = double(dot3(nf, L.dh)) * L.wgt;
                 add(f, p, cf);
                 if (vs) vs[f] += cf;
                 ha[h] = true;
+                hb[h] = p;
             }
         }
         j = ge;

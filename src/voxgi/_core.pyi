@@ -54,7 +54,8 @@ class LineSystem:
     epsilon : float
         Facing-rule margin in voxel units (records of one band on opposite sides fail it).
     history : int
-        F records remembered per line (1..32).
+        F records a receiver passes over in its search along a line (1..32; a
+        run of them in one plane counts once).
     """
     def __init__(self, ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing.NDArray[numpy.float32], point: numpy.typing.NDArray[numpy.float32], epsilon: typing.SupportsFloat | typing.SupportsIndex = 0.05000000074505806, history: typing.SupportsInt | typing.SupportsIndex = 8) -> None:
         ...

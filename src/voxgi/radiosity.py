@@ -331,7 +331,8 @@ class LineRecords:
     epsilon : float
         Facing-rule margin, in voxels (``docs/design.md`` §4).
     history : int
-        F records remembered per line (1..32).
+        F records a receiver passes over in its search along a line (1..32;
+        a run of them in one plane counts once).
     """
 
     ijk: np.ndarray
@@ -378,7 +379,8 @@ def line_system(vox: VoxelSet, *, epsilon: float = 0.02, history: int = 16) -> _
     epsilon : float
         Facing-rule margin, in voxels (``docs/design.md`` §4).
     history : int
-        F records remembered per line (1..32).
+        F records a receiver passes over in its search along a line (1..32;
+        a run of them in one plane counts once).
     """
     return line_records(vox, epsilon=epsilon, history=history).build()
 
@@ -476,7 +478,8 @@ class SolveTuning:
     epsilon : float
         Facing-rule margin in voxels (``docs/design.md`` §4).
     history : int
-        F records remembered per line (1..32).
+        F records a receiver passes over in its search along a line (1..32;
+        a run of them in one plane counts once).
     max_iterations : int
         Bound on the iterations when ``max_bounces`` is None.
     closed : bool, sequence of int or None
