@@ -441,6 +441,8 @@ def voxelize() -> list[str]:
 def paper_tables() -> list[str]:
     rows = []
     threads = None
+    exact_run = load("paper_tables_exact.json")
+    exact = {r["scene"]: r for r in exact_run["rows"]} if exact_run else {}
     for fname in ("paper_tables.json", "paper_tables_sponza.json"):
         d = load(fname)
         if d is None:
@@ -459,6 +461,8 @@ def paper_tables() -> list[str]:
                     f"{secs(r['LT'])} ({p['LT']})",
                     f"{secs(r['RTT'])} ({p['RTT']})",
                     f"{secs(r['TT'])} ({p['TT']})",
+                    secs(exact[r["scene"]]["ST"]) if r["scene"] in exact else "-",
+                    secs(exact[r["scene"]]["TT"]) if r["scene"] in exact else "-",
                 ]
             )
     if not rows:
@@ -484,14 +488,23 @@ def paper_tables() -> list[str]:
                 "LT s",
                 "RTT s",
                 "TT s",
+                "ST exact s",
+                "TT exact s",
             ],
             rows,
         ),
         "",
+        "The last two columns replace the discrete shooting by exact direct light on the "
+        "records (shadow rays to the emitters, `docs/design.md` §5); '-' where that run "
+        "was not made.",
+        "",
         "Command: `python benchmarks/paper_tables.py --scenes labyrinth emission shadow "
         "geometric bunny` and `python benchmarks/paper_tables.py --scenes sponza --out "
         "benchmarks/results/paper_tables_sponza.json` (write "
-        "`benchmarks/results/paper_tables.json`, `benchmarks/results/paper_tables_sponza.json`).",
+        "`benchmarks/results/paper_tables.json`, `benchmarks/results/paper_tables_sponza.json`); "
+        "with exact direct light, `python benchmarks/paper_tables.py --scenes labyrinth "
+        "emission shadow geometric bunny --direct-light exact --out "
+        "benchmarks/results/paper_tables_exact.json`.",
         "",
     ]
 
