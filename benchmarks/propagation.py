@@ -11,6 +11,10 @@ Sections (all by default):
   (``--radii``): radiance error against Le / (1 - rho), iterations, lost
   fraction δ. Writes ``propagation_furnace.json`` (``_res<N>`` for other
   resolutions).
+- ``junctions``  a closed box split by a zero-thickness two-sided wall that
+  meets the box, ends in mid-air or turns a corner, rho 0.8, R 22: the share
+  of each record's hemisphere without a partner at res 32, 64, 128, and the
+  radiance error against Le / (1 - rho) at res 32.
 - ``cap``        emitting-cap sphere: mean / max error vs resolution (32, 64,
   128) and R (8, 16, 22); rho = 0.5.
 - ``cornell``    energy balance on the Cornell box vs resolution (32, 64, 128).
@@ -164,6 +168,92 @@ def furnace(args) -> None:
         ],
     )
     _write("furnace" if res == 48 and R == 8 else f"furnace_res{res}_R{R}", rows)
+
+
+def _divided_box(kind: str, rho: float):
+    """A closed unit box (uniform emission 1, albedo rho) split by a
+    zero-thickness two-sided wall at x = 0.1: ``through`` meets the floor, the
+    ceiling and two side walls, ``end`` stops in mid-air, ``corner`` turns to
+    meet the side wall at x = 0.5."""
+    import trimesh
+
+    s = voxgi.scenes.furnace_box(albedo=rho, emission=1.0)
+    mat = voxgi.Material(albedo=rho, emission=1.0)
+    h = 0.5
+    top = {"plain": None, "through": h, "end": 0.05, "corner": 0.15}[kind]
+    if top is None:
+        return s
+
+    def quad(corners):
+        return trimesh.Trimesh(np.array(corners, float), [[0, 1, 2], [0, 2, 3]], process=False)
+
+    s.add(
+        quad([(0.1, -h, -h), (0.1, h, -h), (0.1, h, top), (0.1, -h, top)]),
+        mat,
+        name="wall",
+        two_sided=True,
+    )
+    if kind == "corner":
+        s.add(
+            quad([(0.1, -h, top), (0.1, h, top), (h, h, top), (h, -h, top)]),
+            mat,
+            name="wall_top",
+            two_sided=True,
+        )
+    return s
+
+
+def junctions(args) -> None:
+    """Thin two-sided walls meeting a closed box: the share of each record's
+    hemisphere the gathering finds a partner in (1 in a closed scene) at
+    three resolutions, and the furnace's radiance error at the first."""
+    rho, R = 0.8, 22
+    ress = args.res or ([24] if args.quick else [32, 64, 128])
+    ds = direction_set(R)
+    rows = []
+    for kind in ("plain", "through", "end", "corner"):
+        for res in ress:
+            vox = voxgi.voxelize(_divided_box(kind, rho), resolution=res, progress=False)
+            front = ~vox.back
+            s = line_records(vox).build()
+            live = np.repeat(vox.albedo[:, :1] > 0, 3, axis=1).astype(np.float32)
+            every = np.arange(len(ds.families), dtype=np.int64)
+            sums, _, _ = s.gather(ds.families, ds.weights, live, every, False, 0)
+            lost = (1 - sums[:, 0] / s.normalisation(ds.families, ds.weights, 0))[front]
+            row = {
+                "wall": kind,
+                "res": res,
+                "records": int(front.sum()),
+                "lost_mean": float(lost.mean()),
+                "lost_max": float(lost.max()),
+                "lost_over_1%": int((lost > 0.01).sum()),
+            }
+            if res == ress[0]:
+                t = time.perf_counter()
+                sol = voxgi.solve(vox, directions=R, progress=False, tol=1e-5)
+                row["seconds"] = time.perf_counter() - t
+                err = np.abs(sol.radiance[front, 0] * (1 - rho) - 1)
+                row.update(
+                    err_mean=float(err.mean()),
+                    err_max=float(err.max()),
+                    err_over_2pct=int((err > 0.02).sum()),
+                )
+            rows.append(row)
+            print(rows[-1], flush=True)
+    cols = [
+        "wall",
+        "res",
+        "records",
+        "lost_mean",
+        "lost_max",
+        "lost_over_1%",
+        "err_mean",
+        "err_max",
+        "err_over_2pct",
+        "seconds",
+    ]
+    _table(rows, cols)
+    _write("junctions", rows, rho=rho, R=R)
 
 
 def _err_vs(sol, ref, vox) -> np.ndarray:
@@ -633,6 +723,7 @@ def energy(args) -> None:
 
 SECTIONS = {
     "furnace": furnace,
+    "junctions": junctions,
     "cap": cap,
     "cornell": cornell,
     "energy": energy,

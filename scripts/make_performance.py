@@ -115,6 +115,60 @@ def furnaces() -> list[str]:
     return out
 
 
+def junctions() -> list[str]:
+    d = load("propagation_junctions.json")
+    if d is None:
+        return []
+    names = {
+        "plain": "no wall",
+        "through": "wall meeting floor, ceiling and two walls",
+        "end": "wall ending in mid-air",
+        "corner": "wall turning a corner",
+    }
+    rows = []
+    for r in d["rows"]:
+        solved = "err_mean" in r
+        rows.append(
+            [
+                names.get(r["wall"], r["wall"]),
+                r["res"],
+                f"{r['records']:,}",
+                pct(r["lost_mean"]),
+                pct(r["lost_max"]),
+                r["lost_over_1%"],
+                f"{pct(r['err_mean'])} / {pct(r['err_max'])}" if solved else "",
+                r["err_over_2pct"] if solved else "",
+            ]
+        )
+    return [
+        "## Thin walls in a furnace",
+        "",
+        f"A closed unit box (ρ {d['rho']}, every surface emitting) split by a zero-thickness "
+        "two-sided wall. In a closed scene every direction of every record ends on a "
+        "surface, so the share of a record's hemisphere in which the gathering finds no "
+        f"partner (R {d['R']}) measures the propagation's error where surfaces meet "
+        "(`docs/design.md` §4); the furnace's radiance error against `Le / (1 - ρ)` "
+        "(shot direct light) follows from it, about ρ / (1 - ρ) times larger.",
+        "",
+        table(
+            [
+                "scene",
+                "res",
+                "records",
+                "lost: mean",
+                "max",
+                "records > 1%",
+                "radiance error: mean / max",
+                "records > 2%",
+            ],
+            rows,
+        ),
+        "",
+        source("python benchmarks/propagation.py junctions", "propagation_junctions.json"),
+        "",
+    ]
+
+
 def cap_sphere() -> list[str]:
     d = load("propagation_cap.json")
     if d is None:
@@ -836,14 +890,15 @@ def build() -> str:
         "between runs, errors do not. The method behind each figure is in "
         "[design.md](design.md).",
         "",
-        "Contents: furnaces, the emitting-cap sphere, direct light on the records, coarser "
-        "later bounces, energy balance, linear cost, throughput, the paper's work unit, "
-        "voxelization, the paper's tables, time against error versus Mitsuba 3, interiors, "
-        "the display's error estimate, distribution.",
+        "Contents: furnaces, thin walls in a furnace, the emitting-cap sphere, direct light "
+        "on the records, coarser later bounces, energy balance, linear cost, throughput, "
+        "the paper's work unit, voxelization, the paper's tables, time against error "
+        "versus Mitsuba 3, interiors, the display's error estimate, distribution.",
         "",
     ]
     for part in (
         furnaces,
+        junctions,
         cap_sphere,
         direct_light,
         later_bounces,
