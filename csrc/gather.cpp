@@ -153,8 +153,6 @@ VOXGI_INLINE void pair_record(GatherRec* rec, uint32_t* lnk, const PendingB& q, 
     for (int skipped = 0, steps = 0; skipped < K && f >= 0 && steps < kMaxChain; ++steps) {
         GatherRec& rf = rec[f];
         const int32_t older = static_cast<int32_t>(lnk[f] & ~kAnswered) - 1;
-        __builtin_prefetch(rec + older, 1, 3);  // (older may be -1: a prefetch does not fault)
-        __builtin_prefetch(lnk + older, 1, 3);
         if ((Stand && sp && (rf.tag & kStandIn)) || !fb.faces(rf, eps)) {
             skipped += !(passed && same_plane(rf.pt, rf.nrm, passed->pt, passed->nrm));
             passed = &rf;

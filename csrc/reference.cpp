@@ -2,8 +2,8 @@
 // each family's records by line key, with its transpose, and the shooting
 // with the deposit on the sender side (docs/design.md §4, §5).
 #include <algorithm>
-#include <cstring>
 #include <stdexcept>
+#include <vector>
 
 #include "lineorder.h"
 #include "linesystem.h"
