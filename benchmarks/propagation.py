@@ -253,7 +253,8 @@ def junctions(args) -> None:
         "seconds",
     ]
     _table(rows, cols)
-    _write("junctions", rows, rho=rho, R=R)
+    full = ress == [32, 64, 128]
+    _write("junctions" if full else "junctions_res" + "_".join(map(str, ress)), rows, rho=rho, R=R)
 
 
 def _err_vs(sol, ref, vox) -> np.ndarray:
@@ -746,7 +747,10 @@ def main() -> None:
     )
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     ap.add_argument(
-        "--res", type=int, nargs="+", help="cap, energy: resolutions; furnace: the first one"
+        "--res",
+        type=int,
+        nargs="+",
+        help="cap, energy, junctions: resolutions; furnace: the first one",
     )
     ap.add_argument(
         "--radii",

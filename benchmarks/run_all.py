@@ -8,8 +8,8 @@ One command for everything the README's performance section quotes::
 Steps (each a script that also runs on its own; results in benchmarks/results/):
 
 1. ``voxelize.py``       voxelization time and memory (bunny 128-512, 1M triangles);
-2. ``propagation.py``    furnace / cap-sphere accuracy, energy balance, linear
-                         cost, throughput, the paper's work unit;
+2. ``propagation.py``    furnace / thin-wall / cap-sphere accuracy, energy
+                         balance, linear cost, throughput, the paper's work unit;
 3. ``paper_tables.py``   the paper's Tables 1, 2 and 4 on the look-alike scenes;
 4. ``reference.py`` + ``time_vs_error.py``   time against error versus Mitsuba 3
                          on the Cornell box, then (full size only) on the
