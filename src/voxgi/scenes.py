@@ -771,7 +771,7 @@ def door_room(width: int = 256, height: int = 256, gap: float = 0.05) -> Scene:
     resolution (8 m / 64 = 0.125 m), mostly after bounces. The lamp is a 2 x 2
     m ceiling panel; every surface is diffuse (0.7). It shows what gaps
     thinner than a voxel do to light carried along discrete lines
-    (``docs/design.md`` §5).
+    (``docs/design.md`` §10).
     """
     W, H, D, t = 4.0, 2.6, 4.0, 0.1  # each room W x H x D; the wall spans z in [D, D + t]
     Z = 2 * D + t
