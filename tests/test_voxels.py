@@ -412,6 +412,25 @@ def test_floor_is_cut_by_a_thin_divider():
     )
 
 
+def test_a_surface_under_a_closed_object_is_buried():
+    # The floor strip under the closed 1 cm wall faces into the wall, where
+    # no light can reach it: its record is made black, so that it neither
+    # gathers light through the wall nor sends any. The strips on either
+    # side keep their albedo.
+    vox = voxgi.voxelize(_floor_and_divider(0.01), 16)
+    f = front(vox) & (vox.object_id == 0)
+    under = f & (np.abs(vox.centroid[:, 0] - 0.5) < 0.005)
+    assert under.sum() >= 16  # one a voxel row along the wall
+    assert np.all(vox.albedo[under] == 0)
+    assert np.all(vox.albedo[f & ~under] > 0)
+    assert vox.stats["buried_records"] == under.sum()
+    # A closed room seen from inside (its faces point inwards) is solid
+    # outside: the lamp just under its ceiling stays lit.
+    shadow = voxgi.voxelize(voxgi.scenes.get("shadow"), 16)
+    assert shadow.stats["buried_records"] == 0
+    assert shadow.emission[~shadow.back].max() > 0
+
+
 def test_same_orientation_surfaces_do_not_cut_each_other():
     # cap_sphere: the emitting cap and the rest of one sphere are two objects
     # meeting along a circle. Where they share voxels their planes are nearly

@@ -456,6 +456,41 @@ def voxelize(
     pitch, origin, dims = _grid(triangles, resolution)
     est = _check_memory(triangles, pitch, resolution, max_memory)
     res = _run_kernel(tri, origin, pitch, dims, cut=cut, threads=nthreads, progress=progress)
-    seconds = time.perf_counter() - t_start
-    stats = _voxelize_stats(dict(res["stats"]), triangles, est, scene, cut=cut, seconds=seconds)
+    stats = _voxelize_stats(dict(res["stats"]), triangles, est, scene, cut=cut, seconds=0.0)
+    stats["buried_records"] = _bury(res, scene, stats["closed_objects"], pitch)
+    stats["seconds"] = time.perf_counter() - t_start
     return _voxel_set(res, pitch, origin, resolution, scene, stats)
+
+
+def _bury(res: dict, scene, closed: list[int], pitch: float) -> int:
+    """Make black the records that face into another object's closed volume.
+
+    Where a closed object touches another surface (a wall slab built against
+    the ceiling and the side walls, a box standing on a floor), junction
+    cutting leaves pieces of that surface against the object's faces, facing
+    its inside. No light reaches them, but on the discrete lines they pair
+    with records on both sides of the object and carry light through it. A
+    record is buried when a point a thousandth of a voxel in front of it
+    lies in the solid of a closed object of another id (inside it, or
+    outside it when its faces point inwards); only records in voxels that
+    hold records of that object are tested. Returns how many were made black.
+    """
+    if not closed:
+        return 0
+    ijk = res["ijk"].astype(np.int64)
+    key = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
+    oid = res["object_id"]
+    buried = np.zeros(len(key), bool)
+    for k in closed:
+        idx = np.flatnonzero(np.isin(key, np.unique(key[oid == k])) & (oid != k) & ~buried)
+        if not len(idx):
+            continue
+        probe = res["centroid"][idx] + 1e-3 * pitch * res["normal"][idx].astype(np.float64)
+        mesh = scene.objects[k].to_trimesh()
+        # the solid side: inside an outward-wound mesh, outside an inward one
+        # (a room seen from within)
+        solid = mesh.contains(probe) != (mesh.volume < 0)
+        buried[idx[solid]] = True
+    res["albedo"][buried] = 0.0
+    res["emission"][buried] = 0.0
+    return int(buried.sum())
