@@ -61,6 +61,19 @@ voxgi::ShadeHits make_hits(const F64& hit_pos, const F32& hit_normal, const F32&
     return hits;
 }
 
+// ray_count (P,): each pixel's rays, non-negative and summing to all `rays`.
+void check_ray_counts(const I64& ray_count, py::ssize_t rays) {
+    const int64_t* pc = ray_count.data();
+    int64_t total = 0;
+    for (py::ssize_t p = 0; p < ray_count.shape(0); ++p) {
+        if (pc[p] < 0) throw py::value_error("ray_count: negative count");
+        total += pc[p];
+    }
+    if (total != rays)
+        throw py::value_error("ray_count sums to " + std::to_string(total) + ", expected " +
+                              std::to_string(rays) + " rays");
+}
+
 auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                     F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, F64 vpl_pos,
                     F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa, double n_gather,
@@ -192,15 +205,7 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
     check_2d(ray_dir, -1, 3, "ray_dir");
     const py::ssize_t R = ray_dir.shape(0);
     check_1d(prim, R, "prim");
-    {
-        const int64_t* rc = ray_count.data();
-        int64_t total = 0;
-        for (py::ssize_t p = 0; p < P; ++p) {
-            if (rc[p] < 0) throw py::value_error("ray_count: negative count");
-            total += rc[p];
-        }
-        if (total != R) throw py::value_error("ray_count does not sum to the number of rays");
-    }
+    check_ray_counts(ray_count, R);
     check_2d(out, P, 3, "out");
     if (!out.writeable()) throw py::value_error("out must be writeable");
     voxgi::ShadeTriangles tris;
@@ -256,15 +261,8 @@ auto vpl_accumulate_py(I64 ray_count, F32 ray_contrib, U8 occluded, int threads)
     check_2d(ray_contrib, -1, 3, "ray_contrib");
     const py::ssize_t R = ray_contrib.shape(0), P = ray_count.shape(0);
     check_1d(occluded, R, "occluded");
+    check_ray_counts(ray_count, R);
     const int64_t* pc = ray_count.data();
-    int64_t total = 0;
-    for (py::ssize_t p = 0; p < P; ++p) {
-        if (pc[p] < 0) throw py::value_error("ray_count: negative count");
-        total += pc[p];
-    }
-    if (total != R)
-        throw py::value_error("ray_count sums to " + std::to_string(total) + ", expected " +
-                              std::to_string(R) + " rays");
     F32 out({P, py::ssize_t(3)});
     float* po = out.mutable_data();
     const float* pr = ray_contrib.data();
@@ -310,15 +308,8 @@ auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I3
     check_2d(ray_weight, R, 3, "ray_weight");
     if (occluded.size() != 0) check_1d(occluded, R, "occluded");
     check_2d(out, P, 3, "out");
+    check_ray_counts(ray_count, R);
     const int64_t* pc = ray_count.data();
-    int64_t total = 0;
-    for (py::ssize_t p = 0; p < P; ++p) {
-        if (pc[p] < 0) throw py::value_error("ray_count: negative count");
-        total += pc[p];
-    }
-    if (total != R)
-        throw py::value_error("ray_count sums to " + std::to_string(total) + ", expected " +
-                              std::to_string(R) + " rays");
     const float *pd = ray_dir.data(), *pw = ray_weight.data();
     const uint8_t* po = occluded.size() != 0 ? occluded.data() : nullptr;
     float* pout = out.mutable_data();

@@ -54,9 +54,6 @@ constexpr uint32_t kAnswered = 0x80000000u;
 constexpr uint32_t kStandIn = 0x80000000u;  // GatherRec::tag
 constexpr uint32_t kCrossing = 0x40000000u;
 constexpr uint32_t kAnswerer = 0x3fffffffu;
-// The most F records one B looks at: a line grazing a face passes one of the
-// face's records per voxel, which count as one against the history.
-constexpr int kMaxChain = 4 * kMaxHistory;
 
 // facing() for the walk's records, B's point and normal held in registers
 // across its chain. With SSE2 the two dot products take one multiply each

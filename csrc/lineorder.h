@@ -9,6 +9,9 @@ namespace voxgi {
 
 constexpr float kTiny = 1e-6f;  // |n.d| below this: the record is parallel to d (neither F nor B)
 constexpr int kMaxHistory = 32;
+// The most F records one B looks at: a line grazing a face passes one of the
+// face's records per voxel, which count as one against the history.
+constexpr int kMaxChain = 4 * kMaxHistory;
 
 // A record met on a line: its position (in some axis order or global), the
 // depth of its surface point along d, and n.d.

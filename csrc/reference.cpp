@@ -83,8 +83,8 @@ void walk_line(const SortedLine& L, const int32_t* line, int64_t j0, int64_t j1,
             // F records passed over (at most K; a run in one plane counts once)
             int skipped = 0, steps = 0;
             int32_t passed = -1;
-            for (int64_t h = int64_t(hp.size()) - 1;
-                 h >= 0 && skipped < L.K && steps < 4 * kMaxHistory; --h, ++steps) {
+            for (int64_t h = int64_t(hp.size()) - 1; h >= 0 && skipped < L.K && steps < kMaxChain;
+                 --h, ++steps) {
                 const int32_t f = hp[h];
                 const float *pf = L.pn + 8 * int64_t(f), *nf = L.pn + 3 + 8 * int64_t(f);
                 if ((sp && L.stand[f]) || !facing(pf, nf, pp, np, L.eps)) {

@@ -21,6 +21,16 @@ std::vector<int64_t> ray_offsets(const int64_t* ray_count, int64_t n_pixels) {
 constexpr double kPi = 3.14159265358979323846;
 constexpr int64_t kChunk = 512;  // pixels per task
 
+// body(p) for every pixel p < P, kChunk pixels a task.
+template <class Body>
+void for_each_pixel(int64_t P, int threads, const StopCheck& stop, Body&& body) {
+    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
+    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
+        const int64_t p1 = std::min(P, (c + 1) * kChunk);
+        for (int64_t p = c * kChunk; p < p1; ++p) body(p);
+    });
+}
+
 inline float dot3(const float* a, const float* b) {
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
@@ -203,30 +213,26 @@ int64_t gather_rays(const ShadeHits& hits, int n_gather, uint64_t seed, int64_t 
         ray_count[p] = m >= 0 ? n_gather : 0;
         offset[p + 1] = offset[p] + ray_count[p];
     }
-    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
     const uint64_t base = splitmix64(seed ^ splitmix64(uint64_t(frame) + 0x6A09E667F3BCC909ull));
-    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
-        const int64_t p1 = std::min(P, (c + 1) * kChunk);
-        for (int64_t p = c * kChunk; p < p1; ++p) {
-            if (ray_count[p] == 0) continue;
-            const double* x = hits.pos + 3 * p;
-            const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
-            float u[3], v[3];
-            tangent_frame(n, u, v);
-            uint64_t h = splitmix64(base ^ uint64_t(p) * 0xD1B54A32D192ED03ull);
-            for (int k = 0; k < n_gather; ++k) {
-                h = splitmix64(h);
-                const double u1 = (k + to_unit(h)) / n_gather;  // stratified in cos²θ
-                h = splitmix64(h);
-                const double phi = 2.0 * kPi * to_unit(h);
-                const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
-                const double lx = r * std::cos(phi), ly = r * std::sin(phi);
-                const int64_t w = offset[p] + k;
-                float *ro = ray_org + 3 * w, *rd = ray_dir + 3 * w;
-                for (int a = 0; a < 3; ++a) {
-                    ro[a] = float(x[a] + eps * ng[a]);
-                    rd[a] = float(lx * u[a] + ly * v[a] + z * n[a]);
-                }
+    for_each_pixel(P, threads, stop, [&](int64_t p) {
+        if (ray_count[p] == 0) return;
+        const double* x = hits.pos + 3 * p;
+        const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
+        float u[3], v[3];
+        tangent_frame(n, u, v);
+        uint64_t h = splitmix64(base ^ uint64_t(p) * 0xD1B54A32D192ED03ull);
+        for (int k = 0; k < n_gather; ++k) {
+            h = splitmix64(h);
+            const double u1 = (k + to_unit(h)) / n_gather;  // stratified in cos²θ
+            h = splitmix64(h);
+            const double phi = 2.0 * kPi * to_unit(h);
+            const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
+            const double lx = r * std::cos(phi), ly = r * std::sin(phi);
+            const int64_t w = offset[p] + k;
+            float *ro = ray_org + 3 * w, *rd = ray_dir + 3 * w;
+            for (int a = 0; a < 3; ++a) {
+                ro[a] = float(x[a] + eps * ng[a]);
+                rd[a] = float(lx * u[a] + ly * v[a] + z * n[a]);
             }
         }
     });
@@ -279,77 +285,69 @@ void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                   const StopCheck& stop) {
     const int64_t P = hits.count;
     const std::vector<int64_t> offset = ray_offsets(ray_count, P);
-    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
-    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
-        const int64_t p1 = std::min(P, (c + 1) * kChunk);
-        for (int64_t p = c * kChunk; p < p1; ++p) {
-            const int32_t m = hits.material[p];
-            if (m < 0 || offset[p + 1] == offset[p]) continue;
-            const double* x = hits.pos + 3 * p;
-            const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
-            double s[3] = {0.0, 0.0, 0.0};
-            for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
-                const int32_t t = prim[r];
-                if (t < 0 || t >= tris.count) continue;
-                const float* df = ray_dir + 3 * r;
-                const double d[3] = {df[0], df[1], df[2]};
-                const double dl = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-                const float wi[3] = {float(d[0] / dl), float(d[1] / dl), float(d[2] / dl)};
-                const float cos_x = dot3(n, wi);
-                if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) continue;
-                // Hit point: the ray against the hit triangle's plane, in double.
-                const double *v0 = tris.v + 9 * int64_t(t), *v1 = v0 + 3, *v2 = v0 + 6;
-                const double e1[3] = {v1[0] - v0[0], v1[1] - v0[1], v1[2] - v0[2]};
-                const double e2[3] = {v2[0] - v0[0], v2[1] - v0[1], v2[2] - v0[2]};
-                double nt[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
-                                e1[0] * e2[1] - e1[1] * e2[0]};
-                const double nl = std::sqrt(nt[0] * nt[0] + nt[1] * nt[1] + nt[2] * nt[2]);
-                if (!(nl > 0.0)) continue;
-                nt[0] /= nl, nt[1] /= nl, nt[2] /= nl;
-                const double o[3] = {x[0] + 0.0, x[1] + 0.0, x[2] + 0.0};
-                const double dn = (d[0] * nt[0] + d[1] * nt[1] + d[2] * nt[2]) / dl;
-                if (dn == 0.0) continue;
-                const double tt =
-                    ((v0[0] - o[0]) * nt[0] + (v0[1] - o[1]) * nt[1] + (v0[2] - o[2]) * nt[2]) / dn;
-                const double y[3] = {o[0] + tt * wi[0], o[1] + tt * wi[1], o[2] + tt * wi[2]};
-                const bool front = dn < 0.0;
-                const int32_t obj = tris.object[t];
-                if (!front && !tris.two_sided[obj]) continue;  // black back of a one-sided surface
-                const float ns[3] = {float(front ? nt[0] : -nt[0]), float(front ? nt[1] : -nt[1]),
-                                     float(front ? nt[2] : -nt[2])};
-                const int64_t rec = lookup_record(grid, y, ns, obj);
-                if (rec < 0) continue;
-                const float cos_y = -dot3(ns, wi);
-                if (cos_y <= 0.f) continue;
-                const double r2 = (y[0] - x[0]) * (y[0] - x[0]) + (y[1] - x[1]) * (y[1] - x[1]) +
-                                  (y[2] - x[2]) * (y[2] - x[2]);
-                const double pa = grid.pa[rec];
-                const double denom = pa * r2 / cos_y + mis.n_gather * cos_x / kPi;
-                if (!(denom > 0.0)) continue;
-                float f[3];
-                shade_brdf(mats, m, n, wi, wo, f);
-                const float* L = grid.radiance + 3 * rec;
-                for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * cos_x / denom;
-            }
-            for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += float(s[ch]);
+    for_each_pixel(P, threads, stop, [&](int64_t p) {
+        const int32_t m = hits.material[p];
+        if (m < 0 || offset[p + 1] == offset[p]) return;
+        const double* x = hits.pos + 3 * p;
+        const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
+        double s[3] = {0.0, 0.0, 0.0};
+        for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
+            const int32_t t = prim[r];
+            if (t < 0 || t >= tris.count) continue;
+            const float* df = ray_dir + 3 * r;
+            const double d[3] = {df[0], df[1], df[2]};
+            const double dl = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            const float wi[3] = {float(d[0] / dl), float(d[1] / dl), float(d[2] / dl)};
+            const float cos_x = dot3(n, wi);
+            if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) continue;
+            // Hit point: the ray against the hit triangle's plane, in double.
+            const double *v0 = tris.v + 9 * int64_t(t), *v1 = v0 + 3, *v2 = v0 + 6;
+            const double e1[3] = {v1[0] - v0[0], v1[1] - v0[1], v1[2] - v0[2]};
+            const double e2[3] = {v2[0] - v0[0], v2[1] - v0[1], v2[2] - v0[2]};
+            double nt[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                            e1[0] * e2[1] - e1[1] * e2[0]};
+            const double nl = std::sqrt(nt[0] * nt[0] + nt[1] * nt[1] + nt[2] * nt[2]);
+            if (!(nl > 0.0)) continue;
+            nt[0] /= nl, nt[1] /= nl, nt[2] /= nl;
+            const double o[3] = {x[0] + 0.0, x[1] + 0.0, x[2] + 0.0};
+            const double dn = (d[0] * nt[0] + d[1] * nt[1] + d[2] * nt[2]) / dl;
+            if (dn == 0.0) continue;
+            const double tt =
+                ((v0[0] - o[0]) * nt[0] + (v0[1] - o[1]) * nt[1] + (v0[2] - o[2]) * nt[2]) / dn;
+            const double y[3] = {o[0] + tt * wi[0], o[1] + tt * wi[1], o[2] + tt * wi[2]};
+            const bool front = dn < 0.0;
+            const int32_t obj = tris.object[t];
+            if (!front && !tris.two_sided[obj]) continue;  // black back of a one-sided surface
+            const float ns[3] = {float(front ? nt[0] : -nt[0]), float(front ? nt[1] : -nt[1]),
+                                 float(front ? nt[2] : -nt[2])};
+            const int64_t rec = lookup_record(grid, y, ns, obj);
+            if (rec < 0) continue;
+            const float cos_y = -dot3(ns, wi);
+            if (cos_y <= 0.f) continue;
+            const double r2 = (y[0] - x[0]) * (y[0] - x[0]) + (y[1] - x[1]) * (y[1] - x[1]) +
+                              (y[2] - x[2]) * (y[2] - x[2]);
+            const double pa = grid.pa[rec];
+            const double denom = pa * r2 / cos_y + mis.n_gather * cos_x / kPi;
+            if (!(denom > 0.0)) continue;
+            float f[3];
+            shade_brdf(mats, m, n, wi, wo, f);
+            const float* L = grid.radiance + 3 * rec;
+            for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * cos_x / denom;
         }
+        for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += float(s[ch]);
     });
 }
 
 void vpl_accumulate(int64_t n_pixels, const int64_t* ray_count, const float* ray_contrib,
                     const uint8_t* occluded, float* out, int threads, const StopCheck& stop) {
     const std::vector<int64_t> offset = ray_offsets(ray_count, n_pixels);
-    const int64_t n_chunks = (n_pixels + kChunk - 1) / kChunk;
-    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
-        const int64_t p1 = std::min(n_pixels, (c + 1) * kChunk);
-        for (int64_t p = c * kChunk; p < p1; ++p) {
-            double s[3] = {0.0, 0.0, 0.0};  // fixed order: the pixel's rays in VPL order
-            for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
-                if (occluded[r]) continue;
-                for (int ch = 0; ch < 3; ++ch) s[ch] += ray_contrib[3 * r + ch];
-            }
-            for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] = float(s[ch]);
+    for_each_pixel(n_pixels, threads, stop, [&](int64_t p) {
+        double s[3] = {0.0, 0.0, 0.0};  // fixed order: the pixel's rays in VPL order
+        for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
+            if (occluded[r]) continue;
+            for (int ch = 0; ch < 3; ++ch) s[ch] += ray_contrib[3 * r + ch];
         }
+        for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] = float(s[ch]);
     });
 }
 
@@ -358,25 +356,21 @@ void light_accumulate(const ShadeHits& hits, const ShadeMaterials& mats, const i
                       float* out, int threads, const StopCheck& stop) {
     const int64_t P = hits.count;
     const std::vector<int64_t> offset = ray_offsets(ray_count, P);
-    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
-    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
-        const int64_t p1 = std::min(P, (c + 1) * kChunk);
-        for (int64_t p = c * kChunk; p < p1; ++p) {
-            const int32_t m = hits.material[p];
-            if (m < 0 || m >= mats.count) continue;
-            const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
-            float sum[3] = {0.f, 0.f, 0.f};
-            for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
-                if (occluded && occluded[r]) continue;
-                const float* wi = ray_dir + 3 * r;
-                const float cos_x = dot3(n, wi);
-                if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) continue;
-                float f[3];
-                shade_brdf(mats, m, n, wi, wo, f);
-                for (int ch = 0; ch < 3; ++ch) sum[ch] += f[ch] * cos_x * ray_weight[3 * r + ch];
-            }
-            for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += sum[ch];
+    for_each_pixel(P, threads, stop, [&](int64_t p) {
+        const int32_t m = hits.material[p];
+        if (m < 0 || m >= mats.count) return;
+        const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
+        float sum[3] = {0.f, 0.f, 0.f};
+        for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
+            if (occluded && occluded[r]) continue;
+            const float* wi = ray_dir + 3 * r;
+            const float cos_x = dot3(n, wi);
+            if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) continue;
+            float f[3];
+            shade_brdf(mats, m, n, wi, wo, f);
+            for (int ch = 0; ch < 3; ++ch) sum[ch] += f[ch] * cos_x * ray_weight[3 * r + ch];
         }
+        for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += sum[ch];
     });
 }
 

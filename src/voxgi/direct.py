@@ -211,10 +211,7 @@ def direct_irradiance(
     t0 = time.perf_counter()
     est = _Estimate(len(vox))
     emit = EmitterSampler(scene)
-    area = np.asarray(vox.area, np.float64)
-    lit = np.flatnonzero(area > 0)
-    if receivers == "reflecting":
-        lit = lit[np.any(np.asarray(vox.albedo)[lit] > 0, axis=1)]
+    lit = _receiving(vox, receivers)
     stats = {"rays": 0, "samples": samples, "emitter_triangles": len(emit), "records_lit": len(lit)}
     if len(emit) and len(lit):
         if offset is None:
@@ -253,6 +250,15 @@ def _check(scene, vox, samples, seed, threads, receivers) -> tuple[int, int, int
         _validate.integer(seed, "seed"),
         _validate.threads(threads),
     )
+
+
+def _receiving(vox: VoxelSet, receivers: str) -> np.ndarray:
+    """Indices of the records to light: those with area, and unless
+    ``receivers="all"`` only those that reflect."""
+    lit = np.flatnonzero(np.asarray(vox.area) > 0)
+    if receivers == "reflecting":
+        lit = lit[np.any(np.asarray(vox.albedo)[lit] > 0, axis=1)]
+    return lit
 
 
 class _Estimate:
@@ -410,10 +416,7 @@ def light_irradiance(
     t0 = time.perf_counter()
     n = len(vox)
     out = np.zeros((n, 3))
-    area = np.asarray(vox.area, np.float64)
-    lit = np.flatnonzero(area > 0)
-    if receivers == "reflecting":
-        lit = lit[np.any(np.asarray(vox.albedo)[lit] > 0, axis=1)]
+    lit = _receiving(vox, receivers)
     env = scene.environment
     stats = {
         "rays": 0,
