@@ -11,6 +11,7 @@ void bind_linesystem(py::module_& m);
 void bind_testing(py::module_& m);
 void bind_display(py::module_& m);
 void bind_direct_light(py::module_& m);
+void bind_rays(py::module_& m);
 
 PYBIND11_MODULE(_core, m) {
     m.doc() = "voxgi compiled core: voxelization, discrete-line propagation, VPL shading";
@@ -35,4 +36,5 @@ PYBIND11_MODULE(_core, m) {
     bind_testing(m);
     bind_display(m);
     bind_direct_light(m);
+    bind_rays(m);
 }

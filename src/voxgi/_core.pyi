@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'direct_light_rays', 'direct_light_sum', 'gather_families', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_prepare']
+__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'direct_light_rays', 'direct_light_sum', 'gather_families', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_prepare']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -128,6 +128,25 @@ class LineSystem:
         """
         Records N.
         """
+class RayScene:
+    """
+    Embree 4 scene of a triangle soup, queried from C++ threads (GIL released).
+    """
+    def __init__(self, library: str, tris: typing.Annotated[numpy.typing.ArrayLike, numpy.float32]) -> None:
+        """
+        Build the scene from (F, 3, 3) float32 corners with the Embree at `library`.
+        """
+    def intersect(self, org: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], dirs: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], uv: bool = False, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+        """
+        First triangle each ray meets (int32, -1: none) and, with uv, its float32 barycentrics u, v (empty arrays otherwise).
+        """
+    def occluded(self, org: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], dirs: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], length: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> numpy.typing.NDArray[numpy.uint8]:
+        """
+        (R,) uint8: 1 where a triangle lies on [org, org + length * dirs).
+        """
+    @property
+    def triangle_count(self) -> int:
+        ...
 def direct_light_rays(emitters: tuple, point: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float64], shift: numpy.typing.NDArray[numpy.float64], sequence: numpy.typing.NDArray[numpy.float64], offset: typing.SupportsFloat | typing.SupportsIndex, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
     """
     The light and hemisphere rays of records (samples each, record-major).

@@ -113,6 +113,8 @@ class _Tracer(Tracer):
 
     def occluded(self, org: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
         """(R,) uint8: 1 where something lies on the segment [org, org + length·dir)."""
+        if self.native is not None:
+            return self.native.occluded(org, dirs, length, self.threads)
         return (super().occluded(org, dirs, length) != -1).astype(np.uint8)
 
 

@@ -1,0 +1,75 @@
+// pybind11 bindings for the Embree ray scene (ray_scene.h).
+#include <memory>
+
+#include "bind_common.h"
+#include "ray_scene.h"
+
+namespace py = pybind11;
+using namespace pybind11::literals;
+using namespace voxgi::py_helpers;
+
+namespace {
+
+void check_rays(const F32& org, const F32& dir, py::ssize_t n) {
+    check_2d(org, n, 3, "org");
+    check_2d(dir, org.shape(0), 3, "dirs");
+}
+
+U8 occluded_py(const voxgi::RayScene& s, const F32& org, const F32& dir, const F32& length,
+               int threads) {
+    check_rays(org, dir, -1);
+    const py::ssize_t n = org.shape(0);
+    check_1d(length, n, "length");
+    U8 out(n);
+    const float *po = org.data(), *pd = dir.data(), *pl = length.data();
+    uint8_t* pr = out.mutable_data();
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        s.occluded(po, pd, pl, n, pr, voxgi::resolve_threads(threads), stop);
+    }
+    return out;
+}
+
+py::tuple intersect_py(const voxgi::RayScene& s, const F32& org, const F32& dir, bool uv,
+                       int threads) {
+    check_rays(org, dir, -1);
+    const py::ssize_t n = org.shape(0);
+    I32 prim(n);
+    F32 u(uv ? n : 0), v(uv ? n : 0);
+    const float *po = org.data(), *pd = dir.data();
+    int32_t* pp = prim.mutable_data();
+    float* pu = uv ? u.mutable_data() : nullptr;
+    float* pv = uv ? v.mutable_data() : nullptr;
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        s.intersect(po, pd, n, pp, pu, pv, voxgi::resolve_threads(threads), stop);
+    }
+    return py::make_tuple(prim, u, v);
+}
+
+}  // namespace
+
+void bind_rays(py::module_& m) {
+    py::class_<voxgi::RayScene, std::shared_ptr<voxgi::RayScene>>(
+        m, "RayScene",
+        "Embree 4 scene of a triangle soup, queried from C++ threads (GIL released).")
+        .def(py::init([](const std::string& library, const F32& tris) {
+                 if (tris.ndim() != 3 || tris.shape(1) != 3 || tris.shape(2) != 3)
+                     throw py::value_error("tris must have shape (F, 3, 3)");
+                 const float* pt = tris.data();
+                 for (py::ssize_t i = 0; i < tris.size(); ++i)
+                     if (!std::isfinite(pt[i]))
+                         throw py::value_error("tris: corner coordinates must be finite");
+                 return std::make_shared<voxgi::RayScene>(library, pt, tris.shape(0));
+             }),
+             "library"_a, "tris"_a,
+             "Build the scene from (F, 3, 3) float32 corners with the Embree at `library`.")
+        .def_property_readonly("triangle_count", &voxgi::RayScene::triangle_count)
+        .def("occluded", &occluded_py, "org"_a, "dirs"_a, "length"_a, "threads"_a = 0,
+             "(R,) uint8: 1 where a triangle lies on [org, org + length * dirs).")
+        .def("intersect", &intersect_py, "org"_a, "dirs"_a, "uv"_a = false, "threads"_a = 0,
+             "First triangle each ray meets (int32, -1: none) and, with uv, its float32 "
+             "barycentrics u, v (empty arrays otherwise).");
+}

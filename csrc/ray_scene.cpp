@@ -1,0 +1,215 @@
+#include "ray_scene.h"
+
+#include <dlfcn.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <map>
+#include <mutex>
+#include <stdexcept>
+
+namespace voxgi {
+
+namespace {
+
+// The few parts of Embree 4's C interface used here, declared from its
+// documented ABI; the values are those of rtcore_*.h.
+constexpr unsigned kInvalidId = ~0u;
+constexpr int kGeometryTriangle = 0;
+constexpr int kBufferIndex = 0;
+constexpr int kBufferVertex = 1;
+constexpr int kFormatUint3 = 0x5003;
+constexpr int kFormatFloat3 = 0x9003;
+constexpr int kSceneFlagRobust = 1 << 2;
+
+struct alignas(16) Ray {
+    float org_x, org_y, org_z, tnear;
+    float dir_x, dir_y, dir_z, time;
+    float tfar;
+    unsigned mask, id, flags;
+};
+
+struct alignas(16) Hit {
+    float ng_x, ng_y, ng_z, u, v;
+    unsigned prim_id, geom_id;
+    unsigned inst_id[1];
+};
+
+// A ray and its hit, with room after the hit for the per-instance-level
+// fields a build of Embree may append (more instance levels, instance
+// primitive ids): the library writes them, and they land here.
+struct alignas(16) RayHit {
+    Ray ray;
+    Hit hit;
+    unsigned char spare[64];
+};
+
+Ray make_ray(const float o[3], const float d[3], float tfar) {
+    Ray r;
+    r.org_x = o[0];
+    r.org_y = o[1];
+    r.org_z = o[2];
+    r.tnear = 0.0f;
+    r.dir_x = d[0];
+    r.dir_y = d[1];
+    r.dir_z = d[2];
+    r.time = 0.0f;
+    r.tfar = tfar;
+    r.mask = ~0u;
+    r.id = 0;
+    r.flags = 0;
+    return r;
+}
+
+}  // namespace
+
+struct EmbreeApi {
+    void* (*new_device)(const char*);
+    void (*release_device)(void*);
+    int (*get_device_error)(void*);
+    void* (*new_scene)(void*);
+    void (*release_scene)(void*);
+    void (*set_scene_flags)(void*, int);
+    void (*commit_scene)(void*);
+    void* (*new_geometry)(void*, int);
+    void* (*set_new_geometry_buffer)(void*, int, unsigned, int, size_t, size_t);
+    void (*commit_geometry)(void*);
+    unsigned (*attach_geometry)(void*, void*);
+    void (*release_geometry)(void*);
+    void (*intersect1)(void*, RayHit*, void*);
+    void (*occluded1)(void*, Ray*, void*);
+};
+
+namespace {
+
+template <class F>
+void bind(void* lib, const std::string& path, const char* name, F& fn) {
+    void* sym = dlsym(lib, name);
+    if (sym == nullptr)
+        throw std::runtime_error(path + " has no symbol " + name + ": not an Embree 4 library");
+    fn = reinterpret_cast<F>(sym);
+}
+
+// Opened once per path and kept for the life of the process: scenes made
+// from it may outlive any one Python object.
+const EmbreeApi* load_embree(const std::string& path) {
+    static std::mutex mutex;
+    static std::map<std::string, EmbreeApi> loaded;
+    std::lock_guard<std::mutex> lock(mutex);
+    auto it = loaded.find(path);
+    if (it != loaded.end()) return &it->second;
+    void* lib = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
+    if (lib == nullptr) {
+        const char* why = dlerror();
+        throw std::runtime_error("cannot open the Embree library " + path + ": " +
+                                 (why ? why : "unknown error"));
+    }
+    EmbreeApi api{};
+    bind(lib, path, "rtcNewDevice", api.new_device);
+    bind(lib, path, "rtcReleaseDevice", api.release_device);
+    bind(lib, path, "rtcGetDeviceError", api.get_device_error);
+    bind(lib, path, "rtcNewScene", api.new_scene);
+    bind(lib, path, "rtcReleaseScene", api.release_scene);
+    bind(lib, path, "rtcSetSceneFlags", api.set_scene_flags);
+    bind(lib, path, "rtcCommitScene", api.commit_scene);
+    bind(lib, path, "rtcNewGeometry", api.new_geometry);
+    bind(lib, path, "rtcSetNewGeometryBuffer", api.set_new_geometry_buffer);
+    bind(lib, path, "rtcCommitGeometry", api.commit_geometry);
+    bind(lib, path, "rtcAttachGeometry", api.attach_geometry);
+    bind(lib, path, "rtcReleaseGeometry", api.release_geometry);
+    bind(lib, path, "rtcIntersect1", api.intersect1);
+    bind(lib, path, "rtcOccluded1", api.occluded1);
+    return &loaded.emplace(path, api).first->second;
+}
+
+constexpr int64_t kBatch = 4096;  // rays per task of a batch query
+
+}  // namespace
+
+RayScene::RayScene(const std::string& library, const float* tris, int64_t n_tris)
+    : api_(load_embree(library)), n_tris_(n_tris) {
+    if (n_tris < 0 || n_tris >= static_cast<int64_t>(kInvalidId) / 3)
+        throw std::invalid_argument("RayScene: triangle count out of range");
+    device_ = api_->new_device(nullptr);
+    if (device_ == nullptr) throw std::runtime_error("Embree could not create a device");
+    scene_ = api_->new_scene(device_);
+    api_->set_scene_flags(scene_, kSceneFlagRobust);
+    if (n_tris > 0) {
+        void* geom = api_->new_geometry(device_, kGeometryTriangle);
+        auto* v = static_cast<float*>(api_->set_new_geometry_buffer(
+            geom, kBufferVertex, 0, kFormatFloat3, 3 * sizeof(float), 3 * n_tris));
+        auto* idx = static_cast<unsigned*>(api_->set_new_geometry_buffer(
+            geom, kBufferIndex, 0, kFormatUint3, 3 * sizeof(unsigned), n_tris));
+        if (v == nullptr || idx == nullptr) {
+            api_->release_geometry(geom);
+            api_->release_scene(scene_);
+            api_->release_device(device_);
+            throw std::runtime_error("Embree could not allocate " + std::to_string(n_tris) +
+                                     " triangles");
+        }
+        std::memcpy(v, tris, sizeof(float) * 9 * n_tris);
+        for (int64_t i = 0; i < 3 * n_tris; ++i) idx[i] = static_cast<unsigned>(i);
+        api_->commit_geometry(geom);
+        api_->attach_geometry(scene_, geom);
+        api_->release_geometry(geom);
+    }
+    api_->commit_scene(scene_);
+    if (int err = api_->get_device_error(device_); err != 0) {
+        api_->release_scene(scene_);
+        api_->release_device(device_);
+        throw std::runtime_error("Embree failed to build the scene (error " + std::to_string(err) +
+                                 ")");
+    }
+}
+
+RayScene::~RayScene() {
+    if (scene_) api_->release_scene(scene_);
+    if (device_) api_->release_device(device_);
+}
+
+bool RayScene::occluded(const float org[3], const float dir[3], float tfar) const {
+    if (!(tfar > 0.0f)) return false;  // an empty segment (or NaN) meets nothing
+    Ray r = make_ray(org, dir, tfar);
+    api_->occluded1(scene_, &r, nullptr);
+    return r.tfar < 0.0f;  // -inf when something was found
+}
+
+int32_t RayScene::intersect(const float org[3], const float dir[3], float* u, float* v,
+                            float* t) const {
+    RayHit rh;
+    rh.ray = make_ray(org, dir, std::numeric_limits<float>::infinity());
+    rh.hit.geom_id = kInvalidId;
+    rh.hit.prim_id = kInvalidId;
+    rh.hit.inst_id[0] = kInvalidId;
+    api_->intersect1(scene_, &rh, nullptr);
+    const bool hit = rh.hit.geom_id != kInvalidId;
+    if (u) *u = hit ? rh.hit.u : 0.0f;
+    if (v) *v = hit ? rh.hit.v : 0.0f;
+    if (t) *t = hit ? rh.ray.tfar : std::numeric_limits<float>::infinity();
+    return hit ? static_cast<int32_t>(rh.hit.prim_id) : -1;
+}
+
+void RayScene::occluded(const float* org, const float* dir, const float* tfar, int64_t n,
+                        uint8_t* out, int threads, const StopCheck& stop) const {
+    const int64_t tasks = (n + kBatch - 1) / kBatch;
+    parallel_for(tasks, threads, stop, [&](int64_t task, int) {
+        const int64_t end = std::min(n, (task + 1) * kBatch);
+        for (int64_t i = task * kBatch; i < end; ++i)
+            out[i] = occluded(org + 3 * i, dir + 3 * i, tfar[i]) ? 1 : 0;
+    });
+}
+
+void RayScene::intersect(const float* org, const float* dir, int64_t n, int32_t* prim, float* u,
+                         float* v, int threads, const StopCheck& stop) const {
+    const int64_t tasks = (n + kBatch - 1) / kBatch;
+    parallel_for(tasks, threads, stop, [&](int64_t task, int) {
+        const int64_t end = std::min(n, (task + 1) * kBatch);
+        for (int64_t i = task * kBatch; i < end; ++i)
+            prim[i] = intersect(org + 3 * i, dir + 3 * i, u ? u + i : nullptr, v ? v + i : nullptr,
+                                nullptr);
+    });
+}
+
+}  // namespace voxgi

@@ -1,0 +1,130 @@
+"""Embree ray queries (voxgi.rays): the compiled scene and embreex's calls."""
+
+from __future__ import annotations
+
+import ctypes.util
+
+import numpy as np
+import pytest
+
+import voxgi
+from voxgi import _core
+from voxgi.rays import Tracer, embree_library
+
+needs_native = pytest.mark.skipif(
+    embree_library() is None, reason="no Embree 4 library found beside embreex"
+)
+
+
+def unit_square_scene() -> voxgi.Scene:
+    """Two triangles covering [0, 1]² at z = 0: (0,0,0)-(1,0,0)-(1,1,0) and
+    (0,0,0)-(1,1,0)-(0,1,0)."""
+    import trimesh
+
+    sq = trimesh.Trimesh(
+        vertices=[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],
+        faces=[[0, 1, 2], [0, 2, 3]],
+        process=False,
+    )
+    scene = voxgi.Scene()
+    scene.add(sq, voxgi.Material(albedo=0.5), name="square")
+    return scene
+
+
+@pytest.fixture(params=[True, False], ids=["native", "embreex"])
+def native(request):
+    if request.param and embree_library() is None:
+        pytest.skip("no Embree 4 library found beside embreex")
+    return request.param
+
+
+def test_rays_down_onto_a_square_hit_the_right_triangle_at_the_right_point(native):
+    scene = unit_square_scene()
+    with Tracer(scene, 2, native=native) as tr:
+        assert (tr.native is not None) == native
+        rng = np.random.default_rng(1)
+        xy = rng.uniform(0.02, 0.98, (5000, 2))
+        xy = xy[np.abs(xy[:, 0] - xy[:, 1]) > 1e-3]  # off the shared diagonal
+        world = np.column_stack([xy, np.full(len(xy), 1.0)])
+        org = (world - tr.centre).astype(np.float32)
+        down = np.tile(np.float32([0, 0, -1]), (len(org), 1))
+        prim, u, v = tr.first_hit(org, down)
+        # below the diagonal x > y lies triangle 0, above it triangle 1
+        np.testing.assert_array_equal(prim, np.where(xy[:, 0] > xy[:, 1], 0, 1))
+        # barycentrics of corners (v0, v1, v2): point = v0 + u (v1 - v0) + v (v2 - v0)
+        t0 = prim == 0
+        np.testing.assert_allclose(u[t0], xy[t0, 0] - xy[t0, 1], atol=2e-6)
+        np.testing.assert_allclose(v[t0], xy[t0, 1], atol=2e-6)
+        np.testing.assert_allclose(u[~t0], xy[~t0, 0], atol=2e-6)
+        np.testing.assert_allclose(v[~t0], xy[~t0, 1] - xy[~t0, 0], atol=2e-6)
+        np.testing.assert_array_equal(tr.intersect(org, down), prim)
+        # the square lies 1 below: a segment of 0.99 misses it, one of 1.01 does not
+        short = np.full(len(org), 0.99, np.float32)
+        assert not np.any(tr.occluded(org, down, short) != -1)
+        assert np.all(tr.occluded(org, down, short + 0.02) != -1)
+        # upward rays meet nothing
+        up = -down
+        assert np.all(tr.intersect(org, up) == -1)
+        assert np.all(tr.occluded(org, up, np.full(len(org), np.inf, np.float32)) == -1)
+
+
+@needs_native
+def test_the_compiled_scene_answers_as_embreex_does():
+    scene = voxgi.scenes.cornell_box()
+    rng = np.random.default_rng(0)
+    n = 20000
+    ext = np.ptp(scene.bounds, axis=0)
+    org = (rng.uniform(-0.45, 0.45, (n, 3)) * ext).astype(np.float32)
+    d = rng.normal(size=(n, 3))
+    d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+    length = rng.uniform(0.0, 0.6 * ext.max(), n).astype(np.float32)
+    answers = []
+    for native, threads in ((False, 1), (True, 1), (True, 2)):
+        with Tracer(scene, threads, native=native) as tr:
+            answers.append((tr.occluded(org, d, length), *tr.first_hit(org, d)))
+    # a mixture of hits and misses, of blocked and free segments
+    assert 0.3 < np.mean(answers[0][1] >= 0) < 1.0
+    assert 0.1 < np.mean(answers[0][0] != -1) < 0.9
+    for other in answers[1:]:
+        for a, b in zip(answers[0], other, strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
+@needs_native
+def test_an_empty_or_degenerate_query_meets_nothing():
+    tris = np.zeros((0, 3, 3), np.float32)
+    s = _core.RayScene(embree_library(), tris)
+    org = np.zeros((3, 3), np.float32)
+    d = np.tile(np.float32([0, 0, 1]), (3, 1))
+    assert s.triangle_count == 0
+    assert np.all(s.intersect(org, d)[0] == -1)
+    assert np.all(s.occluded(org, d, np.ones(3, np.float32)) == 0)
+    # a triangle straight ahead, but a segment of zero or NaN length
+    tri = np.array([[[-1, -1, 1], [1, -1, 1], [0, 1, 1]]], np.float32)
+    s = _core.RayScene(embree_library(), tri)
+    length = np.array([0.0, np.nan, 2.0], np.float32)
+    np.testing.assert_array_equal(s.occluded(org, d, length), [0, 0, 1])
+
+
+@needs_native
+def test_bad_libraries_and_arrays_are_named():
+    tri = np.zeros((1, 3, 3), np.float32)
+    with pytest.raises(RuntimeError, match="cannot open the Embree library /no/such/libembree"):
+        _core.RayScene("/no/such/libembree4.so", tri)
+    libm = ctypes.util.find_library("m")
+    if libm is not None:
+        with pytest.raises(RuntimeError, match="has no symbol rtcNewDevice"):
+            _core.RayScene(libm, tri)
+    with pytest.raises(ValueError, match="tris must have shape"):
+        _core.RayScene(embree_library(), np.zeros((2, 9), np.float32))
+    bad = tri.copy()
+    bad[0, 1, 2] = np.inf
+    with pytest.raises(ValueError, match="finite"):
+        _core.RayScene(embree_library(), bad)
+    s = _core.RayScene(embree_library(), tri)
+    with pytest.raises(ValueError, match="dirs must have shape"):
+        s.intersect(np.zeros((4, 3), np.float32), np.zeros((3, 3), np.float32))
+    with pytest.raises(ValueError, match="length must have shape"):
+        s.occluded(
+            np.zeros((4, 3), np.float32), np.zeros((4, 3), np.float32), np.zeros(3, np.float32)
+        )
