@@ -1052,7 +1052,7 @@ class RenderTuning:
 
     min_frames: int = 4
     emitter_share: float | None = None
-    gather: int = 4
+    gather: int = 8
     vpl_pdf: str = "power"
     vpl_on_surface: bool = True
     pixel_factor: float = PIXEL_FACTOR
