@@ -229,13 +229,15 @@ def direct_light() -> list[str]:
     if f is not None:
         rows = [
             [
-                m,
+                m
+                if f[m].get("computed_by", m) == m
+                else f"{m} (computed by {f[m]['computed_by']})",
                 secs(f[m]["solve_seconds"]),
                 secs(f[m]["direct_seconds"]),
                 pct(f[m]["mean_error"]),
                 pct(f[m]["max_error"]),
             ]
-            for m in ("exact", "shoot")
+            for m in f.get("runs", ("exact", "shoot"))
         ]
         out += [
             f"**{f['scene']}**, resolution {f['resolution']} ({f['records']:,} records), "

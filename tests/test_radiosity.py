@@ -58,7 +58,35 @@ def test_furnace_sphere(sphere32, rho):
     assert 0 < st["lost_fraction"] < 1e-3
     assert st["rays"] == st["shoot_rays"] + st["gather_rays"]
     assert st["gather_rays"] == len(vox) * 381 * sol.bounces  # R = 8: 381 families
-    assert set(st["seconds"]) >= {"shoot", "gather", "total"}
+    # every record emits: one gathering pass gives the direct light
+    assert st["direct_light"]["method"] == "gather"
+    assert st["shoot_rays"] == len(vox) * 381
+    assert set(st["seconds"]) >= {"direct", "gather", "total"}
+
+
+def test_gathering_the_emitters_gives_the_shot_direct_light(sphere32, monkeypatch):
+    # Shooting and gathering pair the same records on the same lines: with one
+    # direction set the gathered direct light is the shot one. Emitting
+    # furnace (sphere records, no objects), and the cap alone emitting.
+    for emit in (None, _cap(sphere32)):
+        vox = voxelset(sphere32, albedo=0.6, emit_mask=emit)
+        kw = dict(directions=6, progress=False, tol=1e-7, tuning=SolveTuning(shoot_directions=6))
+        gathered = voxgi.solve(vox, **kw)
+        assert gathered.stats["direct_light"]["method"] == "gather"
+        assert "shooting" in gathered.stats["skipped"]
+        with monkeypatch.context() as m:
+            m.setattr(voxgi.radiosity, "_gathering_is_cheaper", lambda p: None)
+            shot = voxgi.solve(vox, **kw)
+        assert shot.stats["direct_light"]["method"] == "shoot"
+        np.testing.assert_allclose(gathered.radiosity, shot.radiosity, rtol=1e-5, atol=1e-7)
+        e_g, e_s = gathered.stats["energy"], shot.stats["energy"]
+        np.testing.assert_allclose(e_g["absorbed"], e_s["absorbed"], rtol=1e-6)
+    # a different shooting radius, or a flat lamp, keeps the shooting
+    other = voxgi.solve(vox, directions=6, progress=False, tuning=SolveTuning(shoot_directions=7))
+    assert other.stats["direct_light"]["method"] == "shoot"
+    box = voxgi.voxelize(voxgi.scenes.cornell_box(), resolution=24, progress=False)
+    lamp = voxgi.solve(box, directions=6, progress=False, tuning=SolveTuning(shoot_directions=6))
+    assert lamp.stats["direct_light"]["method"] == "shoot"
 
 
 def test_cap_sphere_and_acceleration(sphere32):
@@ -511,6 +539,7 @@ class _PoisonedExecutor:
 
 
 def test_non_finite_iteration_stops_with_the_last_finite_iterate(sphere32):
+    # the cap's direct light is one gathering pass, then three clean bounces
     vox = voxelset(sphere32, albedo=0.9, emit_mask=_cap(sphere32))
     kw = dict(
         directions=4,
@@ -520,7 +549,7 @@ def test_non_finite_iteration_stops_with_the_last_finite_iterate(sphere32):
     )
     clean = voxgi.radiosity.solve(vox, max_bounces=3, **kw)
     with pytest.warns(RuntimeWarning, match="not finite.*last finite iterate"):
-        sol = voxgi.radiosity.solve(vox, executor=_PoisonedExecutor(at=4), **kw)
+        sol = voxgi.radiosity.solve(vox, executor=_PoisonedExecutor(at=5), **kw)
     assert np.all(np.isfinite(sol.radiosity))
     assert sol.bounces == 3
     np.testing.assert_array_equal(sol.radiosity, clean.radiosity)

@@ -500,7 +500,9 @@ class SolveTuning:
     direct_light : {"shoot", "exact"}
         How the records get their direct light (``docs/design.md`` §5):
         ``"shoot"`` marches discrete rays from every emitter record (the
-        paper's method; cost emitter records x directions x path length);
+        paper's method; cost emitter records x directions x path length;
+        where it would give the same answer for more, one gathering pass
+        over the emitters stands in, and ``stats["skipped"]`` says so);
         ``"exact"`` traces shadow rays from every record to points on the
         emitting triangles (:func:`voxgi.direct.direct_irradiance`; cost
         records x samples; needs ``vox.scene``, else the solve shoots and
@@ -1064,7 +1066,56 @@ def _direct_light(p: _Problem):
         p.stats["skipped"]["exact_direct_light"] = (
             "the records carry no scene (vox.scene is None): shot along the lines instead"
         )
+    why = _gathering_is_cheaper(p)
+    if why is not None:
+        p.stats["skipped"]["shooting"] = why
+        return _gathered_direct_light(p)
     return _shot_direct_light(p)
+
+
+def _gathering_is_cheaper(p: _Problem) -> str | None:
+    """Why one gathering pass over the emitters' radiosity gives the shot
+    direct light for less (``docs/design.md`` §5), or None where it does not.
+
+    Shooting and gathering pair the same records on the same lines, so with
+    one direction set for both they exchange the same light; only the
+    coverage of flat emitters and the silhouettes of objects that do not
+    emit are the shooting's own, so the pass stands in where every object
+    emits and none is flat (furnaces, glowing solids). A shot ray marches about half the
+    grid's extent, a gathering pass visits every record once per direction:
+    with more emitter records x path than records, the pass is cheaper."""
+    if p.opt.Rs != p.opt.R:
+        return None
+    es = np.flatnonzero(np.any(p.twins.send(p.E) > 0, axis=1))
+    if len(es) == 0 or _flat_emitter_coverage(p.a, p.vox, es)[1]:
+        return None
+    obj = getattr(p.vox, "object_id", None)
+    if obj is not None and not np.all(np.isin(obj, obj[es])):
+        return None  # a silhouette of an object that does not emit may pass light
+    ijk = p.a["ijk"]
+    path = 0.5 * float(np.mean(ijk.max(axis=0) - ijk.min(axis=0) + 1))
+    if len(es) * path <= p.n:
+        return None
+    return (
+        f"{len(es)} emitter records x ~{path:.0f} voxels of path outweigh {p.n} records: "
+        "the same light gathered in one pass over the shooting's direction set"
+    )
+
+
+def _gathered_direct_light(p: _Problem):
+    """The shot direct light by one gathering pass of the emitters'
+    radiosity (``_gathering_is_cheaper``); what the records do not receive of
+    the emitted power escapes."""
+    p.stats["direct_light"] = {"method": "gather"}
+    t = time.perf_counter()
+    # the shooting's direction set is the gathering's: its pass may record
+    # the pairs that the bounces then replay
+    fams = np.arange(len(p.gds.families), dtype=np.int64)
+    sums, _, _ = _gatherer(p)(p.gds, p.twins.send(p.E), fams, False, defer_vis=False)
+    Hd = sums / p.S["gather"][:, None]
+    p.seconds["direct"] = time.perf_counter() - t
+    escape = (p.E * p.area[:, None]).sum(axis=0) - (Hd * p.area[:, None]).sum(axis=0)
+    return Hd, escape, p.n * len(fams)
 
 
 def _exact_direct_light(p: _Problem):
