@@ -2,6 +2,7 @@
 #include <pybind11/stl.h>
 
 #include <limits>
+#include <optional>
 
 #include "bind_common.h"
 #include "vpl_shade.h"
@@ -320,9 +321,69 @@ auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I3
     }
 }
 
+py::tuple primary_hits_py(const F64& org, const F64& dirs, const I32& prim, const F64& tri_v,
+                          const F64& tri_ng, const std::optional<F64>& corner_normals,
+                          const I32& tri_object, const U8& obj_two_sided, const F32& obj_emission,
+                          int threads) {
+    check_2d(org, -1, 3, "org");
+    const py::ssize_t P = org.shape(0);
+    check_2d(dirs, P, 3, "dirs");
+    check_1d(prim, P, "prim");
+    if (tri_v.ndim() != 3 || tri_v.shape(1) != 3 || tri_v.shape(2) != 3)
+        throw py::value_error("tri_v must have shape (F, 3, 3)");
+    const py::ssize_t F = tri_v.shape(0);
+    check_2d(tri_ng, F, 3, "tri_ng");
+    if (corner_normals && (corner_normals->ndim() != 3 || corner_normals->shape(0) != F ||
+                           corner_normals->shape(1) != 3 || corner_normals->shape(2) != 3))
+        throw py::value_error("corner_normals must have shape (F, 3, 3) like tri_v");
+    check_1d(tri_object, F, "tri_object");
+    check_2d(obj_emission, -1, 3, "obj_emission");
+    const py::ssize_t O = obj_emission.shape(0);
+    check_1d(obj_two_sided, O, "obj_two_sided");
+    const int32_t* pp = prim.data();
+    for (py::ssize_t i = 0; i < P; ++i)
+        if (pp[i] >= F)
+            throw py::value_error("prim: triangle " + std::to_string(pp[i]) + " out of range (" +
+                                  std::to_string(F) + " triangles)");
+    const int32_t* po = tri_object.data();
+    for (py::ssize_t i = 0; i < F; ++i)
+        if (po[i] < 0 || po[i] >= O)
+            throw py::value_error("tri_object: object " + std::to_string(po[i]) +
+                                  " out of range (" + std::to_string(O) + " objects)");
+    voxgi::PrimaryScene sc;
+    sc.v = tri_v.data();
+    sc.ng = tri_ng.data();
+    sc.corner_normals = corner_normals ? corner_normals->data() : nullptr;
+    sc.object = po;
+    sc.two_sided = obj_two_sided.data();
+    sc.emission = obj_emission.data();
+    F64 pos({P, py::ssize_t(3)});
+    F32 normal({P, py::ssize_t(3)}), ng({P, py::ssize_t(3)}), le({P, py::ssize_t(3)});
+    I32 material(P);
+    const double *o = org.data(), *d = dirs.data();
+    double* ppos = pos.mutable_data();
+    float *pn = normal.mutable_data(), *pg = ng.mutable_data(), *pl = le.mutable_data();
+    int32_t* pm = material.mutable_data();
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::primary_hits(P, o, d, pp, sc, ppos, pn, pg, pm, pl, threads, stop);
+    }
+    return py::make_tuple(pos, normal, ng, material, le);
+}
+
 }  // namespace
 
 void bind_display(py::module_& m) {
+    m.def("primary_hits", &primary_hits_py, "org"_a.noconvert(), "dirs"_a.noconvert(),
+          "prim"_a.noconvert(), "tri_v"_a.noconvert(), "tri_ng"_a.noconvert(),
+          "corner_normals"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),
+          "obj_emission"_a.noconvert(), "threads"_a = 0,
+          R"doc(Primary hits of camera rays (prim: first triangle, -1 none): the exact
+point on the hit triangle's plane (P, 3) float64, the shading and geometric
+normals turned to the viewer (P, 3) float32, the material (P,) int32 (-1: a
+miss or a one-sided back) and its emission (P, 3) float32.)doc");
+
     m.def("vpl_prepare", &vpl_prepare_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
           "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
           "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),

@@ -338,6 +338,69 @@ void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
     });
 }
 
+void primary_hits(int64_t P, const double* org, const double* dir, const int32_t* prim,
+                  const PrimaryScene& scene, double* pos, float* normal, float* ng,
+                  int32_t* material, float* emission, int threads, const StopCheck& stop) {
+    for_each_pixel(P, threads, stop, [&](int64_t p) {
+        double* x = pos + 3 * p;
+        float *ns_out = normal + 3 * p, *ng_out = ng + 3 * p, *le = emission + 3 * p;
+        for (int c = 0; c < 3; ++c) x[c] = 0.0, ns_out[c] = ng_out[c] = le[c] = 0.f;
+        material[p] = -1;
+        const int32_t t = prim[p];
+        if (t < 0) return;
+        const double *o = org + 3 * p, *d = dir + 3 * p;
+        const double* g = scene.ng + 3 * int64_t(t);
+        const double* v0 = scene.v + 9 * int64_t(t);
+        // The exact point on the triangle's plane: Embree's distance is float32.
+        const double dn = d[0] * g[0] + d[1] * g[1] + d[2] * g[2];
+        double tt = ((v0[0] - o[0]) * g[0] + (v0[1] - o[1]) * g[1] + (v0[2] - o[2]) * g[2]) / dn;
+        if (!std::isfinite(tt)) tt = 0.0;
+        for (int c = 0; c < 3; ++c) x[c] = o[c] + tt * d[c];
+        const bool front = dn < 0.0;
+        const double sgn = front ? 1.0 : -1.0;
+        double n[3] = {g[0] * sgn, g[1] * sgn, g[2] * sgn};
+        for (int c = 0; c < 3; ++c) ng_out[c] = float(n[c]);
+        if (scene.corner_normals) {
+            // Barycentric weights of x, interpolating the corner normals.
+            const double *v1 = v0 + 3, *v2 = v0 + 6;
+            const double e1[3] = {v1[0] - v0[0], v1[1] - v0[1], v1[2] - v0[2]};
+            const double e2[3] = {v2[0] - v0[0], v2[1] - v0[1], v2[2] - v0[2]};
+            const double q[3] = {x[0] - v0[0], x[1] - v0[1], x[2] - v0[2]};
+            auto cross = [](const double* a, const double* b, double* r) {
+                r[0] = a[1] * b[2] - a[2] * b[1];
+                r[1] = a[2] * b[0] - a[0] * b[2];
+                r[2] = a[0] * b[1] - a[1] * b[0];
+            };
+            auto dot = [](const double* a, const double* b) {
+                return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+            };
+            double nr[3], c1[3], c2[3];
+            cross(e1, e2, nr);
+            cross(q, e2, c1);
+            cross(e1, q, c2);
+            const double a2 = dot(nr, nr);
+            const double b1 = dot(c1, nr) / a2, b2 = dot(c2, nr) / a2, b0 = 1.0 - b1 - b2;
+            const double* vn = scene.corner_normals + 9 * int64_t(t);
+            double s[3], len2 = 0.0;
+            for (int c = 0; c < 3; ++c) {
+                s[c] = (b0 * vn[c] + b1 * vn[3 + c] + b2 * vn[6 + c]) * sgn;
+                len2 += s[c] * s[c];
+            }
+            const double len = std::max(std::sqrt(len2), 1e-300);
+            for (int c = 0; c < 3; ++c) s[c] /= len;
+            // an interpolated normal behind the surface falls back to the winding one
+            if (dot(s, n) > 0.0)
+                for (int c = 0; c < 3; ++c) n[c] = s[c];
+        }
+        for (int c = 0; c < 3; ++c) ns_out[c] = float(n[c]);
+        const int32_t obj = scene.object[t];
+        if (front || scene.two_sided[obj]) {
+            material[p] = obj;
+            for (int c = 0; c < 3; ++c) le[c] = scene.emission[3 * obj + c];
+        }
+    });
+}
+
 void vpl_accumulate(int64_t n_pixels, const int64_t* ray_count, const float* ray_contrib,
                     const uint8_t* occluded, float* out, int threads, const StopCheck& stop) {
     const std::vector<int64_t> offset = ray_offsets(ray_count, n_pixels);

@@ -134,6 +134,25 @@ void light_accumulate(const ShadeHits& hits, const ShadeMaterials& mats, const i
                       const float* ray_dir, const float* ray_weight, const uint8_t* occluded,
                       float* out, int threads, const StopCheck& stop);
 
+// Primary hits of one frame's camera rays (P rays, `prim` (P,) the first
+// triangle hit, -1: none; origins and unit directions in double). Writes per
+// ray the exact point on the hit triangle's plane (`pos`), the shading normal
+// (corner normals interpolated where `corner_normals` is given, else the
+// winding normal) and the geometric normal, both turned to the viewer's side,
+// and the material (the hit object; -1 for a miss or the black back of a
+// one-sided surface) with its emission. Misses leave zeros.
+struct PrimaryScene {
+    const double* v = nullptr;               // (F, 3, 3) triangle corners
+    const double* ng = nullptr;              // (F, 3) unit winding normals
+    const double* corner_normals = nullptr;  // (F, 3, 3) unit, or null
+    const int32_t* object = nullptr;         // (F,)
+    const uint8_t* two_sided = nullptr;      // (O,)
+    const float* emission = nullptr;         // (O, 3)
+};
+void primary_hits(int64_t P, const double* org, const double* dir, const int32_t* prim,
+                  const PrimaryScene& scene, double* pos, float* normal, float* ng,
+                  int32_t* material, float* emission, int threads, const StopCheck& stop);
+
 // Index of the record that stands for the surface point y on object `obj`
 // seen from the side of normal n, or -1.
 int64_t lookup_record(const RecordGrid& grid, const double y[3], const float n[3], int32_t obj);

@@ -317,3 +317,80 @@ def test_fuzz_prepare(p, k, mat, dt, cols):
     assert count.sum() == len(org)
     assert np.all(np.isfinite(contrib))
     assert np.all(contrib >= 0)
+
+
+def _primary_hits_reference(org, d, prim, v, vn, obj, two_sided, emission):
+    """The primary hits written out in numpy, one formula per line."""
+    P = len(prim)
+    pos = np.zeros((P, 3))
+    ns_out = np.zeros((P, 3), np.float32)
+    ng_out = np.zeros((P, 3), np.float32)
+    mat = np.full(P, -1, np.int32)
+    le = np.zeros((P, 3), np.float32)
+    for p in np.flatnonzero(prim >= 0):
+        t = prim[p]
+        v0, v1, v2 = v[t]
+        nraw = np.cross(v1 - v0, v2 - v0)
+        ng = nraw / np.linalg.norm(nraw)
+        dn = d[p] @ ng
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (v0 - org[p]) @ ng / dn
+        s = s if np.isfinite(s) else 0.0
+        x = org[p] + s * d[p]
+        sgn = 1.0 if dn < 0 else -1.0
+        n = ng * sgn
+        if vn is not None:
+            a2 = nraw @ nraw
+            b1 = np.cross(x - v0, v2 - v0) @ nraw / a2
+            b2 = np.cross(v1 - v0, x - v0) @ nraw / a2
+            sm = ((1 - b1 - b2) * vn[t, 0] + b1 * vn[t, 1] + b2 * vn[t, 2]) * sgn
+            sm /= max(np.linalg.norm(sm), 1e-300)
+            ns = sm if sm @ n > 0 else n
+        else:
+            ns = n
+        pos[p], ns_out[p], ng_out[p] = x, ns, n
+        if dn < 0 or two_sided[obj[t]]:
+            mat[p] = obj[t]
+            le[p] = emission[obj[t]]
+    return pos, ns_out, ng_out, mat, le
+
+
+@pytest.mark.parametrize("corner_normals", [False, True])
+def test_primary_hits_are_the_points_and_normals_of_the_hit_triangles(corner_normals):
+    rng = np.random.default_rng(3)
+    F, P = 40, 2000
+    v = rng.normal(size=(F, 3, 3))
+    e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    ng = np.cross(e1, e2)
+    ng /= np.linalg.norm(ng, axis=1, keepdims=True)
+    vn = None
+    if corner_normals:
+        # near the winding normal, either way round, some of them behind it
+        vn = ng[:, None, :] * rng.choice([-1.0, 1.0], (F, 1, 1)) + 0.4 * rng.normal(size=(F, 3, 3))
+        vn /= np.linalg.norm(vn, axis=2, keepdims=True)
+    obj = rng.integers(0, 3, F).astype(np.int32)
+    two_sided = np.array([0, 1, 0], np.uint8)
+    emission = np.array([[0, 0, 0], [1, 2, 3], [4, 5, 6]], np.float32)
+    prim = rng.integers(-1, F, P).astype(np.int32)
+    # rays from random points towards a point inside their triangle, one parallel to it
+    b = rng.dirichlet([1, 1, 1], P)
+    target = np.einsum("pk,pkc->pc", b, v[np.maximum(prim, 0)])
+    org = target + rng.normal(size=(P, 3))
+    d = target - org
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[0] = e1[max(prim[0], 0)] / np.linalg.norm(e1[max(prim[0], 0)])
+    got = _core.primary_hits(org, d, prim, v, ng, vn, obj, two_sided, emission, threads=2)
+    want = _primary_hits_reference(org, d, prim, v, vn, obj, two_sided, emission)
+    # ray 0 runs along its triangle's plane: any finite point will do
+    assert np.all(np.isfinite(got[0][0]))
+    np.testing.assert_allclose(got[0][1:], want[0][1:], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got[1], want[1], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got[2], want[2], rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(got[3], want[3])
+    np.testing.assert_array_equal(got[4], want[4])
+    hit = prim >= 0
+    # the points lie on their triangles (away from the parallel ray)
+    np.testing.assert_allclose(got[0][hit][1:], target[hit][1:], atol=1e-9)
+    assert 0 < np.mean(got[3] == -1) < 1
+    with pytest.raises(ValueError, match="prim: triangle 40 out of range"):
+        _core.primary_hits(org, d, np.full(P, F, np.int32), v, ng, vn, obj, two_sided, emission)

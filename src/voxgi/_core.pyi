@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'direct_light_rays', 'direct_light_sum', 'gather_families', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_prepare']
+__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'direct_light_rays', 'direct_light_sum', 'gather_families', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_prepare']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -191,6 +191,13 @@ def light_accumulate(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: n
     Light along known directions (delta lights, environment samples, escaped
     gather rays): adds f(wi, wo) max(0, n.wi) weight into out (P, 3) for each ray
     (pixel-major, ray_count (P,) int64) not occluded (uint8 (R,), or empty: none).
+    """
+def primary_hits(org: numpy.typing.NDArray[numpy.float64], dirs: numpy.typing.NDArray[numpy.float64], prim: numpy.typing.NDArray[numpy.int32], tri_v: numpy.typing.NDArray[numpy.float64], tri_ng: numpy.typing.NDArray[numpy.float64], corner_normals: numpy.typing.NDArray[numpy.float64] | None, tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], obj_emission: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+    """
+    Primary hits of camera rays (prim: first triangle, -1 none): the exact
+    point on the hit triangle's plane (P, 3) float64, the shading and geometric
+    normals turned to the viewer (P, 3) float32, the material (P,) int32 (-1: a
+    miss or a one-sided back) and its emission (P, 3) float32.
     """
 def shade_brdf(mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], material: numpy.typing.NDArray[numpy.int32], n: numpy.typing.NDArray[numpy.float32], k1: numpy.typing.NDArray[numpy.float32], k2: numpy.typing.NDArray[numpy.float32]) -> numpy.typing.NDArray[numpy.float32]:
     """

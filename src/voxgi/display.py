@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import Protocol
 
 import numpy as np
@@ -546,46 +546,11 @@ class _FrameShader:
         tr = self.tracer
         prim = tr.intersect(org.astype(np.float32), dirs.astype(np.float32))
         self.primary_rays += len(prim)
-        P = len(prim)
-        hit = np.flatnonzero(prim >= 0)
-        tri = prim[hit]
-        ng = tr.ng[tri]
-        o, d = org[hit], dirs[hit]
-        dn = np.einsum("ij,ij->i", d, ng)
-        # Exact point on the triangle's plane (Embree's t is float32).
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.einsum("ij,ij->i", tr.tris[tri, 0] - o, ng) / dn
-        t = np.where(np.isfinite(t), t, 0.0)
-        p = o + t[:, None] * d
-        front = dn < 0
-        obj = tr.obj[tri]
-        shaded = front | self.two_sided[obj]
-        sgn = np.where(front, 1.0, -1.0)[:, None]
-        ngf = ng * sgn
-        ns = ngf
-        if tr.vn is not None:
-            # Barycentric interpolation of the corner normals, flipped with ng.
-            v0, v1, v2 = tr.tris[tri, 0], tr.tris[tri, 1], tr.tris[tri, 2]
-            n_raw = np.cross(v1 - v0, v2 - v0)
-            a2 = np.einsum("ij,ij->i", n_raw, n_raw)
-            b1 = np.einsum("ij,ij->i", np.cross(p - v0, v2 - v0), n_raw) / a2
-            b2 = np.einsum("ij,ij->i", np.cross(v1 - v0, p - v0), n_raw) / a2
-            b0 = 1.0 - b1 - b2
-            vn = tr.vn[tri]
-            ns = (b0[:, None] * vn[:, 0] + b1[:, None] * vn[:, 1] + b2[:, None] * vn[:, 2]) * sgn
-            ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)
-            ns = np.where((np.einsum("ij,ij->i", ns, ngf) > 0)[:, None], ns, ngf)
-        mat = np.full(P, -1, np.int32)
-        mat[hit[shaded]] = obj[shaded]
-        le = np.zeros((P, 3), np.float32)
-        le[hit[shaded]] = self.mat_emission[obj[shaded]]
-        pos = np.zeros((P, 3))
-        pos[hit] = p
-        n_out = np.zeros((P, 3), np.float32)
-        n_out[hit] = ns
-        ng_out = np.zeros((P, 3), np.float32)
-        ng_out[hit] = ngf
-        wo = np.ascontiguousarray(-dirs, dtype=np.float32)
+        org = np.ascontiguousarray(org, dtype=np.float64)
+        dirs = np.ascontiguousarray(dirs, dtype=np.float64)
+        pos, n_out, ng_out, mat, le = _core.primary_hits(
+            org, dirs, prim, *self._primary_scene, threads=self.threads
+        )
         if self.env is not None:
             # camera rays that leave the scene see the environment
             miss = np.flatnonzero(prim < 0)
@@ -594,10 +559,23 @@ class _FrameShader:
             "pos": pos,
             "normal": n_out,
             "ng": ng_out,
-            "wo": wo,
+            "wo": np.ascontiguousarray(-dirs, dtype=np.float32),
             "material": mat,
             "emission": le,
         }
+
+    @cached_property
+    def _primary_scene(self) -> tuple:
+        """The triangle and object arrays of :func:`_core.primary_hits`."""
+        tr = self.tracer
+        return (
+            np.ascontiguousarray(tr.tris, dtype=np.float64),
+            np.ascontiguousarray(tr.ng, dtype=np.float64),
+            None if tr.vn is None else np.ascontiguousarray(tr.vn, dtype=np.float64),
+            np.ascontiguousarray(tr.obj, dtype=np.int32),
+            self.two_sided.astype(np.uint8),
+            np.ascontiguousarray(self.mat_emission, dtype=np.float32),
+        )
 
     def shade(self, h: dict, vpls: list | None) -> np.ndarray:
         """(P, 3) float32 radiance: emission seen + VPL estimate of the reflected
