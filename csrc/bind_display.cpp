@@ -62,6 +62,31 @@ voxgi::ShadeHits make_hits(const F64& hit_pos, const F32& hit_normal, const F32&
     return hits;
 }
 
+voxgi::ShadeVPLs make_vpls(const F64& vpl_pos, const F32& vpl_normal, const F32& vpl_weight,
+                           const F32& vpl_area, const F32& vpl_pa, double n_gather) {
+    check_2d(vpl_pos, -1, 3, "vpl_pos");
+    const py::ssize_t K = vpl_pos.shape(0);
+    check_2d(vpl_normal, K, 3, "vpl_normal");
+    check_2d(vpl_weight, K, 3, "vpl_weight");
+    check_1d(vpl_area, K, "vpl_area");
+    check_1d(vpl_pa, K, "vpl_pa");
+    const float* vp = vpl_pa.data();
+    for (py::ssize_t k = 0; k < K; ++k) {
+        if (!(vp[k] >= 0.f) || !std::isfinite(vp[k]))
+            throw py::value_error("vpl_pa must be finite and >= 0");
+        if (vp[k] > 0.f && !(n_gather > 0.0))
+            throw py::value_error("vpl_pa: MIS VPLs need n_gather > 0");
+    }
+    voxgi::ShadeVPLs vpls;
+    vpls.count = K;
+    vpls.pos = vpl_pos.data();
+    vpls.normal = vpl_normal.data();
+    vpls.weight = vpl_weight.data();
+    vpls.area = vpl_area.data();
+    vpls.pa = vpl_pa.data();
+    return vpls;
+}
+
 // ray_count (P,): each pixel's rays, non-negative and summing to all `rays`.
 void check_ray_counts(const I64& ray_count, py::ssize_t rays) {
     const int64_t* pc = ray_count.data();
@@ -84,23 +109,10 @@ auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
     const py::ssize_t P = hits.count;
-    check_2d(vpl_pos, -1, 3, "vpl_pos");
-    const py::ssize_t K = vpl_pos.shape(0);
-    check_2d(vpl_normal, K, 3, "vpl_normal");
-    check_2d(vpl_weight, K, 3, "vpl_weight");
-    check_1d(vpl_area, K, "vpl_area");
-    check_1d(vpl_pa, K, "vpl_pa");
     if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
     voxgi::ShadeMIS mis = make_mis(n_gather);
-    {
-        const float* vp = vpl_pa.data();
-        for (py::ssize_t k = 0; k < K; ++k) {
-            if (!(vp[k] >= 0.f) || !std::isfinite(vp[k]))
-                throw py::value_error("vpl_pa must be finite and >= 0");
-            if (vp[k] > 0.f && !(n_gather > 0.0))
-                throw py::value_error("vpl_pa: MIS VPLs need n_gather > 0");
-        }
-    }
+    voxgi::ShadeVPLs vpls = make_vpls(vpl_pos, vpl_normal, vpl_weight, vpl_area, vpl_pa, n_gather);
+    const py::ssize_t K = vpls.count;
     // Output buffers, reused across frames by the caller: room for P*K rays.
     check_1d(ray_count, P, "ray_count");
     check_2d(ray_org, -1, 3, "ray_org");
@@ -114,13 +126,6 @@ auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit
     if (!ray_count.writeable() || !ray_org.writeable() || !ray_dir.writeable() ||
         !ray_len.writeable() || !ray_contrib.writeable())
         throw py::value_error("ray buffers must be writeable");
-    voxgi::ShadeVPLs vpls;
-    vpls.count = K;
-    vpls.pos = vpl_pos.data();
-    vpls.normal = vpl_normal.data();
-    vpls.weight = vpl_weight.data();
-    vpls.area = vpl_area.data();
-    vpls.pa = vpl_pa.data();
     int64_t* pc = ray_count.mutable_data();
     float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data(), *pl = ray_len.mutable_data(),
           *pr = ray_contrib.mutable_data();
@@ -158,19 +163,8 @@ auto gather_rays_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit
     return n;
 }
 
-auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
-                     F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
-                     double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided,
-                     I64 rec_sorted_key, I32 rec_order, I32 rec_cell_start, F64 rec_centroid,
-                     F32 rec_normal, I32 rec_object, F32 rec_radiance, F32 rec_pa, I64 grid_dims,
-                     I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count, F32 ray_dir,
-                     I32 prim, F32 out, int threads) {
-    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
-    voxgi::ShadeHits hits =
-        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
-    const py::ssize_t P = hits.count;
-    voxgi::ShadeMIS mis = make_mis(n_gather);
-    if (!(n_gather > 0.0)) throw py::value_error("n_gather must be > 0");
+voxgi::ShadeTriangles make_triangles(const F64& tri_v, const I32& tri_object,
+                                     const U8& obj_two_sided) {
     if (tri_v.ndim() != 3 || tri_v.shape(1) != 3 || tri_v.shape(2) != 3)
         throw py::value_error("tri_v must have shape (F, 3, 3)");
     const py::ssize_t F = tri_v.shape(0);
@@ -182,6 +176,19 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
         for (py::ssize_t f = 0; f < F; ++f)
             if (to[f] < 0 || to[f] >= O) throw py::value_error("tri_object: index out of range");
     }
+    voxgi::ShadeTriangles tris;
+    tris.count = F;
+    tris.v = tri_v.data();
+    tris.object = tri_object.data();
+    tris.two_sided = obj_two_sided.data();
+    return tris;
+}
+
+voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_order,
+                            const I32& rec_cell_start, const F64& rec_centroid,
+                            const F32& rec_normal, const I32& rec_object, const F32& rec_radiance,
+                            const F32& rec_pa, const I64& grid_dims, const I64& grid_lo,
+                            const F64& grid_origin, double pitch) {
     check_1d(rec_sorted_key, -1, "rec_sorted_key");
     const py::ssize_t N = rec_sorted_key.shape(0);
     check_1d(rec_order, N, "rec_order");
@@ -202,18 +209,6 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
             if (i && sk[i] < sk[i - 1]) throw py::value_error("rec_sorted_key must be ascending");
         }
     }
-    check_1d(ray_count, P, "ray_count");
-    check_2d(ray_dir, -1, 3, "ray_dir");
-    const py::ssize_t R = ray_dir.shape(0);
-    check_1d(prim, R, "prim");
-    check_ray_counts(ray_count, R);
-    check_2d(out, P, 3, "out");
-    if (!out.writeable()) throw py::value_error("out must be writeable");
-    voxgi::ShadeTriangles tris;
-    tris.count = F;
-    tris.v = tri_v.data();
-    tris.object = tri_object.data();
-    tris.two_sided = obj_two_sided.data();
     voxgi::RecordGrid grid;
     grid.count = N;
     grid.sorted_key = rec_sorted_key.data();
@@ -246,6 +241,33 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
         if (N > 0 && (sk[0] < 0 || sk[N - 1] >= grid.dims[0] * grid.dims[1] * grid.dims[2]))
             throw py::value_error("rec_sorted_key: key outside the grid");
     }
+    return grid;
+}
+
+auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                     F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
+                     double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided,
+                     I64 rec_sorted_key, I32 rec_order, I32 rec_cell_start, F64 rec_centroid,
+                     F32 rec_normal, I32 rec_object, F32 rec_radiance, F32 rec_pa, I64 grid_dims,
+                     I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count, F32 ray_dir,
+                     I32 prim, F32 out, int threads) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    const py::ssize_t P = hits.count;
+    voxgi::ShadeMIS mis = make_mis(n_gather);
+    if (!(n_gather > 0.0)) throw py::value_error("n_gather must be > 0");
+    voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
+    voxgi::RecordGrid grid =
+        make_grid(rec_sorted_key, rec_order, rec_cell_start, rec_centroid, rec_normal, rec_object,
+                  rec_radiance, rec_pa, grid_dims, grid_lo, grid_origin, pitch);
+    check_1d(ray_count, P, "ray_count");
+    check_2d(ray_dir, -1, 3, "ray_dir");
+    const py::ssize_t R = ray_dir.shape(0);
+    check_1d(prim, R, "prim");
+    check_ray_counts(ray_count, R);
+    check_2d(out, P, 3, "out");
+    if (!out.writeable()) throw py::value_error("out must be writeable");
     const int64_t* pc = ray_count.data();
     const float* pd = ray_dir.data();
     const int32_t* pp = prim.data();
@@ -255,6 +277,65 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
         py::gil_scoped_release release;
         voxgi::gather_shade(hits, mats, mis, tris, grid, pc, pd, pp, po, threads, stop);
     }
+}
+
+// The triangles must be those `scene` was built from, for prim to index them.
+void check_scene(const voxgi::RayScene& scene, const voxgi::ShadeTriangles& tris) {
+    if (scene.triangle_count() != tris.count)
+        throw py::value_error("scene holds " + std::to_string(scene.triangle_count()) +
+                              " triangles, tri_v " + std::to_string(tris.count));
+}
+
+py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                       F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
+                       F64 vpl_pos, F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa,
+                       double n_gather, double eps, const voxgi::RayScene& scene, int threads) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    voxgi::ShadeMIS mis = make_mis(n_gather);
+    voxgi::ShadeVPLs vpls = make_vpls(vpl_pos, vpl_normal, vpl_weight, vpl_area, vpl_pa, n_gather);
+    F32 out({hits.count, py::ssize_t(3)});
+    float* po = out.mutable_data();
+    int64_t rays = 0;
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::vpl_light(hits, mats, vpls, mis, eps, scene, po, &rays, threads, stop);
+    }
+    return py::make_tuple(out, rays);
+}
+
+int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                        F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
+                        int n_gather, uint64_t seed, int64_t frame, double eps, F64 tri_v,
+                        I32 tri_object, U8 obj_two_sided, I64 rec_sorted_key, I32 rec_order,
+                        I32 rec_cell_start, F64 rec_centroid, F32 rec_normal, I32 rec_object,
+                        F32 rec_radiance, F32 rec_pa, I64 grid_dims, I64 grid_lo, F64 grid_origin,
+                        double pitch, const voxgi::RayScene& scene, F32 out, int threads) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    if (n_gather < 1 || n_gather > 4096) throw py::value_error("n_gather must be in [1, 4096]");
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    voxgi::ShadeMIS mis = make_mis(n_gather);
+    voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
+    check_scene(scene, tris);
+    voxgi::RecordGrid grid =
+        make_grid(rec_sorted_key, rec_order, rec_cell_start, rec_centroid, rec_normal, rec_object,
+                  rec_radiance, rec_pa, grid_dims, grid_lo, grid_origin, pitch);
+    check_2d(out, hits.count, 3, "out");
+    if (!out.writeable()) throw py::value_error("out must be writeable");
+    float* po = out.mutable_data();
+    int64_t rays = 0;
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::gather_light(hits, mats, mis, n_gather, seed, frame, eps, tris, grid, scene, po,
+                            &rays, threads, stop);
+    }
+    return rays;
 }
 
 auto vpl_accumulate_py(I64 ray_count, F32 ray_contrib, U8 occluded, int threads) {
@@ -429,6 +510,30 @@ ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc"
           R"doc(Shade the gather rays (prim: first triangle hit, -1 none) with the radiance
 of the record at each hit point, MIS-weighted against the VPLs; adds into
 out (P, 3) float32.)doc");
+
+    m.def("vpl_light", &vpl_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
+          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "vpl_pos"_a.noconvert(),
+          "vpl_normal"_a.noconvert(), "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(),
+          "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "scene"_a, "threads"_a = 0,
+          R"doc(vpl_prepare, the shadow rays against scene (a RayScene) and vpl_accumulate,
+pixel by pixel without ray arrays: the same (P, 3) float32 sums, and the
+number of shadow rays traced.)doc");
+
+    m.def("gather_light", &gather_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
+          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "seed"_a, "frame"_a,
+          "eps"_a, "tri_v"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),
+          "rec_sorted_key"_a.noconvert(), "rec_order"_a.noconvert(), "rec_cell_start"_a.noconvert(),
+          "rec_centroid"_a.noconvert(), "rec_normal"_a.noconvert(), "rec_object"_a.noconvert(),
+          "rec_radiance"_a.noconvert(), "rec_pa"_a.noconvert(), "grid_dims"_a.noconvert(),
+          "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a, "scene"_a,
+          "out"_a.noconvert(), "threads"_a = 0,
+          R"doc(gather_rays, their first hits in scene (a RayScene built from tri_v) and
+gather_shade, pixel by pixel without ray arrays: the same sums, added into
+out (P, 3) float32. Returns the number of gather rays.)doc");
 
     m.def("vpl_accumulate", &vpl_accumulate_py, "ray_count"_a.noconvert(),
           "ray_contrib"_a.noconvert(), "occluded"_a.noconvert(), "threads"_a = 0,

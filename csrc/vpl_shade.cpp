@@ -2,6 +2,7 @@
 #include "vpl_shade.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <vector>
@@ -98,6 +99,66 @@ void shade_brdf(const ShadeMaterials& mats, int32_t m, const float n[3], const f
     }
 }
 
+namespace {
+
+// The shadow rays of pixel p to the VPLs, in VPL order: emit(org, dir, len,
+// contrib) for each (pixel, VPL) pair with a non-zero unoccluded term.
+template <class Emit>
+void vpl_pixel_rays(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPLs& vpls,
+                    const ShadeMIS& mis, double eps, int64_t p, Emit&& emit) {
+    const int32_t m = hits.material[p];
+    if (m < 0 || m >= mats.count) return;
+    const double* x = hits.pos + 3 * p;
+    const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
+    const double ox = x[0] + eps * ng[0], oy = x[1] + eps * ng[1], oz = x[2] + eps * ng[2];
+    for (int64_t k = 0; k < vpls.count; ++k) {
+        const double* y = vpls.pos + 3 * k;
+        const float* ny = vpls.normal + 3 * k;
+        const double dx = y[0] - x[0], dy = y[1] - x[1], dz = y[2] - x[2];
+        const double r2 = dx * dx + dy * dy + dz * dz;
+        if (!(r2 > 0.0)) continue;
+        const double r = std::sqrt(r2);
+        const float wi[3] = {float(dx / r), float(dy / r), float(dz / r)};
+        const float cos_y = -dot3(ny, wi);  // the VPL must face x
+        if (cos_y <= 0.f) continue;
+        if (dot3(ng, wi) <= 0.f) continue;  // below the geometric surface
+        const float cos_x = dot3(n, wi);
+        if (cos_x <= 0.f) continue;
+        const double cc = double(cos_x) * cos_y;
+        double g;
+        if (vpls.pa && vpls.pa[k] > 0.f) {
+            // Balance heuristic with the gather rays (see ShadeMIS).
+            g = cc / (r2 * vpls.pa[k] + mis.n_gather * cc / kPi);
+        } else {
+            // The VPL is a disc of area dA: on the axis of a disc the exact
+            // point-to-disc term is cos cos / (r² + dA/pi); bounded, and
+            // the point formula far away (docs/design.md §6).
+            g = cc / (r2 + double(vpls.area[k]) / kPi);
+        }
+        float f[3];
+        shade_brdf(mats, m, n, wi, wo, f);
+        const float* wk = vpls.weight + 3 * k;
+        float cr[3];
+        bool any = false;
+        for (int ch = 0; ch < 3; ++ch) {
+            cr[ch] = float(g * f[ch] * wk[ch]);
+            any |= cr[ch] > 0.f;
+        }
+        if (!any) continue;
+        // Shadow ray from x (offset along its geometric normal) to the
+        // VPL's point offset along its normal, stopping eps short.
+        const double tx = y[0] + eps * ny[0] - ox, ty = y[1] + eps * ny[1] - oy,
+                     tz = y[2] + eps * ny[2] - oz;
+        const double len = std::sqrt(tx * tx + ty * ty + tz * tz);
+        const float ro[3] = {float(ox), float(oy), float(oz)};
+        float rd[3] = {wi[0], wi[1], wi[2]};
+        if (len > 0.0) rd[0] = float(tx / len), rd[1] = float(ty / len), rd[2] = float(tz / len);
+        emit(ro, rd, float(std::max(len - eps, 0.0)), cr);
+    }
+}
+
+}  // namespace
+
 int64_t vpl_prepare(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPLs& vpls,
                     const ShadeMIS& mis, double eps, int64_t* ray_count, float* ray_org,
                     float* ray_dir, float* ray_len, float* ray_contrib, int threads,
@@ -111,66 +172,18 @@ int64_t vpl_prepare(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
         const int64_t p0 = c * kChunk, p1 = std::min(P, p0 + kChunk);
         int64_t w = p0 * K;
         for (int64_t p = p0; p < p1; ++p) {
-            const int32_t m = hits.material[p];
-            int64_t cnt = 0;
-            if (m >= 0 && m < mats.count) {
-                const double* x = hits.pos + 3 * p;
-                const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
-                const double ox = x[0] + eps * ng[0], oy = x[1] + eps * ng[1],
-                             oz = x[2] + eps * ng[2];
-                for (int64_t k = 0; k < K; ++k) {
-                    const double* y = vpls.pos + 3 * k;
-                    const float* ny = vpls.normal + 3 * k;
-                    const double dx = y[0] - x[0], dy = y[1] - x[1], dz = y[2] - x[2];
-                    const double r2 = dx * dx + dy * dy + dz * dz;
-                    if (!(r2 > 0.0)) continue;
-                    const double r = std::sqrt(r2);
-                    const float wi[3] = {float(dx / r), float(dy / r), float(dz / r)};
-                    const float cos_y = -dot3(ny, wi);  // the VPL must face x
-                    if (cos_y <= 0.f) continue;
-                    if (dot3(ng, wi) <= 0.f) continue;  // below the geometric surface
-                    const float cos_x = dot3(n, wi);
-                    if (cos_x <= 0.f) continue;
-                    const double cc = double(cos_x) * cos_y;
-                    double g;
-                    if (vpls.pa && vpls.pa[k] > 0.f) {
-                        // Balance heuristic with the gather rays (see ShadeMIS).
-                        g = cc / (r2 * vpls.pa[k] + mis.n_gather * cc / kPi);
-                    } else {
-                        // The VPL is a disc of area dA: on the axis of a disc the exact
-                        // point-to-disc term is cos cos / (r² + dA/pi); bounded, and
-                        // the point formula far away (docs/design.md §6).
-                        g = cc / (r2 + double(vpls.area[k]) / kPi);
-                    }
-                    float f[3];
-                    shade_brdf(mats, m, n, wi, wo, f);
-                    const float* wk = vpls.weight + 3 * k;
-                    float cr[3];
-                    bool any = false;
-                    for (int ch = 0; ch < 3; ++ch) {
-                        cr[ch] = float(g * f[ch] * wk[ch]);
-                        any |= cr[ch] > 0.f;
-                    }
-                    if (!any) continue;
-                    // Shadow ray from x (offset along its geometric normal) to the
-                    // VPL's point offset along its normal, stopping eps short.
-                    const double tx = y[0] + eps * ny[0] - ox, ty = y[1] + eps * ny[1] - oy,
-                                 tz = y[2] + eps * ny[2] - oz;
-                    const double len = std::sqrt(tx * tx + ty * ty + tz * tz);
-                    float *ro = ray_org + 3 * w, *rd = ray_dir + 3 * w, *rc = ray_contrib + 3 * w;
-                    ro[0] = float(ox), ro[1] = float(oy), ro[2] = float(oz);
-                    if (len > 0.0) {
-                        rd[0] = float(tx / len), rd[1] = float(ty / len), rd[2] = float(tz / len);
-                    } else {
-                        rd[0] = wi[0], rd[1] = wi[1], rd[2] = wi[2];
-                    }
-                    ray_len[w] = float(std::max(len - eps, 0.0));
-                    rc[0] = cr[0], rc[1] = cr[1], rc[2] = cr[2];
-                    ++w;
-                    ++cnt;
-                }
-            }
-            ray_count[p] = cnt;
+            const int64_t w0 = w;
+            vpl_pixel_rays(hits, mats, vpls, mis, eps, p,
+                           [&](const float* ro, const float* rd, float len, const float* cr) {
+                               for (int a = 0; a < 3; ++a) {
+                                   ray_org[3 * w + a] = ro[a];
+                                   ray_dir[3 * w + a] = rd[a];
+                                   ray_contrib[3 * w + a] = cr[a];
+                               }
+                               ray_len[w] = len;
+                               ++w;
+                           });
+            ray_count[p] = w - w0;
         }
         chunk_rays[c] = w - p0 * K;
     });
@@ -190,6 +203,25 @@ int64_t vpl_prepare(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
     return total;
 }
 
+void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPLs& vpls,
+               const ShadeMIS& mis, double eps, const RayScene& scene, float* out, int64_t* rays,
+               int threads, const StopCheck& stop) {
+    std::atomic<int64_t> traced{0};
+    for_each_pixel(hits.count, threads, stop, [&](int64_t p) {
+        double s[3] = {0.0, 0.0, 0.0};  // in VPL order, as vpl_accumulate sums
+        int64_t n = 0;
+        vpl_pixel_rays(hits, mats, vpls, mis, eps, p,
+                       [&](const float* ro, const float* rd, float len, const float* cr) {
+                           ++n;
+                           if (scene.occluded(ro, rd, len)) return;
+                           for (int ch = 0; ch < 3; ++ch) s[ch] += cr[ch];
+                       });
+        for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] = float(s[ch]);
+        traced.fetch_add(n, std::memory_order_relaxed);
+    });
+    *rays = traced.load();
+}
+
 namespace {
 
 inline uint64_t splitmix64(uint64_t x) {
@@ -203,6 +235,40 @@ inline double to_unit(uint64_t x) { return double(x >> 11) * (1.0 / 900719925474
 
 }  // namespace
 
+namespace {
+
+// The seed of a frame's gather rays; each pixel's stream is hashed from it.
+uint64_t gather_base(uint64_t seed, int64_t frame) {
+    return splitmix64(seed ^ splitmix64(uint64_t(frame) + 0x6A09E667F3BCC909ull));
+}
+
+// The n_gather rays of shaded pixel p: emit(k, org, dir).
+template <class Emit>
+void gather_pixel_rays(const ShadeHits& hits, int n_gather, uint64_t base, double eps, int64_t p,
+                       Emit&& emit) {
+    const double* x = hits.pos + 3 * p;
+    const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
+    float u[3], v[3];
+    tangent_frame(n, u, v);
+    uint64_t h = splitmix64(base ^ uint64_t(p) * 0xD1B54A32D192ED03ull);
+    for (int k = 0; k < n_gather; ++k) {
+        h = splitmix64(h);
+        const double u1 = (k + to_unit(h)) / n_gather;  // stratified in cos²θ
+        h = splitmix64(h);
+        const double phi = 2.0 * kPi * to_unit(h);
+        const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
+        const double lx = r * std::cos(phi), ly = r * std::sin(phi);
+        float ro[3], rd[3];
+        for (int a = 0; a < 3; ++a) {
+            ro[a] = float(x[a] + eps * ng[a]);
+            rd[a] = float(lx * u[a] + ly * v[a] + z * n[a]);
+        }
+        emit(k, ro, rd);
+    }
+}
+
+}  // namespace
+
 int64_t gather_rays(const ShadeHits& hits, int n_gather, uint64_t seed, int64_t frame, double eps,
                     int64_t* ray_count, float* ray_org, float* ray_dir, int threads,
                     const StopCheck& stop) {
@@ -213,28 +279,17 @@ int64_t gather_rays(const ShadeHits& hits, int n_gather, uint64_t seed, int64_t 
         ray_count[p] = m >= 0 ? n_gather : 0;
         offset[p + 1] = offset[p] + ray_count[p];
     }
-    const uint64_t base = splitmix64(seed ^ splitmix64(uint64_t(frame) + 0x6A09E667F3BCC909ull));
+    const uint64_t base = gather_base(seed, frame);
     for_each_pixel(P, threads, stop, [&](int64_t p) {
         if (ray_count[p] == 0) return;
-        const double* x = hits.pos + 3 * p;
-        const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
-        float u[3], v[3];
-        tangent_frame(n, u, v);
-        uint64_t h = splitmix64(base ^ uint64_t(p) * 0xD1B54A32D192ED03ull);
-        for (int k = 0; k < n_gather; ++k) {
-            h = splitmix64(h);
-            const double u1 = (k + to_unit(h)) / n_gather;  // stratified in cos²θ
-            h = splitmix64(h);
-            const double phi = 2.0 * kPi * to_unit(h);
-            const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
-            const double lx = r * std::cos(phi), ly = r * std::sin(phi);
-            const int64_t w = offset[p] + k;
-            float *ro = ray_org + 3 * w, *rd = ray_dir + 3 * w;
-            for (int a = 0; a < 3; ++a) {
-                ro[a] = float(x[a] + eps * ng[a]);
-                rd[a] = float(lx * u[a] + ly * v[a] + z * n[a]);
-            }
-        }
+        gather_pixel_rays(hits, n_gather, base, eps, p,
+                          [&](int k, const float* ro, const float* rd) {
+                              const int64_t w = offset[p] + k;
+                              for (int a = 0; a < 3; ++a) {
+                                  ray_org[3 * w + a] = ro[a];
+                                  ray_dir[3 * w + a] = rd[a];
+                              }
+                          });
     });
     return offset[P];
 }
@@ -279,6 +334,59 @@ int64_t lookup_record(const RecordGrid& g, const double y[3], const float n[3], 
     return best;
 }
 
+namespace {
+
+// Add the MIS-weighted light of pixel p's gather ray along df (unit up to
+// float rounding) that first meets triangle t (-1: none) into s.
+void gather_ray_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
+                      const ShadeTriangles& tris, const RecordGrid& grid, int64_t p,
+                      const float df[3], int32_t t, double s[3]) {
+    const int32_t m = hits.material[p];
+    const double* x = hits.pos + 3 * p;
+    const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
+    if (t < 0 || t >= tris.count) return;
+    const double d[3] = {df[0], df[1], df[2]};
+    const double dl = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    const float wi[3] = {float(d[0] / dl), float(d[1] / dl), float(d[2] / dl)};
+    const float cos_x = dot3(n, wi);
+    if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) return;
+    // Hit point: the ray against the hit triangle's plane, in double.
+    const double *v0 = tris.v + 9 * int64_t(t), *v1 = v0 + 3, *v2 = v0 + 6;
+    const double e1[3] = {v1[0] - v0[0], v1[1] - v0[1], v1[2] - v0[2]};
+    const double e2[3] = {v2[0] - v0[0], v2[1] - v0[1], v2[2] - v0[2]};
+    double nt[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                    e1[0] * e2[1] - e1[1] * e2[0]};
+    const double nl = std::sqrt(nt[0] * nt[0] + nt[1] * nt[1] + nt[2] * nt[2]);
+    if (!(nl > 0.0)) return;
+    nt[0] /= nl, nt[1] /= nl, nt[2] /= nl;
+    const double o[3] = {x[0] + 0.0, x[1] + 0.0, x[2] + 0.0};
+    const double dn = (d[0] * nt[0] + d[1] * nt[1] + d[2] * nt[2]) / dl;
+    if (dn == 0.0) return;
+    const double tt =
+        ((v0[0] - o[0]) * nt[0] + (v0[1] - o[1]) * nt[1] + (v0[2] - o[2]) * nt[2]) / dn;
+    const double y[3] = {o[0] + tt * wi[0], o[1] + tt * wi[1], o[2] + tt * wi[2]};
+    const bool front = dn < 0.0;
+    const int32_t obj = tris.object[t];
+    if (!front && !tris.two_sided[obj]) return;  // black back of a one-sided surface
+    const float ns[3] = {float(front ? nt[0] : -nt[0]), float(front ? nt[1] : -nt[1]),
+                         float(front ? nt[2] : -nt[2])};
+    const int64_t rec = lookup_record(grid, y, ns, obj);
+    if (rec < 0) return;
+    const float cos_y = -dot3(ns, wi);
+    if (cos_y <= 0.f) return;
+    const double r2 = (y[0] - x[0]) * (y[0] - x[0]) + (y[1] - x[1]) * (y[1] - x[1]) +
+                      (y[2] - x[2]) * (y[2] - x[2]);
+    const double pa = grid.pa[rec];
+    const double denom = pa * r2 / cos_y + mis.n_gather * cos_x / kPi;
+    if (!(denom > 0.0)) return;
+    float f[3];
+    shade_brdf(mats, m, n, wi, wo, f);
+    const float* L = grid.radiance + 3 * rec;
+    for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * cos_x / denom;
+}
+
+}  // namespace
+
 void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                   const ShadeTriangles& tris, const RecordGrid& grid, const int64_t* ray_count,
                   const float* ray_dir, const int32_t* prim, float* out, int threads,
@@ -288,54 +396,30 @@ void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
     for_each_pixel(P, threads, stop, [&](int64_t p) {
         const int32_t m = hits.material[p];
         if (m < 0 || offset[p + 1] == offset[p]) return;
-        const double* x = hits.pos + 3 * p;
-        const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
         double s[3] = {0.0, 0.0, 0.0};
-        for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
-            const int32_t t = prim[r];
-            if (t < 0 || t >= tris.count) continue;
-            const float* df = ray_dir + 3 * r;
-            const double d[3] = {df[0], df[1], df[2]};
-            const double dl = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-            const float wi[3] = {float(d[0] / dl), float(d[1] / dl), float(d[2] / dl)};
-            const float cos_x = dot3(n, wi);
-            if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) continue;
-            // Hit point: the ray against the hit triangle's plane, in double.
-            const double *v0 = tris.v + 9 * int64_t(t), *v1 = v0 + 3, *v2 = v0 + 6;
-            const double e1[3] = {v1[0] - v0[0], v1[1] - v0[1], v1[2] - v0[2]};
-            const double e2[3] = {v2[0] - v0[0], v2[1] - v0[1], v2[2] - v0[2]};
-            double nt[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
-                            e1[0] * e2[1] - e1[1] * e2[0]};
-            const double nl = std::sqrt(nt[0] * nt[0] + nt[1] * nt[1] + nt[2] * nt[2]);
-            if (!(nl > 0.0)) continue;
-            nt[0] /= nl, nt[1] /= nl, nt[2] /= nl;
-            const double o[3] = {x[0] + 0.0, x[1] + 0.0, x[2] + 0.0};
-            const double dn = (d[0] * nt[0] + d[1] * nt[1] + d[2] * nt[2]) / dl;
-            if (dn == 0.0) continue;
-            const double tt =
-                ((v0[0] - o[0]) * nt[0] + (v0[1] - o[1]) * nt[1] + (v0[2] - o[2]) * nt[2]) / dn;
-            const double y[3] = {o[0] + tt * wi[0], o[1] + tt * wi[1], o[2] + tt * wi[2]};
-            const bool front = dn < 0.0;
-            const int32_t obj = tris.object[t];
-            if (!front && !tris.two_sided[obj]) continue;  // black back of a one-sided surface
-            const float ns[3] = {float(front ? nt[0] : -nt[0]), float(front ? nt[1] : -nt[1]),
-                                 float(front ? nt[2] : -nt[2])};
-            const int64_t rec = lookup_record(grid, y, ns, obj);
-            if (rec < 0) continue;
-            const float cos_y = -dot3(ns, wi);
-            if (cos_y <= 0.f) continue;
-            const double r2 = (y[0] - x[0]) * (y[0] - x[0]) + (y[1] - x[1]) * (y[1] - x[1]) +
-                              (y[2] - x[2]) * (y[2] - x[2]);
-            const double pa = grid.pa[rec];
-            const double denom = pa * r2 / cos_y + mis.n_gather * cos_x / kPi;
-            if (!(denom > 0.0)) continue;
-            float f[3];
-            shade_brdf(mats, m, n, wi, wo, f);
-            const float* L = grid.radiance + 3 * rec;
-            for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * cos_x / denom;
-        }
+        for (int64_t r = offset[p]; r < offset[p + 1]; ++r)
+            gather_ray_light(hits, mats, mis, tris, grid, p, ray_dir + 3 * r, prim[r], s);
         for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += float(s[ch]);
     });
+}
+
+void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
+                  int n_gather, uint64_t seed, int64_t frame, double eps,
+                  const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
+                  float* out, int64_t* rays, int threads, const StopCheck& stop) {
+    const uint64_t base = gather_base(seed, frame);
+    std::atomic<int64_t> traced{0};
+    for_each_pixel(hits.count, threads, stop, [&](int64_t p) {
+        if (hits.material[p] < 0 || n_gather <= 0) return;
+        double s[3] = {0.0, 0.0, 0.0};  // in ray order, as gather_shade sums
+        gather_pixel_rays(hits, n_gather, base, eps, p, [&](int, const float* ro, const float* rd) {
+            const int32_t t = scene.intersect(ro, rd, nullptr, nullptr, nullptr);
+            gather_ray_light(hits, mats, mis, tris, grid, p, rd, t, s);
+        });
+        for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += float(s[ch]);
+        traced.fetch_add(n_gather, std::memory_order_relaxed);
+    });
+    *rays = traced.load();
 }
 
 void primary_hits(int64_t P, const double* org, const double* dir, const int32_t* prim,

@@ -1,18 +1,21 @@
 // VPL shading kernels for the anti-aliased display (docs/design.md §6).
 //
 // One frame shades P hit points with the same K virtual point lights (VPLs).
-// It runs in two passes around the visibility queries, which Python makes
-// with Embree (embreex) between them:
+// With a RayScene, vpl_light and gather_light trace each pixel's shadow and
+// gather rays as they are made. Without one (embreex's Python calls), the
+// same work runs in two passes around the visibility queries:
 //   1. vpl_prepare: per (pixel, VPL) pair the unoccluded contribution
 //      f(wi, wo) * W_k * G_bounded, and a shadow ray where it is non-zero;
 //      rays are written compacted, pixel by pixel, VPLs in order.
 //   2. vpl_accumulate: per pixel, the sum of the contributions whose shadow
 //      ray was not occluded, in ray order (independent of the thread count).
+// Both ways sum the same terms in the same order: the same image.
 // No pybind11 here: plain pointers and sizes.
 #pragma once
 
 #include <cstdint>
 
+#include "ray_scene.h"
 #include "util/parallel.h"
 
 namespace voxgi {
@@ -102,6 +105,14 @@ int64_t vpl_prepare(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
 void vpl_accumulate(int64_t n_pixels, const int64_t* ray_count, const float* ray_contrib,
                     const uint8_t* occluded, float* out, int threads, const StopCheck& stop);
 
+// Both passes and the shadow rays between them, pixel by pixel, against
+// `scene`: the same sums as vpl_prepare, occlusion queries and
+// vpl_accumulate, without the ray arrays. Writes out (P, 3) and the number
+// of shadow rays traced into *rays.
+void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPLs& vpls,
+               const ShadeMIS& mis, double eps, const RayScene& scene, float* out, int64_t* rays,
+               int threads, const StopCheck& stop);
+
 // Gather rays: n_g cosine-distributed directions around the shading normal
 // of each shaded pixel (material >= 0), stratified (n_g strata in azimuth x
 // elevation) and jittered with a hash of (seed, frame, pixel, k): the same
@@ -121,6 +132,14 @@ void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                   const ShadeTriangles& tris, const RecordGrid& grid, const int64_t* ray_count,
                   const float* ray_dir, const int32_t* prim, float* out, int threads,
                   const StopCheck& stop);
+
+// gather_rays, their first hits in `scene` and gather_shade, pixel by pixel,
+// without the ray arrays: the same sums, added into out (P, 3). Writes the
+// number of gather rays traced into *rays.
+void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
+                  int n_gather, uint64_t seed, int64_t frame, double eps,
+                  const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
+                  float* out, int64_t* rays, int threads, const StopCheck& stop);
 
 // Light arriving along known directions: point, spot and directional lights
 // (one shadow ray each), environment samples and gather rays that leave the

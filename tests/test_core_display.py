@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from voxgi import _core
+from voxgi import _core, rays
 
 
 def mats(albedo=((0.5, 0.5, 0.5),), rs=None, nu=None, nv=None, glossy=None):
@@ -394,3 +394,23 @@ def test_primary_hits_are_the_points_and_normals_of_the_hit_triangles(corner_nor
     assert 0 < np.mean(got[3] == -1) < 1
     with pytest.raises(ValueError, match="prim: triangle 40 out of range"):
         _core.primary_hits(org, d, np.full(P, F, np.int32), v, ng, vn, obj, two_sided, emission)
+
+
+@pytest.mark.skipif(rays.embree_library() is None, reason="no Embree 4 library found")
+def test_vpl_light_traces_what_vpl_prepare_writes():
+    # A floor hit, two VPLs above it, a small quad hiding the first one.
+    blocker = np.array([[[-0.1, -0.1, 0.5], [0.1, -0.1, 0.5], [0.0, 0.1, 0.5]]], np.float32)
+    scene = _core.RayScene(rays.embree_library(), blocker)
+    h = hits([[0, 0, 0], [2, 0, 0]], [[0, 0, 1], [0, 0, 1]])
+    m = mats()
+    v = vpls(
+        [[0, 0, 1], [0.5, 0, 1]], [[0, 0, -1], [0, 0, -1]], [[1, 1, 1], [2, 2, 2]], [0.01, 0.01]
+    )
+    count, org, d, length, contrib = prepare(h, m, v)
+    occ = scene.occluded(org, d, length)
+    want = _core.vpl_accumulate(count, contrib, occ)
+    got, traced = _core.vpl_light(**h, **m, **v, eps=1e-4, scene=scene)
+    np.testing.assert_array_equal(got, want)
+    assert traced == len(org) == 4
+    assert occ.tolist() == [1, 0, 0, 0]  # the quad hides the first VPL from the first hit
+    assert got[0, 0] > 0

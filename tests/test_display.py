@@ -515,6 +515,25 @@ def test_same_result_for_any_thread_count():
     assert np.array_equal(a, b)
 
 
+@pytest.mark.skipif(voxgi.rays.embree_library() is None, reason="no Embree 4 library found")
+def test_rays_traced_as_they_are_made_give_the_two_pass_image(monkeypatch):
+    # With the compiled ray scene, the shadow and gather rays of each pixel
+    # are traced as they are made; through embreex they go in batches between
+    # two kernels. The same rays, the same order of sums: the same image.
+    scene = voxgi.scenes.cornell_box(width=40, height=40)
+    vox = voxgi.voxelize(scene, resolution=24, progress=False)
+    sol = voxgi.pipeline.solve_for_display(vox, progress=False)
+    runs = []
+    for native in (True, False):
+        if not native:
+            monkeypatch.setattr(voxgi.rays, "embree_library", lambda: None)
+        out = voxgi.render(scene, sol, progress=False, max_frames=3, tol=0.0, threads=2)
+        runs.append(out)
+    assert np.array_equal(runs[0].image, runs[1].image)
+    for key in ("shadow_rays", "gather_rays", "primary_rays"):
+        assert runs[0].stats[key] == runs[1].stats[key] > 0
+
+
 def test_tol_stops_early_and_reports():
     scene = voxgi.scenes.furnace_sphere(albedo=0.5, emission=1.0, width=16, height=16)
     sol = triangle_solution(scene, lambda v: np.full((len(v), 3), 2 * math.pi))

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'direct_light_rays', 'direct_light_sum', 'gather_families', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_prepare']
+__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'direct_light_rays', 'direct_light_sum', 'gather_families', 'gather_light', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_light', 'vpl_prepare']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -170,6 +170,12 @@ def gather_families(ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing
     families[family_indices] and returns the partial sums, (N, 3) float64 (see
     LineSystem.gather); sums from disjoint subsets add up to the full pass.
     """
+def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], n_gather: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, tri_v: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], rec_sorted_key: numpy.typing.NDArray[numpy.int64], rec_order: numpy.typing.NDArray[numpy.int32], rec_cell_start: numpy.typing.NDArray[numpy.int32], rec_centroid: numpy.typing.NDArray[numpy.float64], rec_normal: numpy.typing.NDArray[numpy.float32], rec_object: numpy.typing.NDArray[numpy.int32], rec_radiance: numpy.typing.NDArray[numpy.float32], rec_pa: numpy.typing.NDArray[numpy.float32], grid_dims: numpy.typing.NDArray[numpy.int64], grid_lo: numpy.typing.NDArray[numpy.int64], grid_origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> int:
+    """
+    gather_rays, their first hits in scene (a RayScene built from tri_v) and
+    gather_shade, pixel by pixel without ray arrays: the same sums, added into
+    out (P, 3) float32. Returns the number of gather rays.
+    """
 def gather_rays(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], n_gather: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, ray_count: numpy.typing.NDArray[numpy.int64], ray_org: numpy.typing.NDArray[numpy.float32], ray_dir: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> int:
     """
     Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
@@ -247,6 +253,12 @@ def vpl_accumulate(ray_count: numpy.typing.NDArray[numpy.int64], ray_contrib: nu
     """
     Pass 2 of a display frame: per pixel, the sum of the contributions of the
     rays not occluded (uint8 (R,)), in ray order. Returns (P, 3) float32.
+    """
+def vpl_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], vpl_pos: numpy.typing.NDArray[numpy.float64], vpl_normal: numpy.typing.NDArray[numpy.float32], vpl_weight: numpy.typing.NDArray[numpy.float32], vpl_area: numpy.typing.NDArray[numpy.float32], vpl_pa: numpy.typing.NDArray[numpy.float32], n_gather: typing.SupportsFloat | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+    """
+    vpl_prepare, the shadow rays against scene (a RayScene) and vpl_accumulate,
+    pixel by pixel without ray arrays: the same (P, 3) float32 sums, and the
+    number of shadow rays traced.
     """
 def vpl_prepare(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], vpl_pos: numpy.typing.NDArray[numpy.float64], vpl_normal: numpy.typing.NDArray[numpy.float32], vpl_weight: numpy.typing.NDArray[numpy.float32], vpl_area: numpy.typing.NDArray[numpy.float32], vpl_pa: numpy.typing.NDArray[numpy.float32], n_gather: typing.SupportsFloat | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, ray_count: numpy.typing.NDArray[numpy.int64], ray_org: numpy.typing.NDArray[numpy.float32], ray_dir: numpy.typing.NDArray[numpy.float32], ray_len: numpy.typing.NDArray[numpy.float32], ray_contrib: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> int:
     """

@@ -607,6 +607,8 @@ class _FrameShader:
         worker threads spin for a while after a batch, and a kernel started
         in that time runs on a shared core."""
         P = len(h["material"])
+        if self.tracer.native is not None:
+            return self._vpl_light_traced(h, vpls, cuts)
         out = np.zeros((P, 3), np.float32)
         K = max(len(v["index"]) for v in vpls)
         cap = min(P, self.tile) * K
@@ -663,6 +665,30 @@ class _FrameShader:
             self.shadow_rays += len(occ)
             self.seconds["shade"] += (t1 - t0) + (t3 - t2)
             self.seconds["shadow"] += t2 - t1
+        return out
+
+    def _vpl_light_traced(self, h: dict, vpls: list, cuts: np.ndarray) -> np.ndarray:
+        """:meth:`_vpl_light` in one compiled call per group, its shadow rays
+        traced pixel by pixel as they are made: the same sums."""
+        t0 = time.perf_counter()
+        out = np.empty((len(h["material"]), 3), np.float32)
+        for g, vpl in enumerate(vpls):
+            lo, hi = int(cuts[g]), int(cuts[g + 1])
+            out[lo:hi], rays = _core.vpl_light(
+                *(h[k][lo:hi] for k in _HIT_KEYS),
+                *self._materials(),
+                vpl["pos"],
+                vpl["normal"],
+                vpl["weight"],
+                vpl["area"],
+                vpl["pa"],
+                float(self.gather),
+                self.eps,
+                self.tracer.native,
+                self.threads,
+            )
+            self.shadow_rays += rays
+        self.seconds["shadow"] += time.perf_counter() - t0
         return out
 
     def _light_sum(self, hh, count, dirs, weight, occluded, out) -> None:
@@ -744,6 +770,25 @@ class _FrameShader:
     def _gather(self, h: dict, a: int, b: int, out: np.ndarray) -> None:
         """Add the gather rays' MIS-weighted share of the non-emitter light."""
         t0 = time.perf_counter()
+        if self.tracer.native is not None and self.env is None:
+            # made, traced and shaded pixel by pixel (the escaping rays would
+            # need the environment's MIS below)
+            hh = [h[k][a:b] for k in _HIT_KEYS]
+            self.gather_rays += _core.gather_light(
+                *hh,
+                *self._materials(),
+                self.gather,
+                self.seed,
+                self._frame,
+                self.eps,
+                **self._tri,
+                **self._grid,
+                scene=self.tracer.native,
+                out=out[a:b],
+                threads=self.threads,
+            )
+            self.seconds["gather"] += time.perf_counter() - t0
+            return
         cap = self.tile * self.gather
         if self._gbuffers is None:
             self._gbuffers = (
