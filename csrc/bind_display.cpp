@@ -3,7 +3,9 @@
 
 #include <limits>
 #include <optional>
+#include <vector>
 
+#include "batch_error.h"
 #include "bind_common.h"
 #include "vpl_shade.h"
 
@@ -453,9 +455,39 @@ py::tuple primary_hits_py(const F64& org, const F64& dirs, const I32& prim, cons
     return py::make_tuple(pos, normal, ng, material, le);
 }
 
+py::tuple batch_error_py(const F32& batches, double size, double frames, double crit, int threads) {
+    if (batches.ndim() < 2) throw py::value_error("batches must have shape (k, ...)");
+    const py::ssize_t k = batches.shape(0);
+    if (k < 2) throw py::value_error("batch_error needs at least 2 batches");
+    if (!(size > 0.0) || !(frames >= size * k) || !std::isfinite(frames))
+        throw py::value_error("frames must hold the k batches of size frames each");
+    if (!(crit > 0.0)) throw py::value_error("crit must be > 0 (inf: no heavy-tail test)");
+    std::vector<py::ssize_t> shape(batches.shape() + 1, batches.shape() + batches.ndim());
+    const py::ssize_t n = batches.size() / k;
+    F64 se(shape);
+    U8 flagged(shape);
+    const float* pb = batches.data();
+    double* ps = se.mutable_data();
+    uint8_t* pf = flagged.mutable_data();
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::batch_error(pb, k, n, size, frames, crit, ps, pf, threads, stop);
+    }
+    return py::make_tuple(se, flagged);
+}
+
 }  // namespace
 
 void bind_display(py::module_& m) {
+    m.def("batch_error", &batch_error_py, "batches"_a.noconvert(), "size"_a, "frames"_a, "crit"_a,
+          "threads"_a = 0,
+          R"doc(Per-value standard error of a running mean of `frames` frames from k
+batch means (k, ...) float32 of `size` frames each, raised to the largest
+single-batch jump where the farthest batch is an outlier beyond `crit`
+(externally studentized; inf: no test). Returns (stderr float64, flagged
+uint8), each of the batches' shape without k.)doc");
+
     m.def("primary_hits", &primary_hits_py, "org"_a.noconvert(), "dirs"_a.noconvert(),
           "prim"_a.noconvert(), "tri_v"_a.noconvert(), "tri_ng"_a.noconvert(),
           "corner_normals"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),

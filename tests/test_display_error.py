@@ -180,3 +180,34 @@ def test_cli_writes_the_stderr_channels(tmp_path):
     assert np.all(np.isfinite(se))
     assert np.all(se >= 0)
     assert voxgi.io.read_exr_header(out)["est_max_rel_err"] > 0
+
+
+def test_batch_error_kernel_is_the_batch_means_formula(rng):
+    # The compiled kernel against the formula written out in numpy, with a
+    # few pixels given one far-off batch (flagged, their error raised to it).
+    from voxgi import _core
+    from voxgi.display import _outlier_threshold
+
+    k, p, size, frames = 12, 3000, 2, 27
+    b = (1.0 + 0.1 * rng.standard_normal((k, p, 3))).astype(np.float32)
+    b[5, :40, 1] += 3.0
+    crit = _outlier_threshold(k)
+    se, flagged = _core.batch_error(b, size, frames, crit)
+    x = b.astype(np.float64)
+    dev = x - x.mean(axis=0)
+    ss = np.einsum("kpc,kpc->pc", dev, dev)
+    want = np.sqrt(ss / (k - 1) * size / frames)
+    jump = np.abs(dev).max(axis=0)
+    rest = np.maximum(ss - jump**2 * k / (k - 1), 0.0)
+    tail = jump > crit * np.sqrt(rest / (k - 2) * (k - 1) / k)
+    want = np.where(tail, np.maximum(want, jump * size / frames), want)
+    np.testing.assert_allclose(se, want, rtol=1e-12)
+    np.testing.assert_array_equal(flagged.astype(bool), tail)
+    assert tail[:40, 1].all()
+    assert tail.sum() < 60  # the test flags few others (alpha 1e-3 over 12 batches)
+    # without the test (k < 4, or crit inf) nothing is flagged
+    se3, f3 = _core.batch_error(b[:3], size, 3 * size, math.inf)
+    assert not f3.any()
+    np.testing.assert_allclose(se3, np.sqrt(x[:3].var(axis=0, ddof=1) * size / (3 * size)))
+    with pytest.raises(ValueError, match="at least 2 batches"):
+        _core.batch_error(b[:1], size, frames, crit)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'direct_light_rays', 'direct_light_sum', 'gather_families', 'gather_light', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_light', 'vpl_prepare']
+__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'direct_light_rays', 'direct_light_sum', 'gather_families', 'gather_light', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_light', 'vpl_prepare']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -147,6 +147,14 @@ class RayScene:
     @property
     def triangle_count(self) -> int:
         ...
+def batch_error(batches: numpy.typing.NDArray[numpy.float32], size: typing.SupportsFloat | typing.SupportsIndex, frames: typing.SupportsFloat | typing.SupportsIndex, crit: typing.SupportsFloat | typing.SupportsIndex, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+    """
+    Per-value standard error of a running mean of `frames` frames from k
+    batch means (k, ...) float32 of `size` frames each, raised to the largest
+    single-batch jump where the farthest batch is an outlier beyond `crit`
+    (externally studentized; inf: no test). Returns (stderr float64, flagged
+    uint8), each of the batches' shape without k.
+    """
 def direct_light_rays(emitters: tuple, point: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float64], shift: numpy.typing.NDArray[numpy.float64], sequence: numpy.typing.NDArray[numpy.float64], offset: typing.SupportsFloat | typing.SupportsIndex, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
     """
     The light and hemisphere rays of records (samples each, record-major).

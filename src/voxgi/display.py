@@ -1239,10 +1239,6 @@ _MIN_BATCHES = 9
 #: the batches, two-sided): a normal pixel is flagged with this probability.
 _OUTLIER_ALPHA = 1e-3
 
-#: Pixels per block when the batch statistics are computed (bounds the
-#: temporary float64 arrays to about 25 MB).
-_STAT_BLOCK = 1 << 15
-
 
 @lru_cache(maxsize=64)
 def _outlier_threshold(k: int) -> float:
@@ -1252,7 +1248,7 @@ def _outlier_threshold(k: int) -> float:
     return float(student_t.ppf(1.0 - _OUTLIER_ALPHA / (2 * k), k - 2))
 
 
-def _batch_statistics(batches: np.ndarray, size: int, frames: int, mean: np.ndarray):
+def _batch_statistics(batches: np.ndarray, size: int, frames: int, threads: int = 0):
     """Per-pixel error of the running mean from ``k`` batch means.
 
     Parameters
@@ -1262,8 +1258,8 @@ def _batch_statistics(batches: np.ndarray, size: int, frames: int, mean: np.ndar
         heavy-tail test needs ``k >= 4``).
     size, frames : int
         Frames per batch; frames in the running mean.
-    mean : (P, 3) float64
-        The running mean of all ``frames`` frames.
+    threads : int
+        Threads of the compiled kernel (0: all).
 
     Returns
     -------
@@ -1276,26 +1272,11 @@ def _batch_statistics(batches: np.ndarray, size: int, frames: int, mean: np.ndar
         allows (``docs/design.md`` §6).
     """
     k = len(batches)
-    stderr = np.empty(mean.shape)
-    flagged = np.zeros(len(mean), bool)
     crit = _outlier_threshold(k) if k >= 4 else math.inf
-    for lo in range(0, len(mean), _STAT_BLOCK):
-        hi = min(lo + _STAT_BLOCK, len(mean))
-        b = batches[:, lo:hi].astype(np.float64)
-        dev = b - b.mean(axis=0)
-        ss = np.einsum("kpc,kpc->pc", dev, dev)
-        se = np.sqrt(ss / (k - 1) * (size / frames))
-        if k >= 4:
-            jump = np.abs(dev).max(axis=0)
-            # Externally studentized largest residual: the deviation of the
-            # farthest batch against the spread of the other k - 1.
-            ss_rest = np.maximum(ss - jump * jump * (k / (k - 1.0)), 0.0)
-            scale = np.sqrt(ss_rest / (k - 2) * (k - 1.0) / k)
-            tail = jump > crit * scale
-            se = np.where(tail, np.maximum(se, jump * (size / frames)), se)
-            flagged[lo:hi] = tail.any(axis=1)
-        stderr[lo:hi] = se
-    return stderr, flagged
+    se, tail = _core.batch_error(
+        np.ascontiguousarray(batches, dtype=np.float32), size, frames, crit, threads
+    )
+    return se, tail.any(axis=1)
 
 
 @dataclass
@@ -1325,16 +1306,18 @@ class _Mean:
     share: float = PIXEL_SHARE
     flagged: int = 0
     se: np.ndarray | None = None
+    threads: int = 0
 
     @classmethod
-    def empty(cls, pixels: int, share: float = PIXEL_SHARE) -> _Mean:
+    def empty(cls, pixels: int, share: float = PIXEL_SHARE, threads: int = 0) -> _Mean:
         """No frames yet for ``pixels`` pixels; ``share`` as
-        :attr:`RenderTuning.pixel_share`."""
+        :attr:`RenderTuning.pixel_share`; ``threads`` for the error's kernel."""
         return cls(
             np.zeros((pixels, 3)),
             np.zeros((_BATCH_SLOTS, pixels, 3), np.float32),
             np.zeros((pixels, 3)),
             share=share,
+            threads=threads,
         )
 
     @property
@@ -1365,7 +1348,7 @@ class _Mean:
         # batch's frames only add to the image.
         mean = self.total - self.current
         mean /= done
-        se, flagged = _batch_statistics(self.batches[: self.count], self.size, done, mean)
+        se, flagged = _batch_statistics(self.batches[: self.count], self.size, done, self.threads)
         rel = se * se / (mean * mean + _REL_EPS)
         pixel = rel.max(axis=1)
         self.se = se
@@ -1400,7 +1383,7 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
     from tqdm.auto import tqdm
 
     cam = opt.cam
-    acc = _Mean.empty(cam.height * cam.width, opt.pixel_share)
+    acc = _Mean.empty(cam.height * cam.width, opt.pixel_share, opt.threads)
     interrupted = False
     # With a tolerance the bar follows the error, not the frame cap that is
     # rarely reached: the share of the way, in log scale, from the first
