@@ -291,20 +291,40 @@ void check_scene(const voxgi::RayScene& scene, const voxgi::ShadeTriangles& tris
 py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                        F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
                        F64 vpl_pos, F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa,
-                       double n_gather, double eps, const voxgi::RayScene& scene, int threads) {
+                       double n_gather, double eps, const voxgi::RayScene& scene,
+                       std::optional<I32> pixel_set, std::optional<I64> set_start, int threads) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
     if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
     voxgi::ShadeMIS mis = make_mis(n_gather);
     voxgi::ShadeVPLs vpls = make_vpls(vpl_pos, vpl_normal, vpl_weight, vpl_area, vpl_pa, n_gather);
+    if (pixel_set.has_value() != set_start.has_value())
+        throw py::value_error("pixel_set and set_start go together");
+    const int32_t* ps = nullptr;
+    const int64_t* ss = nullptr;
+    if (pixel_set) {
+        check_1d(*set_start, -1, "set_start");
+        const py::ssize_t S = set_start->shape(0) - 1;
+        ss = set_start->data();
+        if (S < 1 || ss[0] != 0 || ss[S] != vpls.count)
+            throw py::value_error("set_start must run from 0 to the VPL count");
+        for (py::ssize_t i = 0; i < S; ++i)
+            if (ss[i + 1] < ss[i]) throw py::value_error("set_start must be ascending");
+        check_1d(*pixel_set, hits.count, "pixel_set");
+        ps = pixel_set->data();
+        for (py::ssize_t p = 0; p < hits.count; ++p)
+            if (ps[p] < 0 || ps[p] >= S)
+                throw py::value_error("pixel_set: set " + std::to_string(ps[p]) +
+                                      " out of range (" + std::to_string(S) + " sets)");
+    }
     F32 out({hits.count, py::ssize_t(3)});
     float* po = out.mutable_data();
     int64_t rays = 0;
     auto stop = make_stop_check();
     {
         py::gil_scoped_release release;
-        voxgi::vpl_light(hits, mats, vpls, mis, eps, scene, po, &rays, threads, stop);
+        voxgi::vpl_light(hits, mats, vpls, mis, eps, ps, ss, scene, po, &rays, threads, stop);
     }
     return py::make_tuple(out, rays);
 }
@@ -548,10 +568,13 @@ out (P, 3) float32.)doc");
           "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
           "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "vpl_pos"_a.noconvert(),
           "vpl_normal"_a.noconvert(), "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(),
-          "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "scene"_a, "threads"_a = 0,
+          "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "scene"_a,
+          "pixel_set"_a.noconvert() = py::none(), "set_start"_a.noconvert() = py::none(),
+          "threads"_a = 0,
           R"doc(vpl_prepare, the shadow rays against scene (a RayScene) and vpl_accumulate,
 pixel by pixel without ray arrays: the same (P, 3) float32 sums, and the
-number of shadow rays traced.)doc");
+number of shadow rays traced. With pixel_set (P,) int32 and set_start (S+1,)
+int64, pixel p sees only the VPLs of set pixel_set[p].)doc");
 
     m.def("gather_light", &gather_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
           "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),

@@ -204,13 +204,22 @@ int64_t vpl_prepare(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
 }
 
 void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPLs& vpls,
-               const ShadeMIS& mis, double eps, const RayScene& scene, float* out, int64_t* rays,
-               int threads, const StopCheck& stop) {
+               const ShadeMIS& mis, double eps, const int32_t* pixel_set, const int64_t* set_start,
+               const RayScene& scene, float* out, int64_t* rays, int threads,
+               const StopCheck& stop) {
     std::atomic<int64_t> traced{0};
     for_each_pixel(hits.count, threads, stop, [&](int64_t p) {
         double s[3] = {0.0, 0.0, 0.0};  // in VPL order, as vpl_accumulate sums
         int64_t n = 0;
-        vpl_pixel_rays(hits, mats, vpls, mis, eps, p,
+        ShadeVPLs mine = vpls;
+        if (pixel_set) {
+            const int64_t a = set_start[pixel_set[p]], b = set_start[pixel_set[p] + 1];
+            mine.count = b - a;
+            mine.pos += 3 * a, mine.normal += 3 * a, mine.weight += 3 * a;
+            mine.area += a;
+            if (mine.pa) mine.pa += a;
+        }
+        vpl_pixel_rays(hits, mats, mine, mis, eps, p,
                        [&](const float* ro, const float* rd, float len, const float* cr) {
                            ++n;
                            if (scene.occluded(ro, rd, len)) return;

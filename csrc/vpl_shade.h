@@ -107,11 +107,14 @@ void vpl_accumulate(int64_t n_pixels, const int64_t* ray_count, const float* ray
 
 // Both passes and the shadow rays between them, pixel by pixel, against
 // `scene`: the same sums as vpl_prepare, occlusion queries and
-// vpl_accumulate, without the ray arrays. Writes out (P, 3) and the number
+// vpl_accumulate, without the ray arrays. With `pixel_set` (P,) (nullable),
+// pixel p sees only VPLs set_start[s] .. set_start[s + 1] - 1 of set
+// s = pixel_set[p] (interleaved sampling). Writes out (P, 3) and the number
 // of shadow rays traced into *rays.
 void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPLs& vpls,
-               const ShadeMIS& mis, double eps, const RayScene& scene, float* out, int64_t* rays,
-               int threads, const StopCheck& stop);
+               const ShadeMIS& mis, double eps, const int32_t* pixel_set, const int64_t* set_start,
+               const RayScene& scene, float* out, int64_t* rays, int threads,
+               const StopCheck& stop);
 
 // Gather rays: n_g cosine-distributed directions around the shading normal
 // of each shaded pixel (material >= 0), stratified (n_g strata in azimuth x

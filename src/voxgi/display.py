@@ -41,6 +41,7 @@ __all__ = [
 
 #: What the VPL kernels read of a pixel's primary hit.
 _HIT_KEYS = ("pos", "normal", "ng", "wo", "material")
+_VPL_KEYS = ("pos", "normal", "weight", "area", "pa")
 
 #: relMSE's epsilon (voxgi.metrics.rel_mse), used by the stopping rule too.
 _REL_EPS = 0.01
@@ -591,7 +592,9 @@ class _FrameShader:
         if not has_vpls:
             return out
         perm, cuts = self._groups
-        if len(vpls) == 1:
+        if self.tracer.native is not None:
+            out += self._vpl_light_traced(h, vpls)
+        elif len(vpls) == 1:
             out += self._vpl_light(h, vpls, cuts)
         else:  # the hits sorted by group, so that each group is a slice
             out[perm] += self._vpl_light({k: h[k][perm] for k in _HIT_KEYS}, vpls, cuts)
@@ -607,8 +610,6 @@ class _FrameShader:
         worker threads spin for a while after a batch, and a kernel started
         in that time runs on a shared core."""
         P = len(h["material"])
-        if self.tracer.native is not None:
-            return self._vpl_light_traced(h, vpls, cuts)
         out = np.zeros((P, 3), np.float32)
         K = max(len(v["index"]) for v in vpls)
         cap = min(P, self.tile) * K
@@ -667,29 +668,34 @@ class _FrameShader:
             self.seconds["shadow"] += t2 - t1
         return out
 
-    def _vpl_light_traced(self, h: dict, vpls: list, cuts: np.ndarray) -> np.ndarray:
-        """:meth:`_vpl_light` in one compiled call per group, its shadow rays
-        traced pixel by pixel as they are made: the same sums."""
+    def _vpl_light_traced(self, h: dict, vpls: list) -> np.ndarray:
+        """:meth:`_vpl_light` in one compiled call, each pixel lit by its
+        group's VPLs and its shadow rays traced as they are made: the same
+        sums."""
         t0 = time.perf_counter()
-        out = np.empty((len(h["material"]), 3), np.float32)
-        for g, vpl in enumerate(vpls):
-            lo, hi = int(cuts[g]), int(cuts[g + 1])
-            out[lo:hi], rays = _core.vpl_light(
-                *(h[k][lo:hi] for k in _HIT_KEYS),
-                *self._materials(),
-                vpl["pos"],
-                vpl["normal"],
-                vpl["weight"],
-                vpl["area"],
-                vpl["pa"],
-                float(self.gather),
-                self.eps,
-                self.tracer.native,
-                self.threads,
-            )
-            self.shadow_rays += rays
+        cat = [np.concatenate([v[k] for v in vpls]) for k in _VPL_KEYS]
+        start = np.cumsum([0] + [len(v["index"]) for v in vpls]).astype(np.int64)
+        sets = len(vpls) > 1
+        out, rays = _core.vpl_light(
+            *(h[k] for k in _HIT_KEYS),
+            *self._materials(),
+            *cat,
+            float(self.gather),
+            self.eps,
+            self.tracer.native,
+            self._pixel_set if sets else None,
+            start if sets else None,
+            self.threads,
+        )
+        self.shadow_rays += rays
         self.seconds["shadow"] += time.perf_counter() - t0
         return out
+
+    @cached_property
+    def _pixel_set(self) -> np.ndarray:
+        """(P,) int32 interleaving group of each pixel, in row-major order."""
+        perm, cuts = self._groups
+        return np.repeat(np.arange(len(cuts) - 1, dtype=np.int32), np.diff(cuts))[np.argsort(perm)]
 
     def _light_sum(self, hh, count, dirs, weight, occluded, out) -> None:
         """Add into ``out`` each pixel's light rays: BRDF x cos x ``weight``
