@@ -110,6 +110,25 @@ py::tuple sum(const py::tuple& emit, const F64& point, const F64& normal, const 
     return py::make_tuple(out, sq);
 }
 
+py::tuple traced(const py::tuple& emit, const F64& point, const F64& normal, const F64& shift,
+                 const F64& sequence, double offset, const I32& emitter_of,
+                 const voxgi::RayScene& scene, int threads) {
+    const voxgi::EmitterTriangles em = emitters(emit);
+    const voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
+    check_1d(emitter_of, scene.triangle_count(), "emitter_of");
+    const int32_t* eo = emitter_of.data();
+    for (py::ssize_t t = 0; t < emitter_of.shape(0); ++t)
+        if (eo[t] >= em.count) throw py::value_error("emitter_of: index past the emitters");
+    F64 out({q.records, py::ssize_t(3)}), sq({q.records});
+    double *po = out.mutable_data(), *ps = sq.mutable_data();
+    const voxgi::StopCheck stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::direct_light_traced(em, q, eo, scene, po, ps, voxgi::resolve_threads(threads), stop);
+    }
+    return py::make_tuple(out, sq);
+}
+
 }  // namespace
 
 void bind_direct_light(py::module_& m) {
@@ -129,4 +148,10 @@ direction (M,3), M = N x S.)doc");
           "threads"_a = 0,
           R"doc(Per record: direct irradiance (N,3) float64 and the mean square of
 the luminance of each light + hemisphere sample pair (N,) float64.)doc");
+    m.def("direct_light_traced", &traced, "emitters"_a, "point"_a.noconvert(),
+          "normal"_a.noconvert(), "shift"_a.noconvert(), "sequence"_a.noconvert(), "offset"_a,
+          "emitter_of"_a.noconvert(), "scene"_a, "threads"_a = 0,
+          R"doc(direct_light_rays, the rays traced in scene (a RayScene of the
+triangles emitter_of indexes) and direct_light_sum, record by record without
+ray arrays: the same per-record irradiance (N,3) and mean square (N,).)doc");
 }

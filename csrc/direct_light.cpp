@@ -85,6 +85,48 @@ void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
     for (int i = 0; i < 3; ++i) c[i] = float(weight * em.radiance[3 * k + i]);
 }
 
+// What sample `ray` of record r brings, light and hemisphere sample together:
+// the light sample's contribution unless its ray was blocked, and the
+// power-heuristic share of the emitter its hemisphere ray met first
+// (triangle t, barycentrics u, v; -1: none).
+inline void sample_pair(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
+                        const float* contribution, bool light_blocked, const float* hemi_direction,
+                        int32_t t, float hu, float hv, const int32_t* emitter_of,
+                        int64_t scene_triangles, double pair[3]) {
+    const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
+    for (int i = 0; i < 3; ++i) pair[i] = light_blocked ? 0.0 : double(contribution[i]);
+    const int32_t k = (t >= 0 && t < scene_triangles) ? emitter_of[t] : -1;
+    if (k < 0) return;
+    // the hit point from its barycentrics, in double
+    const double* c = em.corners + 9 * k;
+    const double bu = hu, bv = hv, b0 = 1.0 - bu - bv;
+    double d[3];
+    for (int i = 0; i < 3; ++i) d[i] = b0 * c[i] + bu * c[3 + i] + bv * c[6 + i] - x[i];
+    const double r2 = dot(d, d);
+    const double w[3] = {hemi_direction[0], hemi_direction[1], hemi_direction[2]};
+    const double cos_x = std::max(0.0, dot(w, nx)), cos_y = emitter_cosine(em, k, w);
+    if (cos_y > 0.0 && r2 > 0.0) {
+        // power heuristic, solid-angle measure
+        const double pl = em.density[k] * r2 / cos_y, ph = cos_x / kPi;
+        const double weight = cos_x * ph / (pl * pl + ph * ph);
+        for (int i = 0; i < 3; ++i) pair[i] += weight * em.radiance[3 * k + i];
+    }
+}
+
+// Record r's light and hemisphere rays of sample s.
+inline void sample_rays(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r, int64_t s,
+                        float* lo, float* ld, float* ll, float* con, float* ho, float* hd) {
+    const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
+    double u[5], w[3];
+    sample_point(q, r, s, u);
+    light_ray(em, q, r, u, lo, ld, ll, con);
+    cosine_direction(nx, u[3], u[4], w);
+    for (int i = 0; i < 3; ++i) {
+        ho[i] = float(x[i] + q.offset * nx[i]);
+        hd[i] = float(w[i]);
+    }
+}
+
 }  // namespace
 
 void direct_light_rays(const EmitterTriangles& em, const DirectLightQuery& q, float* light_origin,
@@ -94,21 +136,13 @@ void direct_light_rays(const EmitterTriangles& em, const DirectLightQuery& q, fl
     const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
         const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
-        for (int64_t r = task * kRecordsPerTask; r < r1; ++r) {
-            const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
+        for (int64_t r = task * kRecordsPerTask; r < r1; ++r)
             for (int64_t s = 0; s < q.samples; ++s) {
                 const int64_t ray = r * q.samples + s;
-                double u[5], w[3];
-                sample_point(q, r, s, u);
-                light_ray(em, q, r, u, light_origin + 3 * ray, light_direction + 3 * ray,
-                          light_length + ray, contribution + 3 * ray);
-                cosine_direction(nx, u[3], u[4], w);
-                for (int i = 0; i < 3; ++i) {
-                    hemi_origin[3 * ray + i] = float(x[i] + q.offset * nx[i]);
-                    hemi_direction[3 * ray + i] = float(w[i]);
-                }
+                sample_rays(em, q, r, s, light_origin + 3 * ray, light_direction + 3 * ray,
+                            light_length + ray, contribution + 3 * ray, hemi_origin + 3 * ray,
+                            hemi_direction + 3 * ray);
             }
-        }
     });
 }
 
@@ -121,34 +155,41 @@ void direct_light_sum(const EmitterTriangles& em, const DirectLightQuery& q,
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
         const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
         for (int64_t r = task * kRecordsPerTask; r < r1; ++r) {
-            const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
             double sum[3] = {0.0, 0.0, 0.0}, sq = 0.0;
             for (int64_t s = 0; s < q.samples; ++s) {
                 const int64_t ray = r * q.samples + s;
-                double pair[3] = {0.0, 0.0, 0.0};
-                if (light_hit[ray] == -1)
-                    for (int i = 0; i < 3; ++i) pair[i] += contribution[3 * ray + i];
-                const int32_t t = hemi_hit[ray];
-                const int32_t k = (t >= 0 && t < scene_triangles) ? emitter_of[t] : -1;
-                if (k >= 0) {
-                    // the hit point from its barycentrics, in double
-                    const double* c = em.corners + 9 * k;
-                    const double bu = hemi_u[ray], bv = hemi_v[ray], b0 = 1.0 - bu - bv;
-                    double d[3];
-                    for (int i = 0; i < 3; ++i)
-                        d[i] = b0 * c[i] + bu * c[3 + i] + bv * c[6 + i] - x[i];
-                    const double r2 = dot(d, d);
-                    const double w[3] = {hemi_direction[3 * ray], hemi_direction[3 * ray + 1],
-                                         hemi_direction[3 * ray + 2]};
-                    const double cos_x = std::max(0.0, dot(w, nx)),
-                                 cos_y = emitter_cosine(em, k, w);
-                    if (cos_y > 0.0 && r2 > 0.0) {
-                        // power heuristic, solid-angle measure
-                        const double pl = em.density[k] * r2 / cos_y, ph = cos_x / kPi;
-                        const double weight = cos_x * ph / (pl * pl + ph * ph);
-                        for (int i = 0; i < 3; ++i) pair[i] += weight * em.radiance[3 * k + i];
-                    }
-                }
+                double pair[3];
+                sample_pair(em, q, r, contribution + 3 * ray, light_hit[ray] != -1,
+                            hemi_direction + 3 * ray, hemi_hit[ray], hemi_u[ray], hemi_v[ray],
+                            emitter_of, scene_triangles, pair);
+                double lum = 0.0;
+                for (int i = 0; i < 3; ++i) sum[i] += pair[i], lum += kLuminance[i] * pair[i];
+                sq += lum * lum;
+            }
+            for (int i = 0; i < 3; ++i) irradiance[3 * r + i] = sum[i] / double(q.samples);
+            mean_square[r] = sq / double(q.samples);
+        }
+    });
+}
+
+void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
+                         const int32_t* emitter_of, const RayScene& scene, double* irradiance,
+                         double* mean_square, int threads, const StopCheck& stop) {
+    const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
+    const int64_t nt = scene.triangle_count();
+    parallel_for(tasks, threads, stop, [&](int64_t task, int) {
+        const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
+        for (int64_t r = task * kRecordsPerTask; r < r1; ++r) {
+            double sum[3] = {0.0, 0.0, 0.0}, sq = 0.0;
+            for (int64_t s = 0; s < q.samples; ++s) {
+                float lo[3], ld[3], ll, con[3], ho[3], hd[3], hu, hv;
+                sample_rays(em, q, r, s, lo, ld, &ll, con, ho, hd);
+                // light rays that cannot contribute have length 0 (and no
+                // contribution) and are not traced
+                const bool blocked = ll > 0.f && scene.occluded(lo, ld, ll);
+                const int32_t t = scene.intersect(ho, hd, &hu, &hv, nullptr);
+                double pair[3];
+                sample_pair(em, q, r, con, blocked, hd, t, hu, hv, emitter_of, nt, pair);
                 double lum = 0.0;
                 for (int i = 0; i < 3; ++i) sum[i] += pair[i], lum += kLuminance[i] * pair[i];
                 sq += lum * lum;

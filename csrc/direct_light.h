@@ -2,13 +2,16 @@
 // point, shadow rays to points drawn on the emitting triangles (light
 // sampling) and rays in cosine-distributed directions (hemisphere sampling),
 // combined by the power heuristic (Veach 1997), so that neither a small lamp far away
-// nor a large emitter next to the record gives unbounded variance. Embree
-// traces the rays from Python; these kernels make them and sum what they
-// bring. No pybind11 here: plain pointers and sizes.
+// nor a large emitter next to the record gives unbounded variance. With a
+// RayScene, direct_light_traced makes, traces and sums the rays record by
+// record; without one, Embree traces them from Python between
+// direct_light_rays and direct_light_sum. No pybind11 here: plain pointers
+// and sizes.
 #pragma once
 
 #include <cstdint>
 
+#include "ray_scene.h"
 #include "util/parallel.h"
 
 namespace voxgi {
@@ -61,5 +64,12 @@ void direct_light_sum(const EmitterTriangles& em, const DirectLightQuery& q,
                       const float* hemi_direction, const int32_t* hemi_hit, const float* hemi_u,
                       const float* hemi_v, const int32_t* emitter_of, int64_t scene_triangles,
                       double* irradiance, double* mean_square, int threads, const StopCheck& stop);
+
+// direct_light_rays, the rays traced in `scene` (built from the scene's
+// triangles, which emitter_of indexes) and direct_light_sum, record by
+// record without the ray arrays: the same sums.
+void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
+                         const int32_t* emitter_of, const RayScene& scene, double* irradiance,
+                         double* mean_square, int threads, const StopCheck& stop);
 
 }  // namespace voxgi

@@ -199,3 +199,19 @@ def test_far_from_the_origin_gives_the_same_light():
     e_near, _ = direct_irradiance(near, voxgi.voxelize(near, resolution=16), samples=32)
     e_far, _ = direct_irradiance(far, voxgi.voxelize(far, resolution=16), samples=32)
     assert np.allclose(e_far, e_near, rtol=1e-3, atol=1e-6)
+
+
+@pytest.mark.skipif(voxgi.rays.embree_library() is None, reason="no Embree 4 library found")
+def test_rays_traced_as_they_are_made_give_the_two_pass_light(monkeypatch):
+    # With the compiled ray scene, each record's light and hemisphere rays are
+    # traced as they are made; through embreex they go in batches between two
+    # kernels. The same rays, the same sums: the same irradiance, bit for bit.
+    scene = voxgi.scenes.window_room()
+    vox = voxgi.voxelize(scene, resolution=24, progress=False)
+    H, st = direct_irradiance(scene, vox, samples=8, threads=2)
+    monkeypatch.setattr(voxgi.rays, "embree_library", lambda: None)
+    H2, st2 = direct_irradiance(scene, vox, samples=8, threads=2)
+    assert np.array_equal(H, H2)
+    assert st["rays"] == st2["rays"] > 0
+    assert st["refined_records"] == st2["refined_records"] > 0
+    assert np.count_nonzero(H[:, 0] > 0) > len(vox) // 4

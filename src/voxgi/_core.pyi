@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'direct_light_rays', 'direct_light_sum', 'gather_families', 'gather_light', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_light', 'vpl_prepare']
+__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'direct_light_rays', 'direct_light_sum', 'direct_light_traced', 'gather_families', 'gather_light', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_light', 'vpl_prepare']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -169,6 +169,12 @@ def direct_light_sum(emitters: tuple, point: numpy.typing.NDArray[numpy.float64]
     """
     Per record: direct irradiance (N,3) float64 and the mean square of
     the luminance of each light + hemisphere sample pair (N,) float64.
+    """
+def direct_light_traced(emitters: tuple, point: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float64], shift: numpy.typing.NDArray[numpy.float64], sequence: numpy.typing.NDArray[numpy.float64], offset: typing.SupportsFloat | typing.SupportsIndex, emitter_of: numpy.typing.NDArray[numpy.int32], scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+    """
+    direct_light_rays, the rays traced in scene (a RayScene of the
+    triangles emitter_of indexes) and direct_light_sum, record by record without
+    ray arrays: the same per-record irradiance (N,3) and mean square (N,).
     """
 def gather_families(ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing.NDArray[numpy.float32], point: numpy.typing.NDArray[numpy.float32], families: numpy.typing.NDArray[numpy.int32], weights: numpy.typing.NDArray[numpy.float64], values: numpy.typing.NDArray[numpy.float32], family_indices: numpy.typing.NDArray[numpy.int64], epsilon: typing.SupportsFloat | typing.SupportsIndex = 0.05000000074505806, history: typing.SupportsInt | typing.SupportsIndex = 8, threads: typing.SupportsInt | typing.SupportsIndex = 0, stand_in: numpy.typing.NDArray[numpy.bool] | None = None) -> numpy.typing.NDArray[numpy.float64]:
     """

@@ -350,6 +350,8 @@ def _batch(
     Returns the mean RGB irradiance (R, 3) and the mean square of its
     luminance (R,), from which the caller judges each record's noise.
     """
+    if tracer.native is not None:
+        return _core.direct_light_traced(*args, emitter_of, tracer.native, threads=nthreads)
     lo, ld, length, contribution, ho, hd = _core.direct_light_rays(*args, threads=nthreads)
     # light rays that cannot contribute (a back face at either end) have length 0
     live = np.flatnonzero(length > 0)
