@@ -658,3 +658,23 @@ def test_a_thin_wall_meeting_a_box_loses_light_only_where_surfaces_cross():
     plain = front & _voxels_of_one_plane(vox)
     assert lost[plain].max() < 1e-6, lost[plain].max()
     assert lost[front].mean() < 5e-4, lost[front].mean()  # 2.3e-4; the corners lose up to 5%
+
+
+def test_exact_direct_light_ignores_the_shooting_radius():
+    # Nothing is shot: the shooting's direction set is never built, and a
+    # later set of the same radius keeps its own normalisation.
+    vox = voxgi.voxelize(voxgi.scenes.cornell_box(), resolution=24, progress=False)
+    kw = dict(directions=6, progress=False, max_bounces=4)
+    sols = [
+        voxgi.solve(
+            vox,
+            tuning=SolveTuning(
+                direct_light="exact", later_directions=9, later_after=1, shoot_directions=rs
+            ),
+            **kw,
+        )
+        for rs in (9, 11)
+    ]
+    np.testing.assert_array_equal(sols[0].radiosity, sols[1].radiosity)
+    assert set(sols[0].stats["directions"]) == {"gather", "later"}
+    assert "shoot" not in sols[0].stats["S_spread"]

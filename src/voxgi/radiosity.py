@@ -632,6 +632,15 @@ def _max_line_keys(families: np.ndarray, extent: np.ndarray) -> int:
     return int(np.max(nu * nw))
 
 
+def _shoots(vox: VoxelSet, opt: _Settings) -> bool:
+    """Whether a solve of ``vox`` with ``opt`` shoots its direct light (see
+    :attr:`_Problem.shoots`)."""
+    scene = getattr(vox, "scene", None)
+    if scene is not None and scene.has_lights:
+        return False
+    return opt.direct_light == "shoot" or scene is None
+
+
 def solve_memory(
     vox: VoxelSet,
     directions: int = 22,
@@ -665,7 +674,10 @@ def solve_memory(
     ijk = _validate.as_c_array(vox.ijk, np.int32, (-1, 3), "vox.ijk")
     n = len(ijk)
     extent = ijk.max(axis=0).astype(np.int64) - ijk.min(axis=0) if n else np.zeros(3, np.int64)
-    radii = {opt.R, opt.Rs} | ({opt.Rl} if opt.Rl is not None else set())
+    # the shooting's set only where the direct light is shot (building one of
+    # radius 35 takes a quarter of a second)
+    radii = {opt.R} | ({opt.Rs} if _shoots(vox, opt) else set())
+    radii |= {opt.Rl} if opt.Rl is not None else set()
     sets = [direction_set(r) for r in sorted(radii)]
     keys = max(_max_line_keys(ds.families, extent) for ds in sets)
     per_thread = n * _THREAD_RECORD_BYTES + keys * _LINE_KEY_BYTES
@@ -935,9 +947,7 @@ class _Problem:
         decides: lights other than emitting triangles have no records to
         shoot from, so a scene with any is always lit exactly
         (``docs/design.md`` §11)."""
-        if self.lights:
-            return False
-        return self.opt.direct_light == "shoot" or getattr(self.vox, "scene", None) is None
+        return _shoots(self.vox, self.opt)
 
     @property
     def limit(self) -> int:
@@ -992,7 +1002,7 @@ def _open_backend(p: _Problem, executor, progress: bool) -> None:
     if hasattr(p.sysm, "stats"):
         p.stats["executor"] = p.sysm.stats
     p.gds = direction_set(opt.R)
-    p.sds = direction_set(opt.Rs)
+    p.sds = direction_set(opt.Rs) if p.shoots else None
     p.lds = direction_set(opt.Rl) if opt.Rl is not None else None
     p.seconds["setup"] = time.perf_counter() - t
 
@@ -1012,7 +1022,7 @@ def _normalise(p: _Problem) -> None:
     if p.lds is not None:
         if opt.Rl == opt.R:
             Sl = Sg
-        elif opt.Rl == opt.Rs:
+        elif opt.Rl == opt.Rs and p.shoots:
             Sl = Ss
         else:
             Sl = p.sysm.normalisation(p.lds.families, p.lds.weights, nt)
@@ -1020,6 +1030,8 @@ def _normalise(p: _Problem) -> None:
     p.seconds["normalisation"] = time.perf_counter() - t
     d = {}
     for name, ds in (("gather", p.gds), ("shoot", p.sds)):
+        if ds is None:
+            continue
         d[name] = {
             "radius": int(ds.radius),
             "count": len(ds),
@@ -1029,10 +1041,9 @@ def _normalise(p: _Problem) -> None:
     if p.lds is not None:
         d["later"] = {"radius": opt.Rl, "count": len(p.lds), "after": opt.later_after}
     p.stats["directions"] = d
-    p.stats["S_spread"] = {
-        "gather": [float(Sg.min()), float(Sg.max())],
-        "shoot": [float(Ss.min()), float(Ss.max())],
-    }
+    p.stats["S_spread"] = {"gather": [float(Sg.min()), float(Sg.max())]}
+    if p.sds is not None:
+        p.stats["S_spread"]["shoot"] = [float(Ss.min()), float(Ss.max())]
 
 
 def _silhouettes(p: _Problem, emitters_send: np.ndarray) -> dict:
