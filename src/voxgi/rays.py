@@ -63,6 +63,9 @@ class Tracer:
         primitives; a query's answer is an index into them.
     threads : int
         Worker threads for large batches (1: the calling thread only).
+    native : bool, optional
+        Trace in the compiled core where :func:`embree_library` finds Embree
+        (default); False: always through embreex's Python calls.
 
     Attributes
     ----------
@@ -70,6 +73,9 @@ class Tracer:
         The frame's origin in world coordinates (the middle of the scene's bounds).
     tris : (F, 3, 3) float64
         The triangles' corners in the centred frame.
+    native : voxgi._core.RayScene or None
+        The compiled scene, which the display and the direct light also hand
+        to their kernels; None on the embreex path.
     """
 
     def __init__(self, scene: Scene, threads: int, *, native: bool = True):
