@@ -1,6 +1,8 @@
 #include "ray_scene.h"
 
+#ifndef _WIN32
 #include <dlfcn.h>
+#endif
 
 #include <algorithm>
 #include <cmath>
@@ -83,6 +85,15 @@ struct EmbreeApi {
 };
 
 namespace {
+
+#ifdef _WIN32
+// Windows builds trace through embreex's Python calls (voxgi.rays finds no
+// library to hand over there); a RayScene cannot be made.
+void* dlopen(const char*, int) { return nullptr; }
+void* dlsym(void*, const char*) { return nullptr; }
+const char* dlerror() { return "run-time loading of Embree is not supported on Windows"; }
+constexpr int RTLD_NOW = 0, RTLD_LOCAL = 0;
+#endif
 
 template <class F>
 void bind(void* lib, const std::string& path, const char* name, F& fn) {
