@@ -590,12 +590,12 @@ class _FrameShader:
                 self._direct_lights(h, a, min(P, a + self.tile), out)
         if not has_vpls:
             return out
-        perm, cuts = self._groups
         if self.tracer.native is not None:
             out += self._vpl_light_traced(h, vpls)
         elif len(vpls) == 1:
-            out += self._vpl_light(h, vpls, cuts)
+            out += self._vpl_light(h, vpls, self._groups[1])
         else:  # the hits sorted by group, so that each group is a slice
+            perm, cuts = self._groups
             out[perm] += self._vpl_light({k: h[k][perm] for k in _HIT_KEYS}, vpls, cuts)
         if self.gather:
             for a in range(0, P, self.tile):

@@ -1092,20 +1092,22 @@ def _gathering_is_cheaper(p: _Problem) -> str | None:
     one direction set for both they exchange the same light; only the
     coverage of flat emitters and the silhouettes of objects that do not
     emit are the shooting's own, so the pass stands in where every object
-    emits and none is flat (furnaces, glowing solids). A shot ray marches about half the
-    grid's extent, a gathering pass visits every record once per direction:
-    with more emitter records x path than records, the pass is cheaper."""
+    emits and none is flat (furnaces, glowing solids). A shot ray marches
+    about half the grid's extent, a gathering pass visits every record once
+    per direction: with more emitter records x path than records, the pass
+    is cheaper. The cheap tests come first: a scene with a lamp leaves before
+    the flat test, which the shooting then makes itself."""
     if p.opt.Rs != p.opt.R:
         return None
     es = np.flatnonzero(np.any(p.twins.send(p.E) > 0, axis=1))
-    if len(es) == 0 or _flat_emitter_coverage(p.a, p.vox, es)[1]:
+    if len(es) == 0:
         return None
     obj = getattr(p.vox, "object_id", None)
     if obj is not None and not np.all(np.isin(obj, obj[es])):
         return None  # a silhouette of an object that does not emit may pass light
     ijk = p.a["ijk"]
     path = 0.5 * float(np.mean(ijk.max(axis=0) - ijk.min(axis=0) + 1))
-    if len(es) * path <= p.n:
+    if len(es) * path <= p.n or _flat_emitter_coverage(p.a, p.vox, es)[1]:
         return None
     return (
         f"{len(es)} emitter records x ~{path:.0f} voxels of path outweigh {p.n} records: "
