@@ -15,6 +15,9 @@ Sections (all by default):
   meets the box, ends in mid-air or turns a corner, rho 0.8, R 22: the share
   of each record's hemisphere without a partner at res 32, 64, 128, and the
   radiance error against Le / (1 - rho) at res 32.
+- ``thin_walls`` the same walls in the furnace, rho 0.8, R 8, shot direct
+  light, res 32, 64, 128: radiance error of the lines alone and with traced
+  bounces (64 and 256 rays a record in the first pass), and seconds.
 - ``cap``        emitting-cap sphere: mean / max error vs resolution (32, 64,
   128) and R (8, 16, 22); rho = 0.5.
 - ``cornell``    energy balance on the Cornell box vs resolution (32, 64, 128).
@@ -255,6 +258,50 @@ def junctions(args) -> None:
     _table(rows, cols)
     full = ress == [32, 64, 128]
     _write("junctions" if full else "junctions_res" + "_".join(map(str, ress)), rows, rho=rho, R=R)
+
+
+def thin_walls(args) -> None:
+    """Thin walls in the uniform furnace: every record's radiance error
+    against Le / (1 - rho), the lines alone and with traced bounces."""
+    rho, R = 0.8, 8
+    ress = args.res or ([24] if args.quick else [32, 64, 128])
+    configs = [("lines", 64), ("traced", 64), ("traced", 256)]
+    rows = []
+    for kind in ("through", "end", "corner"):
+        for res in ress:
+            vox = voxgi.voxelize(_divided_box(kind, rho), resolution=res, progress=False)
+            front = ~vox.back & (vox.area > 0)
+            for how, samples in configs:
+                tuning = voxgi.SolveTuning(
+                    shoot_directions=R,
+                    diagnostics=False,
+                    indirect_light=how,
+                    traced_samples=samples,
+                )
+                t = time.perf_counter()
+                sol = voxgi.solve(vox, directions=R, progress=False, tuning=tuning)
+                err = sol.radiance[front, 0] * (1 - rho) - 1
+                rows.append(
+                    {
+                        "wall": kind,
+                        "res": res,
+                        "records": int(front.sum()),
+                        "bounces": how if how == "lines" else f"traced {samples}",
+                        "err_mean": float(err.mean()),
+                        "err_max": float(np.abs(err).max()),
+                        "err_over_2pct": int((np.abs(err) > 0.02).sum()),
+                        "traced_passes": sol.stats.get("traced", {}).get("passes", 0),
+                        "traced_seconds": sol.stats["seconds"].get("traced", 0.0),
+                        "seconds": time.perf_counter() - t,
+                    }
+                )
+                print(rows[-1], flush=True)
+    cols = ["wall", "res", "records", "bounces", "err_mean", "err_max", "err_over_2pct"]
+    _table(rows, [*cols, "traced_passes", "traced_seconds", "seconds"])
+    full = ress == [32, 64, 128]
+    _write(
+        "thin_walls" if full else "thin_walls_res" + "_".join(map(str, ress)), rows, rho=rho, R=R
+    )
 
 
 def _err_vs(sol, ref, vox) -> np.ndarray:
@@ -725,6 +772,7 @@ def energy(args) -> None:
 SECTIONS = {
     "furnace": furnace,
     "junctions": junctions,
+    "thin_walls": thin_walls,
     "cap": cap,
     "cornell": cornell,
     "energy": energy,
@@ -750,7 +798,7 @@ def main() -> None:
         "--res",
         type=int,
         nargs="+",
-        help="cap, energy, junctions: resolutions; furnace: the first one",
+        help="cap, energy, junctions, thin_walls: resolutions; furnace: the first one",
     )
     ap.add_argument(
         "--radii",

@@ -23,6 +23,7 @@ from . import _core, _validate
 from .radiosity import Solution
 from .rays import Tracer
 from .scene import Camera, Scene
+from .traced import record_grid
 from .voxels import available_memory
 
 __all__ = [
@@ -499,46 +500,14 @@ class _FrameShader:
         self.gather_rays = 0
         self.seconds = {"primary": 0.0, "shade": 0.0, "shadow": 0.0, "gather": 0.0}
         if self.gather:
-            self._grid = self._record_grid(sampler, tracer.centre)
+            self._grid = record_grid(
+                sampler.vox, tracer.centre, sampler.B / math.pi, sampler.record_pa
+            )
             self._tri = {
                 "tri_v": tracer.tris,
                 "tri_object": tracer.obj,
                 "obj_two_sided": self.two_sided.astype(np.uint8),
             }
-
-    @staticmethod
-    def _record_grid(sampler: VPLSampler, centre: np.ndarray) -> dict:
-        """Records sorted by voxel key, to find the record under a gather hit
-        (positions in the tracer's frame, centred on ``centre``)."""
-        vox = sampler.vox
-        ijk = np.asarray(vox.ijk, dtype=np.int64)
-        lo = ijk.min(axis=0)
-        dims = ijk.max(axis=0) - lo + 1
-        rel = ijk - lo
-        key = (rel[:, 0] * dims[1] + rel[:, 1]) * dims[2] + rel[:, 2]
-        order = np.argsort(key, kind="stable")
-        sorted_key = np.ascontiguousarray(key[order])
-        cells = int(np.prod(dims))
-        # A dense table of each voxel's first record (4 bytes a voxel of the
-        # bounding grid) replaces a binary search per gather hit, up to 64 MB.
-        if cells <= (1 << 24):
-            start = np.searchsorted(sorted_key, np.arange(cells + 1)).astype(np.int32)
-        else:
-            start = np.zeros(0, np.int32)
-        return {
-            "rec_sorted_key": sorted_key,
-            "rec_order": order.astype(np.int32),
-            "rec_cell_start": start,
-            "rec_centroid": np.ascontiguousarray(sampler.pos - centre),
-            "rec_normal": sampler.normal,
-            "rec_object": np.ascontiguousarray(vox.object_id, dtype=np.int32),
-            "rec_radiance": np.ascontiguousarray(sampler.B / math.pi, dtype=np.float32),
-            "rec_pa": sampler.record_pa,
-            "grid_dims": dims.astype(np.int64),
-            "grid_lo": lo.astype(np.int64),
-            "grid_origin": np.asarray(vox.origin, dtype=np.float64).reshape(3) - centre,
-            "pitch": float(vox.pitch),
-        }
 
     def hits(self, org: np.ndarray, dirs: np.ndarray) -> dict:
         """Primary hits: points in float64 on the hit triangle's plane, normals

@@ -1,0 +1,284 @@
+"""Reflected light gathered at the records by rays against the exact triangles.
+
+The propagation carries light along discrete lines whose blockers are voxels
+(``docs/design.md`` §4), so a gap narrower than a voxel closes for it, and
+where a thin wall meets another surface the records of both rooms can share
+a line. The traced gather asks the scene's own triangles instead: from each
+record's surface point, cosine-distributed rays find the first triangle, and
+the record standing for the hit point (the lookup the display's gather rays
+use, §6) gives the radiosity seen there. With ``values`` the records'
+radiosity ``B`` and n rays per record,
+
+.. math:: H(x) \\approx \\frac{1}{n} \\sum_{k=1}^{n} B(y_k),
+
+the irradiance of a Lambertian record at x (the rays' density
+``cos θ / π`` cancels the integrand's ``cos θ`` and ``1/π``). The cost is
+records × rays per pass, whatever the geometry's detail.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import _core, _validate
+from .rays import Tracer
+from .scene import Scene
+from .voxels import VoxelSet
+
+__all__ = ["TracedGather", "record_grid", "traced_irradiance"]
+
+
+def record_grid(
+    vox: VoxelSet, centre: np.ndarray, radiance: np.ndarray, pa: np.ndarray | None = None
+) -> dict:
+    """The records sorted by voxel, as the compiled gather kernels look them up.
+
+    Parameters
+    ----------
+    vox : VoxelSet
+        The records.
+    centre : (3,) float64
+        Origin of the tracer's frame (:attr:`voxgi.rays.Tracer.centre`).
+    radiance : (N, 3)
+        What a ray that lands on each record reads.
+    pa : (N,) float32 or None
+        Each record's VPL density for the display's MIS (None: zeros, no MIS).
+
+    Returns
+    -------
+    dict
+        The kernels' ``rec_*``, ``grid_*`` and ``pitch`` keyword arguments.
+    """
+    ijk = np.asarray(vox.ijk, dtype=np.int64)
+    lo = ijk.min(axis=0)
+    dims = ijk.max(axis=0) - lo + 1
+    rel = ijk - lo
+    key = (rel[:, 0] * dims[1] + rel[:, 1]) * dims[2] + rel[:, 2]
+    order = np.argsort(key, kind="stable")
+    sorted_key = np.ascontiguousarray(key[order])
+    cells = int(np.prod(dims))
+    # A dense table of each voxel's first record (4 bytes a voxel of the
+    # bounding grid) replaces a binary search per hit, up to 64 MB.
+    if cells <= (1 << 24):
+        start = np.searchsorted(sorted_key, np.arange(cells + 1)).astype(np.int32)
+    else:
+        start = np.zeros(0, np.int32)
+    n = len(vox)
+    return {
+        "rec_sorted_key": sorted_key,
+        "rec_order": order.astype(np.int32),
+        "rec_cell_start": start,
+        "rec_centroid": np.ascontiguousarray(np.asarray(vox.centroid, np.float64) - centre),
+        "rec_normal": np.ascontiguousarray(vox.normal, dtype=np.float32),
+        "rec_object": np.ascontiguousarray(vox.object_id, dtype=np.int32),
+        "rec_radiance": np.ascontiguousarray(radiance, dtype=np.float32),
+        "rec_pa": np.zeros(n, np.float32) if pa is None else np.ascontiguousarray(pa, np.float32),
+        "grid_dims": dims.astype(np.int64),
+        "grid_lo": lo.astype(np.int64),
+        "grid_origin": np.asarray(vox.origin, dtype=np.float64).reshape(3) - centre,
+        "pitch": float(vox.pitch),
+    }
+
+
+class TracedGather:
+    """Gather the records' radiosity at every reflecting record, by rays.
+
+    Builds the ray scene once; each call is one pass. Use as a context
+    manager, or call :meth:`close`.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene ``vox`` was voxelized from (its triangles are traced).
+    vox : VoxelSet
+        The records; rays leave each reflecting record (albedo > 0, area > 0)
+        from ``vox.centroid`` on the side of ``vox.normal``.
+    threads : int or None
+        Worker threads (None: all cores); the result does not depend on it.
+    offset : float or None
+        Ray offset from the surface, scene units (None: 1e-4 of the scene's
+        diagonal).
+    native : bool
+        Trace in the compiled core where Embree is found (default); False:
+        through embreex's Python calls (:class:`voxgi.rays.Tracer`), which
+        draws other rays of the same distribution.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        vox: VoxelSet,
+        *,
+        threads: int | None = None,
+        offset: float | None = None,
+        native: bool = True,
+    ):
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
+        if not isinstance(vox, VoxelSet):
+            raise TypeError(f"vox: expected voxgi.VoxelSet, got {type(vox).__name__}")
+        if vox.scene_fingerprint and vox.scene_fingerprint != scene.fingerprint():
+            raise ValueError(
+                "vox: these records were voxelized from another scene "
+                f"(fingerprint {vox.scene_fingerprint!r}, the scene's is "
+                f"{scene.fingerprint()!r})"
+            )
+        self.threads = _validate.threads(threads)
+        if offset is None:
+            offset = 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
+        self.offset = float(offset)
+        self.vox = vox
+        self.tracer = Tracer(scene, self.threads, native=native)
+        c = self.tracer.centre
+        n = len(vox)
+        normal = np.ascontiguousarray(vox.normal, np.float32)
+        reflecting = (np.asarray(vox.area) > 0) & np.any(np.asarray(vox.albedo) > 0, axis=1)
+        self.gathering = np.flatnonzero(reflecting)
+        # Each record is a "pixel" of the display's gather kernels with one
+        # white Lambertian material (index 0), or -1: no rays.
+        self._hits = (
+            np.ascontiguousarray(np.asarray(vox.centroid, np.float64) - c),
+            normal,
+            normal,
+            normal,
+            np.where(reflecting, 0, -1).astype(np.int32),
+        )
+        self._materials = (
+            np.ones((1, 3), np.float32),
+            np.zeros((1, 3), np.float32),
+            np.ones(1, np.float32),
+            np.ones(1, np.float32),
+            np.zeros(1, np.uint8),
+        )
+        self._tri = {
+            "tri_v": self.tracer.tris,
+            "tri_object": np.ascontiguousarray(scene.triangles()["object"], np.int32),
+            "obj_two_sided": np.array([o.two_sided for o in scene.objects], np.uint8),
+        }
+        self._grid = record_grid(vox, c, np.zeros((n, 3), np.float32))
+        self.rays = 0
+
+    def close(self) -> None:
+        """Release the tracer's threads."""
+        self.tracer.close()
+
+    def __enter__(self) -> TracedGather:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __call__(self, values: np.ndarray, samples: int, seed: int) -> np.ndarray:
+        """One pass: (N, 3) float64 mean of ``values`` under ``samples`` rays
+        per reflecting record (0 elsewhere), stratified in cos²θ and hashed
+        from ``seed`` and the record (the same for any thread count)."""
+        n = len(self.vox)
+        values = np.asarray(values)
+        if values.shape != (n, 3):
+            raise ValueError(f"values: expected shape ({n}, 3), got {values.shape}")
+        self._grid["rec_radiance"] = np.ascontiguousarray(values, dtype=np.float32)
+        out = np.zeros((n, 3), np.float32)
+        args = (*self._hits, *self._materials)
+        if self.tracer.native is not None:
+            self.rays += _core.gather_light(
+                *args,
+                samples,
+                seed,
+                0,
+                self.offset,
+                **self._tri,
+                **self._grid,
+                scene=self.tracer.native,
+                out=out,
+                threads=self.threads,
+            )
+            return out.astype(np.float64)
+        self._two_pass(args, samples, seed, out)
+        return out.astype(np.float64)
+
+    def _two_pass(self, args: tuple, samples: int, seed: int, out: np.ndarray) -> None:
+        """The same pass through embreex: rays, first hits, then the shading."""
+        hits = self._hits
+        step = max(1, (1 << 21) // samples)
+        for a in range(0, len(self.vox), step):
+            b = min(len(self.vox), a + step)
+            part = tuple(h[a:b] for h in hits)
+            count = np.zeros(b - a, np.int64)
+            org = np.zeros(((b - a) * samples, 3), np.float32)
+            dirs = np.zeros_like(org)
+            # gather_rays hashes each record's stream from its index in the
+            # batch; offsetting the seed by the batch keeps the streams apart
+            r = _core.gather_rays(
+                *part, samples, seed, a, self.offset, count, org, dirs, threads=self.threads
+            )
+            prim = self.tracer.intersect(org[:r], dirs[:r])
+            self.rays += r
+            _core.gather_shade(
+                *part,
+                *self._materials,
+                samples,
+                **self._tri,
+                **self._grid,
+                ray_count=count,
+                ray_dir=dirs[:r],
+                prim=prim,
+                out=out[a:b],
+                threads=self.threads,
+            )
+
+
+def traced_irradiance(
+    scene: Scene,
+    vox: VoxelSet,
+    radiosity: np.ndarray,
+    *,
+    samples: int = 64,
+    seed: int = 0,
+    threads: int | None = None,
+) -> tuple[np.ndarray, dict]:
+    """Irradiance at every reflecting record from the records' radiosity, by rays.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene ``vox`` was voxelized from.
+    vox : VoxelSet
+        The records.
+    radiosity : (N, 3)
+        Each record's radiosity (radiance times π), as a ray landing on it
+        reads it; for the indirect light, the reflected part ``B − E``.
+    samples : int, optional
+        Cosine-distributed rays per record (>= 1).
+    seed : int, optional
+        Seeds the rays.
+    threads : int or None, optional
+        Worker threads (None: all cores).
+
+    Returns
+    -------
+    irradiance : (N, 3) float64
+        0 for records that reflect nothing or have no area.
+    stats : dict
+        ``rays`` and ``seconds``.
+
+    Examples
+    --------
+    Inside a closed box whose every record has radiosity π, each record
+    receives π (every ray lands on the box):
+
+    >>> import numpy as np, voxgi
+    >>> scene = voxgi.scenes.furnace_box()
+    >>> vox = voxgi.voxelize(scene, 8, progress=False)
+    >>> H, _ = voxgi.traced.traced_irradiance(scene, vox, np.full((len(vox), 3), np.pi))
+    >>> bool(np.allclose(H[vox.albedo[:, 0] > 0], np.pi, rtol=1e-5))
+    True
+    """
+    samples = _validate.integer(samples, "samples", low=1, high=1 << 16)
+    seed = _validate.integer(seed, "seed")
+    t0 = time.perf_counter()
+    with TracedGather(scene, vox, threads=threads) as g:
+        H = g(radiosity, samples, seed)
+        rays = g.rays
+    return H, {"rays": rays, "seconds": time.perf_counter() - t0}
