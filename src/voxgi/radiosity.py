@@ -29,6 +29,7 @@ with the :class:`voxgi._core.LineSystem` methods ``size``, ``normalisation``,
 
 from __future__ import annotations
 
+import itertools
 import json
 import time
 import warnings
@@ -1526,11 +1527,11 @@ def _traced_bounces(p: _Problem, Hd: np.ndarray, R: np.ndarray) -> np.ndarray:
         lam = lam_bound
         while Btot > 0:
             residuals.append(float(np.sum(area * np.abs(d))) / Btot)
-            if len(residuals) >= 2 and residuals[-2] > 0:
+            if len(residuals) >= 2 and min(residuals[-3:-1]) > 0:
                 # the larger of the last two ratios: the first pass's noise
                 # shrinks faster than the light still on its way
-                ratios = [b / a for a, b in zip(residuals[-3:-1], residuals[-2:], strict=False)]
-                lam = min(max(ratios[-2:]), lam_bound)
+                last = residuals[-3:]
+                lam = min(max(b / a for a, b in itertools.pairwise(last)), lam_bound)
             if residuals[-1] * lam / (1 - lam) < opt.tol or len(residuals) >= _TRACED_PASSES:
                 break
             d = p.rho * trace(d, later, seed=len(residuals) + 1)
