@@ -1496,9 +1496,9 @@ def _traced_bounces(p: _Problem, Hd: np.ndarray, R: np.ndarray) -> np.ndarray:
 
     The first pass gathers all of ``R``: ``R_1 = ρ (H_d + T R)``. Each later
     pass carries only the last change, ``d_{k+1} = ρ T d_k``, so its noise
-    shrinks with the change; once the remaining error of the geometric
-    series, ``r λ / (1 − λ)`` as for the lines, is under ``tol``, its tail
-    ``d λ / (1 − λ)`` is added.
+    shrinks with the change; once, after two passes at least, the remaining
+    error of the geometric series, ``r λ / (1 − λ)`` as for the lines, is
+    under ``tol``, its tail ``d λ / (1 − λ)`` is added.
     """
     opt = p.opt
     if opt.indirect_light != "traced":
@@ -1532,7 +1532,11 @@ def _traced_bounces(p: _Problem, Hd: np.ndarray, R: np.ndarray) -> np.ndarray:
                 # shrinks faster than the light still on its way
                 last = residuals[-3:]
                 lam = min(max(b / a for a, b in itertools.pairwise(last)), lam_bound)
-            if residuals[-1] * lam / (1 - lam) < opt.tol or len(residuals) >= _TRACED_PASSES:
+            # At least two passes: the first one's change is mostly local (a
+            # slit, a junction) and small against the whole, so the rule
+            # waits for the ratio it implies to be measured.
+            done = len(residuals) >= 2 and residuals[-1] * lam / (1 - lam) < opt.tol
+            if done or len(residuals) >= _TRACED_PASSES:
                 break
             d = p.rho * trace(d, later, seed=len(residuals) + 1)
             R = R + d
