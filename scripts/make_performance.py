@@ -169,6 +169,57 @@ def junctions() -> list[str]:
     ]
 
 
+def thin_walls() -> list[str]:
+    d = load("propagation_thin_walls.json")
+    if d is None:
+        return []
+    names = {
+        "through": "wall meeting floor, ceiling and two walls",
+        "end": "wall ending in mid-air",
+        "corner": "wall turning a corner",
+    }
+    rows = [
+        [
+            names.get(r["wall"], r["wall"]),
+            r["res"],
+            f"{r['records']:,}",
+            r["bounces"],
+            f"{pct(r['err_mean'], 3)} / {pct(r['err_max'])}",
+            r["err_over_2pct"],
+            r["traced_passes"] or "",
+            secs(r["traced_seconds"]) if r["traced_passes"] else "",
+            secs(r["seconds"]),
+        ]
+        for r in d["rows"]
+    ]
+    return [
+        "### The same walls with traced bounces",
+        "",
+        f"The furnaces above at R {d['R']} (shot direct light, ρ {d['rho']}), solved with the "
+        "lines alone and with traced bounces (`SolveTuning(indirect_light=\"traced\")`, "
+        "`docs/design.md` §5) of 64 and 256 rays a record in the first pass. What the "
+        "traced bounces leave is that first pass's noise on the box's tiny corner records.",
+        "",
+        table(
+            [
+                "scene",
+                "res",
+                "records",
+                "bounces",
+                "radiance error: mean / max",
+                "records > 2%",
+                "traced passes",
+                "traced",
+                "solve",
+            ],
+            rows,
+        ),
+        "",
+        source("python benchmarks/propagation.py thin_walls", "propagation_thin_walls.json"),
+        "",
+    ]
+
+
 def cap_sphere() -> list[str]:
     d = load("propagation_cap.json")
     if d is None:
@@ -901,6 +952,7 @@ def build() -> str:
     for part in (
         furnaces,
         junctions,
+        thin_walls,
         cap_sphere,
         direct_light,
         later_bounces,
