@@ -260,11 +260,19 @@ void gather_pixel_rays(const ShadeHits& hits, int n_gather, uint64_t base, doubl
     float u[3], v[3];
     tangent_frame(n, u, v);
     uint64_t h = splitmix64(base ^ uint64_t(p) * 0xD1B54A32D192ED03ull);
+    // A square count is stratified in both cos²θ and the azimuth (m x m
+    // cells); any other in cos²θ alone.
+    int m = int(std::sqrt(double(n_gather)));
+    while ((m + 1) * (m + 1) <= n_gather) ++m;
+    while (m * m > n_gather) --m;
+    const bool grid = m > 1 && m * m == n_gather;
     for (int k = 0; k < n_gather; ++k) {
         h = splitmix64(h);
-        const double u1 = (k + to_unit(h)) / n_gather;  // stratified in cos²θ
+        const double j1 = to_unit(h);
         h = splitmix64(h);
-        const double phi = 2.0 * kPi * to_unit(h);
+        const double j2 = to_unit(h);
+        const double u1 = grid ? (k / m + j1) / m : (k + j1) / n_gather;
+        const double phi = 2.0 * kPi * (grid ? (k % m + j2) / m : j2);
         const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
         const double lx = r * std::cos(phi), ly = r * std::sin(phi);
         float ro[3], rd[3];

@@ -196,7 +196,7 @@ def thin_walls() -> list[str]:
         "### The same walls with traced bounces",
         "",
         f"The furnaces above at R {d['R']} (shot direct light, ρ {d['rho']}), solved with the "
-        "lines alone and with traced bounces (`SolveTuning(indirect_light=\"traced\")`, "
+        'lines alone and with traced bounces (`SolveTuning(indirect_light="traced")`, '
         "`docs/design.md` §5) of 64 and 256 rays a record in the first pass. What the "
         "traced bounces leave is that first pass's noise on the box's tiny corner records.",
         "",
@@ -842,7 +842,7 @@ def interiors() -> list[str]:
                     r["voxgi_frames"],
                     sci(r["voxgi_rel_mse"]),
                     " / ".join(f"{b:.3f}" for b in r["voxgi_brightness"]),
-                    secs(tm),
+                    secs(tm) + (" *" if r.get("mitsuba_seconds_extrapolated") and tm else ""),
                     "" if tm is None else f"{tm / r['voxgi_seconds']:.1f}x",
                     sci(r["reference_noise_rel_mse"]),
                 ]
@@ -856,7 +856,10 @@ def interiors() -> list[str]:
             "against a high-spp Mitsuba reference (its own noise in the last column), the "
             "brightness ratio per channel (R / G / B) of the pixels whose primary ray meets a "
             "surface that does not emit, and the seconds Mitsuba needs to reach voxgi's relMSE "
-            "(doubling spp, log-log interpolation), in the same run.",
+            "(doubling spp, log-log interpolation), in the same run. * : no sweep render "
+            "reached voxgi's relMSE against a reference whose own noise is not small; the "
+            "seconds are extrapolated from the last one by error ∝ 1/spp, both errors less "
+            "the reference's noise.",
             "",
             table(
                 [

@@ -522,8 +522,9 @@ class SolveTuning:
         ``vox.scene`` and ``max_bounces=None``; otherwise ``stats["skipped"]``
         says why the lines alone carried it.
     traced_samples : int
-        Rays per record in the first traced pass; the later passes, which
-        carry only the previous pass's change, take a quarter (at least 16).
+        Rays per record in the first traced pass (1 to 4096; a square number
+        is stratified in both angles); the later passes, which carry only
+        the previous pass's change, take a quarter (at least 16).
 
     >>> SolveTuning(shoot_directions=8).later_after
     2
@@ -600,7 +601,7 @@ def _settings(directions, max_bounces, tol, threads, tuning) -> _Settings:
         direct_light=t.direct_light,
         direct_samples=_validate.integer(t.direct_samples, "direct_samples", low=1, high=1 << 16),
         indirect_light=t.indirect_light,
-        traced_samples=_validate.integer(t.traced_samples, "traced_samples", low=1, high=1 << 16),
+        traced_samples=_validate.integer(t.traced_samples, "traced_samples", low=1, high=4096),
     )
 
 

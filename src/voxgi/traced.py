@@ -250,7 +250,8 @@ def traced_irradiance(
         Each record's radiosity (radiance times π), as a ray landing on it
         reads it; for the indirect light, the reflected part ``B − E``.
     samples : int, optional
-        Cosine-distributed rays per record (>= 1).
+        Cosine-distributed rays per record, 1 to 4096 (a square number is
+        stratified in both angles).
     seed : int, optional
         Seeds the rays.
     threads : int or None, optional
@@ -275,7 +276,7 @@ def traced_irradiance(
     >>> bool(np.allclose(H[vox.albedo[:, 0] > 0], np.pi, rtol=1e-5))
     True
     """
-    samples = _validate.integer(samples, "samples", low=1, high=1 << 16)
+    samples = _validate.integer(samples, "samples", low=1, high=4096)
     seed = _validate.integer(seed, "seed")
     t0 = time.perf_counter()
     with TracedGather(scene, vox, threads=threads) as g:
