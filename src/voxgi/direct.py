@@ -27,7 +27,7 @@ from .rays import Tracer
 from .scene import Scene
 from .voxels import VoxelSet
 
-__all__ = ["EmitterSampler", "direct_irradiance", "light_irradiance"]
+__all__ = ["EmitterSampler", "check_scene_and_records", "direct_irradiance", "light_irradiance"]
 
 _ROUNDS = 3
 _LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -231,8 +231,9 @@ def direct_irradiance(
     return est.irradiance, stats
 
 
-def _check(scene, vox, samples, seed, threads, receivers) -> tuple[int, int, int]:
-    """Validate the arguments of :func:`direct_irradiance`; the checked numbers."""
+def check_scene_and_records(scene, vox) -> None:
+    """Raise TypeError or ValueError unless ``scene`` is a :class:`Scene` and
+    ``vox`` a :class:`VoxelSet` voxelized from it (where it records which)."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
     if not isinstance(vox, VoxelSet):
@@ -243,6 +244,11 @@ def _check(scene, vox, samples, seed, threads, receivers) -> tuple[int, int, int
             f"(fingerprint {vox.scene_fingerprint!r}, the scene's is "
             f"{scene.fingerprint()!r})"
         )
+
+
+def _check(scene, vox, samples, seed, threads, receivers) -> tuple[int, int, int]:
+    """Validate the arguments of :func:`direct_irradiance`; the checked numbers."""
+    check_scene_and_records(scene, vox)
     if receivers not in ("reflecting", "all"):
         raise ValueError(f"receivers: expected 'reflecting' or 'all', got {receivers!r}")
     return (

@@ -23,6 +23,7 @@ import time
 import numpy as np
 
 from . import _core, _validate
+from .direct import check_scene_and_records
 from .rays import Tracer
 from .scene import Scene
 from .voxels import VoxelSet
@@ -115,16 +116,7 @@ class TracedGather:
         offset: float | None = None,
         native: bool = True,
     ):
-        if not isinstance(scene, Scene):
-            raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
-        if not isinstance(vox, VoxelSet):
-            raise TypeError(f"vox: expected voxgi.VoxelSet, got {type(vox).__name__}")
-        if vox.scene_fingerprint and vox.scene_fingerprint != scene.fingerprint():
-            raise ValueError(
-                "vox: these records were voxelized from another scene "
-                f"(fingerprint {vox.scene_fingerprint!r}, the scene's is "
-                f"{scene.fingerprint()!r})"
-            )
+        check_scene_and_records(scene, vox)
         self.threads = _validate.threads(threads)
         if offset is None:
             offset = 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
