@@ -106,6 +106,13 @@ def furnace(resolution: int, threads: int, directions: int = 8) -> dict:
         f"shoot at R {directions}": voxgi.SolveTuning(
             direct_light="shoot", shoot_directions=directions, diagnostics=False
         ),
+        # and with the reflected light finished by traced bounces
+        f"shoot at R {directions}, traced bounces": voxgi.SolveTuning(
+            direct_light="shoot",
+            shoot_directions=directions,
+            diagnostics=False,
+            indirect_light="traced",
+        ),
     }
     out["runs"] = list(runs)
     for method, tuning in runs.items():
