@@ -703,8 +703,8 @@ def test_traced_bounces_make_thin_wall_junctions_exact_in_the_furnace(wall):
     # are several percent dark. Rays against the exact triangles see the
     # wall; every record must come within 2% and the mean within 0.1%.
     # (The first traced pass's noise is what is left: 256 rays a record
-    # leave 0.8-1.1% at the box's corner records, 64 rays 1.7%; the lines
-    # alone 4.8-5.0%.)
+    # leave 0.5-1.0% at the box's corner records, 64 rays 1.4-1.5%; the
+    # lines alone 4.8-5.0%.)
     rho = 0.8
     vox = voxgi.voxelize(_box_with_thin_wall(rho, wall), 32, progress=False)
     front = ~vox.back & (vox.area > 0)
