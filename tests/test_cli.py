@@ -65,6 +65,7 @@ def test_render_builtin_scene_writes_exr_png_and_metadata(tmp_path, capsys):
     text = capsys.readouterr().out
     for word in ("voxelize", "solve", "display", "wrote", "seconds"):
         assert word in text
+    assert "traced passes of" in text  # the render pipeline's solve finishes with them
 
 
 def test_default_output_name(tmp_path, monkeypatch):

@@ -357,7 +357,15 @@ def _run_solve(args, vox):
         vox, directions=args.directions, threads=args.threads, progress=not args.quiet
     )
     t_sol = time.perf_counter() - t0
-    _say(f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays in {t_sol:.2f} s")
+    traced = sol.stats.get("traced")
+    then = (
+        ""
+        if traced is None
+        else f", then {traced['passes']} traced passes of {traced['rays']:.3g} rays"
+    )
+    _say(
+        f"solve: {sol.bounces} bounces, {sol.stats.get('rays', 0):.3g} rays{then} in {t_sol:.2f} s"
+    )
     for what, why in sol.stats.get("skipped", {}).items():
         _note(args, f"solve skipped {what}: {why}")
     return sol, t_sol
