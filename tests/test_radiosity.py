@@ -738,3 +738,20 @@ def test_traced_bounces_are_skipped_where_they_cannot_run():
         voxgi.solve(vox, tuning=SolveTuning(indirect_light="rays"), progress=False)
     with pytest.raises(ValueError, match="traced_samples"):
         voxgi.solve(vox, tuning=SolveTuning(traced_samples=0), progress=False)
+
+
+def test_traced_bounces_that_go_wrong_leave_the_lines_answer(monkeypatch):
+    # No silent NaN: a non-finite traced pass is reported and the lines'
+    # radiosity returned.
+    from voxgi import traced
+
+    vox = voxgi.voxelize(voxgi.scenes.furnace_box(albedo=0.5), 8, progress=False)
+    kw = dict(directions=4, progress=False)
+    lines = voxgi.solve(vox, tuning=SolveTuning(shoot_directions=4), **kw)
+    monkeypatch.setattr(traced.TracedGather, "__call__", lambda self, v, n, seed: v * np.nan)
+    with pytest.warns(RuntimeWarning, match="traced bounces gave a non-finite"):
+        sol = voxgi.solve(
+            vox, tuning=SolveTuning(shoot_directions=4, indirect_light="traced"), **kw
+        )
+    np.testing.assert_array_equal(sol.radiosity, lines.radiosity)
+    assert sol.stats["skipped"]["traced_bounces"] == "their answer was not finite"

@@ -1517,6 +1517,7 @@ def _traced_bounces(p: _Problem, Hd: np.ndarray, R: np.ndarray) -> np.ndarray:
     t = time.perf_counter()
     area = p.area[:, None]
     lines_power = (R * area).sum(axis=0)
+    R_lines = R
     later = max(16, opt.traced_samples // 4)
     lam_bound = float(min(max(float(p.rho.max()), 0.5), 1 - 1e-6))
     residuals = []
@@ -1544,6 +1545,14 @@ def _traced_bounces(p: _Problem, Hd: np.ndarray, R: np.ndarray) -> np.ndarray:
         if len(residuals) >= 2:
             R = R + d * (lam / (1 - lam))
         rays = trace.rays
+    if not np.all(np.isfinite(R)):
+        warnings.warn(
+            "solve: the traced bounces gave a non-finite radiosity; returning the lines' answer",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        p.stats["skipped"]["traced_bounces"] = "their answer was not finite"
+        return R_lines
     # The changes carry the first pass's noise with either sign; where they
     # outweigh a dim record's light the sum dips below zero.
     negative = np.any(R < 0, axis=1)
@@ -1630,7 +1639,10 @@ def solve(
     -------
     Solution
         ``radiosity`` (N, 3) float32, always finite; ``stats`` with ray counts,
-        ``seconds``, ``lost_fraction``, ``energy``, ``skipped`` and ``stopped``.
+        ``seconds``, ``lost_fraction``, ``energy`` (of the lines), ``skipped``,
+        ``stopped`` and, after traced bounces, ``traced`` (passes, rays,
+        residuals, the change of the reflected power against the lines, and
+        the records whose sum came out negative and were set to zero).
 
     Raises
     ------
