@@ -262,9 +262,7 @@ void gather_pixel_rays(const ShadeHits& hits, int n_gather, uint64_t base, doubl
     uint64_t h = splitmix64(base ^ uint64_t(p) * 0xD1B54A32D192ED03ull);
     // A square count is stratified in both cos²θ and the azimuth (m x m
     // cells); any other in cos²θ alone.
-    int m = int(std::sqrt(double(n_gather)));
-    while ((m + 1) * (m + 1) <= n_gather) ++m;
-    while (m * m > n_gather) --m;
+    const int m = int(std::lround(std::sqrt(double(n_gather))));
     const bool grid = m > 1 && m * m == n_gather;
     for (int k = 0; k < n_gather; ++k) {
         h = splitmix64(h);

@@ -119,8 +119,9 @@ void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPL
 // Gather rays: n_g cosine-distributed directions around the shading normal
 // of each shaded pixel (material >= 0), stratified (n_g = m² strata: m in
 // cos²θ x m in azimuth; any other n_g: n_g strata in cos²θ) and jittered
-// with a hash of (seed, frame, pixel, k): the same for any thread count. Writes `ray_count` (P,)
-// and rays pixel-major into org (R, 3) / dir (R, 3); returns R.
+// with a hash of (seed, frame, pixel, k): the same for any thread count.
+// Writes `ray_count` (P,) and rays pixel-major into org (R, 3) / dir (R, 3);
+// returns R.
 int64_t gather_rays(const ShadeHits& hits, int n_gather, uint64_t seed, int64_t frame, double eps,
                     int64_t* ray_count, float* ray_org, float* ray_dir, int threads,
                     const StopCheck& stop);

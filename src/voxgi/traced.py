@@ -127,7 +127,6 @@ class TracedGather:
         n = len(vox)
         normal = np.ascontiguousarray(vox.normal, np.float32)
         reflecting = (np.asarray(vox.area) > 0) & np.any(np.asarray(vox.albedo) > 0, axis=1)
-        self.gathering = np.flatnonzero(reflecting)
         # Each record is a "pixel" of the display's gather kernels with one
         # white Lambertian material (index 0), or -1: no rays.
         self._hits = (
