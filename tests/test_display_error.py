@@ -50,6 +50,25 @@ def test_correlated_frames_batch_variance_is_unbiased(rng):
     assert abs(ratio - 1.0) < 0.03, ratio
 
 
+def test_mean_relmse_sees_errors_that_cancel_within_aligned_blocks(rng):
+    # Each aligned block of 4 frames carries a component that sums to zero
+    # over the block (as the errors at an edge under the four sub-pixel
+    # offsets of a (0, 2)-sequence block), of sd s, plus iid noise of sd t.
+    # Over 16 frames the mean's variance is t²/16 alone; the spread between
+    # single frames gives (3s²/4 + t²)/16, four times that here. The mean
+    # relMSE must rest on the blocks: 4 blocks a pixel, 12,000 estimates of
+    # relative sd 0.82 each, so their average is good to 0.75%; 4% is 5 sd.
+    n, p, s, t = 16, 4000, 0.2, 0.1
+    a = s * rng.standard_normal((n // 4, 4, p, 3))
+    a -= a.mean(axis=1, keepdims=True)
+    frames = 1.0 + a.reshape(n, p, 3) + t * rng.standard_normal((n, p, 3))
+    acc = fold(frames)
+    truth = np.mean(t**2 / n / (acc.mean**2 + 0.01))
+    assert abs(acc.est / truth - 1.0) < 0.04, acc.est / truth
+    # the per-pixel error, from single-frame batches, does not see it
+    assert np.mean(acc.se**2 / (acc.mean**2 + 0.01)) > 3.0 * truth
+
+
 def test_one_outlier_batch_is_flagged_and_bounds_the_error(rng):
     # 200 pixels of N(1, 0.01²) over 64 frames; pixel 7 gets +1 in one frame.
     # Its mean is then 1/64 off, 25 of its own standard errors: the guard
