@@ -215,3 +215,22 @@ def test_rays_traced_as_they_are_made_give_the_two_pass_light(monkeypatch):
     assert st["rays"] == st2["rays"] > 0
     assert st["refined_records"] == st2["refined_records"] > 0
     assert np.count_nonzero(H[:, 0] > 0) > len(vox) // 4
+
+
+def test_sobol_points_are_scipys_sequence():
+    # The record samples' base sequence is Sobol' (Joe-Kuo direction
+    # numbers); scipy draws the same points in Gray-code order.
+    from scipy.stats import qmc
+
+    from voxgi.direct import _sequence, _sobol
+
+    for m in (0, 3, 10):
+        i = np.arange(1 << m)
+        want = qmc.Sobol(5, scramble=False).random_base2(m)
+        np.testing.assert_array_equal(_sobol(m)[i ^ (i >> 1)] / 2.0**32, want)
+    # the digital shift keeps the stratification: 16 points fill the 16
+    # intervals of every dimension, and the 4x4 cells of the first two
+    x = _sequence(16, seed=7)
+    for a in range(5):
+        assert len(np.unique(np.floor(x[:, a] * 16))) == 16, a
+    assert len(np.unique(np.floor(x[:, 0] * 4) * 4 + np.floor(x[:, 1] * 4))) == 16

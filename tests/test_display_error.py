@@ -201,6 +201,16 @@ def test_cli_writes_the_stderr_channels(tmp_path):
     assert voxgi.io.read_exr_header(out)["est_max_rel_err"] > 0
 
 
+def test_outlier_thresholds_are_student_t_quantiles():
+    from scipy.stats import t
+
+    from voxgi.display import _BATCH_SLOTS, _OUTLIER_ALPHA, _outlier_threshold
+
+    for k in range(4, _BATCH_SLOTS + 1):
+        want = t.ppf(1.0 - _OUTLIER_ALPHA / (2 * k), k - 2)
+        assert _outlier_threshold(k) == pytest.approx(want, rel=1e-5), k
+
+
 def test_batch_error_kernel_is_the_batch_means_formula(rng):
     # The compiled kernel against the formula written out in numpy, with a
     # few pixels given one far-off batch (flagged, their error raised to it).
