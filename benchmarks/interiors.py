@@ -25,7 +25,7 @@ measured is extrapolated from its last sweep render by the Monte Carlo law
 takes 32,768 samples (``REFERENCE_SPP``).
 
 It records relMSE (``voxgi.metrics.rel_mse``) and the brightness ratio, per
-channel, of the pixels whose primary ray hits a surface that does not emit,
+channel, of the pixels whose whole footprint sees surfaces that do not emit,
 and writes ``benchmarks/results/interiors_<size>.json`` and each scene's
 voxgi image as ``<tag>_voxgi_<size>.png``. Needs ``pip install mitsuba``
 (the ``bench`` extra).

@@ -7,10 +7,11 @@ import sys
 
 import numpy as np
 import pytest
+import trimesh
 
 import voxgi
 from voxgi import cli
-from voxgi.compare import _seconds_to, compare
+from voxgi.compare import _non_emitter_mask, _seconds_to, compare
 
 
 def test_seconds_to_an_error_interpolates_in_log_log():
@@ -19,6 +20,43 @@ def test_seconds_to_an_error_interpolates_in_log_log():
     assert _seconds_to(10**-2.5, sweep) == pytest.approx(10**0.5)
     assert _seconds_to(1e-4, sweep) is None  # never reached
     assert _seconds_to(0.1, sweep) == 1.0  # reached by the first render
+
+
+def _lamp_on_a_wall(pixel_filter: str) -> voxgi.Scene:
+    """A white wall at z = 0 seen square-on from z = 1 with a 90 degree field:
+    8 pixels across [-1, 1], a quarter unit each; a lamp covers x < -0.65,
+    column 0 and the left corners of column 1, but not column 1's centre."""
+    cam = voxgi.Camera(
+        eye=(0, 0, 1),
+        target=(0, 0, 0),
+        up=(0, 1, 0),
+        fov=90.0,
+        width=8,
+        height=8,
+        pixel_filter=pixel_filter,
+    )
+    scene = voxgi.Scene(cam)
+    quad = np.array([[0, 1, 2], [0, 2, 3]])
+    wall = np.array([[-2.0, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]])
+    lamp = np.array([[-2.0, -2, 1e-3], [-0.65, -2, 1e-3], [-0.65, 2, 1e-3], [-2, 2, 1e-3]])
+    scene.add(trimesh.Trimesh(wall, quad, process=False), voxgi.Material(albedo=0.5), name="wall")
+    lamp = trimesh.Trimesh(lamp, quad, process=False)
+    scene.add(lamp, voxgi.Material(albedo=0.0, emission=5.0), name="lamp")
+    return scene
+
+
+def test_brightness_counts_only_pixels_wholly_off_the_lamps():
+    # Column 1's centre sees the wall but its left corners see the lamp: a
+    # mask by pixel centres would count it, and with it the lamp's share.
+    scene = _lamp_on_a_wall("box")
+    mask = _non_emitter_mask(scene, scene.camera)
+    assert not mask[:, :2].any()
+    assert mask[:, 2:].all()
+    # the Gaussian filter spreads samples 2 pixels further
+    scene = _lamp_on_a_wall("gaussian")
+    mask = _non_emitter_mask(scene, scene.camera)
+    assert not mask[:, :4].any()
+    assert mask[2:-2, 4:-2].all()
 
 
 def test_without_mitsuba_the_error_says_how_to_install(monkeypatch, tmp_path):
