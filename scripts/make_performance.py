@@ -827,6 +827,52 @@ def calibration() -> list[str]:
     ]
 
 
+def display_noise() -> list[str]:
+    d = load("display_noise.json")
+    if d is None:
+        return []
+    rows = []
+    for sc in d["scenes"]:
+        base = sc["rows"][0]["noise_x_seconds"]
+        for i, r in enumerate(sc["rows"]):
+            rows.append(
+                [
+                    sc["scene"] if i == 0 else "",
+                    r["light"],
+                    f"{r['vpls']} / {r['gather']}",
+                    sci(r["frame_noise"]),
+                    secs(r["ms_per_frame"]),
+                    f"{r['noise_x_seconds'] / base:.2f}" if r["light"] == "all" else "",
+                ]
+            )
+    return [
+        "## What the display's noise is made of",
+        "",
+        f"Each scene at {d['size']}x{d['size']}, solved with the defaults of "
+        f"`voxgi.render(scene)`, displayed for {d['frames']} frames (one seed) per setting. "
+        "Frame noise: the relMSE of a single frame, `mean(var / (L² + 0.01))`, from the spread "
+        "between aligned blocks of 4 frames (`docs/design.md §6`). The light of the emitting "
+        "records and of the other records is each displayed alone, with the whole VPL budget. "
+        "Cost of error: frame noise times seconds per frame, relative to the defaults' (the "
+        "time to a given relMSE scales with it; under 1 is cheaper).",
+        "",
+        table(
+            [
+                "scene",
+                "light",
+                "VPLs / gather rays",
+                "frame noise",
+                "ms per frame",
+                "cost of error",
+            ],
+            rows,
+        ),
+        "",
+        source(f"python benchmarks/display_noise.py --size {d['size']}", "display_noise.json"),
+        "",
+    ]
+
+
 def interiors() -> list[str]:
     out = []
     for path in sorted(RESULTS.glob("interiors_*.json")):
@@ -854,8 +900,9 @@ def interiors() -> list[str]:
             "`voxgi.render(scene)` with every default (voxelize, solve and display timed "
             "together) against Mitsuba 3's path tracer on the same exported scene: relMSE "
             "against a high-spp Mitsuba reference (its own noise in the last column), the "
-            "brightness ratio per channel (R / G / B) of the pixels whose primary ray meets a "
-            "surface that does not emit, and the seconds Mitsuba needs to reach voxgi's relMSE "
+            "brightness ratio per channel (R / G / B) of the pixels whose whole footprint "
+            "(centre and corners) sees surfaces that do not emit, and the seconds Mitsuba "
+            "needs to reach voxgi's relMSE "
             "(doubling spp, log-log interpolation), in the same run. * : no sweep render "
             "reached voxgi's relMSE against a reference whose own noise is not small; the "
             "seconds are extrapolated from the last one by error ∝ 1/spp, both errors less "
@@ -949,7 +996,8 @@ def build() -> str:
         "Contents: furnaces, thin walls in a furnace, the emitting-cap sphere, direct light "
         "on the records, coarser later bounces, energy balance, linear cost, throughput, "
         "the paper's work unit, voxelization, the paper's tables, time against error "
-        "versus Mitsuba 3, interiors, the display's error estimate, distribution.",
+        "versus Mitsuba 3, interiors, the display's error estimate, what the display's noise "
+        "is made of, distribution.",
         "",
     ]
     for part in (
@@ -967,6 +1015,7 @@ def build() -> str:
         versus_mitsuba,
         interiors,
         calibration,
+        display_noise,
         distributed,
     ):
         lines += part()
