@@ -642,7 +642,7 @@ def versus_mitsuba() -> list[str]:
         (
             "time_vs_error_512.json",
             "Cornell box, 512x512",
-            "python benchmarks/time_vs_error.py --size 512 --spp 4 16 64 256",
+            "python benchmarks/time_vs_error.py --size 512",
         ),
         (
             "time_vs_error_shadow_256.json",
