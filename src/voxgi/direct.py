@@ -23,6 +23,7 @@ import time
 import numpy as np
 
 from . import _core, _validate
+from ._qmc import sobol
 from .rays import Tracer
 from .scene import Scene
 from .voxels import VoxelSet
@@ -136,34 +137,6 @@ class EmitterSampler:
         return idx, y
 
 
-#: Sobol' direction numbers of dimensions 2-5 (Joe and Kuo 2008): degree s,
-#: coefficients a and initial m_1..m_s of each primitive polynomial.
-_SOBOL_POLYNOMIALS = ((1, 0, (1,)), (2, 1, (1, 3)), (3, 1, (1, 3, 1)), (3, 2, (1, 1, 1)))
-
-
-def _sobol(m: int) -> np.ndarray:
-    """(2**m, 5) uint32: the first 2**m points of the 5-dimensional Sobol'
-    sequence as 32-bit fractions, each point the XOR of the direction numbers
-    of its index's set bits."""
-    bits = 32
-    v = np.zeros((5, bits), np.uint64)
-    v[0] = [1 << (bits - 1 - j) for j in range(bits)]
-    for d, (deg, a, init) in enumerate(_SOBOL_POLYNOMIALS, start=1):
-        mm = list(init)
-        for j in range(deg, bits):
-            x = mm[j - deg] ^ (mm[j - deg] << deg)
-            for k in range(1, deg):
-                if (a >> (deg - 1 - k)) & 1:
-                    x ^= mm[j - k] << k
-            mm.append(x)
-        v[d] = [mm[j] << (bits - 1 - j) for j in range(bits)]
-    i = np.arange(1 << m, dtype=np.uint64)
-    out = np.zeros((len(i), 5), np.uint64)
-    for j in range(m):
-        out ^= ((i >> np.uint64(j)) & np.uint64(1))[:, None] * v[:, j][None, :]
-    return out.astype(np.uint32)
-
-
 def _sequence(samples: int, seed: int) -> np.ndarray:
     """(samples, 5) Sobol' points in [0, 1), digitally shifted by ``seed``:
     one record's stratified samples (three dimensions pick the light point,
@@ -171,7 +144,7 @@ def _sequence(samples: int, seed: int) -> np.ndarray:
     stratification; each record adds its own rotation on top."""
     m = max(0, int(np.ceil(np.log2(samples))))
     shift = np.random.default_rng(seed).integers(0, 1 << 32, size=5, dtype=np.uint64)
-    pts = _sobol(m) ^ shift.astype(np.uint32)
+    pts = sobol(np.arange(1 << m)) ^ shift.astype(np.uint32)
     return (pts[:samples] / 2.0**32).astype(np.float64)
 
 

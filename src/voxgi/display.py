@@ -20,6 +20,7 @@ from typing import Protocol
 import numpy as np
 
 from . import _core, _validate
+from ._qmc import sobol
 from .radiosity import Solution
 from .rays import Tracer
 from .scene import Camera, Scene
@@ -143,22 +144,6 @@ def _concentric_disc(u: float, v: float) -> tuple[float, float]:
     return r * math.cos(phi), r * math.sin(phi)
 
 
-def _vdc2(i: int) -> int:
-    """Van der Corput base 2 as a 32-bit integer (bit reversal)."""
-    return int(f"{i & 0xFFFFFFFF:032b}"[::-1], 2)
-
-
-def _sobol2(i: int) -> int:
-    """Second dimension of Sobol' as a 32-bit integer (Kollig & Keller 2002)."""
-    v, r = 1 << 31, 0
-    while i:
-        if i & 1:
-            r ^= v
-        i >>= 1
-        v ^= v >> 1
-    return r
-
-
 def frame_samples(frame: int, seed: int = 0) -> tuple[tuple[float, float], tuple[float, float]]:
     """Sub-pixel offset in [0, 1)² and lens point in the unit disc for a frame.
 
@@ -174,7 +159,8 @@ def frame_samples(frame: int, seed: int = 0) -> tuple[tuple[float, float], tuple
     s1, s2 = (int(x) for x in rng.integers(0, 1 << 32, size=2, dtype=np.uint64))
     rot = rng.random(2)
     i = int(frame)
-    off = ((_vdc2(i) ^ s1) / 2.0**32, (_sobol2(i) ^ s2) / 2.0**32)
+    u1, u2 = (int(x) for x in sobol([i], 2)[0])
+    off = ((u1 ^ s1) / 2.0**32, (u2 ^ s2) / 2.0**32)
     lu = (_radical_inverse(i + 1, 3) + rot[0]) % 1.0
     lv = (_radical_inverse(i + 1, 5) + rot[1]) % 1.0
     return off, _concentric_disc(lu, lv)
@@ -1121,7 +1107,7 @@ def _check_render(
 
 def _check_image_memory(cam: Camera) -> None:
     """Refuse an image that cannot fit before allocating anything: a render
-    holds about 1420 bytes per pixel (the running sums, 32 batch means,
+    holds about 1400 bytes per pixel (the running sums, 32 batch means,
     hit records, frame buffers) plus about 30 MB of tile buffers and 50 MB
     for the batch statistics."""
     need = 1500 * cam.width * cam.height + (80 << 20)
@@ -1302,10 +1288,8 @@ class _Mean:
     flagged: int = 0
     se: np.ndarray | None = None
     threads: int = 0
-    block_open: np.ndarray | None = None
     block_sum: np.ndarray | None = None
     block_sq: np.ndarray | None = None
-    blocks: int = 0
 
     @classmethod
     def empty(cls, pixels: int, share: float = PIXEL_SHARE, threads: int = 0) -> _Mean:
@@ -1317,7 +1301,6 @@ class _Mean:
             np.zeros((pixels, 3)),
             share=share,
             threads=threads,
-            block_open=np.zeros((pixels, 3)),
             block_sum=np.zeros((pixels, 3)),
             block_sq=np.zeros((pixels, 3)),
         )
@@ -1332,13 +1315,11 @@ class _Mean:
         self.frames += 1
         self.total += x
         self.current += x
-        self.block_open += x
         if self.frames % _STRATUM_FRAMES == 0:
-            self.block_open /= _STRATUM_FRAMES
-            self.block_sum += self.block_open
-            self.block_sq += self.block_open * self.block_open
-            self.block_open[:] = 0.0
-            self.blocks += 1
+            # the block just completed: all frames less the blocks before it
+            block = (self.total - _STRATUM_FRAMES * self.block_sum) / _STRATUM_FRAMES
+            self.block_sum += block
+            self.block_sq += block * block
         if self.frames - self.count * self.size < self.size:
             return
         self.batches[self.count] = self.current / self.size
@@ -1362,8 +1343,8 @@ class _Mean:
         rel = se * se / denom
         pixel = rel.max(axis=1)
         self.se = se
-        if self.blocks >= 2:
-            k = self.blocks
+        k = self.frames // _STRATUM_FRAMES
+        if k >= 2:
             spread = np.maximum(self.block_sq - self.block_sum**2 / k, 0.0) / (k - 1)
             rel_blocks = spread * (_STRATUM_FRAMES / done) / denom
             self.est = float(
