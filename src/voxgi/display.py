@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Protocol
 
@@ -37,6 +37,8 @@ __all__ = [
     "camera_rays",
     "frame_samples",
     "gaussian_pixel_filter",
+    "light_spread",
+    "ray_budget",
     "render",
 ]
 
@@ -1012,10 +1014,10 @@ class RenderTuning:
     emitter_share : float or None
         Share of each frame's VPLs taken from emitters; None splits by power
         (see :class:`VPLSampler`).
-    gather : int
-        Cosine-distributed gather rays per pixel and frame for the
-        non-emitter light, MIS-combined with its VPLs (0: VPLs only, the
-        paper's display).
+    gather : int or None
+        Cosine-distributed gather rays per pixel and frame, MIS-combined
+        with the VPLs (0: VPLs only, the paper's display; None: from the
+        light's spread, see :func:`ray_budget`).
     vpl_pdf : {"power", "area"}
         VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
         paper); see :class:`VPLSampler`.
@@ -1035,7 +1037,7 @@ class RenderTuning:
 
     min_frames: int = 4
     emitter_share: float | None = None
-    gather: int = 8
+    gather: int | None = None
     vpl_pdf: str = "power"
     vpl_on_surface: bool = True
     pixel_factor: float = PIXEL_FACTOR
@@ -1047,7 +1049,7 @@ class _RenderSettings:
     """The validated arguments of one render."""
 
     cam: Camera
-    K: int
+    K: int | None
     max_frames: int
     tol: float
     seed: int
@@ -1055,10 +1057,11 @@ class _RenderSettings:
     pixel_factor: float
     pixel_share: float
     emitter_share: float | None
-    gather: int
+    gather: int | None
     vpl_pdf: str
     vpl_on_surface: bool
     threads: int
+    spread: float = math.nan
 
 
 def _check_render(
@@ -1084,7 +1087,7 @@ def _check_render(
     tol = _validate.real(tol, "tol", low=0.0, allow_none=True)
     return _RenderSettings(
         cam=cam,
-        K=_validate.integer(vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16),
+        K=_validate.integer(vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16, allow_none=True),
         max_frames=_validate.integer(max_frames, "max_frames", low=1, allow_none=True) or 256,
         tol=1e-3 if tol is None else tol,
         seed=_validate.integer(seed, "seed"),
@@ -1098,7 +1101,7 @@ def _check_render(
         emitter_share=_validate.real(
             t.emitter_share, "emitter_share", low=0.0, high=1.0, allow_none=True
         ),
-        gather=_validate.integer(t.gather, "gather", low=0, high=4096),
+        gather=_validate.integer(t.gather, "gather", low=0, high=4096, allow_none=True),
         vpl_pdf=t.vpl_pdf,
         vpl_on_surface=bool(t.vpl_on_surface),
         threads=_validate.threads(threads),
@@ -1149,6 +1152,82 @@ def _check_executor(executor) -> FrameExecutor:
             "voxgi.render also takes a dask.distributed.Client as client="
         )
     return executor
+
+
+#: (VPLs per frame, gather rays per pixel and frame) of :func:`ray_budget`
+#: for concentrated light and for light spread evenly. 25 is a square, so the
+#: gather rays are stratified in both angles (5 x 5 cells).
+RAY_BUDGETS = ((16, 8), (8, 25))
+
+#: :func:`light_spread` from which the light counts as spread evenly. Measured
+#: noise per second of the second budget against the first
+#: (``docs/design.md`` §6): more in the Cornell box (spread 0.025) and rooms
+#: lit through a window or a door (0.18, 0.19), 14% less in a sky-lit atrium
+#: (0.55), several times less in a furnace (1).
+SPREAD_EVEN = 0.4
+
+
+def light_spread(sol) -> float:
+    """How evenly the light of a solution covers the scene's surfaces.
+
+    ``(Σ ΔA·B)² / (Σ ΔA · Σ ΔA·B²)`` over the front records, with ``B`` the
+    luminance of their radiosity: 1 when every surface is equally bright (a
+    furnace), about the share of the area that carries the light when a few
+    surfaces do (0.025 in the Cornell box, 0.18 in a room lit through a
+    window), 0 with no light.
+
+    Parameters
+    ----------
+    sol : Solution
+
+    Returns
+    -------
+    float in [0, 1]
+    """
+    vox = sol.vox
+    area = np.asarray(vox.area, dtype=np.float64)
+    lum = np.asarray(sol.radiosity, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    front = area > 0
+    if vox.back is not None:
+        front &= ~np.asarray(vox.back, dtype=bool)
+    a, b = area[front], np.maximum(lum[front], 0.0)
+    second = float(np.sum(a * b * b)) * float(np.sum(a))
+    return float(np.sum(a * b)) ** 2 / second if second > 0 else 0.0
+
+
+def ray_budget(spread: float, vpls: int | None = None, gather: int | None = None):
+    """VPLs per frame and gather rays per pixel for light of this spread.
+
+    VPLs drawn by power go where the light comes from, gather rays where a
+    pixel looks: light from a few bright surfaces needs the first, light that
+    comes evenly from everywhere the second (``docs/design.md`` §6). Under a
+    spread of :data:`SPREAD_EVEN` the budget is the first of
+    :data:`RAY_BUDGETS`, from it on the second. A number given is kept.
+
+    Parameters
+    ----------
+    spread : float
+        :func:`light_spread` of the solution.
+    vpls, gather : int or None
+        Chosen counts (None: from the spread).
+
+    Returns
+    -------
+    (int, int)
+        VPLs per frame, gather rays per pixel and frame.
+
+    >>> ray_budget(0.025), ray_budget(1.0), ray_budget(1.0, gather=0)
+    ((16, 8), (8, 25), (8, 0))
+    """
+    k, g = RAY_BUDGETS[spread >= SPREAD_EVEN]
+    return (k if vpls is None else int(vpls)), (g if gather is None else int(gather))
+
+
+def _with_budget(opt: _RenderSettings, sol) -> _RenderSettings:
+    """``opt`` with its VPL and gather counts fixed from the solution's light."""
+    spread = light_spread(sol)
+    k, g = ray_budget(spread, opt.K, opt.gather)
+    return replace(opt, K=k, gather=g, spread=spread)
 
 
 def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
@@ -1425,6 +1504,8 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
         "light_rays": int(getattr(source, "light_rays", 0)),
         "gather_rays": int(source.gather_rays),
         "gather_per_frame": spec.gather_per_frame,
+        "vpls_per_frame": int(sum(spec.sampler.counts)),
+        "light_spread": opt.spread,
         "vpls": int(acc.frames * sum(spec.sampler.counts)),
         "vpl_split": [int(c) for c in spec.sampler.counts],
         "vpl_pdf": spec.sampler.pdf,
@@ -1446,7 +1527,7 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
 def render(
     scene,
     sol,
-    vpls_per_frame: int = 16,
+    vpls_per_frame: int | None = None,
     max_frames: int | None = None,
     tol: float | None = None,
     seed: int = 0,
@@ -1475,8 +1556,9 @@ def render(
         With a camera (``scene.camera``, or ``camera=``).
     sol : Solution
         The voxel solution of ``scene`` (``voxgi.render`` also takes None).
-    vpls_per_frame : int
-        VPLs per frame and pixel (>= 1).
+    vpls_per_frame : int or None
+        VPLs per frame and pixel (>= 1; None: from the light's spread,
+        :func:`ray_budget`).
     max_frames : int or None
         At most this many frames (default 256).
     tol : float or None
@@ -1509,6 +1591,7 @@ def render(
     opt = _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads, tuning)
     executor = _check_executor(executor)
     _check_solution(scene, sol, opt.cam)
+    opt = _with_budget(opt, sol)
     t0 = time.perf_counter()
     spec = _shader_spec(scene, sol, opt)
     source = executor.frames(spec, opt.max_frames, threads=opt.threads)

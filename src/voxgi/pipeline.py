@@ -124,7 +124,7 @@ def solve_for_display(
 def render(
     scene: Scene,
     sol: Solution | None = None,
-    vpls_per_frame: int = 16,
+    vpls_per_frame: int | None = None,
     max_frames: int | None = None,
     tol: float | None = None,
     seed: int = 0,
