@@ -1,8 +1,9 @@
 """What the display's noise is made of, and what each ray budget buys.
 
 Per scene (the Cornell box, ``shadow``, ``geometric``, the window room, the
-furnace sphere at albedo 0.9) at ``--size`` pixels square: one voxelize +
-solve with the defaults of ``voxgi.render(scene)``, then ``--frames`` frames
+furnace sphere at albedo 0.9, the sky-lit atrium) at ``--size`` pixels
+square: one voxelize + solve with the defaults of ``voxgi.render(scene)``,
+its light's spread (``voxgi.display.light_spread``), then ``--frames`` frames
 (``tol=0``, one seed) of each display setting below. For each, the noise of
 one frame as a relMSE, ``mean(var / (L² + 0.01))`` over pixels and channels
 with ``var`` from the spread between aligned blocks of 4 frames (as the
@@ -15,7 +16,9 @@ unit of error: the seconds to reach a relMSE ``tol`` are about
   to zero), and of the other records alone (the emitters set to zero): each
   is displayed with the whole VPL budget on its records;
 * the whole light with VPLs per frame and gather rays per pixel of
-  (16, 8) (the defaults), (8, 16), (16, 16), (32, 8) and (16, 4).
+  (16, 8) (the defaults for concentrated light), (8, 25) (for light spread
+  evenly, ``voxgi.display.ray_budget``), (8, 16), (16, 16), (32, 8) and
+  (16, 9).
 
 Writes ``results/display_noise.json``.
 
@@ -39,7 +42,8 @@ from time_vs_error import RESULTS, git_commit
 import voxgi
 import voxgi.display
 
-BUDGETS = ((16, 8), (8, 16), (16, 16), (32, 8), (16, 4))
+BUDGETS = ((16, 8), (8, 25), (8, 16), (16, 16), (32, 8), (16, 9))
+NOISE_SCENES = (*SCENES, "sponza_atrium")
 BLOCK = 4
 
 
@@ -126,14 +130,15 @@ def measure(name: str, size: int, frames: int) -> dict:
         add(label, *_run(scene, part, frames, *BUDGETS[0]), *BUDGETS[0])
     for vpls, gather in BUDGETS[1:]:
         add("all", *_run(scene, sol, frames, vpls, gather), vpls, gather)
-    return {"scene": name, "records": len(vox), "rows": rows}
+    spread = voxgi.display.light_spread(sol)
+    return {"scene": name, "records": len(vox), "spread": spread, "rows": rows}
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--frames", type=int, default=32)
-    ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=SCENES)
+    ap.add_argument("--scenes", nargs="+", default=list(NOISE_SCENES), choices=NOISE_SCENES)
     args = ap.parse_args(argv)
     res = {
         "size": args.size,

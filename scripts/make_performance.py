@@ -837,7 +837,9 @@ def display_noise() -> list[str]:
         for i, r in enumerate(sc["rows"]):
             rows.append(
                 [
-                    sc["scene"] if i == 0 else "",
+                    f"{sc['scene']} ({sc['spread']:.3f})"
+                    if i == 0 and "spread" in sc
+                    else (sc["scene"] if i == 0 else ""),
                     r["light"],
                     f"{r['vpls']} / {r['gather']}",
                     sci(r["frame_noise"]),
@@ -853,8 +855,10 @@ def display_noise() -> list[str]:
         "Frame noise: the relMSE of a single frame, `mean(var / (L² + 0.01))`, from the spread "
         "between aligned blocks of 4 frames (`docs/design.md §6`). The light of the emitting "
         "records and of the other records is each displayed alone, with the whole VPL budget. "
-        "Cost of error: frame noise times seconds per frame, relative to the defaults' (the "
-        "time to a given relMSE scales with it; under 1 is cheaper).",
+        "Cost of error: frame noise times seconds per frame, relative to 16 VPLs and 8 gather "
+        "rays (the time to a given relMSE scales with it; under 1 is cheaper). In brackets, "
+        "the light's spread (`voxgi.display.light_spread`): from 0.4 on the defaults are 8 "
+        "VPLs and 25 gather rays, under it 16 and 8 (`docs/design.md §6`).",
         "",
         table(
             [
