@@ -14,11 +14,12 @@ inside, renders it, and compares both with the known answer:
   own estimate of it (``out.stderr``; ``docs/design.md`` §6). With the
   defaults the render stops once the estimated relMSE is under 1e-3 and 999
   pixels in 1000 have an estimated relative error under 10·sqrt(1e-3) =
-  0.32: the worst pixel, one where a VPL landed next to the shaded point,
-  keeps a few percent. ``RenderTuning(pixel_factor=0.22, pixel_share=0)``
-  bounds every pixel's estimate by 0.7%, at the price of more frames; with
-  the box inside, its corners' heavy tails keep it to the frame cap (256)
-  here. Both are printed, each worst pixel beside its estimate.
+  0.32: the worst pixel, near the box's corners, keeps one to a few
+  percent. ``RenderTuning(pixel_factor=0.22, pixel_share=0)`` bounds every
+  pixel's estimate by 0.7%, at the price of more frames. Both are printed,
+  each worst pixel beside its estimate. The furnace's light is spread
+  evenly, so the display takes 8 VPLs and 25 gather rays a frame
+  (``voxgi.display.ray_budget``).
 
 Every surface emits and the furnace's light is uniform, so the shooting
 radius 8 (``SolveTuning(shoot_directions=8)``) serves as well as the default
