@@ -16,9 +16,9 @@ unit of error: the seconds to reach a relMSE ``tol`` are about
   to zero), and of the other records alone (the emitters set to zero): each
   is displayed with the whole VPL budget on its records;
 * the whole light with VPLs per frame and gather rays per pixel of
-  (16, 8) (the defaults for concentrated light), (8, 25) (for light spread
-  evenly, ``voxgi.display.ray_budget``), (8, 16), (16, 16), (32, 8) and
-  (16, 9).
+  (16, 9) (the defaults for concentrated light), (8, 25) (for light spread
+  evenly, ``voxgi.display.ray_budget``), (16, 8), (8, 16), (16, 16) and
+  (32, 8).
 
 Writes ``results/display_noise.json``.
 
@@ -42,7 +42,7 @@ from time_vs_error import RESULTS, git_commit
 import voxgi
 import voxgi.display
 
-BUDGETS = ((16, 8), (8, 25), (8, 16), (16, 16), (32, 8), (16, 9))
+BUDGETS = ((16, 9), (8, 25), (16, 8), (8, 16), (16, 16), (32, 8))
 NOISE_SCENES = (*SCENES, "sponza_atrium")
 BLOCK = 4
 

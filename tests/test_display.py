@@ -167,9 +167,9 @@ def test_light_spread_closed_forms():
 
 def test_ray_budget_moves_vpls_to_gather_rays_where_the_light_is_even():
     budget = voxgi.display.ray_budget
-    assert budget(0.0) == budget(0.39) == (16, 8)
+    assert budget(0.0) == budget(0.39) == (16, 9)
     assert budget(0.4) == budget(1.0) == (8, 25)
-    assert budget(1.0, vpls=16, gather=8) == (16, 8)
+    assert budget(1.0, vpls=16, gather=9) == (16, 9)
     assert budget(0.0, gather=0) == (16, 0)
 
 
@@ -178,9 +178,8 @@ def test_furnace_at_the_defaults_every_pixel_within_one_percent(rho):
     # Exact radiosity on the triangles and the render's defaults: even light,
     # so the display takes 8 VPLs and 25 gather rays, and no pixel of the
     # stopped image is off Le / (1 - rho) by 1% (seeds 0-2 at rho 0.9: worst
-    # 0.54-0.72%). With the budget of concentrated light (16 VPLs, 8 gather
-    # rays) the same render is off by 0.9% (rho 0.5) and 1.5-1.6% (rho 0.9)
-    # in its worst pixel.
+    # 0.54-0.72%). With 16 VPLs and 8 gather rays the same render is off by
+    # 0.9% (rho 0.5) and 1.5-1.6% (rho 0.9) in its worst pixel.
     scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=1.0, width=64, height=48)
     sol = triangle_solution(scene, lambda v: np.full((len(v), 3), math.pi / (1 - rho)))
     out = voxgi.render(scene, sol, progress=False)

@@ -1155,15 +1155,17 @@ def _check_executor(executor) -> FrameExecutor:
 
 
 #: (VPLs per frame, gather rays per pixel and frame) of :func:`ray_budget`
-#: for concentrated light and for light spread evenly. 25 is a square, so the
-#: gather rays are stratified in both angles (5 x 5 cells).
-RAY_BUDGETS = ((16, 8), (8, 25))
+#: for concentrated light and for light spread evenly. Both gather counts are
+#: squares, so the rays are stratified in both angles (3 x 3 and 5 x 5
+#: cells): 9 such rays leave 0.80 times the noise of 8 stratified in one angle
+#: in the Cornell box (``docs/design.md`` §6).
+RAY_BUDGETS = ((16, 9), (8, 25))
 
-#: :func:`light_spread` from which the light counts as spread evenly. Measured
-#: noise per second of the second budget against the first
-#: (``docs/design.md`` §6): more in the Cornell box (spread 0.025) and rooms
-#: lit through a window or a door (0.18, 0.19), 14% less in a sky-lit atrium
-#: (0.55), several times less in a furnace (1).
+#: :func:`light_spread` from which the light counts as spread evenly. Cost of
+#: a unit of error of the second budget against the first (``docs/design.md``
+#: §6): 1.3-3.7 times on the Cornell box, ``shadow``, ``geometric`` (spread
+#: 0.025-0.07) and a room lit through a window (0.18), 0.87 in a sky-lit
+#: atrium (0.55), 0.21 in a furnace (1).
 SPREAD_EVEN = 0.4
 
 
@@ -1217,7 +1219,7 @@ def ray_budget(spread: float, vpls: int | None = None, gather: int | None = None
         VPLs per frame, gather rays per pixel and frame.
 
     >>> ray_budget(0.025), ray_budget(1.0), ray_budget(1.0, gather=0)
-    ((16, 8), (8, 25), (8, 0))
+    ((16, 9), (8, 25), (8, 0))
     """
     k, g = RAY_BUDGETS[spread >= SPREAD_EVEN]
     return (k if vpls is None else int(vpls)), (g if gather is None else int(gather))
