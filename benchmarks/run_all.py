@@ -20,7 +20,9 @@ Steps (each a script that also runs on its own; results in benchmarks/results/):
                          when the ``mitsuba`` package is absent
                          (``pip install "voxgi[bench]"``);
 5. ``calibration.py``    the display's error estimate against the measured
-                         error, five scenes, three seeds; ``display_noise.py``
+                         error, five scenes, three seeds; ``furnace_pixels.py``
+                         every pixel of the furnace at the defaults;
+                         ``display_noise.py``
                          what a frame's noise is made of, and the cost of a
                          unit of error at other ray budgets;
 6. the linear-cost log-log plot ``results/linear_cost.png`` from step 2.
@@ -100,6 +102,7 @@ def main() -> None:
             *(["--size", "64", "--ref-frames", "64"] if args.quick else []),
         ]
     )
+    ok["furnace_pixels"] = run(["benchmarks/furnace_pixels.py"])
     ok["display_noise"] = run(
         [
             "benchmarks/display_noise.py",
