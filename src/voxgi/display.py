@@ -1164,8 +1164,8 @@ RAY_BUDGETS = ((16, 9), (8, 25))
 #: :func:`light_spread` from which the light counts as spread evenly. Cost of
 #: a unit of error of the second budget against the first (``docs/design.md``
 #: §6): 1.3-3.7 times on the Cornell box, ``shadow``, ``geometric`` (spread
-#: 0.025-0.07) and a room lit through a window (0.18), 0.87 in a sky-lit
-#: atrium (0.55), 0.21 in a furnace (1).
+#: 0.025-0.07) and a room lit through a window (0.18), about 1 in a sky-lit
+#: atrium (0.55), 0.16-0.21 in a furnace (1).
 SPREAD_EVEN = 0.4
 
 
