@@ -24,6 +24,7 @@ import numpy as np
 
 from . import _core, _validate
 from ._qmc import sobol
+from .lights import LUMINANCE
 from .rays import Tracer
 from .scene import Scene
 from .voxels import VoxelSet
@@ -31,7 +32,6 @@ from .voxels import VoxelSet
 __all__ = ["EmitterSampler", "check_scene_and_records", "direct_irradiance", "light_irradiance"]
 
 _ROUNDS = 3
-_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 class EmitterSampler:
@@ -88,7 +88,7 @@ class EmitterSampler:
         self.area = 0.5 * twice
         self.normal = cross / np.maximum(twice, np.finfo(np.float64).tiny)[:, None]
         # a two-sided triangle sends its radiance into both hemispheres
-        power = self.area * (self.radiance @ _LUMINANCE) * np.where(self.two_sided, 2.0, 1.0)
+        power = self.area * (self.radiance @ LUMINANCE) * np.where(self.two_sided, 2.0, 1.0)
         total = float(power.sum())
         self.probability = power / total if total > 0 else power
         self._cdf = np.cumsum(self.probability)
@@ -338,7 +338,7 @@ def _noisy(
     term varies most, get the samples they need in a few batches and the rest
     of the scene keeps ``samples``.
     """
-    lum = est.irradiance[lit] @ _LUMINANCE
+    lum = est.irradiance[lit] @ LUMINANCE
     var = np.maximum(est.mean_sq[lit] - lum * lum, 0.0) / est.counts[lit]
     need = var / np.maximum((rel_error * lum) ** 2, np.finfo(np.float64).tiny)
     bad = (lum > 0) & (need > 1.0)

@@ -21,6 +21,7 @@ import numpy as np
 
 from . import _core, _validate
 from ._qmc import sobol
+from .lights import LUMINANCE
 from .radiosity import Solution
 from .rays import Tracer
 from .scene import Camera, Scene
@@ -347,7 +348,7 @@ class VPLSampler:
         useful = ~back & (area > 0) & np.any(B > 0, axis=1)
         self.skipped_records = int(n - useful.sum())
         order = np.argsort(_morton(np.asarray(vox.ijk)), kind="stable")
-        lum = B @ np.array([0.2126, 0.7152, 0.0722])
+        lum = B @ LUMINANCE
         self.pdf = pdf
         self.sets = []
         for sel in (useful & emit, useful & ~emit):
@@ -1188,7 +1189,7 @@ def light_spread(sol) -> float:
     """
     vox = sol.vox
     area = np.asarray(vox.area, dtype=np.float64)
-    lum = np.asarray(sol.radiosity, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    lum = np.asarray(sol.radiosity, dtype=np.float64) @ LUMINANCE
     front = area > 0
     if vox.back is not None:
         front &= ~np.asarray(vox.back, dtype=bool)

@@ -32,7 +32,9 @@ from . import _validate
 
 __all__ = ["DirectionalLight", "Environment", "PointLight", "SpotLight", "spot_falloff"]
 
-_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+#: Luminance of linear RGB (Rec. 709 primaries): the weights by which
+#: voxgi ranks light for sampling.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 def _unit(value, what: str) -> tuple[float, float, float]:
@@ -306,7 +308,7 @@ class Environment:
             h, w = self.image.shape[:2]
             cos_edges = np.cos(np.linspace(0.0, np.pi, h + 1))
             omega_row = (2.0 * np.pi / w) * (cos_edges[:-1] - cos_edges[1:])  # (H,)
-            lum = np.maximum(self.image @ _LUMINANCE, 0.0)
+            lum = np.maximum(self.image @ LUMINANCE, 0.0)
             weight = (lum * omega_row[:, None]).ravel()
             total = float(weight.sum())
             p = weight / total if total > 0 else np.full(h * w, 1.0 / (h * w))
