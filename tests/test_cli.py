@@ -62,10 +62,14 @@ def test_render_builtin_scene_writes_exr_png_and_metadata(tmp_path, capsys):
     assert meta["interrupted"] is False
     assert meta["max_frames"] == 6
     assert {"voxelize", "solve", "total"} <= set(meta["seconds"])
+    # the furnace's light is even: the budget of spread light, said and recorded
+    assert (meta["vpls_per_frame"], meta["gather_per_frame"]) == (8, 25)
+    assert meta["light_spread"] > 0.99
     text = capsys.readouterr().out
     for word in ("voxelize", "solve", "display", "wrote", "seconds"):
         assert word in text
     assert "traced passes of" in text  # the render pipeline's solve finishes with them
+    assert "8 VPLs and 25 gather rays a pixel (light spread 1.00)" in text
 
 
 def test_default_output_name(tmp_path, monkeypatch):

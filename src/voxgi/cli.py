@@ -390,9 +390,11 @@ def _report_display(args, res, interrupted: bool) -> None:
     """Print the display's summary line and, with ``--verbose``, what it skipped."""
     s = res.stats
     _say(
-        f"display: {res.frames} frames{' (interrupted)' if interrupted else ''}, "
-        f"{s['vpls']} VPLs/pixel, {s['primary_rays']:.3g} primary + {s['shadow_rays']:.3g} "
-        f"shadow + {s['gather_rays']:.3g} gather rays in {s['seconds']['display']:.2f} s "
+        f"display: {res.frames} frames{' (interrupted)' if interrupted else ''} of "
+        f"{s['vpls_per_frame']} VPLs and {s['gather_per_frame']} gather rays a pixel (light "
+        f"spread {s['light_spread']:.2f}), {s['primary_rays']:.3g} primary + "
+        f"{s['shadow_rays']:.3g} shadow + {s['gather_rays']:.3g} gather rays in "
+        f"{s['seconds']['display']:.2f} s "
         f"(estimated relMSE of the noise {s['est_rel_mse']:.2e}, worst pixel "
         f"{s['est_max_rel_err']:.1%})"
     )
@@ -427,6 +429,9 @@ def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
         "est_rel_mse": s["est_rel_mse"],
         "est_max_rel_err": s["est_max_rel_err"],
         "vpls_per_pixel": s["vpls"],
+        "vpls_per_frame": s["vpls_per_frame"],
+        "gather_per_frame": s["gather_per_frame"],
+        "light_spread": s["light_spread"],
         "seed": args.seed,
         "exposure": args.exposure,
         "interrupted": bool(s.get("interrupted")),
