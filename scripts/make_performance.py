@@ -857,7 +857,7 @@ def display_noise() -> list[str]:
         "records and of the other records is each displayed alone, with the whole VPL budget. "
         "Cost of error: frame noise times seconds per frame, relative to 16 VPLs and 9 gather "
         "rays (the time to a given relMSE scales with it; under 1 is cheaper). In brackets, "
-        "the light's spread (`voxgi.display.light_spread`): from 0.4 on the defaults are 8 "
+        "the light's spread (`voxgi.display.light_spread`): from 0.8 on the defaults are 8 "
         "VPLs and 25 gather rays, under it 16 and 9 (`docs/design.md §6`).",
         "",
         table(

@@ -166,8 +166,8 @@ def test_light_spread_closed_forms():
 
 def test_ray_budget_moves_vpls_to_gather_rays_where_the_light_is_even():
     budget = voxgi.display.ray_budget
-    assert budget(0.0) == budget(0.39) == (16, 9)
-    assert budget(0.4) == budget(1.0) == (8, 25)
+    assert budget(0.0) == budget(0.79) == (16, 9)
+    assert budget(0.8) == budget(1.0) == (8, 25)
     assert budget(1.0, vpls=16, gather=9) == (16, 9)
     assert budget(0.0, gather=0) == (16, 0)
 

@@ -1165,9 +1165,11 @@ RAY_BUDGETS = ((16, 9), (8, 25))
 #: :func:`light_spread` from which the light counts as spread evenly. Cost of
 #: a unit of error of the second budget against the first (``docs/design.md``
 #: §6): 1.3-3.7 times on the Cornell box, ``shadow``, ``geometric`` (spread
-#: 0.025-0.07) and a room lit through a window (0.18), about 1 in a sky-lit
-#: atrium (0.55), 0.16-0.21 in a furnace (1).
-SPREAD_EVEN = 0.4
+#: 0.025-0.07), rooms lit through a window or by a sun (0.18-0.29), a box lit
+#: by a point light (0.42) and a sphere lit by an emitting cap (0.57); about 1
+#: in a sky-lit atrium (0.55); 0.7 for objects under a uniform sky (0.95) and
+#: 0.16-0.21 in a furnace (1).
+SPREAD_EVEN = 0.8
 
 
 def light_spread(sol) -> float:
