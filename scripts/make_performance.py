@@ -837,9 +837,7 @@ def display_noise() -> list[str]:
         for i, r in enumerate(sc["rows"]):
             rows.append(
                 [
-                    f"{sc['scene']} ({sc['spread']:.3f})"
-                    if i == 0 and "spread" in sc
-                    else (sc["scene"] if i == 0 else ""),
+                    f"{sc['scene']} ({sc['spread']:.3f})" if i == 0 else "",
                     r["light"],
                     f"{r['vpls']} / {r['gather']}",
                     sci(r["frame_noise"]),
