@@ -12,11 +12,18 @@
 namespace voxgi::py_helpers {
 namespace py = pybind11;
 
-using I32 = py::array_t<int32_t, py::array::c_style>;
-using I64 = py::array_t<int64_t, py::array::c_style>;
-using F32 = py::array_t<float, py::array::c_style>;
-using F64 = py::array_t<double, py::array::c_style>;
-using U8 = py::array_t<uint8_t, py::array::c_style>;
+// Arrays reach the kernels C-contiguous and aligned for their type. NumPy
+// allows misaligned arrays (np.frombuffer at an odd offset; Dask and pickle
+// protocol 5 hand workers buffers at any offset within a message), and a
+// kernel reading int32 or double through a misaligned pointer is undefined
+// behaviour: vectorized code may fault on it. pybind11 passes these flags to
+// NumPy's conversion, which copies such an array (and only such an array).
+constexpr int kInput = py::array::c_style | py::detail::npy_api::NPY_ARRAY_ALIGNED_;
+using I32 = py::array_t<int32_t, kInput>;
+using I64 = py::array_t<int64_t, kInput>;
+using F32 = py::array_t<float, kInput>;
+using F64 = py::array_t<double, kInput>;
+using U8 = py::array_t<uint8_t, kInput>;
 
 // A StopCheck for kernels running with the GIL released: at most every
 // 50 ms it re-acquires the GIL and asks Python whether a signal (Ctrl-C)

@@ -63,6 +63,15 @@ py::tuple shoot_sender_side(const voxgi::LineSystem& s, I32 emitters, I32 famili
     return py::make_tuple(hd, unfound, count.rays, count.steps);
 }
 
+// Whether each array reaches the kernels aligned for its element type (the
+// input aliases of bind_common.h promise it, whatever the caller passes).
+py::tuple input_alignment(I32 i32, I64 i64, F32 f32, F64 f64) {
+    auto aligned = [](const void* p, size_t a) { return reinterpret_cast<uintptr_t>(p) % a == 0; };
+    return py::make_tuple(
+        aligned(i32.data(), alignof(int32_t)), aligned(i64.data(), alignof(int64_t)),
+        aligned(f32.data(), alignof(float)), aligned(f64.data(), alignof(double)));
+}
+
 }  // namespace
 
 void bind_testing(py::module_& m) {
@@ -86,4 +95,7 @@ x's weight, the partner receives); vis is unchanged by it.)doc");
 Each ray's power values[e] * cos_e * weight * send_scale[e] (send_scale =
 area / S) is shared by its receivers in proportion to recv_area * cos_r; hd
 holds power. Returns (hd, unfound, rays, steps) as LineSystem.shoot.)doc");
+    t.def("input_alignment", &input_alignment, "i32"_a.noconvert(), "i64"_a.noconvert(),
+          "f32"_a.noconvert(), "f64"_a.noconvert(),
+          "Whether each array, as a kernel sees it, is aligned for its type: (4,) bools.");
 }
