@@ -2,10 +2,25 @@
 
 from __future__ import annotations
 
+import signal
+
 import numpy as np
 import pytest
 
 import voxgi
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _python_handles_sigint():
+    """The Ctrl-C tests send SIGINT as a terminal would; that needs Python's
+    own handler. A shell starts a background job with SIGINT ignored, and
+    Python then installs no handler: the signal would vanish and an
+    interrupted render would run to its frame cap. The child processes of the
+    command-line tests get the default disposition back through exec."""
+    before = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
 
 
 @pytest.fixture
