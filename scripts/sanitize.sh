@@ -15,9 +15,13 @@ JOBS=${JOBS:-2}
 
 if [ ! -x "$VENV/bin/python" ]; then
   "$PYTHON" -m venv "$VENV"
-  "$VENV/bin/pip" install -q numpy scipy trimesh embreex openexr scikit-image tqdm \
-      pytest hypothesis matplotlib pybind11 scikit-build-core ninja cmake
 fi
+# The runtime and test dependencies as pyproject.toml lists them (read on
+# every run, so the list cannot fall behind), and the build backend.
+"$VENV/bin/python" -c 'import tomllib
+p = tomllib.load(open("pyproject.toml", "rb"))["project"]
+print("\n".join(p["dependencies"] + p["optional-dependencies"]["test"]))' > "$VENV/requirements.txt"
+"$VENV/bin/pip" install -q -r "$VENV/requirements.txt" pybind11 scikit-build-core ninja cmake
 # A normal (not editable) install, so nothing else's build dir is touched.
 CMAKE_BUILD_PARALLEL_LEVEL=$JOBS "$VENV/bin/pip" install -q --no-deps --no-build-isolation \
     --force-reinstall -Cbuild-dir=build/asan -Ccmake.define.VOXGI_SANITIZE=ON \
