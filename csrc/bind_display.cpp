@@ -186,40 +186,27 @@ voxgi::ShadeTriangles make_triangles(const F64& tri_v, const I32& tri_object,
     return tris;
 }
 
-voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_order,
-                            const I32& rec_cell_start, const F64& rec_centroid,
-                            const F32& rec_normal, const I32& rec_object, const F32& rec_radiance,
-                            const F32& rec_pa, const I64& grid_dims, const I64& grid_lo,
+voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_cell_start,
+                            const F32& rec_packed, const I64& grid_dims, const I64& grid_lo,
                             const F64& grid_origin, double pitch) {
     check_1d(rec_sorted_key, -1, "rec_sorted_key");
     const py::ssize_t N = rec_sorted_key.shape(0);
-    check_1d(rec_order, N, "rec_order");
-    check_2d(rec_centroid, N, 3, "rec_centroid");
-    check_2d(rec_normal, N, 3, "rec_normal");
-    check_1d(rec_object, N, "rec_object");
-    check_2d(rec_radiance, N, 3, "rec_radiance");
-    check_1d(rec_pa, N, "rec_pa");
+    constexpr py::ssize_t kRow = sizeof(voxgi::PackedRecord) / sizeof(float);
+    check_2d(rec_packed, N, kRow, "rec_packed");
     check_1d(grid_dims, 3, "grid_dims");
     check_1d(grid_lo, 3, "grid_lo");
     check_1d(grid_origin, 3, "grid_origin");
     if (!(pitch > 0.0) || !std::isfinite(pitch)) throw py::value_error("pitch must be > 0");
     {
-        const int32_t* ro = rec_order.data();
         const int64_t* sk = rec_sorted_key.data();
-        for (py::ssize_t i = 0; i < N; ++i) {
-            if (ro[i] < 0 || ro[i] >= N) throw py::value_error("rec_order: index out of range");
-            if (i && sk[i] < sk[i - 1]) throw py::value_error("rec_sorted_key must be ascending");
-        }
+        for (py::ssize_t i = 1; i < N; ++i)
+            if (sk[i] < sk[i - 1]) throw py::value_error("rec_sorted_key must be ascending");
     }
     voxgi::RecordGrid grid;
     grid.count = N;
     grid.sorted_key = rec_sorted_key.data();
-    grid.order = rec_order.data();
-    grid.centroid = rec_centroid.data();
-    grid.normal = rec_normal.data();
-    grid.object = rec_object.data();
-    grid.radiance = rec_radiance.data();
-    grid.pa = rec_pa.data();
+    // float rows of the layout of PackedRecord (its object field an int32's bits)
+    grid.rec = reinterpret_cast<const voxgi::PackedRecord*>(rec_packed.data());
     for (int a = 0; a < 3; ++a) {
         grid.dims[a] = grid_dims.data()[a];
         grid.lo[a] = grid_lo.data()[a];
@@ -249,8 +236,7 @@ voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_order,
 auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                      F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
                      double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided,
-                     I64 rec_sorted_key, I32 rec_order, I32 rec_cell_start, F64 rec_centroid,
-                     F32 rec_normal, I32 rec_object, F32 rec_radiance, F32 rec_pa, I64 grid_dims,
+                     I64 rec_sorted_key, I32 rec_cell_start, F32 rec_packed, I64 grid_dims,
                      I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count, F32 ray_dir,
                      I32 prim, F32 out, int threads) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
@@ -260,9 +246,8 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
     voxgi::ShadeMIS mis = make_mis(n_gather);
     if (!(n_gather > 0.0)) throw py::value_error("n_gather must be > 0");
     voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
-    voxgi::RecordGrid grid =
-        make_grid(rec_sorted_key, rec_order, rec_cell_start, rec_centroid, rec_normal, rec_object,
-                  rec_radiance, rec_pa, grid_dims, grid_lo, grid_origin, pitch);
+    voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
+                                       grid_lo, grid_origin, pitch);
     check_1d(ray_count, P, "ray_count");
     check_2d(ray_dir, -1, 3, "ray_dir");
     const py::ssize_t R = ray_dir.shape(0);
@@ -332,10 +317,9 @@ py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 
 int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                         F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
                         int n_gather, uint64_t seed, int64_t frame, double eps, F64 tri_v,
-                        I32 tri_object, U8 obj_two_sided, I64 rec_sorted_key, I32 rec_order,
-                        I32 rec_cell_start, F64 rec_centroid, F32 rec_normal, I32 rec_object,
-                        F32 rec_radiance, F32 rec_pa, I64 grid_dims, I64 grid_lo, F64 grid_origin,
-                        double pitch, const voxgi::RayScene& scene, F32 out, int threads) {
+                        I32 tri_object, U8 obj_two_sided, I64 rec_sorted_key, I32 rec_cell_start,
+                        F32 rec_packed, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch,
+                        const voxgi::RayScene& scene, F32 out, int threads) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
@@ -344,9 +328,8 @@ int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32
     voxgi::ShadeMIS mis = make_mis(n_gather);
     voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
     check_scene(scene, tris);
-    voxgi::RecordGrid grid =
-        make_grid(rec_sorted_key, rec_order, rec_cell_start, rec_centroid, rec_normal, rec_object,
-                  rec_radiance, rec_pa, grid_dims, grid_lo, grid_origin, pitch);
+    voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
+                                       grid_lo, grid_origin, pitch);
     check_2d(out, hits.count, 3, "out");
     if (!out.writeable()) throw py::value_error("out must be writeable");
     float* po = out.mutable_data();
@@ -554,11 +537,10 @@ ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc"
           "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
           "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "tri_v"_a.noconvert(),
           "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "rec_sorted_key"_a.noconvert(),
-          "rec_order"_a.noconvert(), "rec_cell_start"_a.noconvert(), "rec_centroid"_a.noconvert(),
-          "rec_normal"_a.noconvert(), "rec_object"_a.noconvert(), "rec_radiance"_a.noconvert(),
-          "rec_pa"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
-          "grid_origin"_a.noconvert(), "pitch"_a, "ray_count"_a.noconvert(),
-          "ray_dir"_a.noconvert(), "prim"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0,
+          "rec_cell_start"_a.noconvert(), "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(),
+          "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a,
+          "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(), "prim"_a.noconvert(),
+          "out"_a.noconvert(), "threads"_a = 0,
           R"doc(Shade the gather rays (prim: first triangle hit, -1 none) with the radiance
 of the record at each hit point, MIS-weighted against the VPLs; adds into
 out (P, 3) float32.)doc");
@@ -581,11 +563,9 @@ int64, pixel p sees only the VPLs of set pixel_set[p].)doc");
           "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
           "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "seed"_a, "frame"_a,
           "eps"_a, "tri_v"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),
-          "rec_sorted_key"_a.noconvert(), "rec_order"_a.noconvert(), "rec_cell_start"_a.noconvert(),
-          "rec_centroid"_a.noconvert(), "rec_normal"_a.noconvert(), "rec_object"_a.noconvert(),
-          "rec_radiance"_a.noconvert(), "rec_pa"_a.noconvert(), "grid_dims"_a.noconvert(),
-          "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a, "scene"_a,
-          "out"_a.noconvert(), "threads"_a = 0,
+          "rec_sorted_key"_a.noconvert(), "rec_cell_start"_a.noconvert(),
+          "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
+          "grid_origin"_a.noconvert(), "pitch"_a, "scene"_a, "out"_a.noconvert(), "threads"_a = 0,
           R"doc(gather_rays, their first hits in scene (a RayScene built from tri_v) and
 gather_shade, pixel by pixel without ray arrays: the same sums, added into
 out (P, 3) float32. Returns the number of gather rays.)doc");

@@ -327,15 +327,14 @@ int64_t lookup_record(const RecordGrid& g, const double y[3], const float n[3], 
             q1 = std::upper_bound(g.sorted_key + q0, g.sorted_key + g.count, key) - g.sorted_key;
         }
         for (int64_t q = q0; q < q1; ++q) {
-            const int64_t r = g.order[q];
-            const double* cr = g.centroid + 3 * r;
-            const float* nr = g.normal + 3 * r;
-            const double dx = y[0] - cr[0], dy = y[1] - cr[1], dz = y[2] - cr[2];
+            const PackedRecord& r = g.rec[q];
+            const double dx = y[0] - r.centroid[0], dy = y[1] - r.centroid[1],
+                         dz = y[2] - r.centroid[2];
             // Nearest centroid, strongly preferring the same side and object.
-            const double penalty = 4.0 * (1.0 - dot3(nr, n)) + (g.object[r] != obj ? 4.0 : 0.0);
+            const double penalty = 4.0 * (1.0 - dot3(r.normal, n)) + (r.object != obj ? 4.0 : 0.0);
             const double score = dx * dx + dy * dy + dz * dz + p2 * penalty;
             if (best < 0 || score < best_score)
-                best = r, best_score = score, best_penalty = penalty;
+                best = q, best_score = score, best_penalty = penalty;
         }
     };
     // The record of this surface (same object and side) in the hit's own
@@ -391,12 +390,13 @@ void gather_ray_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     if (cos_y <= 0.f) return;
     const double r2 = (y[0] - x[0]) * (y[0] - x[0]) + (y[1] - x[1]) * (y[1] - x[1]) +
                       (y[2] - x[2]) * (y[2] - x[2]);
-    const double pa = grid.pa[rec];
+    const PackedRecord& R = grid.rec[rec];
+    const double pa = R.pa;
     const double denom = pa * r2 / cos_y + mis.n_gather * cos_x / kPi;
     if (!(denom > 0.0)) return;
     float f[3];
     shade_brdf(mats, m, n, wi, wo, f);
-    const float* L = grid.radiance + 3 * rec;
+    const float* L = R.radiance;
     for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * cos_x / denom;
 }
 

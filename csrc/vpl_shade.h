@@ -64,18 +64,27 @@ struct ShadeMIS {
     double n_gather = 0.0;  // gather rays per pixel per frame
 };
 
-// Voxel records for looking up the radiance where a gather ray lands.
+// What a gather ray's lookup reads of one record: one 64-byte row, so that
+// scoring a voxel's records and reading the chosen one's light touch a cache
+// line or two instead of one per array (the lookup is bound by these loads).
+struct PackedRecord {
+    float centroid[3];  // in the tracer's frame; it only ranks records in a voxel
+    float normal[3];
+    int32_t object;
+    float pa;           // n_v p_a of the record (0: not a MIS VPL)
+    float radiance[3];  // B / pi
+    float unused[5];
+};
+static_assert(sizeof(PackedRecord) == 64, "one record, one 64-byte row");
+
+// Voxel records for looking up the radiance where a gather ray lands, in the
+// order of their voxel keys: a voxel's records are neighbours.
 struct RecordGrid {
     int64_t count = 0;
     const int64_t* sorted_key = nullptr;  // (N,) linear voxel keys, ascending
-    const int32_t* order = nullptr;       // (N,) record of each sorted key
     const int32_t* cell_start = nullptr;  // (dims product + 1,) first sorted index of each key,
                                           // or null: binary search in sorted_key
-    const double* centroid = nullptr;     // (N, 3)
-    const float* normal = nullptr;        // (N, 3)
-    const int32_t* object = nullptr;      // (N,)
-    const float* radiance = nullptr;      // (N, 3) B / pi
-    const float* pa = nullptr;            // (N,) n_v p_a of the record (0: not a MIS VPL)
+    const PackedRecord* rec = nullptr;    // (N,) in the order of sorted_key
     int64_t dims[3] = {0, 0, 0};          // key = (i * dims[1] + j) * dims[2] + k
     int64_t lo[3] = {0, 0, 0};            // ijk of key 0
     double origin[3] = {0.0, 0.0, 0.0};
@@ -176,8 +185,8 @@ void primary_hits(int64_t P, const double* org, const double* dir, const int32_t
                   const PrimaryScene& scene, double* pos, float* normal, float* ng,
                   int32_t* material, float* emission, int threads, const StopCheck& stop);
 
-// Index of the record that stands for the surface point y on object `obj`
-// seen from the side of normal n, or -1.
+// Position in the grid's order of the record that stands for the surface
+// point y on object `obj` seen from the side of normal n, or -1.
 int64_t lookup_record(const RecordGrid& grid, const double y[3], const float n[3], int32_t obj);
 
 // The BRDF used by the display for one pair of directions (exposed for tests):

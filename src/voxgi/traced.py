@@ -31,6 +31,22 @@ from .voxels import VoxelSet
 __all__ = ["TracedGather", "record_grid", "traced_irradiance"]
 
 
+#: Columns of a row of ``rec_packed``, float32, 64 bytes: the layout of
+#: ``PackedRecord`` in ``csrc/vpl_shade.h`` (the object id as an int32's bits).
+_CENTROID, _NORMAL, _OBJECT, _PA, _RADIANCE, _ROW = slice(0, 3), slice(3, 6), 6, 7, slice(8, 11), 16
+
+
+def _voxel_order(vox: VoxelSet) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The records' voxel keys on their bounding grid: (lo, dims, key, order),
+    ``order`` the records sorted by key (stable)."""
+    ijk = np.asarray(vox.ijk, dtype=np.int64)
+    lo = ijk.min(axis=0)
+    dims = ijk.max(axis=0) - lo + 1
+    rel = ijk - lo
+    key = (rel[:, 0] * dims[1] + rel[:, 1]) * dims[2] + rel[:, 2]
+    return lo, dims, key, np.argsort(key, kind="stable")
+
+
 def record_grid(
     vox: VoxelSet, centre: np.ndarray, radiance: np.ndarray, pa: np.ndarray | None = None
 ) -> dict:
@@ -51,13 +67,12 @@ def record_grid(
     -------
     dict
         The kernels' ``rec_*``, ``grid_*`` and ``pitch`` keyword arguments.
+        ``rec_packed`` holds one 64-byte row a record in key order (centroid,
+        normal, object, ``pa``, radiance), aligned to 64 bytes: a gather ray's
+        lookup then reads a cache line or two, where separate arrays cost one
+        each.
     """
-    ijk = np.asarray(vox.ijk, dtype=np.int64)
-    lo = ijk.min(axis=0)
-    dims = ijk.max(axis=0) - lo + 1
-    rel = ijk - lo
-    key = (rel[:, 0] * dims[1] + rel[:, 1]) * dims[2] + rel[:, 2]
-    order = np.argsort(key, kind="stable")
+    lo, dims, key, order = _voxel_order(vox)
     sorted_key = np.ascontiguousarray(key[order])
     cells = int(np.prod(dims))
     # A dense table of each voxel's first record (4 bytes a voxel of the
@@ -67,15 +82,19 @@ def record_grid(
     else:
         start = np.zeros(0, np.int32)
     n = len(vox)
+    buf = np.zeros(n * _ROW + _ROW, np.float32)
+    skip = (-buf.ctypes.data % 64) // buf.itemsize
+    packed = buf[skip : skip + n * _ROW].reshape(n, _ROW)
+    packed[:, _CENTROID] = np.asarray(vox.centroid, np.float64)[order] - centre
+    packed[:, _NORMAL] = np.asarray(vox.normal, np.float32)[order]
+    packed.view(np.int32)[:, _OBJECT] = np.asarray(vox.object_id, np.int32)[order]
+    if pa is not None:
+        packed[:, _PA] = np.asarray(pa, np.float32)[order]
+    packed[:, _RADIANCE] = np.asarray(radiance, np.float32)[order]
     return {
         "rec_sorted_key": sorted_key,
-        "rec_order": order.astype(np.int32),
         "rec_cell_start": start,
-        "rec_centroid": np.ascontiguousarray(np.asarray(vox.centroid, np.float64) - centre),
-        "rec_normal": np.ascontiguousarray(vox.normal, dtype=np.float32),
-        "rec_object": np.ascontiguousarray(vox.object_id, dtype=np.int32),
-        "rec_radiance": np.ascontiguousarray(radiance, dtype=np.float32),
-        "rec_pa": np.zeros(n, np.float32) if pa is None else np.ascontiguousarray(pa, np.float32),
+        "rec_packed": packed,
         "grid_dims": dims.astype(np.int64),
         "grid_lo": lo.astype(np.int64),
         "grid_origin": np.asarray(vox.origin, dtype=np.float64).reshape(3) - centre,
@@ -149,6 +168,7 @@ class TracedGather:
             "obj_two_sided": np.array([o.two_sided for o in scene.objects], np.uint8),
         }
         self._grid = record_grid(vox, c, np.zeros((n, 3), np.float32))
+        self._order = _voxel_order(vox)[3]
         self.rays = 0
 
     def close(self) -> None:
@@ -169,7 +189,7 @@ class TracedGather:
         values = np.asarray(values)
         if values.shape != (n, 3):
             raise ValueError(f"values: expected shape ({n}, 3), got {values.shape}")
-        self._grid["rec_radiance"] = np.ascontiguousarray(values, dtype=np.float32)
+        self._grid["rec_packed"][:, _RADIANCE] = values[self._order]
         out = np.zeros((n, 3), np.float32)
         args = (*self._hits, *self._materials)
         if self.tracer.native is not None:
