@@ -5,6 +5,7 @@
 #include <pybind11/pybind11.h>
 
 #include <chrono>
+#include <cstdint>
 #include <string>
 
 #include "util/parallel.h"
@@ -24,6 +25,12 @@ using I64 = py::array_t<int64_t, kInput>;
 using F32 = py::array_t<float, kInput>;
 using F64 = py::array_t<double, kInput>;
 using U8 = py::array_t<uint8_t, kInput>;
+
+// Arrays a kernel writes into in place are taken as they are, never copied
+// (a copy would keep the answer from the caller): C-contiguous (noconvert),
+// then check_inplace refuses one that is read-only or misaligned.
+using I64Out = py::array_t<int64_t, py::array::c_style>;
+using F32Out = py::array_t<float, py::array::c_style>;
 
 // A StopCheck for kernels running with the GIL released: at most every
 // 50 ms it re-acquires the GIL and asks Python whether a signal (Ctrl-C)
@@ -45,6 +52,13 @@ inline voxgi::StopCheck make_stop_check() {
         }
         return false;
     };
+}
+
+template <class A>
+void check_inplace(const A& a, const char* name) {
+    if (!a.writeable()) throw py::value_error(std::string(name) + " must be writeable");
+    if (reinterpret_cast<std::uintptr_t>(a.data()) % sizeof(typename A::value_type) != 0)
+        throw py::value_error(std::string(name) + " must be aligned for its type");
 }
 
 // Check shape of a 2-D array: (n, cols), n == -1 accepts any n.

@@ -105,8 +105,8 @@ void check_ray_counts(const I64& ray_count, py::ssize_t rays) {
 auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                     F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, F64 vpl_pos,
                     F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa, double n_gather,
-                    double eps, I64 ray_count, F32 ray_org, F32 ray_dir, F32 ray_len,
-                    F32 ray_contrib, int threads) {
+                    double eps, I64Out ray_count, F32Out ray_org, F32Out ray_dir, F32Out ray_len,
+                    F32Out ray_contrib, int threads) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
@@ -125,9 +125,11 @@ auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit
     check_2d(ray_dir, cap, 3, "ray_dir");
     check_1d(ray_len, cap, "ray_len");
     check_2d(ray_contrib, cap, 3, "ray_contrib");
-    if (!ray_count.writeable() || !ray_org.writeable() || !ray_dir.writeable() ||
-        !ray_len.writeable() || !ray_contrib.writeable())
-        throw py::value_error("ray buffers must be writeable");
+    check_inplace(ray_count, "ray_count");
+    check_inplace(ray_org, "ray_org");
+    check_inplace(ray_dir, "ray_dir");
+    check_inplace(ray_len, "ray_len");
+    check_inplace(ray_contrib, "ray_contrib");
     int64_t* pc = ray_count.mutable_data();
     float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data(), *pl = ray_len.mutable_data(),
           *pr = ray_contrib.mutable_data();
@@ -141,8 +143,8 @@ auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit
 }
 
 auto gather_rays_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
-                    int n_gather, uint64_t seed, int64_t frame, double eps, I64 ray_count,
-                    F32 ray_org, F32 ray_dir, int threads) {
+                    int n_gather, uint64_t seed, int64_t frame, double eps, I64Out ray_count,
+                    F32Out ray_org, F32Out ray_dir, int threads) {
     voxgi::ShadeHits hits = make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material,
                                       std::numeric_limits<int32_t>::max());
     const py::ssize_t P = hits.count;
@@ -154,6 +156,9 @@ auto gather_rays_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit
     if (ray_org.shape(0) < P * n_gather)
         throw py::value_error("ray buffers hold " + std::to_string(ray_org.shape(0)) +
                               " rays, need " + std::to_string(P * n_gather));
+    check_inplace(ray_count, "ray_count");
+    check_inplace(ray_org, "ray_org");
+    check_inplace(ray_dir, "ray_dir");
     int64_t* pc = ray_count.mutable_data();
     float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data();
     auto stop = make_stop_check();
@@ -238,7 +243,7 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
                      double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided,
                      I64 rec_sorted_key, I32 rec_cell_start, F32 rec_packed, I64 grid_dims,
                      I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count, F32 ray_dir,
-                     I32 prim, F32 out, int threads) {
+                     I32 prim, F32Out out, int threads) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
@@ -254,7 +259,7 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
     check_1d(prim, R, "prim");
     check_ray_counts(ray_count, R);
     check_2d(out, P, 3, "out");
-    if (!out.writeable()) throw py::value_error("out must be writeable");
+    check_inplace(out, "out");
     const int64_t* pc = ray_count.data();
     const float* pd = ray_dir.data();
     const int32_t* pp = prim.data();
@@ -319,7 +324,7 @@ int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32
                         int n_gather, uint64_t seed, int64_t frame, double eps, F64 tri_v,
                         I32 tri_object, U8 obj_two_sided, I64 rec_sorted_key, I32 rec_cell_start,
                         F32 rec_packed, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch,
-                        const voxgi::RayScene& scene, F32 out, int threads) {
+                        const voxgi::RayScene& scene, F32Out out, int threads) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
@@ -331,7 +336,7 @@ int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32
     voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
                                        grid_lo, grid_origin, pitch);
     check_2d(out, hits.count, 3, "out");
-    if (!out.writeable()) throw py::value_error("out must be writeable");
+    check_inplace(out, "out");
     float* po = out.mutable_data();
     int64_t rays = 0;
     auto stop = make_stop_check();
@@ -383,7 +388,7 @@ auto shade_brdf_py(F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_gl
 
 auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                          F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
-                         I64 ray_count, F32 ray_dir, F32 ray_weight, U8 occluded, F32 out,
+                         I64 ray_count, F32 ray_dir, F32 ray_weight, U8 occluded, F32Out out,
                          int threads) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
@@ -395,6 +400,7 @@ auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I3
     check_2d(ray_weight, R, 3, "ray_weight");
     if (occluded.size() != 0) check_1d(occluded, R, "occluded");
     check_2d(out, P, 3, "out");
+    check_inplace(out, "out");
     check_ray_counts(ray_count, R);
     const int64_t* pc = ray_count.data();
     const float *pd = ray_dir.data(), *pw = ray_weight.data();

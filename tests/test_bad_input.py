@@ -621,6 +621,26 @@ def test_core_takes_misaligned_arrays_as_aligned_copies():
     np.testing.assert_array_equal(got[0], want)
 
 
+def test_core_refuses_misaligned_arrays_it_writes_into():
+    # a copy would take the answer with it: in-place outputs are never converted
+    P, n = 4, 2
+    up = np.tile(np.array([0, 0, 1], np.float32), (P, 1))
+    hits = (np.zeros((P, 3)), up, up, up, np.zeros(P, np.int32))
+    count, org = np.zeros(P, np.int64), np.zeros((P * n, 3), np.float32)
+    dirs = np.zeros_like(org)
+    assert _core.gather_rays(*hits, n, 0, 0, 1e-3, count, org, dirs) == P * n
+    np.testing.assert_array_equal(count, n)  # written in place
+    assert np.allclose(org[:, 2], 1e-3)
+    with pytest.raises(ValueError, match="ray_org must be aligned"):
+        _core.gather_rays(*hits, n, 0, 0, 1e-3, count, _misaligned(org), dirs)
+    with pytest.raises(ValueError, match="ray_count must be aligned"):
+        _core.gather_rays(*hits, n, 0, 0, 1e-3, _misaligned(count), org, dirs)
+    ro = org.copy()
+    ro.flags.writeable = False
+    with pytest.raises(ValueError, match="ray_org must be writeable"):
+        _core.gather_rays(*hits, n, 0, 0, 1e-3, count, ro, dirs)
+
+
 def test_core_linesystem_out_of_range_indices():
     ijk, normal, point = _ls_arrays()
     ls = _core.LineSystem(ijk, normal, point)
