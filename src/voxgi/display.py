@@ -1011,7 +1011,7 @@ class RenderTuning:
     ----------
     min_frames : int
         Frames before the stopping rule is trusted (>= 2; the rule also
-        waits for 9 batches, ``docs/design.md`` §6).
+        waits for 8 batches, ``docs/design.md`` §6).
     emitter_share : float or None
         Share of each frame's VPLs taken from emitters; None splits by power
         (see :class:`VPLSampler`).
@@ -1274,10 +1274,12 @@ def _skipped(spec: FrameShaderSpec) -> list[str]:
 #: batch size), so the error estimate always rests on at least 16 batches.
 _BATCH_SLOTS = 32
 
-#: Batches before the stopping rule is trusted: the variance estimate from k
-#: batches has a relative standard deviation of sqrt(2 / (k - 1)) (normal
-#: batches), at most 1/2 from 9 batches on.
-_MIN_BATCHES = 9
+#: Batches before the stopping rule is trusted: two blocks of
+#: :data:`_STRATUM_FRAMES` frames for the relMSE estimate, and a per-pixel
+#: variance known to a relative standard deviation of sqrt(2 / (k - 1)) =
+#: 0.53 (normal batches). A ninth frame, which opens a third block, measured
+#: no lower error than eight (``docs/design.md`` §6).
+_MIN_BATCHES = 8
 
 #: Frames per block of the mean relMSE's estimate. The sub-pixel offsets
 #: follow a (0, 2)-sequence, so any 4 frames from a multiple of 4 put one
