@@ -72,7 +72,12 @@ def record_grid(
         lookup then reads a cache line or two, where separate arrays cost one
         each.
     """
-    lo, dims, key, order = _voxel_order(vox)
+    return _record_grid(vox, centre, radiance, pa, _voxel_order(vox))
+
+
+def _record_grid(vox, centre, radiance, pa, voxel_order) -> dict:
+    """:func:`record_grid` from the records' :func:`_voxel_order`."""
+    lo, dims, key, order = voxel_order
     sorted_key = np.ascontiguousarray(key[order])
     cells = int(np.prod(dims))
     # A dense table of each voxel's first record (4 bytes a voxel of the
@@ -167,8 +172,9 @@ class TracedGather:
             "tri_object": np.ascontiguousarray(scene.triangles()["object"], np.int32),
             "obj_two_sided": np.array([o.two_sided for o in scene.objects], np.uint8),
         }
-        self._grid = record_grid(vox, c, np.zeros((n, 3), np.float32))
-        self._order = _voxel_order(vox)[3]
+        voxel_order = _voxel_order(vox)
+        self._order = voxel_order[3]  # puts each pass's values in the grid's order
+        self._grid = _record_grid(vox, c, np.zeros((n, 3), np.float32), None, voxel_order)
         self.rays = 0
 
     def close(self) -> None:
