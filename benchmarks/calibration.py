@@ -65,9 +65,7 @@ def measure(name: str, size: int, ref_frames: int) -> dict:
             "frames": ref.frames,
             "seconds": time.perf_counter() - t0,
             "est_rel_mse": ref.stats["est_rel_mse"],
-            "phases": {
-                k: ref.stats["seconds"][k] for k in ("primary", "shadow", "gather", "shade")
-            },
+            "phases": {k: ref.stats["seconds"][k] for k in ("primary", "shadow", "gather")},
             "rays": {
                 k: ref.stats[f"{k}_rays"] / ref.frames for k in ("primary", "shadow", "gather")
             },

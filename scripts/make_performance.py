@@ -774,7 +774,7 @@ def calibration() -> list[str]:
                 ]
             )
         ref = r["reference"]
-        total = sum(ref["phases"].values())
+        total = sum(ref["phases"][k] for k in ("primary", "shadow", "gather"))
         pixels = d["size"] ** 2
         phases.append(
             [
@@ -784,7 +784,6 @@ def calibration() -> list[str]:
                     f"{pct(ref['phases'][k] / total, 0)} ({ref['rays'][k] / pixels:.1f})"
                     for k in ("primary", "shadow", "gather")
                 ),
-                pct(ref["phases"]["shade"] / total, 0),
             ]
         )
     return [
@@ -814,11 +813,12 @@ def calibration() -> list[str]:
         ),
         "",
         "Where the display's time goes (the reference render): milliseconds per frame and "
-        "the share of each phase, with rays per pixel and frame in parentheses; shading is "
-        "the per-pixel arithmetic of the VPLs and gather hits.",
+        "the share of each phase, with rays per pixel and frame in parentheses. The compiled "
+        "kernels shade each ray's hit as it is traced, so a phase's time includes the "
+        "shading of its rays (`docs/design.md` §6).",
         "",
         table(
-            ["scene", "ms per frame", "primary rays", "shadow rays", "gather rays", "shading"],
+            ["scene", "ms per frame", "primary rays", "shadow rays", "gather rays"],
             phases,
         ),
         "",

@@ -576,6 +576,12 @@ def test_rays_traced_as_they_are_made_give_the_two_pass_image(monkeypatch):
     assert np.array_equal(runs[0].image, runs[1].image)
     for key in ("shadow_rays", "gather_rays", "primary_rays"):
         assert runs[0].stats[key] == runs[1].stats[key] > 0
+    # only the two-pass path shades apart from its rays, and times it
+    assert "shade" not in runs[0].stats["seconds"]
+    assert runs[1].stats["seconds"]["shade"] > 0
+    # and the render says why it took the slower path
+    assert not any("compiled ray tracing" in x for x in runs[0].stats["skipped"])
+    assert any("no Embree 4 library found" in x for x in runs[1].stats["skipped"])
 
 
 def test_tol_stops_early_and_reports():
@@ -589,7 +595,7 @@ def test_tol_stops_early_and_reports():
     k = s["vpls_per_frame"]
     assert s["vpls"] == k * out.frames
     assert 0 < s["shadow_rays"] <= 16 * 16 * k * out.frames
-    assert {"setup", "primary", "shade", "shadow", "total"} <= set(s["seconds"])
+    assert {"setup", "primary", "shadow", "gather", "total"} <= set(s["seconds"])
 
 
 def test_ctrl_c_returns_the_image_so_far():

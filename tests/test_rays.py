@@ -128,3 +128,22 @@ def test_bad_libraries_and_arrays_are_named():
         s.occluded(
             np.zeros((4, 3), np.float32), np.zeros((4, 3), np.float32), np.zeros(3, np.float32)
         )
+
+
+def test_a_library_that_cannot_be_opened_is_named_and_the_queries_still_answer(
+    monkeypatch, tmp_path
+):
+    # A file that is not Embree where the library should be: the tracer says
+    # which file and why, and answers through embreex instead.
+    fake = tmp_path / "libembree4.so.4"
+    fake.write_bytes(b"not a shared library")
+    monkeypatch.setattr(voxgi.rays, "embree_library", lambda: str(fake))
+    scene = unit_square_scene()
+    with Tracer(scene, 1) as tr:
+        assert tr.native is None
+        assert str(fake) in tr.why_not_native
+        org = np.float32([[0.3 - tr.centre[0], 0.6 - tr.centre[1], 1.0 - tr.centre[2]]])
+        prim, _, _ = tr.first_hit(org, np.float32([[0, 0, -1]]))
+        assert prim.tolist() == [1]
+    with Tracer(scene, 1, native=False) as tr:
+        assert "native=False" in tr.why_not_native

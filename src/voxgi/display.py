@@ -73,7 +73,14 @@ class RenderResult:
         batch means of the frames with a heavy-tail guard (``docs/design.md``
         §6); None with fewer than two frames.
     stats : dict
-        ``seconds`` per phase, ray counts, VPLs used, what was skipped.
+        ``seconds`` per phase, ray counts, VPLs used, what was skipped. The
+        phases: ``setup``; ``primary`` (camera rays and their hits);
+        ``shadow`` (the VPLs' light: shadow rays and the shading of the VPLs
+        they find); ``gather`` (gather rays and the shading of their hits);
+        ``shade`` only where the VPLs are shaded apart from their shadow rays
+        (the embreex path, ``docs/design.md`` §6); ``total`` and ``display``
+        (the same), plus ``voxelize`` and ``solve`` when :func:`voxgi.render`
+        ran them.
     solution : Solution or None
         The voxel solution displayed (computed here when none was given).
     """
@@ -487,7 +494,9 @@ class _FrameShader:
         self.primary_rays = 0
         self.shadow_rays = 0
         self.gather_rays = 0
-        self.seconds = {"primary": 0.0, "shade": 0.0, "shadow": 0.0, "gather": 0.0}
+        # the VPLs' and gather rays' shading is timed with their rays; only
+        # the embreex path, which shades apart from tracing, adds "shade"
+        self.seconds = {"primary": 0.0, "shadow": 0.0, "gather": 0.0}
         if self.gather:
             self._grid = record_grid(
                 sampler.vox, tracer.centre, sampler.B / math.pi, sampler.record_pa
@@ -621,7 +630,7 @@ class _FrameShader:
             out[a:b] += _core.vpl_accumulate(cnt_buf[: b - a], contrib, occ, self.threads)
             t3 = time.perf_counter()
             self.shadow_rays += len(occ)
-            self.seconds["shade"] += (t1 - t0) + (t3 - t2)
+            self.seconds["shade"] = self.seconds.get("shade", 0.0) + (t1 - t0) + (t3 - t2)
             self.seconds["shadow"] += t2 - t1
         return out
 
@@ -1604,6 +1613,12 @@ def render(
     source = executor.frames(spec, opt.max_frames, threads=opt.threads)
     seconds = {"setup": time.perf_counter() - t0}
     skipped = _skipped(spec)
+    tracer = getattr(source, "tracer", None)
+    if tracer is not None and tracer.why_not_native is not None:
+        skipped.append(
+            f"compiled ray tracing: {tracer.why_not_native}; the rays go through embreex's "
+            "Python calls in batches (the same image, slower)"
+        )
     acc, interrupted = _progressive_mean(source, opt, progress)
     image = acc.mean.reshape(opt.cam.height, opt.cam.width, 3).astype(np.float32)
     seconds.update(source.seconds)

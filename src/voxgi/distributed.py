@@ -566,7 +566,7 @@ class DistributedFrames(_Farm):
         self._futs: dict = {}
         self._next = 0
         self.primary_rays = self.shadow_rays = self.gather_rays = 0
-        self.seconds = {k: 0.0 for k in ("primary", "shade", "shadow", "gather")}
+        self.seconds = {k: 0.0 for k in ("primary", "shadow", "gather")}
 
     def _submit_upto(self, last: int, seed: int) -> None:
         while self._next <= min(last, self.max_frames - 1):

@@ -76,6 +76,9 @@ class Tracer:
     native : voxgi._core.RayScene or None
         The compiled scene, which the display and the direct light also hand
         to their kernels; None on the embreex path.
+    why_not_native : str or None
+        Why the queries go through embreex's Python calls (slower, the same
+        answers), or None when they do not.
     """
 
     def __init__(self, scene: Scene, threads: int, *, native: bool = True):
@@ -85,12 +88,17 @@ class Tracer:
         self.threads = max(1, int(threads))
         self._pool = None
         self.native = None
+        self.why_not_native = None
         lib = embree_library() if native else None
-        if lib is not None:
+        if not native:
+            self.why_not_native = "the caller asked for embreex's calls (native=False)"
+        elif lib is None:
+            self.why_not_native = "no Embree 4 library found beside embreex"
+        else:
             try:
                 self.native = _core.RayScene(lib, self._tri32)
-            except RuntimeError:
-                self.native = None  # not an Embree 4 we can open: embreex's calls below
+            except RuntimeError as e:  # not an Embree 4 we can open: embreex's calls below
+                self.why_not_native = str(e)
         if self.native is None:
             from embreex import rtcore_scene
             from embreex.mesh_construction import TriangleMesh
