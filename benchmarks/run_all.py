@@ -24,7 +24,8 @@ Steps (each a script that also runs on its own; results in benchmarks/results/):
                          every pixel of the furnace at the defaults;
                          ``display_noise.py``
                          what a frame's noise is made of, and the cost of a
-                         unit of error at other ray budgets;
+                         unit of error at other ray budgets; ``ray_cost.py``
+                         what a ray costs, and the rays' share of the display;
 6. the linear-cost log-log plot ``results/linear_cost.png`` from step 2.
 
 Never collected by pytest (``testpaths = ["tests"]``).
@@ -109,6 +110,7 @@ def main() -> None:
             *(["--size", "64", "--frames", "8"] if args.quick else []),
         ]
     )
+    ok["ray_cost"] = run(["benchmarks/ray_cost.py", *(["--size", "64"] if args.quick else [])])
     if importlib.util.find_spec("mitsuba") is None:
         print(
             "\nmitsuba not installed: time-vs-error against Mitsuba 3 skipped "

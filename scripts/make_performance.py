@@ -875,6 +875,58 @@ def display_noise() -> list[str]:
     ]
 
 
+def ray_cost() -> list[str]:
+    d = load("ray_cost.json")
+    if d is None:
+        return []
+    rows = []
+    for r in d["scenes"]:
+        rd = r["render"]
+        one, two = r["ns_per_ray_1"], r["ns_per_ray_2"]
+        rows.append(
+            [
+                r["scene"],
+                f"{r['triangles']:,}",
+                *(f"{one[k]:.0f} / {two[k]:.0f}" for k in ("primary", "shadow", "gather")),
+                str(rd["frames"]),
+                *(
+                    f"{rd['rays_per_pixel_frame'][k]:.1f}, {pct(rd['rays_alone'][k], 0)}"
+                    for k in ("primary", "shadow", "gather")
+                ),
+            ]
+        )
+    return [
+        "## What a ray costs",
+        "",
+        f"Each scene at {d['size']}x{d['size']}, solved and displayed with the defaults of "
+        "`voxgi.render(scene)`. The camera, shadow and gather rays of two of its frames, "
+        "traced alone through the compiled core's Embree scene (`voxgi.rays.Tracer`): "
+        "nanoseconds per ray on 1 / 2 threads (best of "
+        f"{d['repeats']}). Then, per phase of the default render, the rays per pixel and "
+        "frame and the share of the phase's time that its rays alone take at the 2-thread "
+        "cost; the rest is making the rays, finding the hit's record and shading "
+        "(`docs/design.md` §7).",
+        "",
+        table(
+            [
+                "scene",
+                "triangles",
+                "camera ray, ns",
+                "shadow ray, ns",
+                "gather ray, ns",
+                "frames",
+                "camera rays: per pixel, share",
+                "shadow rays",
+                "gather rays",
+            ],
+            rows,
+        ),
+        "",
+        source(f"python benchmarks/ray_cost.py --size {d['size']}", "ray_cost.json"),
+        "",
+    ]
+
+
 def furnace_pixels() -> list[str]:
     d = load("furnace_pixels.json")
     if d is None:
@@ -1041,7 +1093,7 @@ def build() -> str:
         "on the records, coarser later bounces, energy balance, linear cost, throughput, "
         "the paper's work unit, voxelization, the paper's tables, time against error "
         "versus Mitsuba 3, interiors, the display's error estimate, every pixel of the "
-        "furnace, what the display's noise is made of, distribution.",
+        "furnace, what the display's noise is made of, what a ray costs, distribution.",
         "",
     ]
     for part in (
@@ -1061,6 +1113,7 @@ def build() -> str:
         calibration,
         furnace_pixels,
         display_noise,
+        ray_cost,
         distributed,
     ):
         lines += part()
