@@ -414,3 +414,90 @@ def test_vpl_light_traces_what_vpl_prepare_writes():
     assert traced == len(org) == 4
     assert occ.tolist() == [1, 0, 0, 0]  # the quad hides the first VPL from the first hit
     assert got[0, 0] > 0
+
+
+def _plane_pixels(width, height, step=0.01, depth=1.0):
+    """Camera hits on the plane z = depth seen from the origin, one pixel a
+    footprint apart (pixel_angle = step / depth): pos, normal, material."""
+    rows, cols = np.divmod(np.arange(width * height), width)
+    pos = np.column_stack([cols * step, rows * step, np.full(width * height, depth)])
+    normal = np.tile(np.float32([0, 0, -1]), (width * height, 1))
+    return pos, normal, np.zeros(width * height, np.int32)
+
+
+def _filter(pos, normal, material, values, width, height, glossy=(0,), radius=1, step=0.01):
+    out = np.zeros((width * height, 3), np.float32)
+    _core.geometry_filter(
+        np.ascontiguousarray(pos, np.float64),
+        np.ascontiguousarray(normal, np.float32),
+        np.ascontiguousarray(material, np.int32),
+        np.asarray(glossy, np.uint8),
+        np.zeros(3),
+        step,
+        width,
+        height,
+        radius,
+        np.ascontiguousarray(values, np.float32),
+        out,
+    )
+    return out
+
+
+def test_geometry_filter_is_the_box_mean_on_one_plane():
+    # Every pixel sees the same plane: each gets the plain mean of the pixels
+    # of its (2r + 1)² square that lie inside the image.
+    w, h = 7, 5
+    pos, normal, mat = _plane_pixels(w, h)
+    vals = np.random.default_rng(3).random((w * h, 3)).astype(np.float32)
+    for radius in (1, 2):
+        got = _filter(pos, normal, mat, vals, w, h, radius=radius).reshape(h, w, 3)
+        img = vals.reshape(h, w, 3).astype(np.float64)
+        for r in range(h):
+            for c in range(w):
+                box = img[max(0, r - radius) : r + radius + 1, max(0, c - radius) : c + radius + 1]
+                np.testing.assert_allclose(got[r, c], box.mean(axis=(0, 1)), rtol=1e-6)
+
+
+def test_geometry_filter_keeps_other_surfaces_out():
+    w, h = 6, 4
+    vals = np.random.default_rng(4).random((w * h, 3)).astype(np.float32)
+    col = np.arange(w * h) % w
+    left = col < 3
+
+    def only_own_side(got, pos, normal, mat, **kw):
+        # each half filtered alone must give the same as the whole image
+        for side in (left, ~left):
+            v = np.where(side[:, None], vals, 0.0)
+            alone = _filter(pos, normal, mat, v, w, h, **kw)
+            np.testing.assert_allclose(got[side], alone[side], rtol=1e-6)
+
+    pos, normal, mat = _plane_pixels(w, h)
+    # another material
+    m2 = np.where(left, 0, 1).astype(np.int32)
+    only_own_side(
+        _filter(pos, normal, m2, vals, w, h, glossy=(0, 0)), pos, normal, m2, glossy=(0, 0)
+    )
+    # a fold: the right half faces along x
+    n2 = normal.copy()
+    n2[~left] = (-1, 0, 0)
+    only_own_side(_filter(pos, n2, mat, vals, w, h), pos, n2, mat)
+    # a step: the right half lies 5 footprints behind, parallel
+    p2 = pos.copy()
+    p2[~left, 2] += 0.05
+    only_own_side(_filter(p2, normal, mat, vals, w, h), p2, normal, mat)
+    # a glossy material and pixels with nothing shaded keep their own values
+    np.testing.assert_array_equal(_filter(pos, normal, mat, vals, w, h, glossy=(1,)), vals)
+    none = np.full(w * h, -1, np.int32)
+    np.testing.assert_array_equal(_filter(pos, normal, none, vals, w, h), vals)
+
+
+def test_geometry_filter_refuses_bad_shapes_and_radii():
+    w, h = 3, 2
+    pos, normal, mat = _plane_pixels(w, h)
+    vals = np.zeros((w * h, 3), np.float32)
+    with pytest.raises(ValueError, match="radius"):
+        _filter(pos, normal, mat, vals, w, h, radius=-1)
+    with pytest.raises(ValueError, match="hit_pos"):
+        _filter(pos[:-1], normal, mat, vals, w, h)
+    with pytest.raises(ValueError, match="pixel_angle"):
+        _filter(pos, normal, mat, vals, w, h, step=0.0)

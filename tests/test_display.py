@@ -257,6 +257,57 @@ def test_cap_sphere_nonuniform_emission():
     assert rel[~border].max() < 0.02, rel[~border].max()
 
 
+def test_indirect_filter_keeps_the_answer_and_cuts_the_noise():
+    # The cap sphere of the test above: away from the cap's border every
+    # pixel of the rest is Le_mean rho / (1 - rho), of which the light of the
+    # non-emitting records is a part: the filter must leave it so and take
+    # noise off. Same seed and rays, filter off and on.
+    rho, le = 0.6, 2.0
+    scene = voxgi.scenes.cap_sphere(
+        albedo=rho, emission=le, cap_angle=70.0, subdivisions=4, width=24, height=24
+    )
+    scene.camera = scene.camera.replace(target=(0.0, 1.0, -0.5), fov=120.0)
+    t = scene.triangles()
+    a = 0.5 * np.linalg.norm(
+        np.cross(
+            t["triangles"][:, 1] - t["triangles"][:, 0], t["triangles"][:, 2] - t["triangles"][:, 0]
+        ),
+        axis=1,
+    )
+    le_mean = float(np.sum(a * t["emission"][t["object"], 0]) / a.sum())
+    sol = triangle_solution(
+        scene, lambda v: math.pi * (v.emission.astype(np.float64) + rho * le_mean / (1 - rho))
+    )
+    from voxgi.display import _Tracer
+
+    tr = _Tracer(scene, 1)
+    org, d = camera_rays(scene.camera)
+    prim = tr.intersect((org - tr.centre).astype(np.float32), d.astype(np.float32))
+    tr.close()
+    obj = tr.obj[prim].reshape(24, 24)
+    rest = obj == 1
+    rest[1:] &= obj[:-1] == 1
+    rest[:-1] &= obj[1:] == 1
+    rest[:, 1:] &= obj[:, :-1] == 1
+    rest[:, :-1] &= obj[:, 1:] == 1
+    assert rest.sum() > 20
+    exact = rho * le_mean / (1 - rho)
+    runs = {}
+    for radius in (0, 1):
+        tuning = voxgi.RenderTuning(gather=9, indirect_filter=radius)
+        out = voxgi.render(scene, sol, 16, max_frames=32, tol=0.0, progress=False, tuning=tuning)
+        assert out.stats["indirect_filter"] == radius
+        runs[radius] = out
+    for out in runs.values():
+        # the mean over the rest's pixels: exact within the noise of 32 frames
+        assert abs(out.image[..., 0][rest].mean() / exact - 1.0) < 0.004
+    err = {r: np.sqrt(np.mean((o.image[..., 0][rest] / exact - 1.0) ** 2)) for r, o in runs.items()}
+    # and the render's own per-pixel estimate sees it
+    est = {r: np.sqrt(np.mean((o.stderr[..., 0][rest] / exact) ** 2)) for r, o in runs.items()}
+    assert err[1] < 0.8 * err[0], err
+    assert est[1] < 0.8 * est[0], est
+
+
 # -- anti-aliasing and depth of field -----------------------------------------------------
 def _emitter_scene(quads_z: list[tuple[float, np.ndarray]], cam: voxgi.Camera) -> voxgi.Scene:
     """Emissive black-albedo squares (centres (x, y) at depth z), nothing else."""

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'direct_light_rays', 'direct_light_sum', 'direct_light_traced', 'gather_families', 'gather_light', 'gather_rays', 'gather_shade', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_light', 'vpl_prepare']
+__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'direct_light_rays', 'direct_light_sum', 'direct_light_traced', 'gather_families', 'gather_light', 'gather_rays', 'gather_shade', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_light', 'vpl_prepare']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -201,6 +201,16 @@ def gather_shade(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy
     Shade the gather rays (prim: first triangle hit, -1 none) with the radiance
     of the record at each hit point, MIS-weighted against the VPLs; adds into
     out (P, 3) float32.
+    """
+def geometry_filter(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_glossy: numpy.typing.NDArray[numpy.uint8], eye: numpy.typing.NDArray[numpy.float64], pixel_angle: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, radius: typing.SupportsInt | typing.SupportsIndex, reflected: numpy.typing.NDArray[numpy.float32], out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
+    """
+    Adds into out (P, 3) float32 the reflected light (P, 3) float32 of one
+    frame averaged, per pixel, over the pixels of the (2 radius + 1)^2 square
+    around it that see the same material, with normals within about 25 degrees,
+    within two pixel footprints of its tangent plane (footprint: pixel_angle
+    times the distance to eye) and within 3 (radius + 1) footprints of it.
+    Pixels of glossy materials (mat_glossy) or with no material keep their own
+    value.
     """
 def hardware_threads() -> int:
     """
