@@ -210,11 +210,14 @@ def test_furnace_sphere_full_pipeline(rho):
     assert err.max() < 0.01, err.max()
 
 
-def test_cap_sphere_nonuniform_emission():
-    # Inside a sphere every pair has cos cos / (pi r²) = 1/A, so
-    # L(x) = Le(x) + rho Le_mean / (1 - rho) (docs/design.md §1): the cap
-    # pixels and the rest differ by exactly Le. This exercises both VPL sets
-    # (emitters and non-emitters) and their split.
+def _cap_sphere_case():
+    """The cap sphere (rho 0.6, cap Le 2) seen from inside with cap and rest
+    in view, its exact solution, and the object each pixel's centre sees.
+
+    Inside a sphere every pair has cos cos / (pi r²) = 1/A, so
+    L(x) = Le(x) + rho Le_mean / (1 - rho) (docs/design.md §1): the cap
+    pixels and the rest differ by exactly Le. Returns (scene, sol, obj
+    (24, 24), le, the reflected radiance rho Le_mean / (1 - rho))."""
     rho, le = 0.6, 2.0
     scene = voxgi.scenes.cap_sphere(
         albedo=rho, emission=le, cap_angle=70.0, subdivisions=4, width=24, height=24
@@ -231,10 +234,6 @@ def test_cap_sphere_nonuniform_emission():
     sol = triangle_solution(
         scene, lambda v: math.pi * (v.emission.astype(np.float64) + rho * le_mean / (1 - rho))
     )
-    out = voxgi.render(scene, sol, progress=False, max_frames=128, tol=0.0)
-    assert out.stats["vpl_split"][0] >= 1
-    assert out.stats["vpl_split"][1] >= 1
-    # Which object each pixel sees (centre rays of the pinhole camera).
     from voxgi.display import _Tracer
 
     tr = _Tracer(scene, 1)
@@ -242,7 +241,16 @@ def test_cap_sphere_nonuniform_emission():
     prim = tr.intersect((org - tr.centre).astype(np.float32), d.astype(np.float32))
     tr.close()
     obj = tr.obj[prim].reshape(24, 24)
-    ref = np.where(obj == 0, le, 0.0) + rho * le_mean / (1 - rho)
+    return scene, sol, obj, le, rho * le_mean / (1 - rho)
+
+
+def test_cap_sphere_nonuniform_emission():
+    # Both VPL sets (emitters and non-emitters) and their split.
+    scene, sol, obj, le, reflected = _cap_sphere_case()
+    out = voxgi.render(scene, sol, progress=False, max_frames=128, tol=0.0)
+    assert out.stats["vpl_split"][0] >= 1
+    assert out.stats["vpl_split"][1] >= 1
+    ref = np.where(obj == 0, le, 0.0) + reflected
     rel = np.abs(out.image[..., 0] / ref - 1.0)
     # Away from the cap's border (AA mixes the two values there): 2%, the
     # gather rays' per-pixel noise after 128 frames (inside a sphere every
@@ -258,40 +266,17 @@ def test_cap_sphere_nonuniform_emission():
 
 
 def test_indirect_filter_keeps_the_answer_and_cuts_the_noise():
-    # The cap sphere of the test above: away from the cap's border every
-    # pixel of the rest is Le_mean rho / (1 - rho), of which the light of the
-    # non-emitting records is a part: the filter must leave it so and take
-    # noise off. Same seed and rays, filter off and on.
-    rho, le = 0.6, 2.0
-    scene = voxgi.scenes.cap_sphere(
-        albedo=rho, emission=le, cap_angle=70.0, subdivisions=4, width=24, height=24
-    )
-    scene.camera = scene.camera.replace(target=(0.0, 1.0, -0.5), fov=120.0)
-    t = scene.triangles()
-    a = 0.5 * np.linalg.norm(
-        np.cross(
-            t["triangles"][:, 1] - t["triangles"][:, 0], t["triangles"][:, 2] - t["triangles"][:, 0]
-        ),
-        axis=1,
-    )
-    le_mean = float(np.sum(a * t["emission"][t["object"], 0]) / a.sum())
-    sol = triangle_solution(
-        scene, lambda v: math.pi * (v.emission.astype(np.float64) + rho * le_mean / (1 - rho))
-    )
-    from voxgi.display import _Tracer
-
-    tr = _Tracer(scene, 1)
-    org, d = camera_rays(scene.camera)
-    prim = tr.intersect((org - tr.centre).astype(np.float32), d.astype(np.float32))
-    tr.close()
-    obj = tr.obj[prim].reshape(24, 24)
+    # Away from the cap's border every pixel of the rest is
+    # Le_mean rho / (1 - rho), of which the light of the non-emitting
+    # records is a part: the filter must leave it so and take noise off.
+    # Same seed and rays, filter off and on.
+    scene, sol, obj, _, exact = _cap_sphere_case()
     rest = obj == 1
     rest[1:] &= obj[:-1] == 1
     rest[:-1] &= obj[1:] == 1
     rest[:, 1:] &= obj[:, :-1] == 1
     rest[:, :-1] &= obj[:, 1:] == 1
     assert rest.sum() > 20
-    exact = rho * le_mean / (1 - rho)
     runs = {}
     for radius in (0, 1):
         tuning = voxgi.RenderTuning(gather=9, indirect_filter=radius)
