@@ -15,6 +15,9 @@ unit of error: the seconds to reach a relMSE ``tol`` are about
 * the light of the emitting records alone (the solution's other records set
   to zero), and of the other records alone (the emitters set to zero): each
   is displayed with the whole VPL budget on its records;
+All without the indirect filter (``RenderTuning(indirect_filter=0)``): the
+noise of the estimator itself, before any averaging over pixels.
+
 * the whole light with VPLs per frame and gather rays per pixel of
   (16, 9) (the defaults for concentrated light), (8, 25) (for light spread
   evenly, ``voxgi.display.ray_budget``), (16, 8), (8, 16), (16, 16) and
@@ -80,7 +83,7 @@ def _run(scene, sol, frames: int, vpls: int, gather: int) -> tuple[np.ndarray, f
         seed=5,
         progress=False,
         executor=rec,
-        tuning=voxgi.RenderTuning(gather=gather),
+        tuning=voxgi.RenderTuning(gather=gather, indirect_filter=0),
     )
     return np.array(rec.kept), (time.perf_counter() - t0) / frames
 

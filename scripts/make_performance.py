@@ -849,14 +849,16 @@ def display_noise() -> list[str]:
         "## What the display's noise is made of",
         "",
         f"Each scene at {d['size']}x{d['size']}, solved with the defaults of "
-        f"`voxgi.render(scene)`, displayed for {d['frames']} frames (one seed) per setting. "
+        f"`voxgi.render(scene)`, displayed without the indirect filter for {d['frames']} "
+        "frames (one seed) per setting. "
         "Frame noise: the relMSE of a single frame, `mean(var / (L² + 0.01))`, from the spread "
         "between aligned blocks of 4 frames (`docs/design.md §6`). The light of the emitting "
         "records and of the other records is each displayed alone, with the whole VPL budget. "
         "Cost of error: frame noise times seconds per frame, relative to 16 VPLs and 9 gather "
         "rays (the time to a given relMSE scales with it; under 1 is cheaper). In brackets, "
         "the light's spread (`voxgi.display.light_spread`): from 0.8 on the defaults are 8 "
-        "VPLs and 25 gather rays, under it 16 and 9 (`docs/design.md §6`).",
+        "VPLs and 25 gather rays, under it 16 and 9 without the filter and 8 and 4 with it "
+        "(`docs/design.md §6`).",
         "",
         table(
             [
