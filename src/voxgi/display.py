@@ -84,7 +84,8 @@ class RenderResult:
         ``shadow`` (the VPLs' light: shadow rays and the shading of the VPLs
         they find); ``gather`` (gather rays and the shading of their hits);
         ``shade`` only where the VPLs are shaded apart from their shadow rays
-        (the embreex path, ``docs/design.md`` §6); ``total`` and ``display``
+        (the embreex path, ``docs/design.md`` §6); ``filter`` where the
+        indirect light is filtered; ``total`` and ``display``
         (the same), plus ``voxelize`` and ``solve`` when :func:`voxgi.render`
         ran them.
     solution : Solution or None
@@ -1340,9 +1341,8 @@ def _with_budget(opt: _RenderSettings, sol) -> _RenderSettings:
     spread = light_spread(sol)
     filtered = opt.indirect_filter > 0 and _reflects_light(sol)
     k, g = ray_budget(spread, opt.K, opt.gather, filtered=filtered)
-    return replace(
-        opt, K=k, gather=g, spread=spread, indirect_filter=opt.indirect_filter * filtered
-    )
+    radius = opt.indirect_filter if filtered else 0
+    return replace(opt, K=k, gather=g, spread=spread, indirect_filter=radius)
 
 
 def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
