@@ -1471,6 +1471,10 @@ class _Mean:
     channels, takes ``se`` from the spread between aligned blocks of
     :data:`_STRATUM_FRAMES` frames instead, kept as running sums (a flagged
     pixel keeps the larger of the two); before two blocks, from the batches.
+
+    These are worked out when first read after a batch completes, not at
+    every batch: a render reads them only once its stopping rule can apply,
+    and a fixed number of frames only at the end.
     """
 
     total: np.ndarray
@@ -1479,15 +1483,16 @@ class _Mean:
     frames: int = 0
     size: int = 1
     count: int = 0
-    est: float = float("inf")
-    worst: float = float("inf")
-    tail: float = float("inf")
     share: float = PIXEL_SHARE
-    flagged: int = 0
-    se: np.ndarray | None = None
     threads: int = 0
     block_sum: np.ndarray | None = None
     block_sq: np.ndarray | None = None
+    _est: float = float("inf")
+    _worst: float = float("inf")
+    _tail: float = float("inf")
+    _flagged: int = 0
+    _se: np.ndarray | None = None
+    _stale: bool = False
 
     @classmethod
     def empty(cls, pixels: int, share: float = PIXEL_SHARE, threads: int = 0) -> _Mean:
@@ -1508,8 +1513,48 @@ class _Mean:
         """(P, 3) float64 mean of the frames so far."""
         return self.total / max(self.frames, 1)
 
+    @property
+    def est(self) -> float:
+        """Estimated relMSE of the mean (inf before two batches)."""
+        self._refresh()
+        return self._est
+
+    @property
+    def worst(self) -> float:
+        """Largest per-pixel relative error."""
+        self._refresh()
+        return self._worst
+
+    @property
+    def tail(self) -> float:
+        """Per-pixel relative error all but ``share`` of the pixels stay within."""
+        self._refresh()
+        return self._tail
+
+    @property
+    def flagged(self) -> int:
+        """Pixels the heavy-tail test flagged."""
+        self._refresh()
+        return self._flagged
+
+    @property
+    def se(self) -> np.ndarray | None:
+        """(P, 3) per-pixel standard error (None before two batches)."""
+        self._refresh()
+        return self._se
+
+    def _refresh(self) -> None:
+        if self._stale:
+            self._estimate()
+            self._stale = False
+
     def add(self, x: np.ndarray) -> None:
-        """Fold one frame in; on completing a batch, update the estimate."""
+        """Fold one frame in; on completing a batch, mark the estimate for
+        an update."""
+        if self._stale and self.frames + 1 - self.count * self.size < self.size:
+            # this frame opens a batch and changes the sums the last complete
+            # batch's estimate is made of: make it while they are as they were
+            self._refresh()
         self.frames += 1
         self.total += x
         self.current += x
@@ -1527,8 +1572,7 @@ class _Mean:
             half = _BATCH_SLOTS // 2
             self.batches[:half] = 0.5 * (self.batches[0::2] + self.batches[1::2])
             self.count, self.size = half, 2 * self.size
-        if self.count >= 2:
-            self._estimate()
+        self._stale = self.count >= 2
 
     def _estimate(self) -> None:
         done = self.count * self.size
@@ -1540,19 +1584,19 @@ class _Mean:
         denom = mean * mean + _REL_EPS
         rel = se * se / denom
         pixel = rel.max(axis=1)
-        self.se = se
+        self._se = se
         k = self.frames // _STRATUM_FRAMES
         if k >= 2:
             spread = np.maximum(self.block_sq - self.block_sum**2 / k, 0.0) / (k - 1)
             rel_blocks = spread * (_STRATUM_FRAMES / done) / denom
-            self.est = float(
+            self._est = float(
                 np.mean(np.where(flagged[:, None], np.maximum(rel, rel_blocks), rel_blocks))
             )
         else:
-            self.est = float(np.mean(rel))
-        self.worst = float(np.sqrt(np.max(pixel)))
-        self.tail = float(np.sqrt(np.quantile(pixel, 1.0 - self.share, method="higher")))
-        self.flagged = int(np.count_nonzero(flagged))
+            self._est = float(np.mean(rel))
+        self._worst = float(np.sqrt(np.max(pixel)))
+        self._tail = float(np.sqrt(np.quantile(pixel, 1.0 - self.share, method="higher")))
+        self._flagged = int(np.count_nonzero(flagged))
 
     def done(self, opt: _RenderSettings) -> bool:
         """At least ``min_frames`` frames and :data:`_MIN_BATCHES` batches, the
@@ -1560,11 +1604,15 @@ class _Mean:
         ``pixel_share`` of the pixels with a relative error over
         ``pixel_factor · sqrt(tol)``."""
         return (
-            self.frames >= opt.min_frames
-            and self.count >= _MIN_BATCHES
+            self.ready(opt)
             and self.est <= opt.tol
             and self.tail <= opt.pixel_factor * math.sqrt(opt.tol)
         )
+
+    def ready(self, opt: _RenderSettings) -> bool:
+        """Whether the stopping rule may apply: ``min_frames`` frames and
+        :data:`_MIN_BATCHES` batches."""
+        return self.frames >= opt.min_frames and self.count >= _MIN_BATCHES
 
     def stderr(self, shape) -> np.ndarray | None:
         """Per-pixel standard error (None before two batches)."""
@@ -1598,12 +1646,15 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
         for f in range(opt.max_frames):
             acc.add(source.frame(f, opt.seed).astype(np.float64))
             share = (f + 1) / opt.max_frames
-            if opt.tol > 0 and np.isfinite(acc.est) and acc.est > 0:
-                first = acc.est if first is None else first
+            # the estimate is read only once the rule may stop on it
+            est = acc.est if opt.tol > 0 and acc.ready(opt) else math.nan
+            if np.isfinite(est) and est > 0:
+                first = est if first is None else first
                 if first > opt.tol:
-                    share = max(share, math.log(first / acc.est) / math.log(first / opt.tol))
+                    share = max(share, math.log(first / est) / math.log(first / opt.tol))
             bar.update(int(100 * min(share, 1.0)) - bar.n)
-            bar.set_postfix_str(f"frame {f + 1}, est relMSE {acc.est:.2e}")
+            known = f", est relMSE {est:.2e}" if np.isfinite(est) else ""
+            bar.set_postfix_str(f"frame {f + 1}{known}")
             if acc.done(opt):
                 break
     except KeyboardInterrupt:
