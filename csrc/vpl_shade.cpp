@@ -437,17 +437,12 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
     *rays = traced.load();
 }
 
-void primary_hits(int64_t P, const double* org, const double* dir, const int32_t* prim,
-                  const PrimaryScene& scene, double* pos, float* normal, float* ng,
-                  int32_t* material, float* emission, int threads, const StopCheck& stop) {
-    for_each_pixel(P, threads, stop, [&](int64_t p) {
-        double* x = pos + 3 * p;
-        float *ns_out = normal + 3 * p, *ng_out = ng + 3 * p, *le = emission + 3 * p;
-        for (int c = 0; c < 3; ++c) x[c] = 0.0, ns_out[c] = ng_out[c] = le[c] = 0.f;
-        material[p] = -1;
-        const int32_t t = prim[p];
-        if (t < 0) return;
-        const double *o = org + 3 * p, *d = dir + 3 * p;
+void primary_hit(const double o[3], const double d[3], int32_t t, const PrimaryScene& scene,
+                 double x[3], float ns_out[3], float ng_out[3], int32_t* material, float le[3]) {
+    for (int c = 0; c < 3; ++c) x[c] = 0.0, ns_out[c] = ng_out[c] = le[c] = 0.f;
+    *material = -1;
+    if (t < 0) return;
+    {
         const double* g = scene.ng + 3 * int64_t(t);
         const double* v0 = scene.v + 9 * int64_t(t);
         // The exact point on the triangle's plane: Embree's distance is float32.
@@ -494,9 +489,18 @@ void primary_hits(int64_t P, const double* org, const double* dir, const int32_t
         for (int c = 0; c < 3; ++c) ns_out[c] = float(n[c]);
         const int32_t obj = scene.object[t];
         if (front || scene.two_sided[obj]) {
-            material[p] = obj;
+            *material = obj;
             for (int c = 0; c < 3; ++c) le[c] = scene.emission[3 * obj + c];
         }
+    }
+}
+
+void primary_hits(int64_t P, const double* org, const double* dir, const int32_t* prim,
+                  const PrimaryScene& scene, double* pos, float* normal, float* ng,
+                  int32_t* material, float* emission, int threads, const StopCheck& stop) {
+    for_each_pixel(P, threads, stop, [&](int64_t p) {
+        primary_hit(org + 3 * p, dir + 3 * p, prim[p], scene, pos + 3 * p, normal + 3 * p,
+                    ng + 3 * p, material + p, emission + 3 * p);
     });
 }
 

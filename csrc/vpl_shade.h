@@ -181,6 +181,13 @@ struct PrimaryScene {
     const uint8_t* two_sided = nullptr;      // (O,)
     const float* emission = nullptr;         // (O, 3)
 };
+// The hit of one ray (origin o, unit direction d) on triangle t (-1: none):
+// point x on the triangle's plane in double, shading and geometric normals
+// facing the ray's origin, material (-1: miss or a one-sided back) and the
+// emission seen.
+void primary_hit(const double o[3], const double d[3], int32_t t, const PrimaryScene& scene,
+                 double x[3], float ns_out[3], float ng_out[3], int32_t* material, float le[3]);
+// primary_hit for P rays with their hit triangles prim (P,).
 void primary_hits(int64_t P, const double* org, const double* dir, const int32_t* prim,
                   const PrimaryScene& scene, double* pos, float* normal, float* ng,
                   int32_t* material, float* emission, int threads, const StopCheck& stop);

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'direct_light_rays', 'direct_light_sum', 'direct_light_traced', 'gather_families', 'gather_light', 'gather_rays', 'gather_shade', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_light', 'vpl_prepare']
+__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_hits', 'direct_light_rays', 'direct_light_sum', 'direct_light_traced', 'gather_families', 'gather_light', 'gather_rays', 'gather_shade', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_light', 'vpl_prepare']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -154,6 +154,15 @@ def batch_error(batches: numpy.typing.NDArray[numpy.float32], size: typing.Suppo
     single-batch jump where the farthest batch is an outlier beyond `crit`
     (externally studentized; inf: no test). Returns (stderr float64, flagged
     uint8), each of the batches' shape without k.
+    """
+def camera_hits(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.NDArray[numpy.float64], up: numpy.typing.NDArray[numpy.float64], forward: numpy.typing.NDArray[numpy.float64], tan_half_fov: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, aperture: typing.SupportsFloat | typing.SupportsIndex, focus: typing.SupportsFloat | typing.SupportsIndex, offset: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], lens: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], tri_v: numpy.typing.NDArray[numpy.float64], tri_ng: numpy.typing.NDArray[numpy.float64], corner_normals: numpy.typing.NDArray[numpy.float64] | None, tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], obj_emission: numpy.typing.NDArray[numpy.float32], scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+    """
+    Every pixel's camera ray (the rays of voxgi.display.camera_rays, with
+    eye in the scene's frame), its first hit in scene (a RayScene built from
+    tri_v) and primary_hits on it: pos (P, 3) float64, normal, ng and wo (the
+    unit direction back to the eye) (P, 3) float32, material (P,) int32,
+    emission (P, 3) float32 and the hit triangle (P,) int32 (-1: none),
+    P = width * height, row-major from the top-left pixel.
     """
 def direct_light_rays(emitters: tuple, point: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float64], shift: numpy.typing.NDArray[numpy.float64], sequence: numpy.typing.NDArray[numpy.float64], offset: typing.SupportsFloat | typing.SupportsIndex, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
     """

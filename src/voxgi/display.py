@@ -542,6 +542,45 @@ class _FrameShader:
             "emission": le,
         }
 
+    def camera_hits(self, offset, lens) -> dict:
+        """:meth:`hits` of the camera rays through sub-pixel ``offset`` and
+        lens point ``lens`` (:func:`camera_rays`); with the compiled tracer
+        made, traced and shaded in one kernel, without ray arrays."""
+        tr = self.tracer
+        if tr.native is None:
+            org, dirs = camera_rays(self.cam, offset, lens)
+            return self.hits(org - tr.centre, dirs)
+        cam = self.cam
+        right, up, fwd = cam.frame()
+        pos, n_out, ng_out, wo, mat, le, prim = _core.camera_hits(
+            np.asarray(cam.eye, dtype=np.float64) - tr.centre,
+            right,
+            up,
+            fwd,
+            math.tan(math.radians(cam.fov) / 2.0),
+            cam.width,
+            cam.height,
+            float(cam.aperture),
+            float(cam.focus),
+            (float(offset[0]), float(offset[1])),
+            (float(lens[0]), float(lens[1])),
+            *self._primary_scene,
+            tr.native,
+            threads=self.threads,
+        )
+        self.primary_rays += len(prim)
+        if self.env is not None:
+            miss = np.flatnonzero(prim < 0)
+            le[miss] = self.env.eval(-wo[miss].astype(np.float64))
+        return {
+            "pos": pos,
+            "normal": n_out,
+            "ng": ng_out,
+            "wo": wo,
+            "material": mat,
+            "emission": le,
+        }
+
     @cached_property
     def _primary_scene(self) -> tuple:
         """The triangle and object arrays of :func:`_core.primary_hits`."""
@@ -876,8 +915,7 @@ class _FrameShader:
         self._frame = int(f)
         offset, lens = frame_samples(f, seed)
         t0 = time.perf_counter()
-        org, dirs = camera_rays(self.cam, offset, lens)
-        h = self.hits(org - self.tracer.centre, dirs)
+        h = self.camera_hits(offset, lens)
         self.seconds["primary"] += time.perf_counter() - t0
         vpls = None
         if not self.sampler.empty:

@@ -1,0 +1,54 @@
+#include "camera.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace voxgi {
+
+void camera_ray(const PixelCamera& cam, const double offset[2], const double lens[2], int64_t p,
+                double org[3], double dir[3]) {
+    const int64_t i = p / cam.width, j = p % cam.width;
+    const double aspect = double(cam.width) / double(cam.height);
+    const double sx =
+        (2.0 * (double(j) + offset[0]) / double(cam.width) - 1.0) * cam.tan_half_fov * aspect;
+    const double sy = (1.0 - 2.0 * (double(i) + offset[1]) / double(cam.height)) * cam.tan_half_fov;
+    double d[3];
+    for (int c = 0; c < 3; ++c) d[c] = cam.forward[c] + sx * cam.right[c] + sy * cam.up[c];
+    if (cam.aperture > 0.0) {
+        // d·forward = 1, so eye + focus·d lies on the plane in focus
+        for (int c = 0; c < 3; ++c) {
+            org[c] = cam.eye[c] + cam.aperture * (lens[0] * cam.right[c] + lens[1] * cam.up[c]);
+            d[c] = cam.eye[c] + cam.focus * d[c] - org[c];
+        }
+    } else {
+        for (int c = 0; c < 3; ++c) org[c] = cam.eye[c];
+    }
+    const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    for (int c = 0; c < 3; ++c) dir[c] = d[c] / len;
+}
+
+void camera_hits(const PixelCamera& cam, const double offset[2], const double lens[2],
+                 const RayScene& scene, const PrimaryScene& triangles, double* pos, float* normal,
+                 float* ng, float* wo, int32_t* material, float* emission, int32_t* prim,
+                 int threads, const StopCheck& stop) {
+    const int64_t P = cam.width * cam.height;
+    auto one_pixel = [&](int64_t p) {
+        double o[3], d[3];
+        camera_ray(cam, offset, lens, p, o, d);
+        const float of[3] = {float(o[0]), float(o[1]), float(o[2])};
+        const float df[3] = {float(d[0]), float(d[1]), float(d[2])};
+        const int32_t t = scene.intersect(of, df, nullptr, nullptr, nullptr);
+        prim[p] = t;
+        primary_hit(o, d, t, triangles, pos + 3 * p, normal + 3 * p, ng + 3 * p, material + p,
+                    emission + 3 * p);
+        for (int c = 0; c < 3; ++c) wo[3 * p + c] = float(-d[c]);
+    };
+    constexpr int64_t kChunk = 512;  // pixels a task: neighbouring, coherent rays
+    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
+    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t chunk, int) {
+        const int64_t end = std::min(P, (chunk + 1) * kChunk);
+        for (int64_t p = chunk * kChunk; p < end; ++p) one_pixel(p);
+    });
+}
+
+}  // namespace voxgi

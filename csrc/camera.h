@@ -1,0 +1,44 @@
+// Camera rays of the display (docs/design.md §6), made, traced and turned
+// into hit points pixel by pixel, without ray arrays.
+// No pybind11 here: plain pointers and sizes.
+#pragma once
+
+#include <cstdint>
+
+#include "ray_scene.h"
+#include "util/parallel.h"
+#include "vpl_shade.h"
+
+namespace voxgi {
+
+// A pinhole or thin-lens camera over a width x height image, in the frame
+// of the ray scene (eye already moved by the scene's centre).
+struct PixelCamera {
+    double eye[3] = {0.0, 0.0, 0.0};
+    double right[3] = {1.0, 0.0, 0.0};
+    double up[3] = {0.0, 1.0, 0.0};
+    double forward[3] = {0.0, 0.0, 1.0};
+    double tan_half_fov = 1.0;  // tan(fov / 2), fov vertical
+    int64_t width = 1;
+    int64_t height = 1;
+    double aperture = 0.0;  // lens radius; 0: pinhole
+    double focus = 1.0;     // distance of the plane in focus along forward
+};
+
+// Origin and unit direction of pixel p's ray (row-major from the top-left
+// pixel) through sub-pixel position `offset` in [0, 1)^2 (x right, y down)
+// and lens point `lens` on the unit disc; the same arithmetic as
+// voxgi.display.camera_rays.
+void camera_ray(const PixelCamera& cam, const double offset[2], const double lens[2], int64_t p,
+                double org[3], double dir[3]);
+
+// Every pixel's camera ray, its first hit in `scene` and primary_hit on it:
+// pos (P, 3), normal, ng, wo (the unit direction back to the eye) (P, 3),
+// material (P,), emission (P, 3) and the hit triangle prim (P,) (-1: none),
+// P = width * height.
+void camera_hits(const PixelCamera& cam, const double offset[2], const double lens[2],
+                 const RayScene& scene, const PrimaryScene& triangles, double* pos, float* normal,
+                 float* ng, float* wo, int32_t* material, float* emission, int32_t* prim,
+                 int threads, const StopCheck& stop);
+
+}  // namespace voxgi
