@@ -521,7 +521,7 @@ def _camera_hits_both_ways(scene, cam, offset, lens):
     org, dirs = camera_rays(cam, offset, lens)
     org = org - tr.centre
     prim = tr.intersect(org.astype(np.float32), dirs.astype(np.float32))
-    want = _core.primary_hits(org, dirs, prim, *tri_args, threads=2) + (prim, -dirs)
+    want = (*_core.primary_hits(org, dirs, prim, *tri_args, threads=2), prim, -dirs)
     right, up, fwd = cam.frame()
     got = _core.camera_hits(
         np.asarray(cam.eye, np.float64) - tr.centre,
