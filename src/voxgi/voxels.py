@@ -462,6 +462,46 @@ def voxelize(
     return _voxel_set(res, pitch, origin, resolution, scene, stats)
 
 
+#: Directions of the rays of :func:`_inside`: fixed, and none along an axis or
+#: a face or cube diagonal, along which built scenes line up their edges.
+_PARITY_DIRECTIONS = np.array(
+    [[0.5286, 0.6213, 0.5784], [-0.7071, 0.1612, 0.6885], [0.2195, -0.8416, 0.4935]]
+)
+
+
+def _inside(mesh, points: np.ndarray) -> np.ndarray:
+    """(P,) bool: whether each point lies inside the closed ``mesh``, by the
+    parity of the crossings along rays, as ``trimesh.Trimesh.contains``
+    decides it, but with the same answer on every call.
+
+    For each of three fixed directions, the crossings forward and backward:
+    no crossing either way says outside; equal parities say what they say;
+    unequal ones (a ray through an edge or a vertex counted a crossing twice
+    or not at all) say nothing. The most votes win, ties outside.
+    ``contains`` settles such rays with a random direction instead.
+    """
+    n = len(points)
+    inside = np.zeros(n, np.int64)
+    outside = np.zeros(n, np.int64)
+    for d in _PARITY_DIRECTIONS:
+        d = d / np.linalg.norm(d)
+        odd = []
+        for sign in (1.0, -1.0):
+            _, ray = mesh.ray.intersects_id(
+                points,
+                np.broadcast_to(sign * d, (n, 3)),
+                multiple_hits=True,
+                return_locations=False,
+            )
+            odd.append(np.bincount(ray, minlength=n))
+        fwd, back = odd
+        free = (fwd == 0) | (back == 0)
+        agree = ~free & (fwd % 2 == back % 2)
+        inside += agree & (fwd % 2 == 1)
+        outside += free | (agree & (fwd % 2 == 0))
+    return inside > outside
+
+
 def _bury(res: dict, scene, closed: list[int], pitch: float) -> int:
     """Make black the records that face into another object's closed volume.
 
@@ -489,7 +529,7 @@ def _bury(res: dict, scene, closed: list[int], pitch: float) -> int:
         mesh = scene.objects[k].to_trimesh()
         # the solid side: inside an outward-wound mesh, outside an inward one
         # (a room seen from within)
-        solid = mesh.contains(probe) != (mesh.volume < 0)
+        solid = _inside(mesh, probe) != (mesh.volume < 0)
         buried[idx[solid]] = True
     res["albedo"][buried] = 0.0
     res["emission"][buried] = 0.0
