@@ -13,33 +13,41 @@ using namespace voxgi::py_helpers;
 
 namespace {
 
-// The arrays behind an EmitterTriangles, checked; kept alive by the caller.
-voxgi::EmitterTriangles emitters(const py::tuple& t) {
-    if (t.size() != 6) throw py::value_error("emitters: expected 6 arrays");
-    const auto corners = t[0].cast<F64>();
-    if (corners.ndim() != 3 || corners.shape(1) != 3 || corners.shape(2) != 3)
-        throw py::value_error("emitters: corners must have shape (E, 3, 3)");
-    const py::ssize_t e = corners.shape(0);
-    if (e == 0) throw py::value_error("emitters: no emitting triangle");
-    const auto normal = t[1].cast<F64>();
-    const auto two_sided = t[2].cast<U8>();
-    const auto radiance = t[3].cast<F64>();
-    const auto cdf = t[4].cast<F64>();
-    const auto density = t[5].cast<F64>();
-    check_2d(normal, e, 3, "emitters: normal");
-    check_1d(two_sided, e, "emitters: two_sided");
-    check_2d(radiance, e, 3, "emitters: radiance");
-    check_1d(cdf, e, "emitters: cdf");
-    check_1d(density, e, "emitters: density");
+// An EmitterTriangles and the arrays behind it, checked. The arrays are held
+// here: an input that needs converting (another dtype, not contiguous) is a
+// new array that nothing else keeps alive.
+struct Emitters {
+    F64 corners, normal, radiance, cdf, density;
+    U8 two_sided;
     voxgi::EmitterTriangles em;
-    em.count = e;
-    em.corners = corners.data();
-    em.normal = normal.data();
-    em.two_sided = two_sided.data();
-    em.radiance = radiance.data();
-    em.cdf = cdf.data();
-    em.density = density.data();
-    return em;
+};
+
+Emitters emitters(const py::tuple& t) {
+    if (t.size() != 6) throw py::value_error("emitters: expected 6 arrays");
+    Emitters e{t[0].cast<F64>(),
+               t[1].cast<F64>(),
+               t[3].cast<F64>(),
+               t[4].cast<F64>(),
+               t[5].cast<F64>(),
+               t[2].cast<U8>(),
+               {}};
+    if (e.corners.ndim() != 3 || e.corners.shape(1) != 3 || e.corners.shape(2) != 3)
+        throw py::value_error("emitters: corners must have shape (E, 3, 3)");
+    const py::ssize_t n = e.corners.shape(0);
+    if (n == 0) throw py::value_error("emitters: no emitting triangle");
+    check_2d(e.normal, n, 3, "emitters: normal");
+    check_1d(e.two_sided, n, "emitters: two_sided");
+    check_2d(e.radiance, n, 3, "emitters: radiance");
+    check_1d(e.cdf, n, "emitters: cdf");
+    check_1d(e.density, n, "emitters: density");
+    e.em.count = n;
+    e.em.corners = e.corners.data();
+    e.em.normal = e.normal.data();
+    e.em.two_sided = e.two_sided.data();
+    e.em.radiance = e.radiance.data();
+    e.em.cdf = e.cdf.data();
+    e.em.density = e.density.data();
+    return e;
 }
 
 voxgi::DirectLightQuery query(const F64& point, const F64& normal, const F64& shift,
@@ -63,7 +71,8 @@ voxgi::DirectLightQuery query(const F64& point, const F64& normal, const F64& sh
 
 py::tuple rays(const py::tuple& emit, const F64& point, const F64& normal, const F64& shift,
                const F64& sequence, double offset, int threads) {
-    const voxgi::EmitterTriangles em = emitters(emit);
+    const Emitters held = emitters(emit);
+    const voxgi::EmitterTriangles& em = held.em;
     const voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
     const py::ssize_t m = q.records * q.samples, three = 3;
     F32 lo({m, three}), ld({m, three}), ll({m}), con({m, three}), ho({m, three}), hd({m, three});
@@ -82,7 +91,8 @@ py::tuple sum(const py::tuple& emit, const F64& point, const F64& normal, const 
               const F64& sequence, double offset, const F32& contribution, const I32& light_hit,
               const F32& hemi_direction, const I32& hemi_hit, const F32& hemi_u, const F32& hemi_v,
               const I32& emitter_of, int threads) {
-    const voxgi::EmitterTriangles em = emitters(emit);
+    const Emitters held = emitters(emit);
+    const voxgi::EmitterTriangles& em = held.em;
     const voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
     const py::ssize_t m = q.records * q.samples;
     check_2d(contribution, m, 3, "contribution");
@@ -113,7 +123,8 @@ py::tuple sum(const py::tuple& emit, const F64& point, const F64& normal, const 
 py::tuple traced(const py::tuple& emit, const F64& point, const F64& normal, const F64& shift,
                  const F64& sequence, double offset, const I32& emitter_of,
                  const voxgi::RayScene& scene, int threads) {
-    const voxgi::EmitterTriangles em = emitters(emit);
+    const Emitters held = emitters(emit);
+    const voxgi::EmitterTriangles& em = held.em;
     const voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
     check_1d(emitter_of, scene.triangle_count(), "emitter_of");
     const int32_t* eo = emitter_of.data();

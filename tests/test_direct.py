@@ -235,3 +235,34 @@ def test_sobol_points_are_scipys_sequence():
     for a in range(5):
         assert len(np.unique(np.floor(x[:, a] * 16))) == 16, a
     assert len(np.unique(np.floor(x[:, 0] * 4) * 4 + np.floor(x[:, 1] * 4))) == 16
+
+
+def test_direct_light_kernels_hold_the_emitter_arrays_they_convert():
+    # The kernels take the emitters as a tuple of arrays. One that has to be
+    # converted (Fortran order, strided) becomes a new array that only the
+    # binding holds, and it must hold it while the kernel runs: under
+    # scripts/sanitize.sh a dropped one aborts the run (heap-use-after-free).
+    from voxgi import _core
+
+    # hundreds of emitting triangles: arrays too large for NumPy's cache of
+    # small buffers, so that a dropped one goes back to the allocator
+    em = EmitterSampler(voxgi.scenes.cap_sphere(subdivisions=3))
+    assert em.arrays[0].nbytes > 1 << 14
+    rng = np.random.default_rng(0)
+    n = 4000
+    point = (rng.random((n, 3)) - 0.5) * 0.5
+    normal = np.tile([0.0, 0.0, 1.0], (n, 1))
+    shift, seq = rng.random((n, 5)), rng.random((16, 5))
+    corners, nrm, two, rad, cdf, dens = em.arrays
+    converted = (
+        np.repeat(corners, 2, axis=0)[::2],
+        np.asfortranarray(nrm),
+        two,
+        np.asfortranarray(rad),
+        np.repeat(cdf, 2)[::2],
+        np.repeat(dens, 2)[::2],
+    )
+    want = _core.direct_light_rays(em.arrays, point, normal, shift, seq, 1e-4)
+    got = _core.direct_light_rays(converted, point, normal, shift, seq, 1e-4)
+    for g, w in zip(got, want, strict=True):
+        np.testing.assert_array_equal(g, w)
