@@ -240,3 +240,27 @@ def test_batch_error_kernel_is_the_batch_means_formula(rng):
     np.testing.assert_allclose(se3, np.sqrt(x[:3].var(axis=0, ddof=1) * size / (3 * size)))
     with pytest.raises(ValueError, match="at least 2 batches"):
         _core.batch_error(b[:1], size, frames, crit)
+
+
+def test_estimate_read_late_is_the_one_made_at_its_batch(rng):
+    # The estimate is worked out when read. Read after any frame, it must be
+    # the one made when the last batch completed, also once batches hold two
+    # or four frames (past 32 and 64 frames) and frames that open a batch
+    # have changed the running sums since.
+    frames = 1.0 + 0.1 * rng.standard_normal((80, 50, 3))
+    frames[45, 3] += 2.0  # one pixel's outlier, flagged by the heavy-tail test
+    eager, late = _Mean.empty(50), _Mean.empty(50)
+    for f, x in enumerate(frames):
+        eager.add(x)
+        eager._refresh()
+        late.add(x)
+        if f % 7 == 6 or f == len(frames) - 1:
+            assert (late.est, late.worst, late.tail, late.flagged) == (
+                eager.est,
+                eager.worst,
+                eager.tail,
+                eager.flagged,
+            ), f
+            np.testing.assert_array_equal(late.se, eager.se)
+    assert late.size == 4
+    assert late.flagged >= 1
