@@ -276,10 +276,11 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
 }
 
 // The triangles must be those `scene` was built from, for prim to index them.
-void check_scene(const voxgi::RayScene& scene, const voxgi::ShadeTriangles& tris) {
-    if (scene.triangle_count() != tris.count)
+// The ray scene was built from the tri_v given with it.
+void check_scene(const voxgi::RayScene& scene, int64_t triangles) {
+    if (scene.triangle_count() != triangles)
         throw py::value_error("scene holds " + std::to_string(scene.triangle_count()) +
-                              " triangles, tri_v " + std::to_string(tris.count));
+                              " triangles, tri_v " + std::to_string(triangles));
 }
 
 py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
@@ -336,7 +337,7 @@ int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32
     if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
     voxgi::ShadeMIS mis = make_mis(n_gather);
     voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
-    check_scene(scene, tris);
+    check_scene(scene, tris.count);
     voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
                                        grid_lo, grid_origin, pitch);
     check_2d(out, hits.count, 3, "out");
@@ -552,9 +553,7 @@ py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const 
     cam.focus = focus;
     const voxgi::PrimaryScene sc =
         make_primary_scene(tri_v, tri_ng, corner_normals, tri_object, obj_two_sided, obj_emission);
-    if (scene.triangle_count() != tri_v.shape(0))
-        throw py::value_error("scene holds " + std::to_string(scene.triangle_count()) +
-                              " triangles, tri_v " + std::to_string(tri_v.shape(0)));
+    check_scene(scene, tri_v.shape(0));
     const py::ssize_t P = width * height;
     F64 pos({P, py::ssize_t(3)});
     F32 normal({P, py::ssize_t(3)}), ng({P, py::ssize_t(3)}), wo({P, py::ssize_t(3)}),

@@ -1,6 +1,5 @@
 #include "camera.h"
 
-#include <algorithm>
 #include <cmath>
 
 namespace voxgi {
@@ -31,7 +30,6 @@ void camera_hits(const PixelCamera& cam, const double offset[2], const double le
                  const RayScene& scene, const PrimaryScene& triangles, double* pos, float* normal,
                  float* ng, float* wo, int32_t* material, float* emission, int32_t* prim,
                  int threads, const StopCheck& stop) {
-    const int64_t P = cam.width * cam.height;
     auto one_pixel = [&](int64_t p) {
         double o[3], d[3];
         camera_ray(cam, offset, lens, p, o, d);
@@ -43,12 +41,8 @@ void camera_hits(const PixelCamera& cam, const double offset[2], const double le
                     emission + 3 * p);
         for (int c = 0; c < 3; ++c) wo[3 * p + c] = float(-d[c]);
     };
-    constexpr int64_t kChunk = 512;  // pixels a task: neighbouring, coherent rays
-    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
-    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t chunk, int) {
-        const int64_t end = std::min(P, (chunk + 1) * kChunk);
-        for (int64_t p = chunk * kChunk; p < end; ++p) one_pixel(p);
-    });
+    // 512 pixels a task: neighbouring, coherent rays
+    for_each_chunked(cam.width * cam.height, 512, threads, stop, one_pixel);
 }
 
 }  // namespace voxgi

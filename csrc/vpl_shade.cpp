@@ -25,11 +25,7 @@ constexpr int64_t kChunk = 512;  // pixels per task
 // body(p) for every pixel p < P, kChunk pixels a task.
 template <class Body>
 void for_each_pixel(int64_t P, int threads, const StopCheck& stop, Body&& body) {
-    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
-    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
-        const int64_t p1 = std::min(P, (c + 1) * kChunk);
-        for (int64_t p = c * kChunk; p < p1; ++p) body(p);
-    });
+    for_each_chunked(P, kChunk, threads, stop, std::forward<Body>(body));
 }
 
 inline float dot3(const float* a, const float* b) {

@@ -73,6 +73,17 @@ void parallel_for(int64_t n_tasks, int threads, const StopCheck& stop, Body&& bo
     if (cancel) throw Interrupted();  // only stop() can have set it without an error
 }
 
+// body(i) for every i < n, `chunk` consecutive items a task: neighbouring
+// items (pixels of one row, records of nearby voxels) stay on one thread.
+template <class Body>
+void for_each_chunked(int64_t n, int64_t chunk, int threads, const StopCheck& stop, Body&& body) {
+    const int64_t tasks = (n + chunk - 1) / chunk;
+    parallel_for(tasks, resolve_threads(threads), stop, [&](int64_t task, int) {
+        const int64_t end = std::min(n, (task + 1) * chunk);
+        for (int64_t i = task * chunk; i < end; ++i) body(i);
+    });
+}
+
 // Hands the results of tasks 0, 1, 2, ... to `combine` in task order,
 // whichever order the tasks finish in: floating-point sums made from
 // per-task partials then come out the same for any number of threads.

@@ -518,60 +518,47 @@ class _FrameShader:
                 "obj_two_sided": self.two_sided.astype(np.uint8),
             }
 
-    def hits(self, org: np.ndarray, dirs: np.ndarray) -> dict:
-        """Primary hits: points in float64 on the hit triangle's plane, normals
-        facing the viewer, material index (-1: miss or a one-sided back)."""
+    def camera_hits(self, offset, lens) -> dict:
+        """Primary hits of the camera rays through sub-pixel ``offset`` and
+        lens point ``lens`` (:func:`camera_rays`): points in float64 on the
+        hit triangle's plane, normals facing the viewer, material index (-1:
+        miss or a one-sided back). The compiled tracer makes, traces and hits
+        the rays in one kernel, without ray arrays; embreex's calls trace
+        :func:`camera_rays`."""
         tr = self.tracer
-        prim = tr.intersect(org.astype(np.float32), dirs.astype(np.float32))
+        dirs = None
+        if tr.native is None:
+            org, dirs = camera_rays(self.cam, offset, lens)
+            org = org - tr.centre
+            prim = tr.intersect(org.astype(np.float32), dirs.astype(np.float32))
+            pos, n_out, ng_out, mat, le = _core.primary_hits(
+                org, dirs, prim, *self._primary_scene, threads=self.threads
+            )
+            wo = np.ascontiguousarray(-dirs, dtype=np.float32)
+        else:
+            cam = self.cam
+            right, up, fwd = cam.frame()
+            pos, n_out, ng_out, wo, mat, le, prim = _core.camera_hits(
+                np.asarray(cam.eye, dtype=np.float64) - tr.centre,
+                right,
+                up,
+                fwd,
+                math.tan(math.radians(cam.fov) / 2.0),
+                cam.width,
+                cam.height,
+                float(cam.aperture),
+                float(cam.focus),
+                (float(offset[0]), float(offset[1])),
+                (float(lens[0]), float(lens[1])),
+                *self._primary_scene,
+                tr.native,
+                threads=self.threads,
+            )
         self.primary_rays += len(prim)
-        org = np.ascontiguousarray(org, dtype=np.float64)
-        dirs = np.ascontiguousarray(dirs, dtype=np.float64)
-        pos, n_out, ng_out, mat, le = _core.primary_hits(
-            org, dirs, prim, *self._primary_scene, threads=self.threads
-        )
         if self.env is not None:
             # camera rays that leave the scene see the environment
             miss = np.flatnonzero(prim < 0)
-            le[miss] = self.env.eval(dirs[miss])
-        return {
-            "pos": pos,
-            "normal": n_out,
-            "ng": ng_out,
-            "wo": np.ascontiguousarray(-dirs, dtype=np.float32),
-            "material": mat,
-            "emission": le,
-        }
-
-    def camera_hits(self, offset, lens) -> dict:
-        """:meth:`hits` of the camera rays through sub-pixel ``offset`` and
-        lens point ``lens`` (:func:`camera_rays`); with the compiled tracer
-        made, traced and shaded in one kernel, without ray arrays."""
-        tr = self.tracer
-        if tr.native is None:
-            org, dirs = camera_rays(self.cam, offset, lens)
-            return self.hits(org - tr.centre, dirs)
-        cam = self.cam
-        right, up, fwd = cam.frame()
-        pos, n_out, ng_out, wo, mat, le, prim = _core.camera_hits(
-            np.asarray(cam.eye, dtype=np.float64) - tr.centre,
-            right,
-            up,
-            fwd,
-            math.tan(math.radians(cam.fov) / 2.0),
-            cam.width,
-            cam.height,
-            float(cam.aperture),
-            float(cam.focus),
-            (float(offset[0]), float(offset[1])),
-            (float(lens[0]), float(lens[1])),
-            *self._primary_scene,
-            tr.native,
-            threads=self.threads,
-        )
-        self.primary_rays += len(prim)
-        if self.env is not None:
-            miss = np.flatnonzero(prim < 0)
-            le[miss] = self.env.eval(-wo[miss].astype(np.float64))
+            le[miss] = self.env.eval(-wo[miss].astype(np.float64) if dirs is None else dirs[miss])
         return {
             "pos": pos,
             "normal": n_out,
@@ -583,7 +570,8 @@ class _FrameShader:
 
     @cached_property
     def _primary_scene(self) -> tuple:
-        """The triangle and object arrays of :func:`_core.primary_hits`."""
+        """The triangle and object arrays of :func:`_core.primary_hits` and
+        :func:`_core.camera_hits`."""
         tr = self.tracer
         return (
             np.ascontiguousarray(tr.tris, dtype=np.float64),
@@ -1493,6 +1481,24 @@ def _batch_statistics(batches: np.ndarray, size: int, frames: int, threads: int 
     return se, tail.any(axis=1)
 
 
+class _Estimated:
+    """A statistic of :class:`_Mean`'s error estimate, worked out when read:
+    reading ``acc.est`` returns ``acc._est`` once ``acc`` has brought its
+    estimate up to date."""
+
+    def __init__(self, doc: str):
+        self.__doc__ = doc
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.field = "_" + name
+
+    def __get__(self, acc, owner=None):
+        if acc is None:
+            return self
+        acc._refresh()
+        return getattr(acc, self.field)
+
+
 @dataclass
 class _Mean:
     """The progressive mean of the frames, its error by batch means, and
@@ -1551,35 +1557,11 @@ class _Mean:
         """(P, 3) float64 mean of the frames so far."""
         return self.total / max(self.frames, 1)
 
-    @property
-    def est(self) -> float:
-        """Estimated relMSE of the mean (inf before two batches)."""
-        self._refresh()
-        return self._est
-
-    @property
-    def worst(self) -> float:
-        """Largest per-pixel relative error."""
-        self._refresh()
-        return self._worst
-
-    @property
-    def tail(self) -> float:
-        """Per-pixel relative error all but ``share`` of the pixels stay within."""
-        self._refresh()
-        return self._tail
-
-    @property
-    def flagged(self) -> int:
-        """Pixels the heavy-tail test flagged."""
-        self._refresh()
-        return self._flagged
-
-    @property
-    def se(self) -> np.ndarray | None:
-        """(P, 3) per-pixel standard error (None before two batches)."""
-        self._refresh()
-        return self._se
+    est = _Estimated("estimated relMSE of the mean (inf before two batches)")
+    worst = _Estimated("largest per-pixel relative error")
+    tail = _Estimated("per-pixel relative error all but ``share`` of the pixels stay within")
+    flagged = _Estimated("pixels the heavy-tail test flagged")
+    se = _Estimated("(P, 3) per-pixel standard error (None before two batches)")
 
     def _refresh(self) -> None:
         if self._stale:
