@@ -2,7 +2,6 @@
 #include "vpl_shade.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <vector>
@@ -26,6 +25,12 @@ constexpr int64_t kChunk = 512;  // pixels per task
 template <class Body>
 void for_each_pixel(int64_t P, int threads, const StopCheck& stop, Body&& body) {
     for_each_chunked(P, kChunk, threads, stop, std::forward<Body>(body));
+}
+
+// The sum of body(p), a pixel's rays, over every pixel p < P, kChunk pixels a task.
+template <class Body>
+int64_t sum_over_pixels(int64_t P, int threads, const StopCheck& stop, Body&& body) {
+    return sum_chunked(P, kChunk, threads, stop, std::forward<Body>(body));
 }
 
 inline float dot3(const float* a, const float* b) {
@@ -203,8 +208,7 @@ void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPL
                const ShadeMIS& mis, double eps, const int32_t* pixel_set, const int64_t* set_start,
                const RayScene& scene, float* out, int64_t* rays, int threads,
                const StopCheck& stop) {
-    std::atomic<int64_t> traced{0};
-    for_each_pixel(hits.count, threads, stop, [&](int64_t p) {
+    *rays = sum_over_pixels(hits.count, threads, stop, [&](int64_t p) {
         double s[3] = {0.0, 0.0, 0.0};  // in VPL order, as vpl_accumulate sums
         int64_t n = 0;
         ShadeVPLs mine = vpls;
@@ -222,9 +226,8 @@ void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPL
                            for (int ch = 0; ch < 3; ++ch) s[ch] += cr[ch];
                        });
         for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] = float(s[ch]);
-        traced.fetch_add(n, std::memory_order_relaxed);
+        return n;
     });
-    *rays = traced.load();
 }
 
 namespace {
@@ -419,18 +422,16 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                   const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
                   float* out, int64_t* rays, int threads, const StopCheck& stop) {
     const uint64_t base = gather_base(seed, frame);
-    std::atomic<int64_t> traced{0};
-    for_each_pixel(hits.count, threads, stop, [&](int64_t p) {
-        if (hits.material[p] < 0 || n_gather <= 0) return;
+    *rays = sum_over_pixels(hits.count, threads, stop, [&](int64_t p) -> int64_t {
+        if (hits.material[p] < 0 || n_gather <= 0) return 0;
         double s[3] = {0.0, 0.0, 0.0};  // in ray order, as gather_shade sums
         gather_pixel_rays(hits, n_gather, base, eps, p, [&](int, const float* ro, const float* rd) {
             const int32_t t = scene.intersect(ro, rd, nullptr, nullptr, nullptr);
             gather_ray_light(hits, mats, mis, tris, grid, p, rd, t, s);
         });
         for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += float(s[ch]);
-        traced.fetch_add(n_gather, std::memory_order_relaxed);
+        return n_gather;
     });
-    *rays = traced.load();
 }
 
 void primary_hit(const double o[3], const double d[3], int32_t t, const PrimaryScene& scene,
