@@ -2,6 +2,7 @@
 #include "vpl_shade.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <vector>
@@ -308,16 +309,30 @@ int64_t gather_rays(const ShadeHits& hits, int n_gather, uint64_t seed, int64_t 
     return offset[P];
 }
 
-int64_t lookup_record(const RecordGrid& g, const double y[3], const float n[3], int32_t obj) {
-    int64_t c[3];
+namespace {
+
+// The voxel of the grid that holds y.
+inline void cell_of(const RecordGrid& g, const double y[3], int64_t c[3]) {
     for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((y[a] - g.origin[a]) / g.pitch));
+}
+
+// Key of voxel (i, j, k) on the records' bounding grid, or -1 outside it.
+inline int64_t grid_key(const RecordGrid& g, int64_t i, int64_t j, int64_t k) {
+    i -= g.lo[0], j -= g.lo[1], k -= g.lo[2];
+    if (i < 0 || j < 0 || k < 0 || i >= g.dims[0] || j >= g.dims[1] || k >= g.dims[2]) return -1;
+    return (i * g.dims[1] + j) * g.dims[2] + k;
+}
+
+// The record in voxel c that stands for y, as lookup_record; falls back to
+// the neighbours when the voxel has none of this surface.
+int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3], int32_t obj,
+                       const int64_t c[3]) {
     const double p2 = g.pitch * g.pitch;
     int64_t best = -1;
     double best_score = 0.0, best_penalty = 0.0;
     auto scan = [&](int64_t i, int64_t j, int64_t k) {
-        i -= g.lo[0], j -= g.lo[1], k -= g.lo[2];
-        if (i < 0 || j < 0 || k < 0 || i >= g.dims[0] || j >= g.dims[1] || k >= g.dims[2]) return;
-        const int64_t key = (i * g.dims[1] + j) * g.dims[2] + k;
+        const int64_t key = grid_key(g, i, j, k);
+        if (key < 0) return;
         int64_t q0, q1;
         if (g.cell_start) {
             q0 = g.cell_start[key], q1 = g.cell_start[key + 1];
@@ -347,22 +362,41 @@ int64_t lookup_record(const RecordGrid& g, const double y[3], const float n[3], 
     return best;
 }
 
+}  // namespace
+
+int64_t lookup_record(const RecordGrid& g, const double y[3], const float n[3], int32_t obj) {
+    int64_t c[3];
+    cell_of(g, y, c);
+    return lookup_in_cell(g, y, n, obj, c);
+}
+
 namespace {
 
-// Add the MIS-weighted light of pixel p's gather ray along df (unit up to
-// float rounding) that first meets triangle t (-1: none) into s.
-void gather_ray_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
-                      const ShadeTriangles& tris, const RecordGrid& grid, int64_t p,
-                      const float df[3], int32_t t, double s[3]) {
-    const int32_t m = hits.material[p];
+// Where a gather ray of pixel p landed, before its record is looked up.
+struct GatherHit {
+    double y[3];   // on the hit triangle's plane, in double
+    float ns[3];   // the hit surface's normal on the side the ray came from
+    float wi[3];   // unit direction
+    float cos_x;   // at the pixel
+    int32_t obj;   // hit object
+    int64_t c[3];  // voxel of y
+    int64_t key;   // its key on the grid (-1: outside), or -2: no light to look up
+};
+
+// The hit of pixel p's gather ray along df (unit up to float rounding) that
+// first meets triangle t (-1: none). key -2 when it brings no light: a miss,
+// a direction below the surface, a black back.
+void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordGrid& grid,
+                int64_t p, const float df[3], int32_t t, GatherHit& h) {
+    h.key = -2;
     const double* x = hits.pos + 3 * p;
-    const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
+    const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
     if (t < 0 || t >= tris.count) return;
     const double d[3] = {df[0], df[1], df[2]};
     const double dl = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-    const float wi[3] = {float(d[0] / dl), float(d[1] / dl), float(d[2] / dl)};
-    const float cos_x = dot3(n, wi);
-    if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) return;
+    for (int a = 0; a < 3; ++a) h.wi[a] = float(d[a] / dl);
+    h.cos_x = dot3(n, h.wi);
+    if (h.cos_x <= 0.f || dot3(ng, h.wi) <= 0.f) return;
     // Hit point: the ray against the hit triangle's plane, in double.
     const double *v0 = tris.v + 9 * int64_t(t), *v1 = v0 + 3, *v2 = v0 + 6;
     const double e1[3] = {v1[0] - v0[0], v1[1] - v0[1], v1[2] - v0[2]};
@@ -372,31 +406,47 @@ void gather_ray_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     const double nl = std::sqrt(nt[0] * nt[0] + nt[1] * nt[1] + nt[2] * nt[2]);
     if (!(nl > 0.0)) return;
     nt[0] /= nl, nt[1] /= nl, nt[2] /= nl;
-    const double o[3] = {x[0] + 0.0, x[1] + 0.0, x[2] + 0.0};
     const double dn = (d[0] * nt[0] + d[1] * nt[1] + d[2] * nt[2]) / dl;
     if (dn == 0.0) return;
     const double tt =
-        ((v0[0] - o[0]) * nt[0] + (v0[1] - o[1]) * nt[1] + (v0[2] - o[2]) * nt[2]) / dn;
-    const double y[3] = {o[0] + tt * wi[0], o[1] + tt * wi[1], o[2] + tt * wi[2]};
+        ((v0[0] - x[0]) * nt[0] + (v0[1] - x[1]) * nt[1] + (v0[2] - x[2]) * nt[2]) / dn;
+    for (int a = 0; a < 3; ++a) h.y[a] = x[a] + tt * h.wi[a];
     const bool front = dn < 0.0;
-    const int32_t obj = tris.object[t];
-    if (!front && !tris.two_sided[obj]) return;  // black back of a one-sided surface
-    const float ns[3] = {float(front ? nt[0] : -nt[0]), float(front ? nt[1] : -nt[1]),
-                         float(front ? nt[2] : -nt[2])};
-    const int64_t rec = lookup_record(grid, y, ns, obj);
+    h.obj = tris.object[t];
+    if (!front && !tris.two_sided[h.obj]) return;  // black back of a one-sided surface
+    for (int a = 0; a < 3; ++a) h.ns[a] = float(front ? nt[a] : -nt[a]);
+    cell_of(grid, h.y, h.c);
+    h.key = grid_key(grid, h.c[0], h.c[1], h.c[2]);
+}
+
+// The MIS-weighted light of pixel p's gather ray h from record rec (-1: none) into s.
+void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
+                      const RecordGrid& grid, int64_t p, const GatherHit& h, int64_t rec,
+                      double s[3]) {
     if (rec < 0) return;
-    const float cos_y = -dot3(ns, wi);
+    const float cos_y = -dot3(h.ns, h.wi);
     if (cos_y <= 0.f) return;
-    const double r2 = (y[0] - x[0]) * (y[0] - x[0]) + (y[1] - x[1]) * (y[1] - x[1]) +
-                      (y[2] - x[2]) * (y[2] - x[2]);
+    const double* x = hits.pos + 3 * p;
+    const double r2 = (h.y[0] - x[0]) * (h.y[0] - x[0]) + (h.y[1] - x[1]) * (h.y[1] - x[1]) +
+                      (h.y[2] - x[2]) * (h.y[2] - x[2]);
     const PackedRecord& R = grid.rec[rec];
     const double pa = R.pa;
-    const double denom = pa * r2 / cos_y + mis.n_gather * cos_x / kPi;
+    const double denom = pa * r2 / cos_y + mis.n_gather * h.cos_x / kPi;
     if (!(denom > 0.0)) return;
     float f[3];
-    shade_brdf(mats, m, n, wi, wo, f);
+    shade_brdf(mats, hits.material[p], hits.normal + 3 * p, h.wi, hits.wo + 3 * p, f);
     const float* L = R.radiance;
-    for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * cos_x / denom;
+    for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.cos_x / denom;
+}
+
+// Add the light of pixel p's gather ray along df that first meets triangle t into s.
+void gather_ray_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
+                      const ShadeTriangles& tris, const RecordGrid& grid, int64_t p,
+                      const float df[3], int32_t t, double s[3]) {
+    GatherHit h;
+    gather_hit(hits, tris, grid, p, df, t, h);
+    if (h.key == -2) return;
+    gather_hit_light(hits, mats, mis, grid, p, h, lookup_in_cell(grid, h.y, h.ns, h.obj, h.c), s);
 }
 
 }  // namespace
@@ -422,16 +472,57 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                   const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
                   float* out, int64_t* rays, int threads, const StopCheck& stop) {
     const uint64_t base = gather_base(seed, frame);
-    *rays = sum_over_pixels(hits.count, threads, stop, [&](int64_t p) -> int64_t {
-        if (hits.material[p] < 0 || n_gather <= 0) return 0;
-        double s[3] = {0.0, 0.0, 0.0};  // in ray order, as gather_shade sums
-        gather_pixel_rays(hits, n_gather, base, eps, p, [&](int, const float* ro, const float* rd) {
-            const int32_t t = scene.intersect(ro, rd, nullptr, nullptr, nullptr);
-            gather_ray_light(hits, mats, mis, tris, grid, p, rd, t, s);
-        });
-        for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += float(s[ch]);
-        return n_gather;
+    const int64_t P = hits.count, tasks = (P + kChunk - 1) / kChunk;
+    if (n_gather <= 0) {
+        *rays = 0;
+        return;
+    }
+    // A gather ray's light waits on two dependent loads from tables larger
+    // than the caches: its voxel's first record, then that record's row.
+    // Each pixel therefore goes through three stages a pixel apart: trace its
+    // rays and prefetch their voxels' entries; prefetch the rows those
+    // entries point at; look up and shade. A pixel's own rays are traced
+    // between one stage and the next, so the loads arrive in their shadow.
+    constexpr int64_t kStages = 3;
+    std::atomic<int64_t> traced{0};
+    parallel_for(tasks, resolve_threads(threads), stop, [&](int64_t task, int) {
+        const int64_t p0 = task * kChunk, p1 = std::min(P, p0 + kChunk);
+        std::vector<GatherHit> ring(size_t(kStages * n_gather));
+        auto slot = [&](int64_t p) { return ring.data() + (p % kStages) * n_gather; };
+        int64_t n_traced = 0;
+        for (int64_t p = p0; p < p1 + kStages - 1; ++p) {
+            if (p < p1 && hits.material[p] >= 0) {
+                GatherHit* h = slot(p);
+                gather_pixel_rays(
+                    hits, n_gather, base, eps, p, [&](int k, const float* ro, const float* rd) {
+                        const int32_t t = scene.intersect(ro, rd, nullptr, nullptr, nullptr);
+                        gather_hit(hits, tris, grid, p, rd, t, h[k]);
+                        if (h[k].key >= 0 && grid.cell_start)
+                            __builtin_prefetch(grid.cell_start + h[k].key);
+                    });
+                n_traced += n_gather;
+            }
+            const int64_t q = p - 1;
+            if (q >= p0 && q < p1 && hits.material[q] >= 0 && grid.cell_start) {
+                const GatherHit* h = slot(q);
+                for (int k = 0; k < n_gather; ++k)
+                    if (h[k].key >= 0) __builtin_prefetch(grid.rec + grid.cell_start[h[k].key]);
+            }
+            const int64_t r = p - 2;
+            if (r >= p0 && hits.material[r] >= 0) {
+                const GatherHit* h = slot(r);
+                double s[3] = {0.0, 0.0, 0.0};  // in ray order, as gather_shade sums
+                for (int k = 0; k < n_gather; ++k) {
+                    if (h[k].key == -2) continue;
+                    const int64_t rec = lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c);
+                    gather_hit_light(hits, mats, mis, grid, r, h[k], rec, s);
+                }
+                for (int ch = 0; ch < 3; ++ch) out[3 * r + ch] += float(s[ch]);
+            }
+        }
+        traced.fetch_add(n_traced, std::memory_order_relaxed);
     });
+    *rays = traced.load();
 }
 
 void primary_hit(const double o[3], const double d[3], int32_t t, const PrimaryScene& scene,
