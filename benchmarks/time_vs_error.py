@@ -56,20 +56,24 @@ from voxgi.metrics import rel_mse
 RESULTS = Path(__file__).resolve().parent / "results"
 
 # (label, voxelize resolution, solve directions, render kwargs); None = library default.
+_RES, _R = voxgi.pipeline.RENDER_RESOLUTION, voxgi.pipeline.RENDER_DIRECTIONS
+#: what voxgi.render(scene) runs
+MAIN = f"res{_RES} R{_R} tol1e-3"
 VOXGI_SETTINGS = [
-    ("res32 R8 f8", 32, 8, {"max_frames": 8, "tol": 0.0}),
-    ("res48 R8 f8", 48, 8, {"max_frames": 8, "tol": 0.0}),
-    ("res64 R8 f8", 64, 8, {"max_frames": 8, "tol": 0.0}),
-    ("res48 R8 tol1e-3", 48, 8, {}),
-    ("res64 R8 tol1e-3", 64, 8, {}),  # = voxgi.render(scene)'s defaults
-    ("res96 R8 tol1e-3", 96, 8, {}),
+    (f"res32 R{_R} f8", 32, _R, {"max_frames": 8, "tol": 0.0}),
+    (f"res48 R{_R} f8", 48, _R, {"max_frames": 8, "tol": 0.0}),
+    (f"res64 R{_R} f8", 64, _R, {"max_frames": 8, "tol": 0.0}),
+    (f"res48 R{_R} tol1e-3", 48, _R, {}),
+    (MAIN, _RES, _R, {}),
+    ("res64 R8 tol1e-3", 64, 8, {}),
+    (f"res96 R{_R} tol1e-3", 96, _R, {}),
     ("res64 R12 tol1e-3", 64, 12, {}),
 ]
 #: voxelize + solve + render with every default (resolution 128, R 22, tol 1e-3):
 #: run with --defaults (it takes minutes with the current solver).
 DEFAULTS = ("defaults", None, None, {})
 #: one finer voxelization, run with --high (minutes on 2 cores).
-HIGH = ("res128 R8 tol1e-3", 128, 8, {})
+HIGH = (f"res128 R{_R} tol1e-3", 128, _R, {})
 MITSUBA_SPP = [4, 16, 64, 256, 1024]
 CORNELL = "cornell-box"
 
@@ -317,11 +321,11 @@ def main(argv=None) -> int:
         help="also run voxgi with all its defaults (slow with the current solver)",
     )
     ap.add_argument(
-        "--high", action="store_true", help="also run voxgi at resolution 128, R 8, tol 1e-3"
+        "--high", action="store_true", help=f"also run voxgi at resolution 128, R {_R}, tol 1e-3"
     )
     ap.add_argument(
         "--main",
-        default="res64 R8 tol1e-3",
+        default=MAIN,
         help="setting used for the difference image, second view and split",
     )
     ap.add_argument("--split-frames", type=int, default=128)

@@ -22,6 +22,7 @@ from .voxels import VoxelSet, voxelize
 
 __all__ = [
     "RENDER_DIRECTIONS",
+    "RENDER_DIRECTIONS_LINES_ONLY",
     "RENDER_RESOLUTION",
     "RENDER_SOLVE_TOL",
     "RENDER_SOLVE_TUNING",
@@ -30,13 +31,23 @@ __all__ = [
     "solve_for_display",
 ]
 
-#: Voxel resolution and gathering radius used by ``render(scene)`` without a
-#: solution and by ``voxgi render``: on the Cornell box at 256x256 against a
-#: converged path-traced reference (``benchmarks/time_vs_error.py``), past
-#: resolution 64 (R 8) the display's noise at its default tolerance, not the
-#: voxels, sets the picture's error.
+#: Voxel resolution used by ``render(scene)`` without a solution and by
+#: ``voxgi render``: on the Cornell box at 256x256 against a converged
+#: path-traced reference (``benchmarks/time_vs_error.py``), past resolution
+#: 64 the display's noise at its default tolerance, not the voxels, sets the
+#: picture's error.
 RENDER_RESOLUTION = 64
-RENDER_DIRECTIONS = 8
+#: Gathering radius of that solve. Its traced passes (below) carry the
+#: reflected light; the lines only give them a start, and a coarse start
+#: costs them nothing: against R 12, solutions at R 4 gave pictures within
+#: 4e-5 relMSE in six scenes (a twentieth of the display's noise after 96
+#: frames or less) and the same error against the path-traced references of
+#: the Cornell box, ``shadow`` and ``geometric``, for a solve 25% shorter
+#: (``docs/design.md`` §5). R 3 takes a third traced pass and no less time.
+RENDER_DIRECTIONS = 4
+#: The radius when the records carry no scene to trace, so the lines alone
+#: carry the reflected light.
+RENDER_DIRECTIONS_LINES_ONLY = 8
 #: The solve's ``tol`` in that pipeline: tighter changes the picture's error
 #: by nothing the display can show, and costs more bounces.
 RENDER_SOLVE_TOL = 1e-3
@@ -106,13 +117,17 @@ def solve_for_display(
     vox : VoxelSet
         Records from :func:`voxgi.voxelize`.
     directions : int or None
-        Gathering radius R (None: :data:`RENDER_DIRECTIONS`).
+        Gathering radius R (None: :data:`RENDER_DIRECTIONS`, or
+        :data:`RENDER_DIRECTIONS_LINES_ONLY` when ``vox.scene`` is None).
     threads, progress, client
         As for :func:`solve`.
     """
+    if directions is None:
+        traced = getattr(vox, "scene", None) is not None
+        directions = RENDER_DIRECTIONS if traced else RENDER_DIRECTIONS_LINES_ONLY
     return solve(
         vox,
-        directions=RENDER_DIRECTIONS if directions is None else directions,
+        directions=directions,
         tol=RENDER_SOLVE_TOL,
         threads=threads,
         progress=progress,
