@@ -505,8 +505,14 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
             const int64_t q = p - 1;
             if (q >= p0 && q < p1 && hits.material[q] >= 0 && grid.cell_start) {
                 const GatherHit* h = slot(q);
-                for (int k = 0; k < n_gather; ++k)
-                    if (h[k].key >= 0) __builtin_prefetch(grid.rec + grid.cell_start[h[k].key]);
+                for (int k = 0; k < n_gather; ++k) {
+                    if (h[k].key < 0) continue;
+                    // a voxel holds a record or two (both sides, two objects at a seam)
+                    const int64_t q0 = grid.cell_start[h[k].key],
+                                  q1 = grid.cell_start[h[k].key + 1];
+                    for (int64_t q = q0; q < std::min(q1, q0 + 3); ++q)
+                        __builtin_prefetch(grid.rec + q);
+                }
             }
             const int64_t r = p - 2;
             if (r >= p0 && hits.material[r] >= 0) {
