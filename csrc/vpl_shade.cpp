@@ -478,20 +478,24 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
         return;
     }
     // A gather ray's light waits on two dependent loads from tables larger
-    // than the caches: its voxel's first record, then that record's row.
-    // Each pixel therefore goes through three stages a pixel apart: trace its
-    // rays and prefetch their voxels' entries; prefetch the rows those
-    // entries point at; look up and shade. A pixel's own rays are traced
-    // between one stage and the next, so the loads arrive in their shadow.
+    // than the caches: its voxel's entry in the cell table, then the record
+    // rows that entry points at. Each pixel therefore goes through three
+    // stages a pixel apart: trace its rays and prefetch their voxels'
+    // entries; read the entries and prefetch the rows; look up and shade. A
+    // pixel's own rays are traced between one stage and the next, so the
+    // loads arrive in their shadow.
     constexpr int64_t kStages = 3;
+    // a voxel holds a record or two (both sides, two objects at a seam)
+    constexpr int64_t kRowsAhead = 3;
     std::atomic<int64_t> traced{0};
     parallel_for(tasks, resolve_threads(threads), stop, [&](int64_t task, int) {
         const int64_t p0 = task * kChunk, p1 = std::min(P, p0 + kChunk);
         std::vector<GatherHit> ring(size_t(kStages * n_gather));
         auto slot = [&](int64_t p) { return ring.data() + (p % kStages) * n_gather; };
+        auto shaded = [&](int64_t p) { return p >= p0 && p < p1 && hits.material[p] >= 0; };
         int64_t n_traced = 0;
         for (int64_t p = p0; p < p1 + kStages - 1; ++p) {
-            if (p < p1 && hits.material[p] >= 0) {
+            if (shaded(p)) {
                 GatherHit* h = slot(p);
                 gather_pixel_rays(
                     hits, n_gather, base, eps, p, [&](int k, const float* ro, const float* rd) {
@@ -502,28 +506,25 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                     });
                 n_traced += n_gather;
             }
-            const int64_t q = p - 1;
-            if (q >= p0 && q < p1 && hits.material[q] >= 0 && grid.cell_start) {
-                const GatherHit* h = slot(q);
+            if (shaded(p - 1) && grid.cell_start) {
+                const GatherHit* h = slot(p - 1);
                 for (int k = 0; k < n_gather; ++k) {
                     if (h[k].key < 0) continue;
-                    // a voxel holds a record or two (both sides, two objects at a seam)
-                    const int64_t q0 = grid.cell_start[h[k].key],
-                                  q1 = grid.cell_start[h[k].key + 1];
-                    for (int64_t q = q0; q < std::min(q1, q0 + 3); ++q)
-                        __builtin_prefetch(grid.rec + q);
+                    const int64_t first = grid.cell_start[h[k].key],
+                                  end = grid.cell_start[h[k].key + 1];
+                    for (int64_t row = first; row < std::min(end, first + kRowsAhead); ++row)
+                        __builtin_prefetch(grid.rec + row);
                 }
             }
-            const int64_t r = p - 2;
-            if (r >= p0 && hits.material[r] >= 0) {
-                const GatherHit* h = slot(r);
+            if (shaded(p - 2)) {
+                const GatherHit* h = slot(p - 2);
                 double s[3] = {0.0, 0.0, 0.0};  // in ray order, as gather_shade sums
                 for (int k = 0; k < n_gather; ++k) {
                     if (h[k].key == -2) continue;
                     const int64_t rec = lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c);
-                    gather_hit_light(hits, mats, mis, grid, r, h[k], rec, s);
+                    gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s);
                 }
-                for (int ch = 0; ch < 3; ++ch) out[3 * r + ch] += float(s[ch]);
+                for (int ch = 0; ch < 3; ++ch) out[3 * (p - 2) + ch] += float(s[ch]);
             }
         }
         traced.fetch_add(n_traced, std::memory_order_relaxed);
