@@ -87,15 +87,13 @@ void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
 
 // What sample `ray` of record r brings, light and hemisphere sample together:
 // the light sample's contribution unless its ray was blocked, and the
-// power-heuristic share of the emitter its hemisphere ray met first
-// (triangle t, barycentrics u, v; -1: none).
+// power-heuristic share of emitter k, which its hemisphere ray met first at
+// barycentrics u, v (-1: no emitter first).
 inline void sample_pair(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
                         const float* contribution, bool light_blocked, const float* hemi_direction,
-                        int32_t t, float hu, float hv, const int32_t* emitter_of,
-                        int64_t scene_triangles, double pair[3]) {
+                        int32_t k, float hu, float hv, double pair[3]) {
     const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
     for (int i = 0; i < 3; ++i) pair[i] = light_blocked ? 0.0 : double(contribution[i]);
-    const int32_t k = (t >= 0 && t < scene_triangles) ? emitter_of[t] : -1;
     if (k < 0) return;
     // the hit point from its barycentrics, in double
     const double* c = em.corners + 9 * k;
@@ -158,10 +156,11 @@ void direct_light_sum(const EmitterTriangles& em, const DirectLightQuery& q,
             double sum[3] = {0.0, 0.0, 0.0}, sq = 0.0;
             for (int64_t s = 0; s < q.samples; ++s) {
                 const int64_t ray = r * q.samples + s;
+                const int32_t t = hemi_hit[ray];
+                const int32_t k = (t >= 0 && t < scene_triangles) ? emitter_of[t] : -1;
                 double pair[3];
                 sample_pair(em, q, r, contribution + 3 * ray, light_hit[ray] != -1,
-                            hemi_direction + 3 * ray, hemi_hit[ray], hemi_u[ray], hemi_v[ray],
-                            emitter_of, scene_triangles, pair);
+                            hemi_direction + 3 * ray, k, hemi_u[ray], hemi_v[ray], pair);
                 double lum = 0.0;
                 for (int i = 0; i < 3; ++i) sum[i] += pair[i], lum += kLuminance[i] * pair[i];
                 sq += lum * lum;
@@ -173,23 +172,28 @@ void direct_light_sum(const EmitterTriangles& em, const DirectLightQuery& q,
 }
 
 void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
-                         const int32_t* emitter_of, const RayScene& scene, double* irradiance,
+                         const RayScene& scene, const RayScene& emitter_scene, double* irradiance,
                          double* mean_square, int threads, const StopCheck& stop) {
     const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
-    const int64_t nt = scene.triangle_count();
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
         const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
         for (int64_t r = task * kRecordsPerTask; r < r1; ++r) {
             double sum[3] = {0.0, 0.0, 0.0}, sq = 0.0;
             for (int64_t s = 0; s < q.samples; ++s) {
-                float lo[3], ld[3], ll, con[3], ho[3], hd[3], hu, hv;
+                float lo[3], ld[3], ll, con[3], ho[3], hd[3], hu, hv, te;
                 sample_rays(em, q, r, s, lo, ld, &ll, con, ho, hd);
                 // light rays that cannot contribute have length 0 (and no
                 // contribution) and are not traced
                 const bool blocked = ll > 0.f && scene.occluded(lo, ld, ll);
-                const int32_t t = scene.intersect(ho, hd, &hu, &hv, nullptr);
+                // The hemisphere ray brings light only where an emitter is
+                // the first thing it meets: its nearest emitter, from the
+                // emitters' own small scene, unless the whole scene blocks
+                // the way there (stopping an offset short, as light rays do).
+                // Most hemisphere rays meet no emitter and cost only that.
+                int32_t k = emitter_scene.intersect(ho, hd, &hu, &hv, &te);
+                if (k >= 0 && scene.occluded(ho, hd, te - float(q.offset))) k = -1;
                 double pair[3];
-                sample_pair(em, q, r, con, blocked, hd, t, hu, hv, emitter_of, nt, pair);
+                sample_pair(em, q, r, con, blocked, hd, k, hu, hv, pair);
                 double lum = 0.0;
                 for (int i = 0; i < 3; ++i) sum[i] += pair[i], lum += kLuminance[i] * pair[i];
                 sq += lum * lum;

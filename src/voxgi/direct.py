@@ -25,7 +25,7 @@ import numpy as np
 from . import _core, _validate
 from ._qmc import sobol
 from .lights import LUMINANCE
-from .rays import Tracer
+from .rays import Tracer, embree_library
 from .scene import Scene
 from .voxels import VoxelSet
 
@@ -297,6 +297,13 @@ class _Rays:
         centre = self.tracer.centre
         self.emitters = (emit.arrays[0] - centre, *emit.arrays[1:])
         self.emitter_of = emit.emitter_of
+        # the emitters alone, which the compiled kernel traces a hemisphere
+        # ray against before the whole scene
+        self.emitter_scene = None
+        if self.tracer.native is not None and len(emit):
+            self.emitter_scene = _core.RayScene(
+                embree_library(), np.ascontiguousarray(self.emitters[0], np.float32)
+            )
         self.point = np.asarray(vox.centroid, np.float64) - centre
         self.normal = np.asarray(vox.normal, np.float64)
         self.offset, self.threads = offset, threads
@@ -323,7 +330,7 @@ class _Rays:
                 base,
                 self.offset,
             )
-            est.add(rec, *_batch(args, self.emitter_of, self.tracer, self.threads), per)
+            est.add(rec, *_batch(args, self), per)
         return len(todo) * per
 
 
@@ -349,17 +356,16 @@ def _noisy(
     return [(lit[bad][size == k], int(k)) for k in np.unique(size)]
 
 
-def _batch(
-    args: tuple, emitter_of: np.ndarray, tracer: Tracer, nthreads: int
-) -> tuple[np.ndarray, np.ndarray]:
+def _batch(args: tuple, rays: _Rays) -> tuple[np.ndarray, np.ndarray]:
     """Trace one batch: ``args`` are the kernels' (emitters, points, normals,
     shifts, sequence, offset) for R records and S samples.
 
     Returns the mean RGB irradiance (R, 3) and the mean square of its
     luminance (R,), from which the caller judges each record's noise.
     """
+    tracer, nthreads, emitter_of = rays.tracer, rays.threads, rays.emitter_of
     if tracer.native is not None:
-        return _core.direct_light_traced(*args, emitter_of, tracer.native, threads=nthreads)
+        return _core.direct_light_traced(*args, tracer.native, rays.emitter_scene, threads=nthreads)
     lo, ld, length, contribution, ho, hd = _core.direct_light_rays(*args, threads=nthreads)
     # light rays that cannot contribute (a back face at either end) have length 0
     live = np.flatnonzero(length > 0)
