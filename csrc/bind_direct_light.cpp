@@ -121,20 +121,24 @@ py::tuple sum(const py::tuple& emit, const F64& point, const F64& normal, const 
 }
 
 py::tuple traced(const py::tuple& emit, const F64& point, const F64& normal, const F64& shift,
-                 const F64& sequence, double offset, const voxgi::RayScene& scene,
-                 const voxgi::RayScene& emitter_scene, int threads) {
+                 const F64& sequence, double offset, const I32& emitter_of,
+                 const voxgi::RayScene& scene, const voxgi::RayScene* emitter_scene, int threads) {
     const Emitters held = emitters(emit);
     const voxgi::EmitterTriangles& em = held.em;
     const voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
-    if (emitter_scene.triangle_count() != em.count)
-        throw py::value_error("emitter_scene: " + std::to_string(emitter_scene.triangle_count()) +
+    check_1d(emitter_of, scene.triangle_count(), "emitter_of");
+    const int32_t* eo = emitter_of.data();
+    for (py::ssize_t t = 0; t < emitter_of.shape(0); ++t)
+        if (eo[t] >= em.count) throw py::value_error("emitter_of: index past the emitters");
+    if (emitter_scene && emitter_scene->triangle_count() != em.count)
+        throw py::value_error("emitter_scene: " + std::to_string(emitter_scene->triangle_count()) +
                               " triangles for " + std::to_string(em.count) + " emitters");
     F64 out({q.records, py::ssize_t(3)}), sq({q.records});
     double *po = out.mutable_data(), *ps = sq.mutable_data();
     const voxgi::StopCheck stop = make_stop_check();
     {
         py::gil_scoped_release release;
-        voxgi::direct_light_traced(em, q, scene, emitter_scene, po, ps,
+        voxgi::direct_light_traced(em, q, eo, scene, emitter_scene, po, ps,
                                    voxgi::resolve_threads(threads), stop);
     }
     return py::make_tuple(out, sq);
@@ -161,10 +165,11 @@ direction (M,3), M = N x S.)doc");
 the luminance of each light + hemisphere sample pair (N,) float64.)doc");
     m.def("direct_light_traced", &traced, "emitters"_a, "point"_a.noconvert(),
           "normal"_a.noconvert(), "shift"_a.noconvert(), "sequence"_a.noconvert(), "offset"_a,
-          "scene"_a, "emitter_scene"_a, "threads"_a = 0,
-          R"doc(direct_light_rays, the rays traced and direct_light_sum, record by
-record without ray arrays: per-record irradiance (N,3) and mean square (N,).
-scene: a RayScene of the scene's triangles; emitter_scene: one of the
-emitters' corners alone, in their order. A hemisphere ray is traced against
-the emitters, and against the scene up to the nearest emitter it meets.)doc");
+          "emitter_of"_a.noconvert(), "scene"_a, "emitter_scene"_a = nullptr, "threads"_a = 0,
+          R"doc(direct_light_rays, the rays traced in scene (a RayScene of the
+triangles emitter_of indexes) and direct_light_sum, record by record without
+ray arrays: the same per-record irradiance (N,3) and mean square (N,).
+emitter_scene (a RayScene of the emitters' corners alone, in their order;
+None: not used): a hemisphere ray is traced against the emitters, and
+against scene only up to the nearest emitter it meets.)doc");
 }

@@ -172,9 +172,11 @@ void direct_light_sum(const EmitterTriangles& em, const DirectLightQuery& q,
 }
 
 void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
-                         const RayScene& scene, const RayScene& emitter_scene, double* irradiance,
-                         double* mean_square, int threads, const StopCheck& stop) {
+                         const int32_t* emitter_of, const RayScene& scene,
+                         const RayScene* emitter_scene, double* irradiance, double* mean_square,
+                         int threads, const StopCheck& stop) {
     const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
+    const int64_t nt = scene.triangle_count();
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
         const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
         for (int64_t r = task * kRecordsPerTask; r < r1; ++r) {
@@ -186,12 +188,18 @@ void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
                 // contribution) and are not traced
                 const bool blocked = ll > 0.f && scene.occluded(lo, ld, ll);
                 // The hemisphere ray brings light only where an emitter is
-                // the first thing it meets: its nearest emitter, from the
-                // emitters' own small scene, unless the whole scene blocks
-                // the way there (stopping an offset short, as light rays do).
-                // Most hemisphere rays meet no emitter and cost only that.
-                int32_t k = emitter_scene.intersect(ho, hd, &hu, &hv, &te);
-                if (k >= 0 && scene.occluded(ho, hd, te - float(q.offset))) k = -1;
+                // the first thing it meets. With the emitters' own scene: its
+                // nearest emitter, unless the whole scene blocks the way
+                // there (stopping an offset short, as light rays do), so that
+                // the many rays that meet no emitter cost only that.
+                int32_t k = -1;
+                if (emitter_scene) {
+                    k = emitter_scene->intersect(ho, hd, &hu, &hv, &te);
+                    if (k >= 0 && scene.occluded(ho, hd, te - float(q.offset))) k = -1;
+                } else {
+                    const int32_t t = scene.intersect(ho, hd, &hu, &hv, nullptr);
+                    k = (t >= 0 && t < nt) ? emitter_of[t] : -1;
+                }
                 double pair[3];
                 sample_pair(em, q, r, con, blocked, hd, k, hu, hv, pair);
                 double lum = 0.0;

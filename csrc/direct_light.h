@@ -65,16 +65,19 @@ void direct_light_sum(const EmitterTriangles& em, const DirectLightQuery& q,
                       const float* hemi_v, const int32_t* emitter_of, int64_t scene_triangles,
                       double* irradiance, double* mean_square, int threads, const StopCheck& stop);
 
-// direct_light_rays, the rays traced and direct_light_sum, record by record
-// without the ray arrays. `scene` holds the scene's triangles and
-// `emitter_scene` the emitter triangles alone, in the order of `em`: a
-// hemisphere ray is traced against the emitters, and against the scene
-// only up to the nearest emitter it meets (an offset short of it). The sums
-// are those of the two passes but where a surface lies within the offset
-// in front of an emitter, which then does not hide it from the hemisphere
-// ray, as it does not hide it from the light rays.
+// direct_light_rays, the rays traced in `scene` (built from the scene's
+// triangles, which emitter_of indexes) and direct_light_sum, record by
+// record without the ray arrays. With `emitter_scene` (the emitter
+// triangles alone, in the order of `em`), a hemisphere ray is traced
+// against the emitters, and against the scene only up to the nearest
+// emitter it meets (an offset short of it); without, to its first hit in
+// the scene. Either way the sums are those of the two passes, but that with
+// `emitter_scene` a surface within the offset in front of an emitter does
+// not hide it from the hemisphere ray, as it does not hide it from the
+// light rays.
 void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
-                         const RayScene& scene, const RayScene& emitter_scene, double* irradiance,
-                         double* mean_square, int threads, const StopCheck& stop);
+                         const int32_t* emitter_of, const RayScene& scene,
+                         const RayScene* emitter_scene, double* irradiance, double* mean_square,
+                         int threads, const StopCheck& stop);
 
 }  // namespace voxgi

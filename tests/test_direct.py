@@ -266,3 +266,17 @@ def test_direct_light_kernels_hold_the_emitter_arrays_they_convert():
     got = _core.direct_light_rays(converted, point, normal, shift, seq, 1e-4)
     for g, w in zip(got, want, strict=True):
         np.testing.assert_array_equal(g, w)
+
+
+@pytest.mark.skipif(voxgi.rays.embree_library() is None, reason="no Embree 4 library found")
+def test_hemisphere_rays_meet_the_emitters_first_only_where_few_triangles_emit():
+    # A lamp of 2 triangles among 30: hemisphere rays go to the emitters'
+    # own scene first; in a furnace, where every triangle emits, they go
+    # to their first hit in the scene.
+    from voxgi.direct import _Rays
+
+    for scene, want in ((voxgi.scenes.cornell_box(), 2), (voxgi.scenes.furnace_box(), None)):
+        vox = voxgi.voxelize(scene, resolution=8, progress=False)
+        with _Rays(scene, vox, EmitterSampler(scene), 1e-4, 1) as rays:
+            got = rays.emitter_scene
+            assert (None if got is None else got.triangle_count) == want

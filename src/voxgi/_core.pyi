@@ -179,13 +179,14 @@ def direct_light_sum(emitters: tuple, point: numpy.typing.NDArray[numpy.float64]
     Per record: direct irradiance (N,3) float64 and the mean square of
     the luminance of each light + hemisphere sample pair (N,) float64.
     """
-def direct_light_traced(emitters: tuple, point: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float64], shift: numpy.typing.NDArray[numpy.float64], sequence: numpy.typing.NDArray[numpy.float64], offset: typing.SupportsFloat | typing.SupportsIndex, scene: ..., emitter_scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+def direct_light_traced(emitters: tuple, point: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float64], shift: numpy.typing.NDArray[numpy.float64], sequence: numpy.typing.NDArray[numpy.float64], offset: typing.SupportsFloat | typing.SupportsIndex, emitter_of: numpy.typing.NDArray[numpy.int32], scene: ..., emitter_scene: ... = None, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
     """
-    direct_light_rays, the rays traced and direct_light_sum, record by
-    record without ray arrays: per-record irradiance (N,3) and mean square (N,).
-    scene: a RayScene of the scene's triangles; emitter_scene: one of the
-    emitters' corners alone, in their order. A hemisphere ray is traced against
-    the emitters, and against the scene up to the nearest emitter it meets.
+    direct_light_rays, the rays traced in scene (a RayScene of the
+    triangles emitter_of indexes) and direct_light_sum, record by record without
+    ray arrays: the same per-record irradiance (N,3) and mean square (N,).
+    emitter_scene (a RayScene of the emitters' corners alone, in their order;
+    None: not used): a hemisphere ray is traced against the emitters, and
+    against scene only up to the nearest emitter it meets.
     """
 def gather_families(ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing.NDArray[numpy.float32], point: numpy.typing.NDArray[numpy.float32], families: numpy.typing.NDArray[numpy.int32], weights: numpy.typing.NDArray[numpy.float64], values: numpy.typing.NDArray[numpy.float32], family_indices: numpy.typing.NDArray[numpy.int64], epsilon: typing.SupportsFloat | typing.SupportsIndex = 0.05000000074505806, history: typing.SupportsInt | typing.SupportsIndex = 8, threads: typing.SupportsInt | typing.SupportsIndex = 0, stand_in: numpy.typing.NDArray[numpy.bool] | None = None) -> numpy.typing.NDArray[numpy.float64]:
     """

@@ -297,10 +297,13 @@ class _Rays:
         centre = self.tracer.centre
         self.emitters = (emit.arrays[0] - centre, *emit.arrays[1:])
         self.emitter_of = emit.emitter_of
-        # the emitters alone, which the compiled kernel traces a hemisphere
-        # ray against before the whole scene
+        # The emitters alone, which the compiled kernel traces a hemisphere
+        # ray against before the whole scene: worth it where most rays meet
+        # no emitter. Where most triangles emit (a furnace), a ray's nearest
+        # emitter costs about its first hit, and the scene's ray would come
+        # on top.
         self.emitter_scene = None
-        if self.tracer.native is not None and len(emit):
+        if self.tracer.native is not None and 0 < len(emit) <= len(self.tracer.tris) // 2:
             self.emitter_scene = _core.RayScene(
                 embree_library(), np.ascontiguousarray(self.emitters[0], np.float32)
             )
@@ -365,7 +368,9 @@ def _batch(args: tuple, rays: _Rays) -> tuple[np.ndarray, np.ndarray]:
     """
     tracer, nthreads, emitter_of = rays.tracer, rays.threads, rays.emitter_of
     if tracer.native is not None:
-        return _core.direct_light_traced(*args, tracer.native, rays.emitter_scene, threads=nthreads)
+        return _core.direct_light_traced(
+            *args, emitter_of, tracer.native, rays.emitter_scene, threads=nthreads
+        )
     lo, ld, length, contribution, ho, hd = _core.direct_light_rays(*args, threads=nthreads)
     # light rays that cannot contribute (a back face at either end) have length 0
     live = np.flatnonzero(length > 0)
