@@ -83,7 +83,8 @@ def _record_grid(vox, centre, radiance, pa, voxel_order) -> dict:
     # A dense table of each voxel's first record (4 bytes a voxel of the
     # bounding grid) replaces a binary search per hit, up to 64 MB.
     if cells <= (1 << 24):
-        start = np.searchsorted(sorted_key, np.arange(cells + 1)).astype(np.int32)
+        start = np.zeros(cells + 1, np.int32)
+        np.cumsum(np.bincount(sorted_key, minlength=cells), out=start[1:])
     else:
         start = np.zeros(0, np.int32)
     n = len(vox)
