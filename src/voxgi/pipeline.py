@@ -59,7 +59,7 @@ RENDER_SOLVE_TOL = 1e-3
 #: frames is that of 64 pairs (the display averages many records), and the
 #: solve takes less time than with the shooting. The reflected light then
 #: takes traced passes too (``docs/design.md`` §5): gaps, bars and walls
-#: thinner than a voxel act as they are, for 0.25-0.7 s at resolution 64
+#: thinner than a voxel act as they are, for 0.1-0.35 s at resolution 64
 #: in the built-in interiors.
 RENDER_SOLVE_TUNING = SolveTuning(
     diagnostics=False, direct_light="exact", direct_samples=16, indirect_light="traced"
