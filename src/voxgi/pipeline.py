@@ -40,10 +40,11 @@ RENDER_RESOLUTION = 64
 #: Gathering radius of that solve. Its traced passes (below) carry the
 #: reflected light; the lines only give them a start, and a coarse start
 #: costs them nothing: against R 12, solutions at R 4 gave pictures within
-#: 4e-5 relMSE in six scenes (a twentieth of the display's noise after 96
-#: frames or less) and the same error against the path-traced references of
-#: the Cornell box, ``shadow`` and ``geometric``, for a solve 25% shorter
-#: (``docs/design.md`` §5). R 3 takes a third traced pass and no less time.
+#: 1.1e-4 relMSE of theirs in six scenes (at most a ninth of the default
+#: tolerance; the door room, lit through a slit, the farthest) and the same
+#: error against the path-traced references of the Cornell box, ``shadow``
+#: and ``geometric``, for a solve about 25% shorter (``docs/design.md`` §5).
+#: R 3 takes a third traced pass and no less time.
 RENDER_DIRECTIONS = 4
 #: The radius when the records carry no scene to trace, so the lines alone
 #: carry the reflected light.
