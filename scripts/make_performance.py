@@ -906,7 +906,9 @@ def ray_cost() -> list[str]:
         "nanoseconds per ray on 1 / 2 threads (best of "
         f"{d['repeats']}). Then, per phase of the default render, the rays per pixel and "
         "frame and the share of the phase's time that its rays alone take at the 2-thread "
-        "cost; the rest is making the rays, finding the hit's record and shading "
+        "cost; the rest is making the rays, finding the hit's record and shading. A share "
+        "over 100%: the phase's kernel, which traces each pixel's rays among that other "
+        "work, got more from the second thread than the bare rays did "
         "(`docs/design.md` §7).",
         "",
         table(
