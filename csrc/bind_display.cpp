@@ -276,7 +276,6 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
 }
 
 // The triangles must be those `scene` was built from, for prim to index them.
-// The ray scene was built from the tri_v given with it.
 void check_scene(const voxgi::RayScene& scene, int64_t triangles) {
     if (scene.triangle_count() != triangles)
         throw py::value_error("scene holds " + std::to_string(scene.triangle_count()) +

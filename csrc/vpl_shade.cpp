@@ -2,7 +2,6 @@
 #include "vpl_shade.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <vector>
@@ -32,6 +31,12 @@ void for_each_pixel(int64_t P, int threads, const StopCheck& stop, Body&& body) 
 template <class Body>
 int64_t sum_over_pixels(int64_t P, int threads, const StopCheck& stop, Body&& body) {
     return sum_chunked(P, kChunk, threads, stop, std::forward<Body>(body));
+}
+
+// The sum of body(p0, p1), the rays of pixels [p0, p1), over tasks of kChunk pixels.
+template <class Body>
+int64_t sum_over_pixel_chunks(int64_t P, int threads, const StopCheck& stop, Body&& body) {
+    return sum_over_chunks(P, kChunk, threads, stop, std::forward<Body>(body));
 }
 
 inline float dot3(const float* a, const float* b) {
@@ -323,8 +328,9 @@ inline int64_t grid_key(const RecordGrid& g, int64_t i, int64_t j, int64_t k) {
     return (i * g.dims[1] + j) * g.dims[2] + k;
 }
 
-// The record in voxel c that stands for y, as lookup_record; falls back to
-// the neighbours when the voxel has none of this surface.
+// Position in the grid's order of the record that stands for the surface
+// point y, in voxel c, on object `obj` seen from the side of normal n, or
+// -1; the neighbouring voxels are searched when c has none of this surface.
 int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3], int32_t obj,
                        const int64_t c[3]) {
     const double p2 = g.pitch * g.pitch;
@@ -361,16 +367,6 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
                 if (di || dj || dk) scan(c[0] + di, c[1] + dj, c[2] + dk);
     return best;
 }
-
-}  // namespace
-
-int64_t lookup_record(const RecordGrid& g, const double y[3], const float n[3], int32_t obj) {
-    int64_t c[3];
-    cell_of(g, y, c);
-    return lookup_in_cell(g, y, n, obj, c);
-}
-
-namespace {
 
 // Where a gather ray of pixel p landed, before its record is looked up.
 struct GatherHit {
@@ -472,7 +468,7 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                   const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
                   float* out, int64_t* rays, int threads, const StopCheck& stop) {
     const uint64_t base = gather_base(seed, frame);
-    const int64_t P = hits.count, tasks = (P + kChunk - 1) / kChunk;
+    const int64_t P = hits.count;
     if (n_gather <= 0) {
         *rays = 0;
         return;
@@ -487,9 +483,7 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
     constexpr int64_t kStages = 3;
     // a voxel holds a record or two (both sides, two objects at a seam)
     constexpr int64_t kRowsAhead = 3;
-    std::atomic<int64_t> traced{0};
-    parallel_for(tasks, resolve_threads(threads), stop, [&](int64_t task, int) {
-        const int64_t p0 = task * kChunk, p1 = std::min(P, p0 + kChunk);
+    *rays = sum_over_pixel_chunks(P, threads, stop, [&](int64_t p0, int64_t p1) {
         std::vector<GatherHit> ring(size_t(kStages * n_gather));
         auto slot = [&](int64_t p) { return ring.data() + (p % kStages) * n_gather; };
         auto shaded = [&](int64_t p) { return p >= p0 && p < p1 && hits.material[p] >= 0; };
@@ -527,9 +521,8 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                 for (int ch = 0; ch < 3; ++ch) out[3 * (p - 2) + ch] += float(s[ch]);
             }
         }
-        traced.fetch_add(n_traced, std::memory_order_relaxed);
+        return n_traced;
     });
-    *rays = traced.load();
 }
 
 void primary_hit(const double o[3], const double d[3], int32_t t, const PrimaryScene& scene,

@@ -192,10 +192,6 @@ void primary_hits(int64_t P, const double* org, const double* dir, const int32_t
                   const PrimaryScene& scene, double* pos, float* normal, float* ng,
                   int32_t* material, float* emission, int threads, const StopCheck& stop);
 
-// Position in the grid's order of the record that stands for the surface
-// point y on object `obj` seen from the side of normal n, or -1.
-int64_t lookup_record(const RecordGrid& grid, const double y[3], const float n[3], int32_t obj);
-
 // The BRDF used by the display for one pair of directions (exposed for tests):
 // Lambertian rho/pi, or with a specular layer the Ashikhmin-Shirley pair
 // (coupled diffuse + anisotropic Phong specular). k1 towards the light,

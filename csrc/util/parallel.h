@@ -84,21 +84,29 @@ void for_each_chunked(int64_t n, int64_t chunk, int threads, const StopCheck& st
     });
 }
 
-// The sum over i < n of body(i) (an item's count: rays traced, say), as
-// for_each_chunked runs it: each task adds its items' counts locally and
-// only its total to the shared sum, which a per-item atomic add would make
-// the cores pass between them item by item.
+// The sum over tasks of body(begin, end), each task `chunk` consecutive
+// items [begin, end) (an item count: rays traced, say): each task adds to
+// the shared sum once, where a per-item atomic add would make the cores
+// pass its cache line between them item by item.
 template <class Body>
-int64_t sum_chunked(int64_t n, int64_t chunk, int threads, const StopCheck& stop, Body&& body) {
+int64_t sum_over_chunks(int64_t n, int64_t chunk, int threads, const StopCheck& stop, Body&& body) {
     const int64_t tasks = (n + chunk - 1) / chunk;
     std::atomic<int64_t> total{0};
     parallel_for(tasks, resolve_threads(threads), stop, [&](int64_t task, int) {
-        const int64_t end = std::min(n, (task + 1) * chunk);
-        int64_t s = 0;
-        for (int64_t i = task * chunk; i < end; ++i) s += body(i);
-        total.fetch_add(s, std::memory_order_relaxed);
+        const int64_t begin = task * chunk;
+        total.fetch_add(body(begin, std::min(n, begin + chunk)), std::memory_order_relaxed);
     });
     return total.load();
+}
+
+// The sum over i < n of body(i), `chunk` consecutive items a task.
+template <class Body>
+int64_t sum_chunked(int64_t n, int64_t chunk, int threads, const StopCheck& stop, Body&& body) {
+    return sum_over_chunks(n, chunk, threads, stop, [&](int64_t begin, int64_t end) {
+        int64_t s = 0;
+        for (int64_t i = begin; i < end; ++i) s += body(i);
+        return s;
+    });
 }
 
 // Hands the results of tasks 0, 1, 2, ... to `combine` in task order,
