@@ -69,6 +69,85 @@ def test_mean_relmse_sees_errors_that_cancel_within_aligned_blocks(rng):
     assert np.mean(acc.se**2 / (acc.mean**2 + 0.01)) > 3.0 * truth
 
 
+def flat(p: int, obj=None) -> tuple[np.ndarray, np.ndarray]:
+    """A frame's surfaces: every pixel on object ``obj`` (0), facing +z."""
+    obj = np.zeros(p, np.int32) if obj is None else obj.astype(np.int32)
+    return obj, np.tile(np.float16([0.0, 0.0, 1.0]), (p, 1))
+
+
+def test_inside_surfaces_the_relmse_rests_on_single_frames(rng):
+    # Every pixel shares one N(0, 0.1²) draw per frame (as all pixels that
+    # share a frame's VPLs err together), so each trial's image estimate has
+    # the degrees of freedom of one pixel's: 7 from 8 single frames, 1 from
+    # two blocks of 4. Over 400 trials the estimate's relative sd is
+    # sqrt(2/7) = 0.53 against sqrt(2) = 1.41 (within about 7% each), and
+    # both average the mean's variance 0.01/8 to within 10% (3.5 sd of the
+    # blocks' average).
+    n, p, sigma = 8, 20, 0.1
+    with_surface, without = [], []
+    for _ in range(400):
+        frames = 1.0 + np.repeat(sigma * rng.standard_normal((n, 1, 3)), p, axis=1)
+        a, b = _Mean.empty(p), _Mean.empty(p)
+        for x in frames:
+            a.add(x, flat(p))
+            b.add(x)
+        den = np.mean(1.0 / (a.mean**2 + 0.01))
+        with_surface.append(a.est / den)
+        without.append(b.est / den)
+        assert a.edge is not None
+        assert not a.edge.any()
+        assert b.edge is None
+    truth = sigma**2 / n
+    for est in (with_surface, without):
+        assert abs(np.mean(est) / truth - 1.0) < 0.1, np.mean(est) / truth
+    assert np.std(with_surface) < 0.5 * np.std(without)
+
+
+def test_at_edges_the_blocks_spread_is_shrunk_and_still_errs_high(rng):
+    # Each pixel is split by a straight edge (a random line through it) into
+    # radiance 1 and 0.2; the frames' sub-pixel offsets are the display's
+    # (0, 2)-sequence, so a pixel's 8 or 16 frames are strata, not
+    # independent draws. The blocks of 4 overstate the mean's error (1.8x at
+    # 8 frames, 2.5x at 16); shrunk by 1/sqrt(blocks) the estimate comes
+    # closer and stays above the truth (1.6x). Averages over 20 seeds of 4000
+    # pixels; the truth is each pixel's error against its exact coverage.
+    p = 4000
+    g = (np.arange(64) + 0.5) / 64 - 0.5
+    gx, gy = (a.ravel() for a in np.meshgrid(g, g))
+    for n in (8, 16):
+        shrunk, blocks = [], []
+        for seed in range(20):
+            c, th = rng.random(p) - 0.5, rng.random(p) * np.pi
+            u, v = np.cos(th), np.sin(th)
+            cover = np.mean(gx[None] * u[:, None] + gy[None] * v[:, None] < c[:, None], axis=1)
+            a, b = _Mean.empty(p), _Mean.empty(p)
+            for f in range(n):
+                (ox, oy), _ = voxgi.display.frame_samples(f, seed)
+                side = (ox - 0.5) * u + (oy - 0.5) * v < c
+                x = np.repeat(np.where(side, 1.0, 0.2)[:, None], 3, axis=1)
+                a.add(x, flat(p, side))  # two objects meet at the edge
+                b.add(x)
+            m = a.mean[:, 0]
+            truth = np.mean((m - (0.2 + 0.8 * cover)) ** 2 / (m * m + 0.01))
+            shrunk.append(a.est / truth)
+            blocks.append(b.est / truth)
+        assert 1.0 < np.mean(shrunk) < 0.9 * np.mean(blocks), (n, np.mean(shrunk), np.mean(blocks))
+
+
+def test_furnace_has_no_edges_and_the_cornell_box_its_outlines(cornell):
+    # Seen from its centre, the furnace sphere is one smooth object: no pixel
+    # is at an edge. The Cornell box has its boxes' outlines and the room's
+    # corners: a few percent of the pixels, not most.
+    scene = voxgi.scenes.furnace_sphere(albedo=0.5, width=32, height=24)
+    sol = voxgi.solve(voxgi.voxelize(scene, resolution=16), progress=False)
+    out = voxgi.render(scene, sol, max_frames=8, tol=0.0, progress=False)
+    assert out.stats["edge_pixels"] == 0
+    sol = voxgi.solve(voxgi.voxelize(cornell, resolution=16), progress=False)
+    out = voxgi.render(cornell, sol, max_frames=8, tol=0.0, progress=False)
+    pixels = cornell.camera.width * cornell.camera.height
+    assert 0.02 * pixels < out.stats["edge_pixels"] < 0.3 * pixels
+
+
 def test_one_outlier_batch_is_flagged_and_bounds_the_error(rng):
     # 200 pixels of N(1, 0.01²) over 64 frames; pixel 7 gets +1 in one frame.
     # Its mean is then 1/64 off, 25 of its own standard errors: the guard

@@ -183,6 +183,22 @@ def frame_samples(frame: int, seed: int = 0) -> tuple[tuple[float, float], tuple
     return off, _concentric_disc(lu, lv)
 
 
+def frame_surface(hits: dict) -> tuple[np.ndarray, np.ndarray]:
+    """What each pixel's camera ray met in one frame: the object (-1: nothing,
+    or a one-sided back) and its geometric normal, to half precision, all the
+    error estimate's edge test needs (``docs/design.md`` §6).
+
+    Returns
+    -------
+    object : (P,) int32
+    normal : (P, 3) float16
+    """
+    return (
+        np.ascontiguousarray(hits["material"], dtype=np.int32),
+        np.asarray(hits["ng"]).astype(np.float16),
+    )
+
+
 def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
     """Primary rays of every pixel, row-major from the top-left pixel.
 
@@ -503,6 +519,8 @@ class _FrameShader:
         self._buffers = None
         self._gbuffers = None
         self.primary_rays = 0
+        #: :func:`frame_surface` of the last frame
+        self.surface: tuple[np.ndarray, np.ndarray] | None = None
         self.shadow_rays = 0
         self.gather_rays = 0
         # the VPLs' and gather rays' shading is timed with their rays; only
@@ -905,6 +923,7 @@ class _FrameShader:
         t0 = time.perf_counter()
         h = self.camera_hits(offset, lens)
         self.seconds["primary"] += time.perf_counter() - t0
+        self.surface = frame_surface(h)
         vpls = None
         if not self.sampler.empty:
             vpls = [self.sampler.frame(f, g) for g in range(len(self._groups[1]) - 1)]
@@ -1427,6 +1446,17 @@ _MIN_BATCHES = 8
 #: in the window room); the spread between such blocks sees it.
 _STRATUM_FRAMES = 4
 
+#: Largest angle between the geometric normals a pixel's camera rays meet on
+#: one object for the pixel to count as inside a surface rather than at an
+#: edge (more than a coarse tessellation's crease, less than a box's corner).
+_EDGE_ANGLE_DEG = 25.0
+
+#: The least factor on an edge pixel's block spread: the offsets' part of its
+#: error falls as frames^-3/2, the light samples' part as frames^-1.
+_EDGE_SHRINK_MIN = 0.5
+
+_EDGE_COS = math.cos(math.radians(_EDGE_ANGLE_DEG))
+
 #: Significance of the heavy-tail test over a pixel's batches (Bonferroni over
 #: the batches, two-sided): a normal pixel is flagged with this probability.
 _OUTLIER_ALPHA = 1e-3
@@ -1512,9 +1542,16 @@ class _Mean:
     (largest over a pixel's channels), and ``tail``, the one that all but
     ``share`` of the pixels stay within, come from these batches. ``est``,
     the estimated relMSE ``mean(se² / (L² + 0.01))`` over pixels and
-    channels, takes ``se`` from the spread between aligned blocks of
-    :data:`_STRATUM_FRAMES` frames instead, kept as running sums (a flagged
-    pixel keeps the larger of the two); before two blocks, from the batches.
+    channels, depends on where a pixel lies. Inside a surface (every frame's
+    camera ray met the same object, at normals within
+    :data:`_EDGE_ANGLE_DEG`) frames are independent and ``se`` is the
+    batches'. At an edge the sub-pixel offsets make them negatively
+    correlated: ``se`` comes from the spread between aligned blocks of
+    :data:`_STRATUM_FRAMES` frames, kept as running sums, times ``1/sqrt(k)``
+    over ``k`` blocks (at least :data:`_EDGE_SHRINK_MIN`). A flagged pixel
+    keeps the larger of the batches' and the blocks' spread; before two
+    blocks, all take the batches'. Frames that come without their surfaces
+    (:func:`frame_surface`) leave every pixel to the blocks.
 
     These are worked out when first read after a batch completes, not at
     every batch: a render reads them only once its stopping rule can apply,
@@ -1531,6 +1568,10 @@ class _Mean:
     threads: int = 0
     block_sum: np.ndarray | None = None
     block_sq: np.ndarray | None = None
+    #: (P,) bool: pixels at an edge so far; None once a frame came without
+    #: its surface
+    edge: np.ndarray | None = None
+    _first_surface: tuple | None = None
     _est: float = float("inf")
     _worst: float = float("inf")
     _tail: float = float("inf")
@@ -1568,13 +1609,15 @@ class _Mean:
             self._estimate()
             self._stale = False
 
-    def add(self, x: np.ndarray) -> None:
-        """Fold one frame in; on completing a batch, mark the estimate for
-        an update."""
+    def add(self, x: np.ndarray, surface: tuple | None = None) -> None:
+        """Fold one frame in, with what its camera rays met
+        (:func:`frame_surface`); on completing a batch, mark the estimate
+        for an update."""
         if self._stale and self.frames + 1 - self.count * self.size < self.size:
             # this frame opens a batch and changes the sums the last complete
             # batch's estimate is made of: make it while they are as they were
             self._refresh()
+        self._add_surface(surface)
         self.frames += 1
         self.total += x
         self.current += x
@@ -1594,6 +1637,20 @@ class _Mean:
             self.count, self.size = half, 2 * self.size
         self._stale = self.count >= 2
 
+    def _add_surface(self, surface: tuple | None) -> None:
+        if surface is None:
+            self.edge = None
+            self._first_surface = None
+            return
+        obj, ng = surface
+        if self.frames == 0:
+            self._first_surface = (obj.copy(), ng.astype(np.float32))
+            self.edge = np.zeros(len(obj), bool)
+        elif self.edge is not None:
+            obj0, ng0 = self._first_surface
+            cos = np.abs(np.einsum("ij,ij->i", ng.astype(np.float32), ng0))
+            self.edge |= (obj != obj0) | ((obj >= 0) & (cos < _EDGE_COS))
+
     def _estimate(self) -> None:
         done = self.count * self.size
         # The estimate speaks for the mean of the complete batches; the open
@@ -1609,8 +1666,13 @@ class _Mean:
         if k >= 2:
             spread = np.maximum(self.block_sq - self.block_sum**2 / k, 0.0) / (k - 1)
             rel_blocks = spread * (_STRATUM_FRAMES / done) / denom
+            if self.edge is None:
+                kept = rel_blocks
+            else:
+                shrink = max(1.0 / math.sqrt(k), _EDGE_SHRINK_MIN)
+                kept = np.where(self.edge[:, None], shrink * rel_blocks, rel)
             self._est = float(
-                np.mean(np.where(flagged[:, None], np.maximum(rel, rel_blocks), rel_blocks))
+                np.mean(np.where(flagged[:, None], np.maximum(rel, rel_blocks), kept))
             )
         else:
             self._est = float(np.mean(rel))
@@ -1664,7 +1726,8 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
     first = None
     try:
         for f in range(opt.max_frames):
-            acc.add(source.frame(f, opt.seed).astype(np.float64))
+            x = source.frame(f, opt.seed).astype(np.float64)
+            acc.add(x, getattr(source, "surface", None))
             share = (f + 1) / opt.max_frames
             # the estimate is read only once the rule may stop on it
             est = acc.est if opt.tol > 0 and acc.ready(opt) else math.nan
@@ -1705,6 +1768,7 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
         "est_max_rel_err": acc.worst,
         "est_tail_rel_err": acc.tail,
         "flagged_pixels": acc.flagged,
+        "edge_pixels": None if acc.edge is None else int(np.count_nonzero(acc.edge)),
         "batches": acc.count,
         "batch_frames": acc.size,
         "tol": opt.tol,

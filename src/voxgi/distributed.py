@@ -276,7 +276,7 @@ def _task_frame(spec: FrameShaderSpec, key, f, seed):
             shader.gather_rays - before[2],
         )
         secs = {k: v - before[3].get(k, 0.0) for k, v in shader.seconds.items()}
-    return x, counts, secs
+    return x, shader.surface, counts, secs
 
 
 # ----------------------------------------------------------------------------- client side
@@ -567,6 +567,7 @@ class DistributedFrames(_Farm):
         self._next = 0
         self.primary_rays = self.shadow_rays = self.gather_rays = 0
         self.seconds = {k: 0.0 for k in ("primary", "shadow", "gather")}
+        self.surface = None  # the last frame's, as the local shader keeps it
 
     def _submit_upto(self, last: int, seed: int) -> None:
         while self._next <= min(last, self.max_frames - 1):
@@ -600,9 +601,9 @@ class DistributedFrames(_Farm):
                 key=f"voxgi-frame-{f}-{_uid()}",
             )
         t = time.perf_counter()
-        x, counts, secs = self._futs.pop(f).result()
+        x, self.surface, counts, secs = self._futs.pop(f).result()
         self.stats["seconds_waiting"] += time.perf_counter() - t
-        self.stats["bytes_received"] += x.nbytes
+        self.stats["bytes_received"] += x.nbytes + sum(a.nbytes for a in self.surface)
         self.primary_rays += counts[0]
         self.shadow_rays += counts[1]
         self.gather_rays += counts[2]
