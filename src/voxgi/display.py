@@ -87,7 +87,12 @@ class RenderResult:
         (the embreex path, ``docs/design.md`` §6); ``filter`` where the
         indirect light is filtered; ``total`` and ``display``
         (the same), plus ``voxelize`` and ``solve`` when :func:`voxgi.render`
-        ran them.
+        ran them. The error estimate: ``est_rel_mse`` (the image's relMSE,
+        what ``tol`` bounds), ``est_max_rel_err`` and ``est_tail_rel_err``
+        (per-pixel relative errors), ``flagged_pixels`` (heavy-tailed pixels
+        the guard does not believe) and ``edge_pixels`` (pixels whose camera
+        rays met more than one surface; None when frames came without their
+        surfaces), ``docs/design.md`` §6.
     solution : Solution or None
         The voxel solution displayed (computed here when none was given).
     """
@@ -185,18 +190,16 @@ def frame_samples(frame: int, seed: int = 0) -> tuple[tuple[float, float], tuple
 
 def frame_surface(hits: dict) -> tuple[np.ndarray, np.ndarray]:
     """What each pixel's camera ray met in one frame: the object (-1: nothing,
-    or a one-sided back) and its geometric normal, to half precision, all the
-    error estimate's edge test needs (``docs/design.md`` §6).
+    or a one-sided back) and its geometric normal, all the error estimate's
+    edge test needs (``docs/design.md`` §6). The hits' own arrays, not
+    copies; a distributed frame sends the normals in half precision.
 
     Returns
     -------
     object : (P,) int32
-    normal : (P, 3) float16
+    normal : (P, 3) float32 or float16
     """
-    return (
-        np.ascontiguousarray(hits["material"], dtype=np.int32),
-        np.asarray(hits["ng"]).astype(np.float16),
-    )
+    return hits["material"], hits["ng"]
 
 
 def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
@@ -1644,11 +1647,11 @@ class _Mean:
             return
         obj, ng = surface
         if self.frames == 0:
-            self._first_surface = (obj.copy(), ng.astype(np.float32))
+            self._first_surface = (np.array(obj, np.int32), np.array(ng, np.float32))
             self.edge = np.zeros(len(obj), bool)
         elif self.edge is not None:
             obj0, ng0 = self._first_surface
-            cos = np.abs(np.einsum("ij,ij->i", ng.astype(np.float32), ng0))
+            cos = np.abs(np.einsum("ij,ij->i", ng, ng0, dtype=np.float32))
             self.edge |= (obj != obj0) | ((obj >= 0) & (cos < _EDGE_COS))
 
     def _estimate(self) -> None:

@@ -276,7 +276,8 @@ def _task_frame(spec: FrameShaderSpec, key, f, seed):
             shader.gather_rays - before[2],
         )
         secs = {k: v - before[3].get(k, 0.0) for k, v in shader.seconds.items()}
-    return x, shader.surface, counts, secs
+    obj, ng = shader.surface
+    return x, (obj, ng.astype(np.float16)), counts, secs
 
 
 # ----------------------------------------------------------------------------- client side
