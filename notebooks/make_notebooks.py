@@ -262,7 +262,9 @@ display_error = notebook(
         "md:# How far off is each pixel? The display's error estimate\n\n"
         "`voxgi.render` estimates each pixel's standard error from batch means of its frames, "
         "with a guard against heavy tails (`docs/design.md §6`), returns it as "
-        "`RenderResult.stderr` and stops when the mean relMSE estimate is under `tol` and no "
+        "`RenderResult.stderr` and stops when the mean relMSE estimate (single frames inside "
+        "surfaces, aligned blocks of 4 frames at edges, where the sub-pixel offsets make frames "
+        "cancel) is under `tol` and no "
         "pixel's relative error estimate exceeds `pixel_factor · sqrt(tol)`. Here the estimate "
         "is set beside the error measured against a long render of the same solution (the "
         "estimate is of the display's noise, so the reference keeps the same voxel solution).",
@@ -285,7 +287,7 @@ display_error = notebook(
         "est = out.stats['est_rel_mse']\n"
         "print(f\"stopped after {out.frames} frames ({out.stats['batches']} batches of \"\n"
         "      f\"{out.stats['batch_frames']}); {out.stats['flagged_pixels']} pixels flagged \"\n"
-        '      f"heavy-tailed")\n'
+        "      f\"heavy-tailed, {out.stats['edge_pixels']} at an edge\")\n"
         "print(f'relMSE: estimated {est:.2e}, measured {measured:.2e} '\n"
         "      f'(ratio {est / measured:.2f}); display {seconds:.2f} s')\n"
         "print(f'worst pixel: estimated {est_rel.max():.3f}, measured {err_rel.max():.3f}')\n"
