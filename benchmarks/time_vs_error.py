@@ -65,6 +65,7 @@ VOXGI_SETTINGS = [
     (f"res64 R{_R} f8", 64, _R, {"max_frames": 8, "tol": 0.0}),
     (f"res48 R{_R} tol1e-3", 48, _R, {}),
     (MAIN, _RES, _R, {}),
+    (f"res{_RES} R{_R} tol5e-4", _RES, _R, {"tol": 5e-4}),
     ("res64 R8 tol1e-3", 64, 8, {}),
     (f"res96 R{_R} tol1e-3", 96, _R, {}),
     ("res64 R12 tol1e-3", 64, 12, {}),
