@@ -148,6 +148,36 @@ def test_furnace_has_no_edges_and_the_cornell_box_its_outlines(cornell):
     assert 0.02 * pixels < out.stats["edge_pixels"] < 0.3 * pixels
 
 
+class _NoSurfaces:
+    """A frame executor whose frames come without their surfaces."""
+
+    class _Source:
+        def __init__(self, shader):
+            self.shader = shader
+
+        def __getattr__(self, name):
+            if name == "surface":
+                raise AttributeError(name)
+            return getattr(self.shader, name)
+
+    def frames(self, spec, max_frames, *, threads=1):
+        return self._Source(spec.build(threads))
+
+
+def test_frames_without_surfaces_leave_the_estimate_to_the_blocks(cornell):
+    # Same frames, same image; without the surfaces no pixel is known to be
+    # inside a surface, so every pixel takes the blocks' spread and the
+    # estimate is not the local render's.
+    sol = voxgi.solve(voxgi.voxelize(cornell, resolution=16), progress=False)
+    kw = dict(max_frames=8, tol=0.0, progress=False)
+    local = voxgi.render(cornell, sol, **kw)
+    bare = voxgi.display.render(cornell, sol, executor=_NoSurfaces(), **kw)
+    np.testing.assert_array_equal(bare.image, local.image)
+    assert bare.stats["edge_pixels"] is None
+    assert local.stats["edge_pixels"] > 0
+    assert bare.stats["est_rel_mse"] != local.stats["est_rel_mse"]
+
+
 def test_one_outlier_batch_is_flagged_and_bounds_the_error(rng):
     # 200 pixels of N(1, 0.01²) over 64 frames; pixel 7 gets +1 in one frame.
     # Its mean is then 1/64 off, 25 of its own standard errors: the guard

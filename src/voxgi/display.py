@@ -37,6 +37,7 @@ __all__ = [
     "VPLSampler",
     "camera_rays",
     "frame_samples",
+    "frame_surface",
     "gaussian_pixel_filter",
     "light_spread",
     "ray_budget",
@@ -1107,7 +1108,10 @@ class FrameExecutor(Protocol):
     the interface of :meth:`FrameShaderSpec.build`'s shader: ``frame(f,
     seed)`` must return frame ``f`` as the local shader would, whatever
     the order of computation; the render loop asks for frames 0, 1, ... and
-    stops after at most ``max_frames``.
+    stops after at most ``max_frames``. After each frame, the source's
+    ``surface`` attribute, where it has one, is that frame's
+    :func:`frame_surface`; without it the relMSE estimate rests on the
+    blocks of frames alone (``docs/design.md`` §6).
     """
 
     def frames(self, spec: FrameShaderSpec, max_frames: int, *, threads: int = 1): ...
