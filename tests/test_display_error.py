@@ -3,6 +3,7 @@ rule and the EXR channels that carry it (docs/design.md §6)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -146,6 +147,28 @@ def test_furnace_has_no_edges_and_the_cornell_box_its_outlines(cornell):
     out = voxgi.render(cornell, sol, max_frames=8, tol=0.0, progress=False)
     pixels = cornell.camera.width * cornell.camera.height
     assert 0.02 * pixels < out.stats["edge_pixels"] < 0.3 * pixels
+    # Mitsuba's Gaussian filter carries each edge 2 pixels further
+    cam = dataclasses.replace(cornell.camera, pixel_filter="gaussian")
+    wide = voxgi.render(cornell, sol, camera=cam, max_frames=8, tol=0.0, progress=False)
+    assert wide.stats["edge_pixels"] > 2 * out.stats["edge_pixels"]
+
+
+def test_a_pixel_filter_spreads_the_edges_over_its_reach():
+    # Mitsuba's Gaussian filter weights a sample into the pixels up to 2
+    # away, so a pixel next to an edge mixes the edge's samples into every
+    # frame: one edge pixel in a 9x9 image makes a 5x5 square of them, cut
+    # to 3x3 by the image's border in a corner (the two share one pixel).
+    acc = _Mean.empty(81, reach=(9, 9, 2))
+    obj = np.zeros(81, np.int32)
+    acc.add(np.ones((81, 3)), flat(81, obj))
+    obj[4 * 9 + 4] = 1
+    obj[8 * 9 + 0] = 1
+    acc.add(np.ones((81, 3)), flat(81, obj))
+    assert np.count_nonzero(acc.edge) == 2
+    edges = acc.edges().reshape(9, 9)
+    assert edges[2:7, 2:7].all()
+    assert edges[6:, :3].all()
+    assert np.count_nonzero(edges) == 25 + 9 - 1
 
 
 class _NoSurfaces:

@@ -245,6 +245,11 @@ def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.nda
 # --------------------------------------------------------------------------
 # VPLs
 # --------------------------------------------------------------------------
+#: Pixels from a sample's own to the farthest pixel a reconstruction filter
+#: weights it into (``Camera.pixel_filter``).
+_FILTER_REACH = {"box": 0, "gaussian": 2}
+
+
 def gaussian_pixel_filter(frame: np.ndarray, width: int, height: int, offset) -> np.ndarray:
     """One frame's samples, taken at ``offset`` in every pixel, weighted into
     the pixels around them by Mitsuba 3's Gaussian reconstruction filter.
@@ -268,7 +273,8 @@ def gaussian_pixel_filter(frame: np.ndarray, width: int, height: int, offset) ->
     """
     sigma = 0.5
     radius = 4 * sigma
-    taps = np.arange(-2, 3)  # sample pixel minus output pixel, within the radius
+    reach = _FILTER_REACH["gaussian"]
+    taps = np.arange(-reach, reach + 1)  # sample pixel minus output pixel, within the radius
 
     def weights(o: float) -> np.ndarray:
         x = taps + o - 0.5
@@ -1518,6 +1524,23 @@ def _batch_statistics(batches: np.ndarray, size: int, frames: int, threads: int 
     return se, tail.any(axis=1)
 
 
+def _dilate(mask: np.ndarray, r: int) -> np.ndarray:
+    """(H, W) bool: ``mask`` grown by ``r`` pixels in each direction (a
+    (2r + 1)² square), by shifted ORs along rows, then columns."""
+    out = mask
+    for axis in (0, 1):
+        grown = out.copy()
+        n = out.shape[axis]
+        for t in range(1, r + 1):
+            lo = [slice(None)] * 2
+            hi = [slice(None)] * 2
+            lo[axis], hi[axis] = slice(0, n - t), slice(t, n)
+            grown[tuple(lo)] |= out[tuple(hi)]
+            grown[tuple(hi)] |= out[tuple(lo)]
+        out = grown
+    return out
+
+
 class _Estimated:
     """A statistic of :class:`_Mean`'s error estimate, worked out when read:
     reading ``acc.est`` returns ``acc._est`` once ``acc`` has brought its
@@ -1575,9 +1598,12 @@ class _Mean:
     threads: int = 0
     block_sum: np.ndarray | None = None
     block_sq: np.ndarray | None = None
-    #: (P,) bool: pixels at an edge so far; None once a frame came without
-    #: its surface
+    #: (P,) bool: pixels whose own camera rays met an edge so far; None once
+    #: a frame came without its surface
     edge: np.ndarray | None = None
+    #: (height, width, pixels): how far a pixel filter spreads a sample
+    #: (:meth:`edges`); None for a box filter
+    reach: tuple[int, int, int] | None = None
     _first_surface: tuple | None = None
     _est: float = float("inf")
     _worst: float = float("inf")
@@ -1587,9 +1613,10 @@ class _Mean:
     _stale: bool = False
 
     @classmethod
-    def empty(cls, pixels: int, share: float = PIXEL_SHARE, threads: int = 0) -> _Mean:
+    def empty(cls, pixels: int, share: float = PIXEL_SHARE, threads: int = 0, reach=None) -> _Mean:
         """No frames yet for ``pixels`` pixels; ``share`` as
-        :attr:`RenderTuning.pixel_share`; ``threads`` for the error's kernel."""
+        :attr:`RenderTuning.pixel_share`; ``threads`` for the error's kernel;
+        ``reach`` as :attr:`reach`."""
         return cls(
             np.zeros((pixels, 3)),
             np.zeros((_BATCH_SLOTS, pixels, 3), np.float32),
@@ -1598,7 +1625,17 @@ class _Mean:
             threads=threads,
             block_sum=np.zeros((pixels, 3)),
             block_sq=np.zeros((pixels, 3)),
+            reach=reach,
         )
+
+    def edges(self) -> np.ndarray | None:
+        """(P,) bool: the pixels the estimate treats as at an edge. With a
+        pixel filter a frame's pixel mixes the samples of its neighbours, so
+        an edge within the filter's reach counts too."""
+        if self.edge is None or self.reach is None:
+            return self.edge
+        h, w, r = self.reach
+        return _dilate(self.edge.reshape(h, w), r).reshape(-1)
 
     @property
     def mean(self) -> np.ndarray:
@@ -1673,11 +1710,12 @@ class _Mean:
         if k >= 2:
             spread = np.maximum(self.block_sq - self.block_sum**2 / k, 0.0) / (k - 1)
             rel_blocks = spread * (_STRATUM_FRAMES / done) / denom
-            if self.edge is None:
+            edge = self.edges()
+            if edge is None:
                 kept = rel_blocks
             else:
                 shrink = max(1.0 / math.sqrt(k), _EDGE_SHRINK_MIN)
-                kept = np.where(self.edge[:, None], shrink * rel_blocks, rel)
+                kept = np.where(edge[:, None], shrink * rel_blocks, rel)
             self._est = float(
                 np.mean(np.where(flagged[:, None], np.maximum(rel, rel_blocks), kept))
             )
@@ -1717,7 +1755,13 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
     from tqdm.auto import tqdm
 
     cam = opt.cam
-    acc = _Mean.empty(cam.height * cam.width, opt.pixel_share, opt.threads)
+    reach = _FILTER_REACH[cam.pixel_filter]
+    acc = _Mean.empty(
+        cam.height * cam.width,
+        opt.pixel_share,
+        opt.threads,
+        (cam.height, cam.width, reach) if reach else None,
+    )
     interrupted = False
     # With a tolerance the bar follows the error, not the frame cap that is
     # rarely reached: the share of the way, in log scale, from the first
@@ -1775,7 +1819,7 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
         "est_max_rel_err": acc.worst,
         "est_tail_rel_err": acc.tail,
         "flagged_pixels": acc.flagged,
-        "edge_pixels": None if acc.edge is None else int(np.count_nonzero(acc.edge)),
+        "edge_pixels": None if acc.edge is None else int(np.count_nonzero(acc.edges())),
         "batches": acc.count,
         "batch_frames": acc.size,
         "tol": opt.tol,
