@@ -802,7 +802,7 @@ def calibration() -> list[str]:
         "",
         f"Each scene at {d['size']}x{d['size']}, solved once with the defaults of "
         "`voxgi.render(scene)`, then displayed with the defaults (tol 1e-3, pixel_factor "
-        f"{d['pixel_factor']:g}) at seeds 0 to {d.get('seeds', 3) - 1} (the first table shows "
+        f"{d['pixel_factor']:g}) at seeds 0 to {d['seeds'] - 1} (the first table shows "
         "seeds 0-2); the measured relMSE is against a "
         f"{d['ref_frames']}-frame render of the same solution (the estimate is of the display's "
         "noise, not of the voxel solution's bias), less that reference's own estimated noise. "
@@ -840,7 +840,7 @@ def calibration() -> list[str]:
         ),
         "",
         source(
-            f"python benchmarks/calibration.py --size {d['size']} --seeds {d.get('seeds', 3)}",
+            f"python benchmarks/calibration.py --size {d['size']} --seeds {d['seeds']}",
             "calibration.json",
         ),
         "",

@@ -1463,12 +1463,11 @@ _STRATUM_FRAMES = 4
 #: one object for the pixel to count as inside a surface rather than at an
 #: edge (more than a coarse tessellation's crease, less than a box's corner).
 _EDGE_ANGLE_DEG = 25.0
+_EDGE_COS = math.cos(math.radians(_EDGE_ANGLE_DEG))
 
 #: The least factor on an edge pixel's block spread: the offsets' part of its
 #: error falls as frames^-3/2, the light samples' part as frames^-1.
 _EDGE_SHRINK_MIN = 0.5
-
-_EDGE_COS = math.cos(math.radians(_EDGE_ANGLE_DEG))
 
 #: Significance of the heavy-tail test over a pixel's batches (Bonferroni over
 #: the batches, two-sided): a normal pixel is flagged with this probability.
