@@ -15,6 +15,7 @@ import trimesh
 
 import voxgi
 from voxgi import _core
+from voxgi.display.settings import _Experiment
 
 NAN, INF = float("nan"), float("inf")
 
@@ -408,9 +409,8 @@ def test_render_bad_args(small):
         ({"seed": "x"}, TypeError, "seed"),
         ({"threads": -1}, ValueError, "threads"),
         ({"tuning": {"gather": 4}}, TypeError, "tuning"),
-        ({"tuning": voxgi.RenderTuning(min_frames=1)}, ValueError, "min_frames"),
         ({"tuning": voxgi.RenderTuning(emitter_share=2.0)}, ValueError, "emitter_share"),
-        ({"tuning": voxgi.RenderTuning(vpl_pdf="uniform")}, ValueError, "pdf"),
+        ({"tuning": _Experiment(vpl_pdf="uniform")}, ValueError, "pdf"),
         ({"client": 42}, TypeError, "client"),
     ]:
         with pytest.raises(exc, match=word):

@@ -11,6 +11,7 @@ also accepts ``sol=None`` and then voxelizes and solves the scene first.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 from . import distributed
 from .display import RenderResult, RenderTuning
@@ -175,17 +176,18 @@ def render(
             vox, directions=directions, threads=threads, progress=progress, client=ex
         )
         seconds["solve"] = time.perf_counter() - t0
+    if vpls_per_frame is not None:
+        tuning = replace(tuning or RenderTuning(), vpls_per_frame=vpls_per_frame)
     out = display_render(
         scene,
         sol,
-        vpls_per_frame,
-        max_frames,
-        tol,
-        seed,
-        progress,
-        threads,
-        ex,
+        tol=tol,
+        max_frames=max_frames,
         camera=camera,
+        seed=seed,
+        threads=threads,
+        progress=progress,
+        executor=ex,
         tuning=tuning,
     )
     if seconds:

@@ -138,7 +138,7 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
             acc.add(x, getattr(source, "surface", None))
             share = (f + 1) / opt.max_frames
             # the estimate is read only once the rule may stop on it
-            est = acc.est if opt.tol > 0 and acc.ready(opt) else math.nan
+            est = acc.est if opt.tol > 0 and acc.ready() else math.nan
             if np.isfinite(est) and est > 0:
                 first = est if first is None else first
                 if first > opt.tol:
@@ -190,15 +190,14 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
 def render(
     scene,
     sol,
-    vpls_per_frame: int | None = None,
-    max_frames: int | None = None,
-    tol: float | None = None,
-    seed: int = 0,
-    progress: bool = True,
-    threads: int | None = None,
-    executor: FrameExecutor | None = None,
     *,
+    tol: float | None = None,
+    max_frames: int | None = None,
     camera: Camera | None = None,
+    seed: int = 0,
+    threads: int | None = None,
+    progress: bool = True,
+    executor: FrameExecutor | None = None,
     tuning: RenderTuning | None = None,
 ) -> RenderResult:
     r"""Render ``scene`` from its camera using the voxel solution ``sol``.
@@ -219,24 +218,24 @@ def render(
         With a camera (``scene.camera``, or ``camera=``).
     sol : Solution
         The voxel solution of ``scene`` (``voxgi.render`` also takes None).
-    vpls_per_frame : int or None
-        VPLs per frame and pixel (>= 1; None: from the light's spread,
-        :func:`ray_budget`).
-    max_frames : int or None
-        At most this many frames (default 256).
     tol : float or None
         Bound on the estimated relMSE of the remaining noise (default 1e-3; 0:
         run ``max_frames``).
-    seed : int
-        Seeds the VPL, sub-pixel and lens sequences.
-    progress, threads
-        A tqdm progress bar; worker threads (None: all cores).
-    executor : FrameExecutor or None
-        Where the frames are computed (None: here); the image is the local one.
+    max_frames : int or None
+        At most this many frames (default 256).
     camera : Camera, optional
         Overrides ``scene.camera``.
+    seed : int
+        Seeds the VPL, sub-pixel and lens sequences.
+    threads : int or None
+        Worker threads (None: all cores); the image does not depend on it.
+    progress : bool
+        A tqdm progress bar.
+    executor : FrameExecutor or None
+        Where the frames are computed (None: here); the image is the local one.
     tuning : RenderTuning or None
-        Expert settings (:class:`RenderTuning`).
+        The estimator's choices (:class:`RenderTuning`: VPLs and gather rays
+        per frame, the emitters' share, the indirect filter).
 
     Returns
     -------
@@ -251,7 +250,7 @@ def render(
         No camera, a solution of another scene, bad arguments, too large an image.
     """
     t_start = time.perf_counter()
-    opt = _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads, tuning)
+    opt = _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning)
     executor = _check_executor(executor)
     _check_solution(scene, sol, opt.cam)
     opt = _with_budget(opt, sol)
