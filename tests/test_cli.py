@@ -231,7 +231,7 @@ def test_help_shows_the_defaults(capsys):
 
     for want in (
         f"(default: {DEFAULT_RESOLUTION})",
-        f"(default: {TRACED_RADIUS}, whose answer the traced passes finish)",
+        f"(default: {TRACED_RADIUS})",
         "(default: 256)",
         "(default: 0.001)",
         "(default: 0.0)",

@@ -683,8 +683,11 @@ def test_traced_bounces_make_thin_wall_junctions_exact_in_the_furnace(wall):
     # are several percent dark. Rays against the exact triangles see the
     # wall; every record must come within 2% and the mean within 0.1%.
     # (The first traced pass's noise is what is left: 256 rays a record
-    # leave 0.5-1.0% at the box's corner records, 64 rays 1.4-1.5%; the
-    # lines alone 4.8-5.0%.)
+    # leave 0.5-1.0% at the box's corner records, 64 rays 1.4-1.5%.) In the
+    # furnace the exact answer is a fixed point of the exact transport, so a
+    # pass of it maps the lines' error e to rho T e, whose largest value is
+    # at most rho max|e| (T averages): the traced passes must at least shrink
+    # the lines' worst error by rho.
     rho = 0.8
     vox = voxgi.voxelize(_box_with_thin_wall(rho, wall), 32, progress=False)
     front = ~vox.back & (vox.area > 0)
@@ -697,8 +700,9 @@ def test_traced_bounces_make_thin_wall_junctions_exact_in_the_furnace(wall):
             tuning=paper(shoot_radius=8, diagnostics=False, indirect_light=how, traced_samples=256),
         )
         errors[how] = sol.radiance[front, 0] * (1 - rho) - 1
-    assert np.abs(errors["lines"]).max() > 0.03  # what the test guards against
-    assert np.abs(errors["traced"]).max() < 0.02, np.abs(errors["traced"]).max()
+    worst = {how: float(np.abs(e).max()) for how, e in errors.items()}
+    assert worst["traced"] <= rho * worst["lines"], worst
+    assert worst["traced"] < 0.02, worst
     assert abs(errors["traced"].mean()) < 1e-3, errors["traced"].mean()
     assert sol.stats["traced"]["passes"] >= 2
 

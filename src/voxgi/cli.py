@@ -121,6 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_render_arguments(r: argparse.ArgumentParser) -> None:
     """Add the ``render`` subcommand's arguments to its parser ``r``."""
+    from .radiosity.tuning import TRACED_RADIUS
     from .voxels import DEFAULT_RESOLUTION
 
     r.add_argument(
@@ -148,9 +149,9 @@ def _add_render_arguments(r: argparse.ArgumentParser) -> None:
         "--radius",
         metavar="R",
         type=_at_least(1),
-        default=None,
-        help="radius R of the solve's gathering direction set (default: 4, whose answer "
-        "the traced passes finish)",
+        default=TRACED_RADIUS,
+        help="radius R of the solve's gathering direction set, whose answer its traced "
+        "passes finish",
     )
     # the option's former name, kept working
     r.add_argument("--directions", dest="radius", type=_at_least(1), help=argparse.SUPPRESS)
