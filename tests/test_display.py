@@ -281,9 +281,9 @@ def test_indirect_filter_keeps_the_answer_and_cuts_the_noise():
     assert rest.sum() > 20
     runs = {}
     for radius in (0, 1):
-        tuning = voxgi.RenderTuning(gather=9, indirect_filter=radius)
+        tuning = voxgi.RenderTuning(vpls_per_frame=16, gather=9, indirect_filter=radius)
         out = voxgi.display.render(
-            scene, sol, vpls_per_frame=16, max_frames=32, tol=0.0, progress=False, tuning=tuning
+            scene, sol, max_frames=32, tol=0.0, progress=False, tuning=tuning
         )
         assert out.stats["indirect_filter"] == radius
         runs[radius] = out
@@ -909,14 +909,13 @@ def test_interleaved_vpl_sets_decorrelate_the_image_mean(monkeypatch):
     vox = voxgi.voxelize(scene, resolution=32)
     b = np.where(vox.back[:, None], 0.0, math.pi / (1 - rho)) * np.ones((1, 3))
     sol = Solution(vox=vox, radiosity=b.astype(np.float32))
-    budget = voxgi.RenderTuning(gather=8)
+    budget = voxgi.RenderTuning(vpls_per_frame=16, gather=8)
 
     def spread():
         means = [
             voxgi.display.render(
                 scene,
                 sol,
-                vpls_per_frame=16,
                 max_frames=4,
                 tol=0.0,
                 seed=s,
