@@ -621,7 +621,7 @@ def test_bad_files_of_each_kind(tmp_path):
     )
     with pytest.raises(
         ValueError,
-        match=r"refs\.gltf: meshes\[0\]\.primitives\[0\]\.attributes\.POSITION: accessor 5",
+        match=r"refs\.gltf: /meshes/0/primitives/0/attributes/POSITION: accessor 5",
     ):
         voxgi.Scene.load(tmp_path / "refs.gltf")
     (tmp_path / "broken.glb").write_bytes(b"glTF\x02\x00\x00\x00")
