@@ -282,6 +282,9 @@ def check_writable(paths) -> None:
             raise UsageError(f"cannot write {path}: it is a folder")
         if is_read_only(path):
             raise UsageError(f"cannot write {path}: the file is read-only")
+        blocker = next((p for p in path.parents if p.exists() and not p.is_dir()), None)
+        if blocker is not None:
+            raise UsageError(f"cannot write {path}: {blocker} is a file, not a folder")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             with tempfile.NamedTemporaryFile(

@@ -236,7 +236,9 @@ def write_png(path, image, exposure: float = 0.0) -> Path:
     return path
 
 
-def read_npz(path, arrays: dict, *, max_bytes: int = 1 << 34) -> dict[str, np.ndarray]:
+def read_npz(
+    path, arrays: dict, *, max_bytes: int = 1 << 34, max_ratio: float | None = None
+) -> dict[str, np.ndarray]:
     """Read named arrays of a ``.npz`` file, each checked before its data is read.
 
     Parameters
@@ -251,6 +253,11 @@ def read_npz(path, arrays: dict, *, max_bytes: int = 1 << 34) -> dict[str, np.nd
         share). A member missing from the file is left out of the result.
     max_bytes : int
         Largest size of one member, as its header declares it.
+    max_ratio : float, optional
+        Largest ratio of the members' declared sizes, all together, to the
+        file's size (plus 64 MiB): a zip bomb declares a thousand times its
+        size, a voxgi solution file tens of times. Default: the environment
+        variable ``VOXGI_MAX_NPZ_RATIO``, else 256.
 
     Returns
     -------
@@ -283,6 +290,15 @@ def read_npz(path, arrays: dict, *, max_bytes: int = 1 << 34) -> dict[str, np.nd
         raise ValueError(f"{path}: not a .npz file ({exc})") from None
     with zf:
         names = set(zf.namelist())
+        if max_ratio is None:
+            max_ratio = float(os.environ.get("VOXGI_MAX_NPZ_RATIO", 256))
+        declared = sum(zf.getinfo(f"{k}.npy").file_size for k in arrays if f"{k}.npy" in names)
+        size = path.stat().st_size
+        if declared > max_ratio * size + (64 << 20):
+            raise ValueError(
+                f"{path}: its arrays declare {declared:,} bytes in a file of {size:,} "
+                f"(more than {max_ratio:g} times; raise VOXGI_MAX_NPZ_RATIO to read it)"
+            )
         for name, (shape, dtype) in arrays.items():
             member = f"{name}.npy"
             if member not in names:

@@ -451,8 +451,8 @@ class Scene:
                     name=m.name,
                     two_sided=m.two_sided,
                 )
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"{source}: mesh {m.name!r}: {exc}") from None
+            except (TypeError, ValueError) as exc:  # (the message names the mesh)
+                raise ValueError(f"{source}: {exc}") from None
             obj.source = m.source
         for k, entry in enumerate(data.lights):
             scene.add_light(formats.toml.light_from_dict(entry, f"{source}: light #{k}"))

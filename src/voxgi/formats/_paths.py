@@ -84,11 +84,15 @@ class FileAccess:
             raise FileNotFoundError(f"{what} not found: {path}") from None
         except OSError as exc:
             raise ValueError(f"{what} {path}: cannot be read ({exc.strerror or exc})") from None
-        with open(fd, "rb", closefd=True) as fh:
-            st = os.fstat(fh.fileno())
+        try:
+            st = os.fstat(fd)
             if not stat.S_ISREG(st.st_mode):
                 raise ValueError(f"{what} {path}: not a regular file ({_kind(st.st_mode)})")
             self.limits.check("file_bytes", st.st_size, f"{what} {path}")
+        except BaseException:
+            os.close(fd)
+            raise
+        with open(fd, "rb", closefd=True) as fh:
             try:
                 data = fh.read(limit + 1)
             except OSError as exc:

@@ -142,7 +142,8 @@ def _scene_emitter(p: Plugin, data: SceneData, notes: Notes) -> None:
         else:
             if "filename" not in p.props:
                 raise ValueError(f"{p.where()}: missing property 'filename'")
-            image = Path(p.props["filename"])
+            # (absolute: the TOML rule would read a relative path from the scene's folder)
+            image = Path(p.props["filename"]).absolute()
             data.environment = {
                 "image": str(image),
                 "scale": float(p.props.get("scale", 1.0)),

@@ -2,9 +2,9 @@
 
 A texture is opened from its header first: its pixel count is checked
 against ``Limits.texture_pixels`` before any pixel is decoded. Its mean is
-then taken over strips of rows, through a histogram of the 8-bit values and
-a 256-entry table of their linear values, so that the memory beyond the
-decoded 8-bit image is a strip, never a float copy of the whole image.
+then taken from Pillow's histogram of the 8-bit values and a 256-entry table
+of their linear values, so that the memory beyond the decoded 8-bit image is
+at most a strip of rows, never a float copy of the whole image.
 """
 
 from __future__ import annotations
@@ -40,17 +40,35 @@ def image_mean(image, raw: bool = False) -> np.ndarray:
     if not hasattr(image, "convert"):
         a = np.asarray(image)
         a = a.reshape(-1, a.shape[-1])[:, :3]
-        counts = [np.bincount(a[:, c].astype(np.uint8), minlength=256) for c in range(3)]
-        return np.array([counts[c] @ table for c in range(3)]) / max(len(a), 1)
+        counts = np.array([np.bincount(a[:, c].astype(np.uint8), minlength=256) for c in range(3)])
+    else:
+        counts = _histogram(image)
+    total = counts[0].sum()
+    return (counts @ table) / max(int(total), 1)
+
+
+def _histogram(image) -> np.ndarray:
+    """(3, 256) counts of each 8-bit value of R, G and B, taken by Pillow in C
+    (no copy of the image); other modes are converted a strip at a time."""
+    mode = image.mode
+    if mode in ("RGB", "RGBA", "RGBX"):
+        return np.array(image.histogram()[:768], np.int64).reshape(3, 256)
+    if mode in ("L", "LA"):
+        return np.tile(np.array(image.histogram()[:256], np.int64), (3, 1))
+    if mode == "P" and image.palette is not None:
+        idx = np.array(image.histogram()[:256], np.int64)
+        pal = np.array(image.getpalette()[:768], np.int64).reshape(-1, 3)
+        n = min(len(pal), 256)
+        return np.array(
+            [np.bincount(pal[:n, c], weights=idx[:n], minlength=256) for c in range(3)]
+        ).astype(np.int64)
     w, h = image.size
     rows = max(1, _STRIP_PIXELS // max(w, 1))
     counts = np.zeros((3, 256), np.int64)
     for y in range(0, h, rows):
-        strip = image.crop((0, y, w, min(h, y + rows)))
-        a = np.asarray(strip.convert("RGB")).reshape(-1, 3)
-        for c in range(3):
-            counts[c] += np.bincount(a[:, c], minlength=256)
-    return (counts @ table) / max(w * h, 1)
+        strip = image.crop((0, y, w, min(h, y + rows))).convert("RGB")
+        counts += np.array(strip.histogram(), np.int64).reshape(3, 256)
+    return counts
 
 
 def open_image(data: bytes, what: str, limits: Limits):

@@ -65,13 +65,13 @@ def load_toml(scene, path: Path, access: FileAccess):
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        hint = ""
         if path.suffix.lower() != ".toml":
-            hint = (
-                " (voxgi reads voxgi's TOML, Mitsuba 3 XML (.xml), OBJ (.obj) and glTF "
-                "(.gltf, .glb) scene files; the suffix picks the reader)"
-            )
-        raise ValueError(f"scene file {path}: malformed TOML: {exc}{hint}") from None
+            raise ValueError(
+                f"scene file {path}: not a scene file voxgi reads: the suffix picks the "
+                "reader, .toml (voxgi's TOML), .xml (Mitsuba 3), .obj (with MTL), .gltf or "
+                f".glb; read as TOML, it is malformed: {exc}"
+            ) from None
+        raise ValueError(f"scene file {path}: malformed TOML: {exc}") from None
     except RecursionError:
         raise ValueError(
             f"scene file {path}: arrays or tables nested too deeply to be a scene file"
@@ -98,7 +98,7 @@ def fill_scene(
     base_dir = access.scene_file.parent
     _check_top_level(data, source)
     if "camera" in data:
-        scene.camera = camera_from_dict(data["camera"], source)
+        scene.camera = _camera(data["camera"], source)
     materials = _materials_from_dict(data.get("materials", {}), source)
     objs = data.get("object", [])
     if not isinstance(objs, list):
@@ -110,12 +110,39 @@ def fill_scene(
         raise _Located(f"{source}: 'light' must be an array of tables ([[light]])", (), "light")
     for k, entry in enumerate(lights):
         try:
-            scene.add_light(light_from_dict(entry, f"{source}: light #{k}"))
+            scene.add_light(_light(entry, f"{source}: light #{k}"))
         except _Located as exc:
             raise _Located(str(exc), ("light", k), exc.key) from None
     if "environment" in data:
-        scene.environment = environment_from_dict(data["environment"], source, base_dir, access)
+        scene.environment = _environment(data["environment"], source, base_dir, access)
     return scene
+
+
+def camera_from_dict(cam, source: str) -> Camera:
+    """The :class:`voxgi.Camera` of a ``[camera]`` table (or a reader's camera)."""
+    try:
+        return _camera(cam, source)
+    except _Located as exc:
+        raise ValueError(str(exc)) from None
+
+
+def light_from_dict(entry, where: str):
+    """The light of one ``[[light]]`` table: ``type`` and the class's fields."""
+    try:
+        return _light(entry, where)
+    except _Located as exc:
+        raise ValueError(str(exc)) from None
+
+
+def environment_from_dict(
+    env, source: str, base_dir: Path, access: FileAccess | None = None
+) -> Environment:
+    """The :class:`voxgi.Environment` of an ``[environment]`` table (an image path is
+    relative to ``base_dir`` and read through ``access``)."""
+    try:
+        return _environment(env, source, base_dir, access)
+    except _Located as exc:
+        raise ValueError(str(exc)) from None
 
 
 # -- which key failed -----------------------------------------------------
@@ -202,7 +229,7 @@ def _check_top_level(data, source: str) -> None:
         )
 
 
-def light_from_dict(entry, where: str):
+def _light(entry, where: str):
     """The light of one ``[[light]]`` table: ``type`` and the class's fields."""
     if not isinstance(entry, dict):
         raise _Located(f"{where}: must be a table")
@@ -224,9 +251,7 @@ def light_from_dict(entry, where: str):
     return _build(cls, fields, f"{where} ({kind})", ())
 
 
-def environment_from_dict(
-    env, source: str, base_dir: Path, access: FileAccess | None = None
-) -> Environment:
+def _environment(env, source: str, base_dir: Path, access: FileAccess | None = None):
     """The :class:`voxgi.Environment` of an ``[environment]`` table (an image path is
     relative to ``base_dir`` and read through ``access``)."""
     where, table = f"{source}: [environment]", ("environment",)
@@ -266,8 +291,7 @@ def environment_from_dict(
         raise _Located(f"{where}: {exc}", table, key) from None
 
 
-def camera_from_dict(cam, source: str) -> Camera:
-    """The :class:`voxgi.Camera` of a ``[camera]`` table."""
+def _camera(cam, source: str) -> Camera:
     if not isinstance(cam, dict):
         raise _Located(f"{source}: [camera] must be a table", ("camera",))
     return _build(Camera, cam, f"{source}: [camera]", ("camera",))
