@@ -6,11 +6,13 @@ from __future__ import annotations
 import io
 import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from .. import _validate
 from ._common import MeshData, Notes, SceneData, clamp_albedo
 from ._paths import FileAccess
 from .mitsuba_xml import PLUGIN_TAGS, Node, Plugin, XmlReader, parse_xml
@@ -55,7 +57,7 @@ def _colour(v, p: Plugin, key: str, notes: Notes) -> np.ndarray:
 
 def _bsdf(p: Plugin, notes: Notes) -> tuple[np.ndarray, bool]:
     """(albedo, two_sided) of a BSDF plugin (docs/design.md §12)."""
-    nested = [c for c in p.children if c.tag == "bsdf"]
+    nested = p.nested("bsdf")
     if p.type == "diffuse":
         return _colour(p.props.get("reflectance", 0.5), p, "reflectance", notes), False
     if p.type in _WRAPPER_BSDFS:
@@ -78,6 +80,11 @@ def _bsdf(p: Plugin, notes: Notes) -> tuple[np.ndarray, bool]:
         (a0, s0), (a1, s1) = _bsdf(nested[0], notes), _bsdf(nested[1], notes)
         notes.approx(f"{p.label()}: the blend of its BSDFs' albedos")
         return (1 - w) * a0 + w * a1, s0 and s1
+    if p.type in _TWO_SIDED_BSDFS:
+        notes.approx(
+            f"glass {p.label()}: an opaque diffuse surface of albedo 0.5 (no light passes it)"
+        )
+        return np.full(3, 0.5), True
     key = next((k for k in _ALBEDO_KEYS if k in p.props), None)
     albedo = np.full(3, 0.5) if key is None else _colour(p.props[key], p, key, notes)
     notes.approx(f"{p.label()}: diffuse with albedo {'0.5' if key is None else key}")
@@ -227,13 +234,17 @@ def _mesh_file(data: bytes, mesh_path: Path, p: Plugin) -> tuple[np.ndarray, np.
     """(vertices, faces) of an ``obj`` or ``ply`` shape's file, read from ``data``
     (an OBJ's material library is not read: the shape's BSDF replaces it)."""
     try:
-        mesh = trimesh.load(
-            io.BytesIO(data),
-            file_type=p.type,
-            force="mesh",
-            process=False,
-            maintain_order=True,
-        )
+        with warnings.catch_warnings():
+            # trimesh's numpy warnings on a mesh's texture coordinates
+            # (an all-NaN median) say nothing about the geometry read
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mesh = trimesh.load(
+                io.BytesIO(data),
+                file_type=p.type,
+                force="mesh",
+                process=False,
+                maintain_order=True,
+            )
         return np.asarray(mesh.vertices), np.asarray(mesh.faces)
     except Exception as exc:
         raise ValueError(f"{p.where()}: cannot load mesh {mesh_path}: {exc}") from None
@@ -244,9 +255,8 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
     if p.type not in ("obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk"):
         notes.drop(f"{p.label()} at line {p.line}")
         return []
-    bsdfs = [c for c in p.children if c.tag == "bsdf"]
-    emitters = [c for c in p.children if c.tag == "emitter"]
-    for c in p.children:
+    bsdfs, emitters = p.nested("bsdf"), p.nested("emitter")
+    for c in [*p.children, *(v for v in p.props.values() if isinstance(v, Plugin))]:
         if c.tag not in ("bsdf", "emitter"):
             notes.drop(f"{c.label()} inside {p.label()}")
     emission = np.zeros(3)
@@ -259,6 +269,10 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
         albedo, two_sided = np.full(3, 0.0 if emitters else 0.5), False
     v, f, source = _shape_mesh(p)
     name = p.id or (Path(source).stem if source else f"{p.type}{index}")
+    if not _validate.nondegenerate(v, f).any():
+        # Mitsuba loads such a mesh and it draws nothing; so does voxgi
+        notes.drop(f"{p.label()} {name!r}: every face has zero area")
+        return []
     albedo = clamp_albedo(albedo, p.label(), notes)
     if max(emission) > 0 and two_sided:
         # Mitsuba's area emitter lights the front side only, whatever the
@@ -297,12 +311,12 @@ def _sensor(p: Plugin, notes: Notes) -> dict | None:
     if p.type not in ("perspective", "thinlens"):
         notes.drop(f"{p.label()} (no camera)")
         return None
-    films = [c for c in p.children if c.tag == "film"]
+    films = p.nested("film")
     width = int(films[0].props.get("width", 768)) if films else 768
     height = int(films[0].props.get("height", 576)) if films else 576
     if width < 1 or height < 1:
         raise ValueError(f"{p.where()}: film size {width}x{height} must be positive")
-    filters = [c for c in films[0].children if c.tag == "rfilter"] if films else []
+    filters = films[0].nested("rfilter") if films else []
     rfilter = filters[0].type if filters else "gaussian"  # Mitsuba's default
     pixel_filter = "box"
     if (
@@ -389,10 +403,6 @@ def load_mitsuba(path, *, search_paths=(), allow_outside=False, limits=None) -> 
     access = FileAccess(path, search_paths, allow_outside, limits)
     reader = XmlReader(path, access)
     root = parse_xml(path, access)
-    version = root.attrs.get("version", "")
-    # Mitsuba 2 and 3 share their XML; 0.x spelled property names differently
-    if version and not version.startswith(("2.", "3.")):
-        reader.notes.approx(f"scene version {version} read as Mitsuba 3 XML")
     try:
         return _read_mitsuba(reader, path, root)
     except RecursionError:
