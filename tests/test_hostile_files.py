@@ -198,7 +198,7 @@ def _(d):
 
 @probe(
     "xml: 9 files including the next 10 times", r"inc\d\.xml: line 2: <include>: 10,001 included"
-)  # noqa: E501
+)
 def _(d):
     for k in range(1, 9):
         (d / f"inc{k}.xml").write_text(
