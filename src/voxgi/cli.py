@@ -122,7 +122,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_render_arguments(r: argparse.ArgumentParser) -> None:
     """Add the ``render`` subcommand's arguments to its parser ``r``."""
-    from .pipeline import RENDER_DIRECTIONS, RENDER_RESOLUTION
+    from .radiosity.tuning import TRACED_RADIUS
+    from .voxels import DEFAULT_RESOLUTION
 
     r.add_argument(
         "scene",
@@ -142,16 +143,19 @@ def _add_render_arguments(r: argparse.ArgumentParser) -> None:
         "--resolution",
         metavar="N",
         type=_at_least(2),
-        default=RENDER_RESOLUTION,
+        default=DEFAULT_RESOLUTION,
         help="voxels along the scene's longest side",
     )
     r.add_argument(
-        "--directions",
+        "--radius",
         metavar="R",
         type=_at_least(1),
-        default=RENDER_DIRECTIONS,
-        help="radius R of the solve's gathering direction set",
+        default=TRACED_RADIUS,
+        help="radius R of the solve's gathering direction set, whose answer its traced "
+        "passes finish",
     )
+    # the option's former name, kept working
+    r.add_argument("--directions", dest="radius", type=_at_least(1), help=argparse.SUPPRESS)
     _add_display_arguments(r)
     _add_path_arguments(r)
     r.add_argument(
@@ -398,12 +402,10 @@ def _run_voxelize(args, scene):
 
 def _run_solve(args, vox):
     """Solve the radiosity for the display and report it; returns ``(sol, seconds)``."""
-    from .pipeline import solve_for_display
+    from .pipeline import solve
 
     t0 = time.perf_counter()
-    sol = solve_for_display(
-        vox, directions=args.directions, threads=args.threads, progress=not args.quiet
-    )
+    sol = solve(vox, radius=args.radius, threads=args.threads, progress=not args.quiet)
     t_sol = time.perf_counter() - t0
     traced = sol.stats.get("traced")
     then = (
@@ -470,7 +472,7 @@ def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
         "height": cam.height,
         "resolution": vox.resolution,
         "records": len(vox),
-        "directions": args.directions,
+        "radius": res.solution.stats["directions"]["gather"]["radius"],
         "frames": res.frames,
         "max_frames": args.frames,
         "tol": args.tol,
