@@ -118,7 +118,7 @@ def test_the_display_bar_counts_towards_the_frames_it_needs(monkeypatch):
     monkeypatch.setattr("sys.stderr", tty)
     scene = voxgi.scenes.cornell_box(width=32, height=32)
     vox = voxgi.voxelize(scene, resolution=16, progress=False)
-    sol = voxgi.pipeline.solve_for_display(vox, progress=False)
+    sol = voxgi.solve(vox, progress=False)
     res = voxgi.display.render(scene, sol, tol=0.5, max_frames=256, progress=True)
     drawn = [(int(n), int(m)) for n, m in re.findall(r"(\d+)/(\d+) \[", tty.getvalue())]
     assert drawn, tty.getvalue()
