@@ -200,6 +200,8 @@ def _add_compare_arguments(c: argparse.ArgumentParser) -> None:
 
 def _add_display_arguments(r: argparse.ArgumentParser) -> None:
     """Add the ``render`` options of the display and its image (frames to seed)."""
+    from .io import TONEMAPS
+
     r.add_argument(
         "--frames",
         "--spp",
@@ -221,8 +223,16 @@ def _add_display_arguments(r: argparse.ArgumentParser) -> None:
         "--exposure",
         metavar="EV",
         type=_finite(),
-        default=0.0,
-        help="exposure of the PNG preview in stops (the EXR stays linear)",
+        default=None,
+        help="exposure of the PNG preview in stops (the EXR stays linear) (default: the "
+        "exposure that maps the image's log-average luminance to middle grey, 0.18)",
+    )
+    r.add_argument(
+        "--tonemap",
+        choices=TONEMAPS,
+        default="reinhard",
+        help="tone curve of the PNG preview: 'reinhard' compresses the highlights so "
+        "that only the brightest 0.1%% of pixels reach white, 'clip' clips at 1",
     )
     r.add_argument(
         "--width",
@@ -413,7 +423,7 @@ def _timings(t_vox: float, t_sol: float, sec: dict) -> dict:
     return timings
 
 
-def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
+def _render_metadata(args, name: str, cam, vox, res, timings: dict, exposure: float) -> dict:
     """The EXR header's record of the render: its settings, sizes and timings."""
     s = res.stats
     return {
@@ -433,7 +443,9 @@ def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
         "gather_per_frame": s["gather_per_frame"],
         "light_spread": s["light_spread"],
         "seed": args.seed,
-        "exposure": args.exposure,
+        "exposure": exposure,
+        "exposure_auto": args.exposure is None,
+        "tonemap": args.tonemap,
         "interrupted": bool(s.get("interrupted")),
         "seconds": timings,
         "skipped": s["skipped"],
@@ -466,12 +478,13 @@ def run_render(args) -> int:
         return _interrupted("interrupted before the first display frame finished; nothing written")
     _report_display(args, res, interrupted)
     timings = _timings(t_vox, t_sol, res.stats["seconds"])
-    meta = _render_metadata(args, name, cam, vox, res, timings)
+    exposure = io.auto_exposure(res.image) if args.exposure is None else args.exposure
+    meta = _render_metadata(args, name, cam, vox, res, timings, exposure)
     # Each write is atomic (voxgi.io.atomic_path): a Ctrl-C here leaves every
     # file either as it was or complete.
     try:
         io.write_exr(exr, res.image, metadata=meta, stderr=res.stderr)
-        io.write_png(png, res.image, exposure=args.exposure)
+        io.write_png(png, res.image, exposure=exposure, tonemap=args.tonemap)
     except KeyboardInterrupt:
         return _interrupted("interrupted while writing; the outputs are whole (old or new)")
     if interrupted:

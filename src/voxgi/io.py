@@ -18,7 +18,16 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["atomic_path", "read_exr", "read_exr_header", "to_srgb8", "write_exr", "write_png"]
+__all__ = [
+    "TONEMAPS",
+    "atomic_path",
+    "auto_exposure",
+    "read_exr",
+    "read_exr_header",
+    "to_srgb8",
+    "write_exr",
+    "write_png",
+]
 
 
 def _umask() -> int:
@@ -184,25 +193,105 @@ def read_exr_header(path) -> dict:
     return out
 
 
-def to_srgb8(image, exposure: float = 0.0) -> np.ndarray:
-    """Tone-map linear radiance to 8-bit sRGB: scale by ``2**exposure``,
-    clip to [0, 1], apply the sRGB transfer curve. NaN maps to 0."""
+TONEMAPS = ("reinhard", "clip")
+"""The PNG preview's tone curves (:func:`to_srgb8`)."""
+
+_KEY = 0.18  # Reinhard et al. 2002: the "normal" key, middle grey
+_WHITE_PERCENTILE = 99.9  # the white point ignores the brightest 0.1% (fireflies)
+_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 / sRGB primaries
+
+
+def _finite_image(image) -> np.ndarray:
+    img = _check_image(image).astype(np.float64)
+    return np.clip(np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0), 0.0, None)
+
+
+def _check_exposure(exposure) -> float:
     if isinstance(exposure, bool) or not isinstance(exposure, (int, float, np.number)):
         raise TypeError(f"exposure: expected a number, got {exposure!r}")
     if not np.isfinite(exposure):
         raise ValueError(f"exposure: must be finite, got {exposure}")
-    img = _check_image(image).astype(np.float64) * (2.0 ** float(exposure))
-    img = np.clip(np.nan_to_num(img, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+    return float(exposure)
+
+
+def auto_exposure(image) -> float:
+    """The exposure, in stops, that maps an image's log-average luminance to
+    middle grey (0.18).
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) array
+        Linear radiance; NaN, infinite and negative values count as 0.
+
+    Returns
+    -------
+    exposure : float
+        ``log2(0.18 / Lavg)`` with ``Lavg = exp(mean(log(1e-6 + L)))`` over
+        the pixels' luminance ``L`` (Reinhard et al. 2002, "Photographic Tone
+        Reproduction for Digital Images", eq. 1-2); 0 for a black image.
+    """
+    lum = _finite_image(image) @ _LUMINANCE
+    if not np.any(lum > 0.0):
+        return 0.0
+    log_average = float(np.exp(np.mean(np.log(1e-6 + lum))))
+    return float(np.log2(_KEY / log_average))
+
+
+def to_srgb8(image, exposure: float = 0.0, tonemap: str = "clip") -> np.ndarray:
+    """Tone-map linear radiance to 8-bit sRGB.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) array
+        Linear radiance. NaN and negative values map to black, +inf to white.
+    exposure : float, optional
+        Scale by ``2**exposure`` first.
+    tonemap : {"clip", "reinhard"}, optional
+        ``"clip"``: clip to [0, 1]. ``"reinhard"``: Reinhard et al.'s extended
+        curve ``x (1 + x / w²) / (1 + x)`` per channel, with the white point
+        ``w`` the larger of 1 and the 99.9th percentile of the exposed
+        luminance: the identity where nothing exceeds 1, otherwise the
+        highlights are compressed so that only the brightest 0.1% reach white.
+        Then the sRGB transfer curve.
+
+    Returns
+    -------
+    srgb : (H, W, 3) uint8
+    """
+    exposure = _check_exposure(exposure)
+    if tonemap not in TONEMAPS:
+        raise ValueError(f"tonemap: expected one of {TONEMAPS}, got {tonemap!r}")
+    # Bounded so that the curve's x² stays finite in float64 for any exposure.
+    img = np.minimum(_finite_image(image) * (2.0**exposure), 1e150)
+    burnt = np.isposinf(_check_image(image))
+    if tonemap == "reinhard":
+        white = max(1.0, float(np.percentile(img @ _LUMINANCE, _WHITE_PERCENTILE)))
+        img = img / (1.0 + img) * (1.0 + img / (white * white))
+    img = np.where(burnt, 1.0, np.clip(img, 0.0, 1.0))
     srgb = np.where(img <= 0.0031308, 12.92 * img, 1.055 * np.power(img, 1 / 2.4) - 0.055)
     return np.round(srgb * 255.0).astype(np.uint8)
 
 
-def write_png(path, image, exposure: float = 0.0) -> Path:
-    """Write a tone-mapped 8-bit sRGB PNG preview of a linear image."""
+def write_png(path, image, exposure: float | None = None, tonemap: str = "reinhard") -> Path:
+    """Write a tone-mapped 8-bit sRGB PNG preview of a linear image.
+
+    Parameters
+    ----------
+    path : str or Path
+    image : (H, W, 3) or (H, W) array
+        Linear radiance.
+    exposure : float, optional
+        Exposure in stops; ``None`` chooses it from the image
+        (:func:`auto_exposure`).
+    tonemap : {"reinhard", "clip"}, optional
+        The tone curve (:func:`to_srgb8`).
+    """
     from skimage.io import imsave
 
     path = Path(path)
-    srgb = to_srgb8(image, exposure)
+    if exposure is None:
+        exposure = auto_exposure(image)
+    srgb = to_srgb8(image, exposure, tonemap)
     with atomic_path(path) as tmp:
         imsave(str(tmp), srgb, check_contrast=False)
     return path
