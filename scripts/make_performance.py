@@ -3,7 +3,9 @@
 Run: ``python scripts/make_performance.py`` (``--check`` exits 1 if the
 committed page differs from what the JSON gives, ``--stdout`` prints it).
 Every table names the command that writes its JSON; re-run that command,
-then this script, to refresh the page.
+then this script, to refresh the page. The page's last part, from the
+``KEPT`` marker on, is written by hand (one-off measurements behind the
+rules of ``docs/design.md``): the script keeps it as it is.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 OUT = ROOT / "docs" / "performance.md"
+#: The line from which the page is written by hand and kept as it is.
+KEPT = "<!-- Written by hand from here on; scripts/make_performance.py keeps it as it is. -->"
 
 
 def load(name: str) -> dict | None:
@@ -1117,7 +1121,8 @@ def build() -> str:
         "on the records, coarser later bounces, energy balance, linear cost, throughput, "
         "the paper's work unit, voxelization, the paper's tables, time against error "
         "versus Mitsuba 3, interiors, the display's error estimate, every pixel of the "
-        "furnace, what the display's noise is made of, what a ray costs, distribution.",
+        "furnace, what the display's noise is made of, what a ray costs, distribution; "
+        "then, written by hand, the measurements behind the design's rules.",
         "",
     ]
     for part in (
@@ -1141,7 +1146,14 @@ def build() -> str:
         distributed,
     ):
         lines += part()
-    return "\n".join(lines).rstrip() + "\n"
+    return "\n".join(lines).rstrip() + "\n\n" + kept_part()
+
+
+def kept_part() -> str:
+    """The hand-written end of the current page, from the :data:`KEPT` marker on."""
+    text = OUT.read_text() if OUT.exists() else ""
+    at = text.find(KEPT)
+    return text[at:] if at >= 0 else KEPT + "\n"
 
 
 def main(argv: list[str] | None = None) -> int:
