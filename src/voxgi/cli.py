@@ -93,7 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="voxelize, solve and render a scene to EXR + PNG",
         description="Render a scene to a linear EXR and a tone-mapped PNG preview beside it. "
         "The EXR also holds each pixel's estimated standard error in the channels "
-        "stderr.R, stderr.G, stderr.B. "
+        "stderr.R, stderr.G, stderr.B, and the pixel AOVs of the camera hits: "
+        "albedo.R/G/B, normal.X/Y/Z, depth.Z and object_id. "
         "Exit codes: 0 done, 1 a scene or value that cannot be used, 2 a bad "
         "command line or an output that cannot be written (checked before any "
         "work), 130 interrupted by Ctrl-C (a partial image is written only if a "
@@ -485,7 +486,7 @@ def run_render(args) -> int:
     # Each write is atomic (voxgi.io.atomic_path): a Ctrl-C here leaves every
     # file either as it was or complete.
     try:
-        io.write_exr(exr, res.image, metadata=meta, stderr=res.stderr)
+        io.write_exr(exr, res.image, metadata=meta, stderr=res.stderr, layers=res.exr_layers())
         io.write_png(png, res.image, exposure=exposure, tonemap=args.tonemap)
     except KeyboardInterrupt:
         return _interrupted("interrupted while writing; the outputs are whole (old or new)")

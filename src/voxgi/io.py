@@ -23,6 +23,7 @@ __all__ = [
     "atomic_path",
     "auto_exposure",
     "read_exr",
+    "read_exr_channels",
     "read_exr_header",
     "to_srgb8",
     "write_exr",
@@ -100,7 +101,9 @@ def _check_image(image, what: str = "image") -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
-def write_exr(path, image, metadata: dict | None = None, *, stderr=None) -> Path:
+def write_exr(
+    path, image, metadata: dict | None = None, *, stderr=None, layers: dict | None = None
+) -> Path:
     """Write a linear RGB float32 OpenEXR file (ZIP compression).
 
     Parameters
@@ -115,6 +118,11 @@ def write_exr(path, image, metadata: dict | None = None, *, stderr=None) -> Path
         Per-pixel standard error of ``image`` (``RenderResult.stderr``),
         written as the channels ``stderr.R``, ``stderr.G``, ``stderr.B``
         (read back with ``read_exr(path, layer="stderr")``).
+    layers : dict, optional
+        More channels, ``name -> (H, W) array`` of the image's height and
+        width, written as float32 (``RenderResult.exr_layers()``: the pixel
+        AOVs ``albedo.R``, ``normal.X``, ``depth.Z``, ...); read back with
+        :func:`read_exr_channels`, or ``read_exr(path, layer="albedo")``.
     """
     import OpenEXR
 
@@ -127,6 +135,15 @@ def write_exr(path, image, metadata: dict | None = None, *, stderr=None) -> Path
         channels.update(
             {f"stderr.{c}": np.ascontiguousarray(se[:, :, i]) for i, c in enumerate("RGB")}
         )
+    for name, a in (layers or {}).items():
+        if not isinstance(name, str) or not name or name in channels or name in "RGB":
+            raise ValueError(f"layers: bad or repeated channel name {name!r}")
+        arr = np.asarray(a)
+        if arr.dtype == object or not np.issubdtype(arr.dtype, np.number):
+            raise TypeError(f"layers[{name!r}]: expected a numeric array, got dtype {arr.dtype}")
+        if arr.shape != img.shape[:2]:
+            raise ValueError(f"layers[{name!r}]: expected shape {img.shape[:2]}, got {arr.shape}")
+        channels[name] = np.ascontiguousarray(arr, dtype=np.float32)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for k, v in (metadata or {}).items():
         header[f"voxgi_{k}"] = v if isinstance(v, str) else json.dumps(v, default=float)
@@ -139,14 +156,14 @@ def write_exr(path, image, metadata: dict | None = None, *, stderr=None) -> Path
     return path
 
 
-def _open_exr(path: Path):
+def _open_exr(path: Path, **options):
     """Open an EXR for reading: FileNotFoundError if absent, ValueError if unreadable."""
     import OpenEXR
 
     if not path.exists():
         raise FileNotFoundError(f"EXR file not found: {path}")
     try:
-        return OpenEXR.File(str(path))
+        return OpenEXR.File(str(path), **options)
     except RuntimeError as exc:  # not an EXR, truncated, unreadable
         raise ValueError(f"{path}: cannot be read as OpenEXR ({exc})") from None
 
@@ -155,7 +172,8 @@ def read_exr(path, layer: str | None = None) -> np.ndarray:
     """Read an OpenEXR file's RGB channels as (H, W, 3) float32.
 
     ``layer`` reads the channels ``<layer>.R``, ``<layer>.G``, ``<layer>.B``
-    instead (``"stderr"``: the error estimate :func:`write_exr` stores).
+    (or ``.X``, ``.Y``, ``.Z``) instead (``"stderr"``: the error estimate
+    :func:`write_exr` stores; ``"albedo"``, ``"normal"``: the pixel AOVs).
     """
     path = Path(path)
     with _open_exr(path) as f:
@@ -165,6 +183,8 @@ def read_exr(path, layer: str | None = None) -> np.ndarray:
                 px = ch[layer].pixels
             elif all(f"{layer}.{c}" in ch for c in "RGB"):
                 px = np.stack([ch[f"{layer}.{c}"].pixels for c in "RGB"], axis=-1)
+            elif all(f"{layer}.{c}" in ch for c in "XYZ"):
+                px = np.stack([ch[f"{layer}.{c}"].pixels for c in "XYZ"], axis=-1)
             else:
                 raise ValueError(f"{path}: no {layer}.R/G/B channels (has {sorted(ch)})")
         elif "RGB" in ch:
@@ -176,6 +196,17 @@ def read_exr(path, layer: str | None = None) -> np.ndarray:
         else:
             raise ValueError(f"{path}: no RGB or Y channels (has {sorted(ch)})")
     return np.ascontiguousarray(px, dtype=np.float32)
+
+
+def read_exr_channels(path) -> dict:
+    """Every channel of an EXR file, by its full name (``R``, ``stderr.R``,
+    ``albedo.R``, ``depth.Z``, ...), as (H, W) float32."""
+    path = Path(path)
+    with _open_exr(path, separate_channels=True) as f:
+        return {
+            name: np.ascontiguousarray(c.pixels, dtype=np.float32)
+            for name, c in f.channels().items()
+        }
 
 
 def read_exr_header(path) -> dict:
