@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ def _colour(v, p: Plugin, key: str, notes: Notes) -> np.ndarray:
         return v.astype(np.float64)
     if isinstance(v, Plugin) and v.tag == "texture":
         if v.type == "bitmap" and "filename" in v.props:
-            img_path = v.file.parent / str(v.props["filename"])
+            img_path = Path(str(v.props["filename"]))  # resolved by the reader
             try:
                 from PIL import Image  # (a scikit-image dependency)
 
@@ -56,7 +57,7 @@ def _colour(v, p: Plugin, key: str, notes: Notes) -> np.ndarray:
 
 def _bsdf(p: Plugin, notes: Notes) -> tuple[np.ndarray, bool]:
     """(albedo, two_sided) of a BSDF plugin (docs/design.md §12)."""
-    nested = [c for c in p.children if c.tag == "bsdf"]
+    nested = p.nested("bsdf")
     if p.type == "diffuse":
         return _colour(p.props.get("reflectance", 0.5), p, "reflectance", notes), False
     if p.type in _WRAPPER_BSDFS:
@@ -79,6 +80,11 @@ def _bsdf(p: Plugin, notes: Notes) -> tuple[np.ndarray, bool]:
         (a0, s0), (a1, s1) = _bsdf(nested[0], notes), _bsdf(nested[1], notes)
         notes.approx(f"{p.label()}: the blend of its BSDFs' albedos")
         return (1 - w) * a0 + w * a1, s0 and s1
+    if p.type in _TWO_SIDED_BSDFS:
+        notes.approx(
+            f"glass {p.label()}: an opaque diffuse surface of albedo 0.5 (no light passes it)"
+        )
+        return np.full(3, 0.5), True
     key = next((k for k in _ALBEDO_KEYS if k in p.props), None)
     albedo = np.full(3, 0.5) if key is None else _colour(p.props[key], p, key, notes)
     notes.approx(f"{p.label()}: diffuse with albedo {'0.5' if key is None else key}")
@@ -143,7 +149,7 @@ def _scene_emitter(p: Plugin, data: SceneData, notes: Notes) -> None:
         else:
             if "filename" not in p.props:
                 raise ValueError(f"{p.where()}: missing property 'filename'")
-            image = p.file.parent / str(p.props["filename"])
+            image = Path(str(p.props["filename"]))  # resolved by the reader
             data.environment = {
                 "image": str(image),
                 "scale": float(p.props.get("scale", 1.0)),
@@ -188,16 +194,24 @@ def _shape_mesh(p: Plugin) -> tuple[np.ndarray, np.ndarray, str | None]:
     else:
         if "filename" not in p.props:
             raise ValueError(f"{p.where()}: missing property 'filename'")
-        mesh_path = p.file.parent / str(p.props["filename"])
+        mesh_path = Path(str(p.props["filename"]))  # resolved by the reader
         if not mesh_path.exists():
             raise ValueError(f"{p.where()}: mesh file not found: {mesh_path}")
         if p.type == "serialized":
             v, f = read_serialized(mesh_path, int(p.props.get("shape_index", 0)))
         else:
             try:
-                mesh = trimesh.load(
-                    mesh_path, file_type=p.type, force="mesh", process=False, maintain_order=True
-                )
+                with warnings.catch_warnings():
+                    # trimesh's numpy warnings on a mesh's texture coordinates
+                    # (an all-NaN median) say nothing about the geometry read
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                    mesh = trimesh.load(
+                        mesh_path,
+                        file_type=p.type,
+                        force="mesh",
+                        process=False,
+                        maintain_order=True,
+                    )
                 v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
             except Exception as exc:
                 raise ValueError(f"{p.where()}: cannot load mesh {mesh_path}: {exc}") from None
@@ -217,14 +231,23 @@ def _shape_mesh(p: Plugin) -> tuple[np.ndarray, np.ndarray, str | None]:
     return v, np.ascontiguousarray(f), source
 
 
+def _has_area(v: np.ndarray, f: np.ndarray) -> bool:
+    """Whether any face has an area, by :class:`~voxgi.Scene`'s rule for
+    degenerate faces (twice the area against the longest edge squared)."""
+    t = v[f]
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    dbl_area = np.linalg.norm(np.cross(e1, e2), axis=1)
+    edge2 = np.max([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e2 - e1)], axis=0)
+    return bool(np.any(dbl_area > 1e-12 * edge2))
+
+
 def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
     """The meshes of a shape plugin: one, or two for a two-sided emitter."""
     if p.type not in ("obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk"):
         notes.drop(f"{p.label()} at line {p.line}")
         return []
-    bsdfs = [c for c in p.children if c.tag == "bsdf"]
-    emitters = [c for c in p.children if c.tag == "emitter"]
-    for c in p.children:
+    bsdfs, emitters = p.nested("bsdf"), p.nested("emitter")
+    for c in [*p.children, *(v for v in p.props.values() if isinstance(v, Plugin))]:
         if c.tag not in ("bsdf", "emitter"):
             notes.drop(f"{c.label()} inside {p.label()}")
     emission = np.zeros(3)
@@ -237,6 +260,10 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
         albedo, two_sided = np.full(3, 0.0 if emitters else 0.5), False
     v, f, source = _shape_mesh(p)
     name = p.id or (Path(source).stem if source else f"{p.type}{index}")
+    if not _has_area(v, f):
+        # Mitsuba loads such a mesh and it draws nothing; so does voxgi
+        notes.drop(f"{p.label()} {name!r}: every face has zero area")
+        return []
     albedo = clamp_albedo(albedo, p.label(), notes)
     if max(emission) > 0 and two_sided:
         # Mitsuba's area emitter lights the front side only, whatever the
@@ -275,12 +302,12 @@ def _sensor(p: Plugin, notes: Notes) -> dict | None:
     if p.type not in ("perspective", "thinlens"):
         notes.drop(f"{p.label()} (no camera)")
         return None
-    films = [c for c in p.children if c.tag == "film"]
+    films = p.nested("film")
     width = int(films[0].props.get("width", 768)) if films else 768
     height = int(films[0].props.get("height", 576)) if films else 576
     if width < 1 or height < 1:
         raise ValueError(f"{p.where()}: film size {width}x{height} must be positive")
-    filters = [c for c in films[0].children if c.tag == "rfilter"] if films else []
+    filters = films[0].nested("rfilter") if films else []
     rfilter = filters[0].type if filters else "gaussian"  # Mitsuba's default
     pixel_filter = "box"
     if (
@@ -362,10 +389,6 @@ def load_mitsuba(path) -> SceneData:
     path = Path(path)
     reader = XmlReader(path)
     root = parse_xml(path)
-    version = root.attrs.get("version", "")
-    # Mitsuba 2 and 3 share their XML; 0.x spelled property names differently
-    if version and not version.startswith(("2.", "3.")):
-        reader.notes.approx(f"scene version {version} read as Mitsuba 3 XML")
     try:
         return _read_mitsuba(reader, path, root)
     except RecursionError:

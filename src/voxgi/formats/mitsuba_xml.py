@@ -54,7 +54,46 @@ def parse_xml(path: Path) -> Node:
         raise ValueError(
             f"scene file {path}: line {root[0].line}: expected a <scene> root, got <{root[0].tag}>"
         )
+    version = root[0].attrs.get("version")
+    if version is not None and _version(version, path, root[0]) < (2, 0, 0):
+        _upgrade_names(root[0])
     return root[0]
+
+
+def _version(text: str, path: Path, node: Node) -> tuple[int, int, int]:
+    """A file's ``version="major.minor.patch"`` as a tuple."""
+    m = re.fullmatch(r"\s*(\d+)(?:\.(\d+))?(?:\.(\d+))?\s*", text)
+    if m is None:
+        raise ValueError(
+            f"scene file {path}: line {node.line}: <scene version={text!r}>: "
+            "not a version number like 0.5.0 or 3.0.0"
+        )
+    return tuple(int(g or 0) for g in m.groups())
+
+
+def _underscore_case(name: str) -> str:
+    """Mitsuba 3's upgrade of a camelCase parameter name: an underscore and
+    lower case where a lower-case letter meets an upper-case one, the rest of
+    that upper-case run lowered too (``toWorld`` to ``to_world``, ``intIOR`` to
+    ``int_ior``; ``IOR`` and ``to_world`` stay)."""
+    return re.sub(r"(?<=[a-z])([A-Z]+)", lambda m: "_" + m.group(1).lower(), name)
+
+
+def _upgrade_names(node: Node) -> None:
+    """Upgrade a Mitsuba 0.x file's tree in place, as Mitsuba 3 does for files
+    of version below 2.0.0: every property name of every object in
+    underscore_case, and a ``diffuse`` BSDF's ``diffuse_reflectance`` becomes
+    its ``reflectance``. (Mitsuba 3 also turns a texture's ``uoffset``,
+    ``vscale``, ... into ``to_uv``; voxgi reduces textures to their mean
+    colour, which no placement changes.)"""
+    for child in node.children:
+        name = child.attrs.get("name")
+        if name is not None and node.tag in PLUGIN_TAGS:
+            name = _underscore_case(name)
+            if node.attrs.get("type") == "diffuse" and name == "diffuse_reflectance":
+                name = "reflectance"
+            child.attrs["name"] = name
+        _upgrade_names(child)
 
 
 #: Plugin tags of Mitsuba 3 XML (objects with a ``type``).
@@ -114,6 +153,14 @@ class Plugin:
 
     def label(self) -> str:
         return f"{self.tag} {self.type!r}" + (f" (id {self.id!r})" if self.id else "")
+
+    def nested(self, tag: str) -> list[Plugin]:
+        """The objects of kind ``tag`` inside, in the file's order, whether
+        nested bare or by name (``<ref name="bsdf" id="..."/>``)."""
+        return [
+            c for c in [*self.children, *self.props.values()]
+            if isinstance(c, Plugin) and c.tag == tag
+        ]  # fmt: skip
 
 
 class XmlReader:
