@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["available", "denoise"]
+__all__ = ["available", "denoise", "load_oidn"]
 
 _EXTRA = 'pip install "voxgi[denoise]"'
 
 
-def _oidn():
+def load_oidn():
+    """The ``mitsuba_oidn`` module; ImportError naming the extra without it."""
     try:
         import mitsuba_oidn
     except ImportError as exc:
@@ -32,7 +33,7 @@ def _oidn():
 def available() -> bool:
     """True when OIDN can be imported (the ``denoise`` extra is installed)."""
     try:
-        _oidn()
+        load_oidn()
     except ImportError:
         return False
     return True
@@ -92,7 +93,7 @@ def denoise(image, albedo=None, normal=None, *, clean_aux: bool = True) -> np.nd
         None if a is None else _rgb(a, n, color.shape)
         for a, n in ((albedo, "albedo"), (normal, "normal"))
     ]
-    oidn = _oidn()
+    oidn = load_oidn()
     out = oidn.denoise(
         np.maximum(color, 0.0),
         aux[0],

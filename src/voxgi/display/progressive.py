@@ -67,6 +67,10 @@ class RenderResult:
     object_id : (H, W) int32 or None
         Index in ``scene.objects`` of the object the first frame's camera ray
         met in each pixel (-1: nothing, or a one-sided back); not averaged.
+    undenoised : (H, W, 3) float32 or None
+        With ``RenderTuning(denoise=True)``: the image before denoising,
+        whose error ``stderr`` and ``stats["est_rel_mse"]`` estimate; ``image``
+        is then OIDN's output. None otherwise.
     """
 
     image: np.ndarray
@@ -78,12 +82,16 @@ class RenderResult:
     normal: np.ndarray | None = None
     depth: np.ndarray | None = None
     object_id: np.ndarray | None = None
+    undenoised: np.ndarray | None = None
 
     def exr_layers(self) -> dict:
         """The AOVs as EXR channels for :func:`voxgi.io.write_exr`'s
         ``layers``: ``albedo.R/G/B``, ``normal.X/Y/Z``, ``depth.Z`` and
-        ``object_id`` (as float32, exact for any object count under 2^24)."""
+        ``object_id`` (as float32, exact for any object count under 2^24),
+        and ``undenoised.R/G/B`` when the image was denoised."""
         out = {}
+        if self.undenoised is not None:
+            out.update({f"undenoised.{c}": self.undenoised[..., i] for i, c in enumerate("RGB")})
         for name, chans in (("albedo", "RGB"), ("normal", "XYZ")):
             a = getattr(self, name)
             if a is not None:
@@ -221,6 +229,7 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
         "eps": spec.eps,
         "skipped": skipped,
         "interrupted": interrupted,
+        "denoised": bool(opt.denoise and acc.frames > 0),
         "threads": opt.threads,
     }
 
@@ -306,7 +315,15 @@ def render(
         )
     acc, aovs, interrupted = _progressive_mean(source, opt, progress)
     image = acc.mean.reshape(opt.cam.height, opt.cam.width, 3).astype(np.float32)
+    aov = aovs.result(opt.cam.height, opt.cam.width)
     seconds.update(source.seconds)
+    undenoised = None
+    if opt.denoise and acc.frames > 0:
+        from ..denoise import denoise
+
+        t0 = time.perf_counter()
+        undenoised, image = image, denoise(image, aov["albedo"], aov["normal"])
+        seconds["denoise"] = time.perf_counter() - t0
     seconds["total"] = time.perf_counter() - t_start
     seconds["display"] = seconds["total"]
     stats = _render_stats(spec, source, acc, opt, skipped, interrupted, seconds)
@@ -316,5 +333,6 @@ def render(
         stderr=acc.stderr(image.shape),
         stats=stats,
         solution=sol,
-        **aovs.result(opt.cam.height, opt.cam.width),
+        undenoised=undenoised,
+        **aov,
     )
