@@ -621,24 +621,33 @@ def test_core_takes_misaligned_arrays_as_aligned_copies():
     np.testing.assert_array_equal(got[0], want)
 
 
-def test_core_refuses_misaligned_arrays_it_writes_into():
-    # a copy would take the answer with it: in-place outputs are never converted
-    P, n = 4, 2
+def _light_accumulate_args(P=4):
+    """Arguments of _core.light_accumulate: P pixels facing +z, one ray each
+    straight up, weight 1, none occluded, and the output (P, 3)."""
     up = np.tile(np.array([0, 0, 1], np.float32), (P, 1))
     hits = (np.zeros((P, 3)), up, up, up, np.zeros(P, np.int32))
-    count, org = np.zeros(P, np.int64), np.zeros((P * n, 3), np.float32)
-    dirs = np.zeros_like(org)
-    assert _core.gather_rays(*hits, n, 0, 0, 1e-3, count, org, dirs) == P * n
-    np.testing.assert_array_equal(count, n)  # written in place
-    assert np.allclose(org[:, 2], 1e-3)
-    with pytest.raises(ValueError, match="ray_org must be aligned"):
-        _core.gather_rays(*hits, n, 0, 0, 1e-3, count, _misaligned(org), dirs)
-    with pytest.raises(ValueError, match="ray_count must be aligned"):
-        _core.gather_rays(*hits, n, 0, 0, 1e-3, _misaligned(count), org, dirs)
-    ro = org.copy()
+    mats = (
+        np.full((1, 3), 0.5, np.float32),
+        np.zeros((1, 3), np.float32),
+        np.ones(1, np.float32),
+        np.ones(1, np.float32),
+        np.zeros(1, np.uint8),
+    )
+    rays = (np.ones(P, np.int64), up.copy(), np.ones((P, 3), np.float32), np.zeros(P, np.uint8))
+    return hits, mats, rays, np.zeros((P, 3), np.float32)
+
+
+def test_core_refuses_misaligned_arrays_it_writes_into():
+    # a copy would take the answer with it: in-place outputs are never converted
+    hits, mats, rays, out = _light_accumulate_args()
+    _core.light_accumulate(*hits, *mats, *rays, out)
+    np.testing.assert_allclose(out, 0.5 / np.pi)  # (rho / pi) cos 0 x 1, written in place
+    with pytest.raises(ValueError, match="out must be aligned"):
+        _core.light_accumulate(*hits, *mats, *rays, _misaligned(out))
+    ro = out.copy()
     ro.flags.writeable = False
-    with pytest.raises(ValueError, match="ray_org must be writeable"):
-        _core.gather_rays(*hits, n, 0, 0, 1e-3, count, ro, dirs)
+    with pytest.raises(ValueError, match="out must be writeable"):
+        _core.light_accumulate(*hits, *mats, *rays, ro)
 
 
 def test_core_linesystem_out_of_range_indices():
@@ -721,18 +730,16 @@ def test_core_display_bad_arrays():
     ]:
         with pytest.raises((TypeError, ValueError)):
             _core.shade_brdf(*args)
-    cnt = np.array([2, 2], np.int64)
-    contrib = np.ones((4, 3), np.float32)
-    occ = np.zeros(4, np.uint8)
-    assert _core.vpl_accumulate(cnt, contrib, occ).shape == (2, 3)
-    for args in [
-        (np.array([2, 3], np.int64), contrib, occ),  # counts exceed the rays
-        (np.array([-1, 5], np.int64), contrib, occ),
-        (cnt, contrib, occ[:3].copy()),
-        (cnt.astype(np.int32), contrib, occ),
+    hits, mats, (cnt, dirs, weight, occ), out = _light_accumulate_args()
+    for rays in [
+        (np.array([2, 3, 0, 0], np.int64), dirs, weight, occ),  # counts exceed the rays
+        (np.array([-1, 5, 0, 0], np.int64), dirs, weight, occ),
+        (cnt, dirs, weight, occ[:3].copy()),
+        (cnt.astype(np.int32), dirs, weight, occ),
+        (cnt, dirs, weight[:3].copy(), occ),
     ]:
         with pytest.raises((TypeError, ValueError)):
-            _core.vpl_accumulate(*args)
+            _core.light_accumulate(*hits, *mats, *rays, out)
 
 
 def test_core_gather_families_bad_indices():

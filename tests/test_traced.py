@@ -34,8 +34,7 @@ def _parallel_squares(h: float = 0.5, top_albedo: float = 0.5):
     return scene
 
 
-@pytest.mark.parametrize("native", [True, False])
-def test_a_point_under_a_square_gathers_its_form_factor(native):
+def test_a_point_under_a_square_gathers_its_form_factor():
     # Radiosity 1 on the top square, 0 on the floor: a floor record gathers
     # the point-to-rectangle form factor at its surface point. Rays drawn
     # uniformly over the hemisphere instead of by cos θ would give the solid
@@ -45,7 +44,7 @@ def test_a_point_under_a_square_gathers_its_form_factor(native):
     vox = voxgi.voxelize(scene, 8, progress=False)
     values = np.where((vox.object_id == 1)[:, None], 1.0, 0.0) * np.ones((1, 3))
     floor = np.flatnonzero((vox.object_id == 0) & ~vox.back & (vox.area > 0))
-    with TracedGather(scene, vox, threads=2, native=native) as g:
+    with TracedGather(scene, vox, threads=2) as g:
         H = g(values, 4096, seed=3)
         assert g.rays == 4096 * np.count_nonzero((vox.area > 0) & (vox.albedo[:, 0] > 0))
     for r in floor:

@@ -194,6 +194,11 @@ def _add_compare_arguments(c: argparse.ArgumentParser) -> None:
         default=None,
         help="folder for voxgi.exr, reference.exr, difference.png (default: compare_SCENE)",
     )
+    c.add_argument(
+        "--no-denoise",
+        action="store_true",
+        help="leave out Mitsuba + OIDN (the denoised sweep; it needs mitsuba-oidn)",
+    )
     c.add_argument("--plot", action="store_true", help="also plot relMSE against seconds")
     c.add_argument("--seed", metavar="S", type=int, default=0, help="voxgi's seed")
     c.add_argument(
@@ -538,6 +543,7 @@ def run_compare(args) -> int:
             threads=args.threads,
             out_dir=out_dir,
             plot=args.plot,
+            denoise=not args.no_denoise,
         )
     except ImportError as exc:
         raise SystemExit(f"voxgi compare: error: {exc}") from None
