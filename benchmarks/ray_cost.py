@@ -93,8 +93,8 @@ def time_rays(tracer: Tracer, rays: dict, repeats: int) -> dict:
 
 def measure(name: str, size: int, repeats: int) -> dict:
     scene = voxgi.scenes.get(name, width=size, height=size)
-    vox = voxgi.voxelize(scene, resolution=voxgi.pipeline.RENDER_RESOLUTION, progress=False)
-    sol = voxgi.pipeline.solve_for_display(vox, progress=False)
+    vox = voxgi.voxelize(scene)
+    sol = voxgi.solve(vox, progress=False)
     out = voxgi.render(scene, sol, progress=False)
     st, sec = out.stats, out.stats["seconds"]
     pixel_frames = size * size * out.frames

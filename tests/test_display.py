@@ -17,6 +17,7 @@ import threading
 import numpy as np
 import pytest
 import trimesh
+from conftest import paper
 
 import voxgi
 from voxgi.display import VPLSampler, camera_rays, frame_samples
@@ -61,7 +62,7 @@ def triangle_solution(scene: voxgi.Scene, radiosity) -> Solution:
 def real_solution(scene, resolution=32, directions=8):
     """voxelize + solve."""
     vox = voxgi.voxelize(scene, resolution=resolution)
-    return voxgi.solve(vox, directions=directions)
+    return voxgi.solve(vox, radius=directions, tuning=paper())
 
 
 # -- the normalisation: furnaces ----------------------------------------------------------
@@ -280,7 +281,9 @@ def test_indirect_filter_keeps_the_answer_and_cuts_the_noise():
     runs = {}
     for radius in (0, 1):
         tuning = voxgi.RenderTuning(gather=9, indirect_filter=radius)
-        out = voxgi.render(scene, sol, 16, max_frames=32, tol=0.0, progress=False, tuning=tuning)
+        out = voxgi.display.render(
+            scene, sol, vpls_per_frame=16, max_frames=32, tol=0.0, progress=False, tuning=tuning
+        )
         assert out.stats["indirect_filter"] == radius
         runs[radius] = out
     for out in runs.values():
@@ -551,7 +554,7 @@ def test_render_errors():
     with pytest.raises(TypeError, match="sol"):
         voxgi.render(scene, sol.radiosity, progress=False)
     with pytest.raises(ValueError, match="vpls_per_frame"):
-        voxgi.render(scene, sol, vpls_per_frame=0, progress=False)
+        voxgi.display.render(scene, sol, vpls_per_frame=0, progress=False)
     with pytest.raises(ValueError, match="max_frames"):
         voxgi.render(scene, sol, max_frames=0, progress=False)
     with pytest.raises(ValueError, match="tol"):
@@ -775,9 +778,7 @@ def test_image_does_not_depend_on_the_scene_position_or_scale(shift, scale):
     # 1e6 rendered at a tenth of its brightness and by 1e7 black.
     def picture(scene):
         vox = voxgi.voxelize(scene, resolution=16, progress=False)
-        sol = voxgi.solve(
-            vox, directions=4, progress=False, tuning=voxgi.SolveTuning(shoot_directions=6)
-        )
+        sol = voxgi.solve(vox, radius=4, progress=False, tuning=paper(shoot_radius=6))
         return voxgi.render(scene, sol, max_frames=8, tol=0, seed=3, progress=False).image
 
     ref = picture(_moved_cornell(0.0, 1.0))
@@ -901,7 +902,16 @@ def test_interleaved_vpl_sets_decorrelate_the_image_mean(monkeypatch):
 
     def spread():
         means = [
-            voxgi.render(scene, sol, 16, 4, 0.0, s, False, tuning=budget).image.mean()
+            voxgi.display.render(
+                scene,
+                sol,
+                vpls_per_frame=16,
+                max_frames=4,
+                tol=0.0,
+                seed=s,
+                progress=False,
+                tuning=budget,
+            ).image.mean()
             for s in range(12)
         ]
         return float(np.std(np.array(means) * (1 - rho) - 1))

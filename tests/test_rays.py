@@ -36,7 +36,7 @@ def test_the_compiled_path_is_the_one_that_traces():
         assert isinstance(tr.native, _core.RayScene)
         assert tr.native.embree_version == embree_version()
     vox = voxgi.voxelize(scene, resolution=8, progress=False)
-    sol = voxgi.solve(vox, directions=4, progress=False)
+    sol = voxgi.solve(vox, radius=4, progress=False)
     out = voxgi.display.render(scene, sol, max_frames=1, progress=False)
     assert not any("embreex" in s or "compiled" in s for s in out.stats["skipped"])
 
