@@ -222,7 +222,7 @@ def test_one_outlier_batch_is_flagged_and_bounds_the_error(rng):
 
 
 def test_stopping_rule_waits_for_batches_and_the_worst_pixel():
-    opt = SimpleNamespace(min_frames=2, tol=1e-3, pixel_factor=1.0)
+    opt = SimpleNamespace(tol=1e-3, pixel_factor=1.0)
     acc = _Mean.empty(4)
     for f in range(7):  # the estimate after 7 batches is not yet trusted
         acc.add(np.full((4, 3), 1.0 + 1e-6 * (-1) ** f))
@@ -236,13 +236,13 @@ def test_stopping_rule_waits_for_batches_and_the_worst_pixel():
     acc = fold(frames)
     assert acc.est <= 1e-3 < acc.worst**2
     assert not acc.done(opt)
-    assert acc.done(SimpleNamespace(min_frames=2, tol=1e-3, pixel_factor=math.inf))
+    assert acc.done(SimpleNamespace(tol=1e-3, pixel_factor=math.inf))
 
 
 def test_stopping_rule_lets_one_pixel_in_1000_exceed_the_bound():
     # 2000 pixels, 16 frames: one noisy pixel (±20%) may stay over the bound
     # (at most 1 in 1000 may), two may not; pixel_share 0 asks every pixel.
-    opt = SimpleNamespace(min_frames=2, tol=1e-3, pixel_factor=1.0)
+    opt = SimpleNamespace(tol=1e-3, pixel_factor=1.0)
     frames = np.ones((16, 2000, 3))
     frames[:, 5] += 0.2 * (-1.0) ** np.arange(16)[:, None]
     assert fold(frames).done(opt)
