@@ -432,7 +432,10 @@ def _(d):
     return _load(_xml(d, body))
 
 
-@probe('xml: fov "abc"', r"scene\.xml: line 2: <sensor type=\"perspective\">: could not convert")
+@probe(
+    'xml: fov "abc"',
+    r"scene\.xml: line 2: <sensor type=\"perspective\">: property 'fov' = 'abc' is not a number",
+)
 def _(d):
     return _load(
         _xml(d, '<sensor type="perspective"><string name="fov" value="abc"/></sensor>' + RECT)
@@ -777,6 +780,43 @@ def _(d):
 def _(d):
     text = '[[object]]\nmesh = "tri.obj"\n[[light]]\ntype = "point"\nposition = [0, 1, 0]\nintensity = 1e38\n'  # noqa: E501
     return _load(_toml(d, text))
+
+
+@probe(
+    "toml: environment EXR whose header claims 10^10 pixels",
+    r"scene\.toml: \[environment\]: image .*sky\.exr \(100000x100000\): 10,000,000,000 pixels",
+)
+def _(d):
+    from voxgi import io
+
+    io.write_exr(d / "sky.exr", np.ones((1, 1, 3), np.float32))
+    raw = (d / "sky.exr").read_bytes()
+    at = raw.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
+    raw = raw[:at] + struct.pack("<iiii", 0, 0, 99_999, 99_999) + raw[at + 16 :]
+    (d / "sky.exr").write_bytes(raw)
+    return _load(_toml(d, '[[object]]\nmesh = "tri.obj"\n\n[environment]\nimage = "sky.exr"\n'))
+
+
+@probe("toml: PLY whose header claims 10^12 vertices", r"scene\.toml: object #0: .*a\.ply")
+def _(d):
+    (d / "a.ply").write_text(
+        "ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000\n"
+        "property float x\nproperty float y\nproperty float z\nelement face 1\n"
+        "property list uchar int vertex_indices\nend_header\n"
+    )
+    return _load(_toml(d, '[[object]]\nmesh = "a.ply"\n', mesh=None))
+
+
+@probe("toml: STL whose header claims 4e9 triangles", r"scene\.toml: object #0: .*c\.stl")
+def _(d):
+    (d / "c.stl").write_bytes(bytes(80) + struct.pack("<I", 4_000_000_000) + bytes(50))
+    return _load(_toml(d, '[[object]]\nmesh = "c.stl"\n', mesh=None))
+
+
+@probe("toml: OBJ face index 3e9", r"scene\.toml: object #0: cannot load mesh .*d\.obj")
+def _(d):
+    (d / "d.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3000000000\n")
+    return _load(_toml(d, '[[object]]\nmesh = "d.obj"\n', mesh=None))
 
 
 @probe("toml: camera at scale 1e-30", LOADS)

@@ -170,6 +170,21 @@ class Plugin:
     #: how the scene's files are read (path policy and limits)
     access: FileAccess | None = field(default=None, repr=False)
 
+    def number(self, key: str, default=None, kind=float):
+        """Property ``key`` (``default`` when absent) as a finite ``kind``; a
+        ValueError naming the element when it is not one (a ``<string>``
+        where a number belongs, say)."""
+        v = self.props.get(key, default)
+        try:
+            if isinstance(v, (bool, np.ndarray, Plugin)):
+                raise TypeError
+            out = kind(v)
+            if not math.isfinite(out):
+                raise ValueError
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError(f"{self.where()}: property {key!r} = {v!r} is not a number") from None
+        return out
+
     def where(self) -> str:
         ident = f' id="{self.id}"' if self.id else ""
         return f'{self.file}: line {self.line}: <{self.tag} type="{self.type}"{ident}>'
