@@ -480,7 +480,10 @@ class XmlReader:
                     raise
                 self.fail(file, op, str(exc))
             m = step @ m
-        if not np.all(np.isfinite(m)) or abs(np.linalg.det(m[:3, :3])) < 1e-300:
+        # singular relative to its own scale (a scene in any unit has transforms)
+        lin = m[:3, :3] / max(float(np.abs(m[:3, :3]).max()), 1e-300)
+        det, norms = abs(np.linalg.det(lin)), np.prod(np.linalg.norm(lin, axis=0))
+        if not np.all(np.isfinite(m)) or not det > 1e-12 * norms:
             self.fail(file, node, "transform is singular or not finite")
         return m
 
