@@ -307,6 +307,7 @@ struct Cluster {
     int32_t obj;
     int32_t count;
     double seed[3];
+    double seed_c[3];  // the first piece's centroid: a point of its plane
     double sum_an[3];
     double sum_n[3];
     double sum_ac[3];
@@ -527,6 +528,14 @@ int clip_pieces(const Context& ctx, const int64_t cell[3], const Pair* pairs, in
     return n_pieces;
 }
 
+// Whether point c (voxel units) lies in the plane of cluster cl's first piece,
+// within kInPlane voxel units.
+constexpr double kInPlane = 1e-3;
+bool in_plane(const double c[3], const Cluster& cl) {
+    const double d[3] = {c[0] - cl.seed_c[0], c[1] - cl.seed_c[1], c[2] - cl.seed_c[2]};
+    return std::fabs(dot3(d, cl.seed)) <= kInPlane;
+}
+
 // Clusters: per object (ascending), greedy by orientation in triangle order;
 // then the pieces of each cluster, in the order they joined it (S.cl_start,
 // S.cl_items).
@@ -550,9 +559,12 @@ void cluster_pieces(const Context& ctx, int n_pieces, Scratch& S, ChunkStats& cs
         int found = -1;
         for (size_t q = obj_first; q < clusters.size(); ++q) {
             const double dd = dot3(pc.tn, clusters[q].seed);
-            // Two-sided surfaces have no preferred side: a flipped winding
-            // joins the cluster with its normal turned around.
-            if (dd >= P.cos_cluster || (ts && -dd >= P.cos_cluster)) {
+            // Two-sided surfaces have no preferred side: a flipped winding in
+            // the cluster's plane joins it with its normal turned around. Off
+            // that plane it is another face (the far face of a two-sided slab
+            // thinner than a voxel), whose sides must stay records of their own.
+            if (dd >= P.cos_cluster ||
+                (ts && -dd >= P.cos_cluster && in_plane(pc.c, clusters[q]))) {
                 found = int(q);
                 if (dd < 0)
                     for (int d = 0; d < 3; ++d) pc.n[d] = -pc.tn[d];
@@ -563,6 +575,7 @@ void cluster_pieces(const Context& ctx, int n_pieces, Scratch& S, ChunkStats& cs
             Cluster c{};
             c.obj = pc.obj;
             std::memcpy(c.seed, pc.tn, sizeof(c.seed));
+            std::memcpy(c.seed_c, pc.c, sizeof(c.seed_c));
             clusters.push_back(c);
             found = int(clusters.size() - 1);
         }
