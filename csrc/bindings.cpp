@@ -9,7 +9,11 @@ void bind_voxelize(py::module_& m);
 void bind_pairtable(py::module_& m);
 void bind_linesystem(py::module_& m);
 void bind_testing(py::module_& m);
-void bind_display(py::module_& m);
+void bind_batch_error(py::module_& m);
+void bind_camera(py::module_& m);
+void bind_vpl_shade(py::module_& m);
+void bind_gather_light(py::module_& m);
+void bind_pixel_filter(py::module_& m);
 void bind_direct_light(py::module_& m);
 void bind_rays(py::module_& m);
 
@@ -34,7 +38,11 @@ PYBIND11_MODULE(_core, m) {
     bind_pairtable(m);
     bind_linesystem(m);
     bind_testing(m);
-    bind_display(m);
+    bind_batch_error(m);
+    bind_camera(m);
+    bind_vpl_shade(m);
+    bind_gather_light(m);
+    bind_pixel_filter(m);
     bind_direct_light(m);
     bind_rays(m);
 }

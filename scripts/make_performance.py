@@ -1,9 +1,12 @@
-"""Write docs/performance.md from the benchmark JSON in benchmarks/results/.
+"""Write docs/performance.md and the README's figure tables from the benchmark JSON.
 
 Run: ``python scripts/make_performance.py`` (``--check`` exits 1 if the
-committed page differs from what the JSON gives, ``--stdout`` prints it).
+committed page or README.md differs from what the JSON gives, ``--stdout``
+prints the page). The README's tables come from ``scripts/readme_figures.py``.
 Every table names the command that writes its JSON; re-run that command,
-then this script, to refresh the page.
+then this script, to refresh the page. The page's last part, from the
+``KEPT`` marker on, is written by hand (one-off measurements behind the
+rules of ``docs/design.md``): the script keeps it as it is.
 """
 
 from __future__ import annotations
@@ -16,6 +19,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 OUT = ROOT / "docs" / "performance.md"
+#: The line from which the page is written by hand and kept as it is.
+KEPT = "<!-- Written by hand from here on; scripts/make_performance.py keeps it as it is. -->"
 
 
 def load(name: str) -> dict | None:
@@ -1117,7 +1122,8 @@ def build() -> str:
         "on the records, coarser later bounces, energy balance, linear cost, throughput, "
         "the paper's work unit, voxelization, the paper's tables, time against error "
         "versus Mitsuba 3, interiors, the display's error estimate, every pixel of the "
-        "furnace, what the display's noise is made of, what a ray costs, distribution.",
+        "furnace, what the display's noise is made of, what a ray costs, distribution; "
+        "then, written by hand, the measurements behind the design's rules.",
         "",
     ]
     for part in (
@@ -1141,29 +1147,43 @@ def build() -> str:
         distributed,
     ):
         lines += part()
-    return "\n".join(lines).rstrip() + "\n"
+    return "\n".join(lines).rstrip() + "\n\n" + kept_part()
+
+
+def kept_part() -> str:
+    """The hand-written end of the current page, from the :data:`KEPT` marker on."""
+    text = OUT.read_text() if OUT.exists() else ""
+    at = text.find(KEPT)
+    return text[at:] if at >= 0 else KEPT + "\n"
 
 
 def main(argv: list[str] | None = None) -> int:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import readme_figures
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument(
         "--check",
         action="store_true",
-        help="exit 1 if docs/performance.md is not what the JSON gives",
+        help="exit 1 if docs/performance.md or the README's figures are not what the JSON gives",
     )
     ap.add_argument("--stdout", action="store_true", help="print instead of writing")
     args = ap.parse_args(argv)
-    text = build()
+    pages = {
+        OUT: build(),
+        readme_figures.README: readme_figures.render(readme_figures.README.read_text()),
+    }
     if args.stdout:
-        sys.stdout.write(text)
+        sys.stdout.write(pages[OUT])
         return 0
     if args.check:
-        same = OUT.exists() and OUT.read_text() == text
-        if not same:
-            print(f"{OUT.relative_to(ROOT)} is out of date: run python scripts/make_performance.py")
-        return 0 if same else 1
-    OUT.write_text(text)
-    print(f"wrote {OUT.relative_to(ROOT)}")
+        stale = [p for p, text in pages.items() if not p.exists() or p.read_text() != text]
+        for p in stale:
+            print(f"{p.relative_to(ROOT)} is out of date: run python scripts/make_performance.py")
+        return 1 if stale else 0
+    for p, text in pages.items():
+        p.write_text(text)
+        print(f"wrote {p.relative_to(ROOT)}")
     return 0
 
 

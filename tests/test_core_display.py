@@ -506,7 +506,8 @@ def test_geometry_filter_refuses_bad_shapes_and_radii():
 def _camera_hits_both_ways(scene, cam, offset, lens):
     """``_core.camera_hits`` and the same hits from ``camera_rays``, the
     tracer's first hits and ``primary_hits``, in the tracer's frame."""
-    from voxgi.display import _Tracer, camera_rays
+    from voxgi.display import camera_rays
+    from voxgi.display.shader import _Tracer
 
     tr = _Tracer(scene, 2)
     n_obj = len(scene.objects)

@@ -234,7 +234,7 @@ def _cap_sphere_case():
     sol = triangle_solution(
         scene, lambda v: math.pi * (v.emission.astype(np.float64) + rho * le_mean / (1 - rho))
     )
-    from voxgi.display import _Tracer
+    from voxgi.display.shader import _Tracer
 
     tr = _Tracer(scene, 1)
     org, d = camera_rays(scene.camera)
@@ -876,7 +876,7 @@ def test_interleaved_vpl_sets_decorrelate_the_image_mean(monkeypatch):
     # 1/INTERLEAVE the spread (docs/design.md §6). With 16 VPLs and 8 gather
     # rays, where the VPLs carry most of the noise; measured over seeds 0-11,
     # 4 frames, exact records: sd 0.14% with one set, 0.040% with 16.
-    from voxgi.display import _FrameShader
+    from voxgi.display.shader import _FrameShader
 
     rho = 0.9
     scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=1.0, width=24, height=24)

@@ -12,7 +12,7 @@ import pytest
 from test_display import triangle_solution
 
 import voxgi
-from voxgi.display import _Mean
+from voxgi.display.estimate import _Mean
 
 
 def fold(frames: np.ndarray) -> _Mean:
@@ -336,7 +336,7 @@ def test_cli_writes_the_stderr_channels(tmp_path):
 def test_outlier_thresholds_are_student_t_quantiles():
     from scipy.stats import t
 
-    from voxgi.display import _BATCH_SLOTS, _OUTLIER_ALPHA, _outlier_threshold
+    from voxgi.display.estimate import _BATCH_SLOTS, _OUTLIER_ALPHA, _outlier_threshold
 
     for k in range(4, _BATCH_SLOTS + 1):
         want = t.ppf(1.0 - _OUTLIER_ALPHA / (2 * k), k - 2)
@@ -347,7 +347,7 @@ def test_batch_error_kernel_is_the_batch_means_formula(rng):
     # The compiled kernel against the formula written out in numpy, with a
     # few pixels given one far-off batch (flagged, their error raised to it).
     from voxgi import _core
-    from voxgi.display import _outlier_threshold
+    from voxgi.display.estimate import _outlier_threshold
 
     k, p, size, frames = 12, 3000, 2, 27
     b = (1.0 + 0.1 * rng.standard_normal((k, p, 3))).astype(np.float32)

@@ -251,9 +251,11 @@ def test_render_equals_local(cornell_small, local_solution, client):
         assert out.stats[k] == ref.stats[k], k
 
 
-def test_progress_bar_counts_finished_tasks(cornell_small, client, capsys):
+def test_progress_bar_counts_finished_tasks(cornell_small, client, capsys, monkeypatch):
     """With progress=True the tasks of each distributed call feed a tqdm bar."""
     _, vox = cornell_small
+    # bars are drawn only where someone watches: make capsys's stderr count as a terminal
+    monkeypatch.setattr("voxgi._progress.interactive", lambda stream=None: True)
     voxgi.solve(vox, directions=R, tuning=TUNED, max_bounces=2, progress=True, client=client)
     err = capsys.readouterr().err
     # one task per worker (2) per call: the bar reaches 2/2 for the gather calls

@@ -1,4 +1,6 @@
-"""docs/performance.md is what scripts/make_performance.py makes of the benchmark JSON."""
+"""The documents say what the code does: docs/performance.md and the README's figures are
+what scripts/make_performance.py makes of the benchmark JSON, and the README's command
+line, defaults and picture are those of the code."""
 
 from __future__ import annotations
 
@@ -7,12 +9,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_performance_page_matches_the_json():
-    # The page is generated: an edit by hand, or a JSON re-run without
-    # regenerating the page, makes it differ from the script's output.
+def test_performance_page_and_readme_figures_match_the_json():
+    # Both are generated: an edit by hand, or a JSON re-run without
+    # regenerating them, makes them differ from the script's output.
     res = subprocess.run(
         [sys.executable, str(ROOT / "scripts" / "make_performance.py"), "--check"],
         capture_output=True,
@@ -34,3 +38,57 @@ def test_readme_starts_with_the_two_commands():
         "python -m pip install . && voxgi render cornell-box -o cornell-box.exr",
         'python -m pip install ".[test]" && python -m pytest -q',
     ]
+
+
+def _readme() -> str:
+    return (ROOT / "README.md").read_text()
+
+
+def test_readme_is_short():
+    assert len(_readme().splitlines()) < 200
+
+
+def _render_parser():
+    from voxgi.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    return sub.choices["render"]
+
+
+def test_readme_command_line_defaults_are_the_parsers():
+    # Each "`--option` (default X)" of the README's command-line paragraph is
+    # the render parser's own default for that option.
+    found = re.findall(r"`(--[a-z-]+)` \(default ([^)]+)\)", _readme())
+    assert len(found) >= 4
+    options = {o: a for a in _render_parser()._actions for o in a.option_strings}
+    for option, text in found:
+        default = options[option].default
+        assert float(text) == pytest.approx(default, rel=0), (option, text, default)
+
+
+def test_readme_usage_names_real_options():
+    usage = re.search(r"```\n(voxgi render .*?)```", _readme(), flags=re.DOTALL).group(1)
+    first = usage.split("voxgi compare")[0]
+    options = {o for a in _render_parser()._actions for o in a.option_strings}
+    named = set(re.findall(r"(--?[a-z][a-z-]*)", first))
+    assert named <= options, named - options
+
+
+def test_hero_picture_is_what_the_render_command_writes():
+    # The picture above the render command is its output: the built-in Cornell
+    # box's camera size, as the caption says.
+    import voxgi
+
+    alt = re.search(r"!\[([^\]]*)\]\(docs/cornell_box\.png\)", _readme()).group(1)
+    assert "`voxgi render cornell-box`" in alt
+    w, h = (int(v) for v in re.search(r"(\d+)x(\d+)", alt).groups())
+    cam = voxgi.scenes.cornell_box().camera
+    assert (w, h) == (cam.width, cam.height)
+    assert _png_size(ROOT / "docs" / "cornell_box.png") == (h, w)
+
+
+def _png_size(path: Path) -> tuple[int, int]:
+    """(height, width) from a PNG's IHDR chunk."""
+    head = path.read_bytes()[:24]
+    assert head[:8] == b"\x89PNG\r\n\x1a\n"
+    return int.from_bytes(head[20:24], "big"), int.from_bytes(head[16:20], "big")

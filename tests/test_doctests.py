@@ -9,7 +9,7 @@ import pytest
 import voxgi
 
 MODULES = sorted(
-    m.name for m in pkgutil.iter_modules(voxgi.__path__, "voxgi.") if m.name != "voxgi._core"
+    m.name for m in pkgutil.walk_packages(voxgi.__path__, "voxgi.") if m.name != "voxgi._core"
 )
 
 

@@ -122,13 +122,13 @@ if stage == "solve":
     voxgi.pipeline.solve_for_display = slow_solve
 else:
     after = int(stage.split(":")[1])   # frames that finish before the slow one
-    frame = voxgi.display._FrameShader.frame
+    frame = voxgi.display.shader._FrameShader.frame
     def slow_frame(self, f, seed):
         if f == after:
             print("MARK frame", f, flush=True)
             time.sleep(120)
         return frame(self, f, seed)
-    voxgi.display._FrameShader.frame = slow_frame
+    voxgi.display.shader._FrameShader.frame = slow_frame
 sys.exit(cli.main(sys.argv[2:]))
 """
 

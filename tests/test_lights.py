@@ -321,7 +321,7 @@ def test_environment_reads_radiance_hdr_files(tmp_path):
 def test_stratified_environment_samples_are_unbiased():
     # each point must be uniform in the cube: E[u0 u1] = E[u0 u2] = 1/4 even
     # though u0 and (u1, u2) are stratified separately (k = 4: 2 x 2 grid)
-    from voxgi.display import _stratified
+    from voxgi.display.shader import _stratified
 
     u = _stratified(np.random.default_rng(5), 50000, 4).reshape(50000, 4, 3)
     for a, b in ((0, 1), (0, 2)):

@@ -75,7 +75,7 @@ def test_gathering_the_emitters_gives_the_shot_direct_light(sphere32, monkeypatc
         assert gathered.stats["direct_light"]["method"] == "gather"
         assert "shooting" in gathered.stats["skipped"]
         with monkeypatch.context() as m:
-            m.setattr(voxgi.radiosity, "_gathering_is_cheaper", lambda p: None)
+            m.setattr(voxgi.radiosity.direct_strategies, "gathering_is_cheaper", lambda p: None)
             shot = voxgi.solve(vox, **kw)
         assert shot.stats["direct_light"]["method"] == "shoot"
         np.testing.assert_allclose(gathered.radiosity, shot.radiosity, rtol=1e-5, atol=1e-7)
@@ -564,7 +564,7 @@ def test_memory_estimate_is_checked_before_the_solve(sphere32, monkeypatch):
     assert est["records"] > 100 * len(vox)
     # more threads, more line tables
     assert voxgi.radiosity.solve_memory(vox, directions=4, threads=4)["threads"] > est["threads"]
-    monkeypatch.setattr(voxgi.radiosity, "available_memory", lambda: est["total"] // 2)
+    monkeypatch.setattr(voxgi.radiosity.memory, "available_memory", lambda: est["total"] // 2)
     with pytest.raises(MemoryError, match=r"need about [0-9.]+ GiB"):
         voxgi.solve(
             vox, directions=4, threads=2, progress=False, tuning=SolveTuning(shoot_directions=4)

@@ -19,12 +19,14 @@ from __future__ import annotations
 from importlib.metadata import PackageNotFoundError, version
 
 from . import _core, formats, io, metrics, scenes
+from .camera import Camera
 from .display import RenderResult, RenderTuning
 from .formats import SceneWarning
 from .lights import DirectionalLight, Environment, PointLight, SpotLight
+from .materials import AshikhminShirley, Material
 from .pipeline import render, solve
 from .radiosity import Solution, SolveTuning
-from .scene import AshikhminShirley, Camera, Material, Scene, SceneObject
+from .scene import Scene, SceneObject
 from .voxels import VoxelSet, voxelize
 
 try:

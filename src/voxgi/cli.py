@@ -9,9 +9,11 @@ traceback.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 #: What ``-o`` may end with; both files are always written.
@@ -514,6 +516,23 @@ def run_compare(args) -> int:
     return 0
 
 
+def plain_text(doc: str) -> str:
+    """A docstring line without its Sphinx roles: ``:func:`window_room``` becomes
+    ``window-room`` when it names a built-in scene (as ``voxgi render`` takes
+    it), else ``window_room``; double backquotes are dropped."""
+    from . import scenes
+
+    names = set(scenes.names())
+
+    def name(m: re.Match) -> str:
+        target = m.group(1).lstrip("~").rsplit(".", 1)[-1]
+        dashed = target.replace("_", "-")
+        return dashed if dashed in names else target
+
+    doc = re.sub(r":[a-z:]+:`([^`]+)`", name, doc)
+    return doc.replace("``", "")
+
+
 def run_scenes(args) -> int:
     """``voxgi scenes``: each built-in scene's name and the first line of its description."""
     from . import scenes
@@ -523,8 +542,14 @@ def run_scenes(args) -> int:
     for n in names:
         fn = getattr(scenes, n.replace("-", "_"), None)
         doc = (getattr(fn, "__doc__", None) or "").strip().splitlines()
-        print(f"{n:<{width}}  {doc[0].strip() if doc else ''}")
+        print(f"{n:<{width}}  {plain_text(doc[0].strip()) if doc else ''}")
     return 0
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Print a warning as ``warning: <message>`` on stderr: a command-line user
+    needs what it says, not the source line that raised it."""
+    print(f"warning: {message}", file=sys.stderr if file is None else file, flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -535,7 +560,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     run = {"render": run_render, "compare": run_compare, "scenes": run_scenes}[args.command]
     try:
-        return run(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return run(args)
     except UsageError as exc:
         print(f"voxgi {args.command}: error: {exc}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE) from None

@@ -347,9 +347,9 @@ class _Farm:
         where = {f.key: i for i, f in enumerate(futs)}
         bar = None
         if self.progress and len(futs) > 1:
-            from tqdm.auto import tqdm
+            from . import _progress
 
-            bar = tqdm(total=len(futs), desc=self.desc, unit="task", leave=False)
+            bar = _progress.bar(self.desc, len(futs), unit="task")
         t = time.perf_counter()
         try:
             for fut in as_completed(futs):

@@ -730,7 +730,7 @@ def point_lit_box(width: int = 256, height: int = 256) -> Scene:
 
 
 def sun_room(width: int = 256, height: int = 256, irradiance: float = 20.0) -> Scene:
-    """:func:`window_room` with its window open and a sun shining in.
+    """The room of :func:`window_room` with its window open and a sun shining in.
 
     The sun (:class:`voxgi.DirectionalLight`, ``irradiance`` W/m² on a
     surface facing it) comes in through the window at about 30° below the

@@ -198,10 +198,10 @@ def available_memory() -> int:
 
 
 def _progress_bar(enabled: bool):
-    """A callable(phase, done, total) driving a tqdm bar, and a closer."""
+    """A callable(phase, done, total) driving a progress bar, and a closer."""
     if not enabled:
         return None, lambda: None
-    from tqdm.auto import tqdm
+    from . import _progress
 
     names = {1: "voxelize: triangles", 2: "voxelize: sorting", 3: "voxelize: voxels"}
     state = {"phase": 0, "bar": None}
@@ -210,9 +210,7 @@ def _progress_bar(enabled: bool):
         if phase != state["phase"]:
             if state["bar"] is not None:
                 state["bar"].close()
-            state["bar"] = tqdm(
-                total=max(int(total), 1), desc=names.get(phase, "voxelize"), leave=False
-            )
+            state["bar"] = _progress.bar(names.get(phase, "voxelize"), max(int(total), 1))
             state["phase"] = phase
         bar = state["bar"]
         bar.update(max(0, int(done) - bar.n))

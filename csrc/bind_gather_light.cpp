@@ -1,0 +1,203 @@
+// pybind11 bindings for the display's gather rays (vpl_shade.h).
+#include "bind_shade.h"
+
+namespace py = pybind11;
+using namespace pybind11::literals;
+using namespace voxgi::py_helpers;
+
+namespace {
+
+auto gather_rays_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                    int n_gather, uint64_t seed, int64_t frame, double eps, I64Out ray_count,
+                    F32Out ray_org, F32Out ray_dir, int threads) {
+    voxgi::ShadeHits hits = make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material,
+                                      std::numeric_limits<int32_t>::max());
+    const py::ssize_t P = hits.count;
+    if (n_gather < 0 || n_gather > 4096) throw py::value_error("n_gather must be in [0, 4096]");
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    check_1d(ray_count, P, "ray_count");
+    check_2d(ray_org, -1, 3, "ray_org");
+    check_2d(ray_dir, ray_org.shape(0), 3, "ray_dir");
+    if (ray_org.shape(0) < P * n_gather)
+        throw py::value_error("ray buffers hold " + std::to_string(ray_org.shape(0)) +
+                              " rays, need " + std::to_string(P * n_gather));
+    check_inplace(ray_count, "ray_count");
+    check_inplace(ray_org, "ray_org");
+    check_inplace(ray_dir, "ray_dir");
+    int64_t* pc = ray_count.mutable_data();
+    float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data();
+    auto stop = make_stop_check();
+    int64_t n;
+    {
+        py::gil_scoped_release release;
+        n = voxgi::gather_rays(hits, n_gather, seed, frame, eps, pc, po, pd, threads, stop);
+    }
+    return n;
+}
+
+voxgi::ShadeTriangles make_triangles(const F64& tri_v, const I32& tri_object,
+                                     const U8& obj_two_sided) {
+    if (tri_v.ndim() != 3 || tri_v.shape(1) != 3 || tri_v.shape(2) != 3)
+        throw py::value_error("tri_v must have shape (F, 3, 3)");
+    const py::ssize_t F = tri_v.shape(0);
+    check_1d(tri_object, F, "tri_object");
+    check_1d(obj_two_sided, -1, "obj_two_sided");
+    const py::ssize_t O = obj_two_sided.shape(0);
+    {
+        const int32_t* to = tri_object.data();
+        for (py::ssize_t f = 0; f < F; ++f)
+            if (to[f] < 0 || to[f] >= O) throw py::value_error("tri_object: index out of range");
+    }
+    voxgi::ShadeTriangles tris;
+    tris.count = F;
+    tris.v = tri_v.data();
+    tris.object = tri_object.data();
+    tris.two_sided = obj_two_sided.data();
+    return tris;
+}
+
+voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_cell_start,
+                            const F32& rec_packed, const I64& grid_dims, const I64& grid_lo,
+                            const F64& grid_origin, double pitch) {
+    check_1d(rec_sorted_key, -1, "rec_sorted_key");
+    const py::ssize_t N = rec_sorted_key.shape(0);
+    constexpr py::ssize_t kRow = sizeof(voxgi::PackedRecord) / sizeof(float);
+    check_2d(rec_packed, N, kRow, "rec_packed");
+    check_1d(grid_dims, 3, "grid_dims");
+    check_1d(grid_lo, 3, "grid_lo");
+    check_1d(grid_origin, 3, "grid_origin");
+    if (!(pitch > 0.0) || !std::isfinite(pitch)) throw py::value_error("pitch must be > 0");
+    {
+        const int64_t* sk = rec_sorted_key.data();
+        for (py::ssize_t i = 1; i < N; ++i)
+            if (sk[i] < sk[i - 1]) throw py::value_error("rec_sorted_key must be ascending");
+    }
+    voxgi::RecordGrid grid;
+    grid.count = N;
+    grid.sorted_key = rec_sorted_key.data();
+    // float rows of the layout of PackedRecord (its object field an int32's bits)
+    grid.rec = reinterpret_cast<const voxgi::PackedRecord*>(rec_packed.data());
+    for (int a = 0; a < 3; ++a) {
+        grid.dims[a] = grid_dims.data()[a];
+        grid.lo[a] = grid_lo.data()[a];
+        grid.origin[a] = grid_origin.data()[a];
+        if (grid.dims[a] < 1) throw py::value_error("grid_dims must be >= 1");
+    }
+    grid.pitch = pitch;
+    // Optional dense table of each voxel key's first sorted record.
+    check_1d(rec_cell_start, -1, "rec_cell_start");
+    if (rec_cell_start.shape(0) > 0) {
+        const int64_t cells = grid.dims[0] * grid.dims[1] * grid.dims[2];
+        if (rec_cell_start.shape(0) != cells + 1)
+            throw py::value_error("rec_cell_start must have dims product + 1 entries");
+        const int32_t* cs = rec_cell_start.data();
+        if (cs[0] != 0 || cs[cells] != N) throw py::value_error("rec_cell_start: bad bounds");
+        for (int64_t c = 0; c < cells; ++c)
+            if (cs[c + 1] < cs[c]) throw py::value_error("rec_cell_start must be ascending");
+        grid.cell_start = cs;
+    } else {
+        const int64_t* sk = rec_sorted_key.data();
+        if (N > 0 && (sk[0] < 0 || sk[N - 1] >= grid.dims[0] * grid.dims[1] * grid.dims[2]))
+            throw py::value_error("rec_sorted_key: key outside the grid");
+    }
+    return grid;
+}
+
+auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                     F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
+                     double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided,
+                     I64 rec_sorted_key, I32 rec_cell_start, F32 rec_packed, I64 grid_dims,
+                     I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count, F32 ray_dir,
+                     I32 prim, F32Out out, int threads) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    const py::ssize_t P = hits.count;
+    voxgi::ShadeMIS mis = make_mis(n_gather);
+    if (!(n_gather > 0.0)) throw py::value_error("n_gather must be > 0");
+    voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
+    voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
+                                       grid_lo, grid_origin, pitch);
+    check_1d(ray_count, P, "ray_count");
+    check_2d(ray_dir, -1, 3, "ray_dir");
+    const py::ssize_t R = ray_dir.shape(0);
+    check_1d(prim, R, "prim");
+    check_ray_counts(ray_count, R);
+    check_2d(out, P, 3, "out");
+    check_inplace(out, "out");
+    const int64_t* pc = ray_count.data();
+    const float* pd = ray_dir.data();
+    const int32_t* pp = prim.data();
+    float* po = out.mutable_data();
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::gather_shade(hits, mats, mis, tris, grid, pc, pd, pp, po, threads, stop);
+    }
+}
+
+int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                        F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
+                        int n_gather, uint64_t seed, int64_t frame, double eps, F64 tri_v,
+                        I32 tri_object, U8 obj_two_sided, I64 rec_sorted_key, I32 rec_cell_start,
+                        F32 rec_packed, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch,
+                        const voxgi::RayScene& scene, F32Out out, int threads) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    if (n_gather < 1 || n_gather > 4096) throw py::value_error("n_gather must be in [1, 4096]");
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    voxgi::ShadeMIS mis = make_mis(n_gather);
+    voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
+    check_scene(scene, tris.count);
+    voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
+                                       grid_lo, grid_origin, pitch);
+    check_2d(out, hits.count, 3, "out");
+    check_inplace(out, "out");
+    float* po = out.mutable_data();
+    int64_t rays = 0;
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::gather_light(hits, mats, mis, n_gather, seed, frame, eps, tris, grid, scene, po,
+                            &rays, threads, stop);
+    }
+    return rays;
+}
+
+}  // namespace
+
+void bind_gather_light(py::module_& m) {
+    m.def("gather_rays", &gather_rays_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+          "n_gather"_a, "seed"_a, "frame"_a, "eps"_a, "ray_count"_a.noconvert(),
+          "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(), "threads"_a = 0,
+          R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
+hashed from seed/frame/pixel), written in place into ray_count (P,) int64 and
+ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc");
+
+    m.def("gather_shade", &gather_shade_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
+          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "tri_v"_a.noconvert(),
+          "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "rec_sorted_key"_a.noconvert(),
+          "rec_cell_start"_a.noconvert(), "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(),
+          "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a,
+          "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(), "prim"_a.noconvert(),
+          "out"_a.noconvert(), "threads"_a = 0,
+          R"doc(Shade the gather rays (prim: first triangle hit, -1 none) with the radiance
+of the record at each hit point, MIS-weighted against the VPLs; adds into
+out (P, 3) float32.)doc");
+
+    m.def("gather_light", &gather_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
+          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "seed"_a, "frame"_a,
+          "eps"_a, "tri_v"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),
+          "rec_sorted_key"_a.noconvert(), "rec_cell_start"_a.noconvert(),
+          "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
+          "grid_origin"_a.noconvert(), "pitch"_a, "scene"_a, "out"_a.noconvert(), "threads"_a = 0,
+          R"doc(gather_rays, their first hits in scene (a RayScene built from tri_v) and
+gather_shade, pixel by pixel without ray arrays: the same sums, added into
+out (P, 3) float32. Returns the number of gather rays.)doc");
+}

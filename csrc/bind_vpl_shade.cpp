@@ -1,0 +1,245 @@
+// pybind11 bindings for the VPL shading kernels (vpl_shade.h).
+#include <pybind11/stl.h>
+
+#include <optional>
+
+#include "bind_shade.h"
+
+namespace py = pybind11;
+using namespace pybind11::literals;
+using namespace voxgi::py_helpers;
+
+namespace {
+
+voxgi::ShadeVPLs make_vpls(const F64& vpl_pos, const F32& vpl_normal, const F32& vpl_weight,
+                           const F32& vpl_area, const F32& vpl_pa, double n_gather) {
+    check_2d(vpl_pos, -1, 3, "vpl_pos");
+    const py::ssize_t K = vpl_pos.shape(0);
+    check_2d(vpl_normal, K, 3, "vpl_normal");
+    check_2d(vpl_weight, K, 3, "vpl_weight");
+    check_1d(vpl_area, K, "vpl_area");
+    check_1d(vpl_pa, K, "vpl_pa");
+    const float* vp = vpl_pa.data();
+    for (py::ssize_t k = 0; k < K; ++k) {
+        if (!(vp[k] >= 0.f) || !std::isfinite(vp[k]))
+            throw py::value_error("vpl_pa must be finite and >= 0");
+        if (vp[k] > 0.f && !(n_gather > 0.0))
+            throw py::value_error("vpl_pa: MIS VPLs need n_gather > 0");
+    }
+    voxgi::ShadeVPLs vpls;
+    vpls.count = K;
+    vpls.pos = vpl_pos.data();
+    vpls.normal = vpl_normal.data();
+    vpls.weight = vpl_weight.data();
+    vpls.area = vpl_area.data();
+    vpls.pa = vpl_pa.data();
+    return vpls;
+}
+
+auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                    F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, F64 vpl_pos,
+                    F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa, double n_gather,
+                    double eps, I64Out ray_count, F32Out ray_org, F32Out ray_dir, F32Out ray_len,
+                    F32Out ray_contrib, int threads) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    const py::ssize_t P = hits.count;
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    voxgi::ShadeMIS mis = make_mis(n_gather);
+    voxgi::ShadeVPLs vpls = make_vpls(vpl_pos, vpl_normal, vpl_weight, vpl_area, vpl_pa, n_gather);
+    const py::ssize_t K = vpls.count;
+    // Output buffers, reused across frames by the caller: room for P*K rays.
+    check_1d(ray_count, P, "ray_count");
+    check_2d(ray_org, -1, 3, "ray_org");
+    const py::ssize_t cap = ray_org.shape(0);
+    if (cap < P * K)
+        throw py::value_error("ray buffers hold " + std::to_string(cap) + " rays, need " +
+                              std::to_string(P * K));
+    check_2d(ray_dir, cap, 3, "ray_dir");
+    check_1d(ray_len, cap, "ray_len");
+    check_2d(ray_contrib, cap, 3, "ray_contrib");
+    check_inplace(ray_count, "ray_count");
+    check_inplace(ray_org, "ray_org");
+    check_inplace(ray_dir, "ray_dir");
+    check_inplace(ray_len, "ray_len");
+    check_inplace(ray_contrib, "ray_contrib");
+    int64_t* pc = ray_count.mutable_data();
+    float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data(), *pl = ray_len.mutable_data(),
+          *pr = ray_contrib.mutable_data();
+    auto stop = make_stop_check();
+    int64_t n;
+    {
+        py::gil_scoped_release release;
+        n = voxgi::vpl_prepare(hits, mats, vpls, mis, eps, pc, po, pd, pl, pr, threads, stop);
+    }
+    return n;
+}
+
+py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                       F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
+                       F64 vpl_pos, F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa,
+                       double n_gather, double eps, const voxgi::RayScene& scene,
+                       std::optional<I32> pixel_set, std::optional<I64> set_start, int threads) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    voxgi::ShadeMIS mis = make_mis(n_gather);
+    voxgi::ShadeVPLs vpls = make_vpls(vpl_pos, vpl_normal, vpl_weight, vpl_area, vpl_pa, n_gather);
+    if (pixel_set.has_value() != set_start.has_value())
+        throw py::value_error("pixel_set and set_start go together");
+    const int32_t* ps = nullptr;
+    const int64_t* ss = nullptr;
+    if (pixel_set) {
+        check_1d(*set_start, -1, "set_start");
+        const py::ssize_t S = set_start->shape(0) - 1;
+        ss = set_start->data();
+        if (S < 1 || ss[0] != 0 || ss[S] != vpls.count)
+            throw py::value_error("set_start must run from 0 to the VPL count");
+        for (py::ssize_t i = 0; i < S; ++i)
+            if (ss[i + 1] < ss[i]) throw py::value_error("set_start must be ascending");
+        check_1d(*pixel_set, hits.count, "pixel_set");
+        ps = pixel_set->data();
+        for (py::ssize_t p = 0; p < hits.count; ++p)
+            if (ps[p] < 0 || ps[p] >= S)
+                throw py::value_error("pixel_set: set " + std::to_string(ps[p]) +
+                                      " out of range (" + std::to_string(S) + " sets)");
+    }
+    F32 out({hits.count, py::ssize_t(3)});
+    float* po = out.mutable_data();
+    int64_t rays = 0;
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::vpl_light(hits, mats, vpls, mis, eps, ps, ss, scene, po, &rays, threads, stop);
+    }
+    return py::make_tuple(out, rays);
+}
+
+auto vpl_accumulate_py(I64 ray_count, F32 ray_contrib, U8 occluded, int threads) {
+    check_1d(ray_count, -1, "ray_count");
+    check_2d(ray_contrib, -1, 3, "ray_contrib");
+    const py::ssize_t R = ray_contrib.shape(0), P = ray_count.shape(0);
+    check_1d(occluded, R, "occluded");
+    check_ray_counts(ray_count, R);
+    const int64_t* pc = ray_count.data();
+    F32 out({P, py::ssize_t(3)});
+    float* po = out.mutable_data();
+    const float* pr = ray_contrib.data();
+    const uint8_t* po_cc = occluded.data();
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::vpl_accumulate(P, pc, pr, po_cc, po, threads, stop);
+    }
+    return out;
+}
+
+auto shade_brdf_py(F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, I32 material,
+                   F32 n, F32 k1, F32 k2) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    check_1d(material, -1, "material");
+    const py::ssize_t Q = material.shape(0);
+    check_2d(n, Q, 3, "n");
+    check_2d(k1, Q, 3, "k1");
+    check_2d(k2, Q, 3, "k2");
+    const int32_t* mi = material.data();
+    for (py::ssize_t q = 0; q < Q; ++q)
+        if (mi[q] < 0 || mi[q] >= mats.count) throw py::value_error("material: index out of range");
+    F32 out({Q, py::ssize_t(3)});
+    float* po = out.mutable_data();
+    const float *pn = n.data(), *p1 = k1.data(), *p2 = k2.data();
+    for (py::ssize_t q = 0; q < Q; ++q)
+        voxgi::shade_brdf(mats, mi[q], pn + 3 * q, p1 + 3 * q, p2 + 3 * q, po + 3 * q);
+    return out;
+}
+
+auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                         F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
+                         I64 ray_count, F32 ray_dir, F32 ray_weight, U8 occluded, F32Out out,
+                         int threads) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    const py::ssize_t P = hits.count;
+    check_1d(ray_count, P, "ray_count");
+    check_2d(ray_dir, -1, 3, "ray_dir");
+    const py::ssize_t R = ray_dir.shape(0);
+    check_2d(ray_weight, R, 3, "ray_weight");
+    if (occluded.size() != 0) check_1d(occluded, R, "occluded");
+    check_2d(out, P, 3, "out");
+    check_inplace(out, "out");
+    check_ray_counts(ray_count, R);
+    const int64_t* pc = ray_count.data();
+    const float *pd = ray_dir.data(), *pw = ray_weight.data();
+    const uint8_t* po = occluded.size() != 0 ? occluded.data() : nullptr;
+    float* pout = out.mutable_data();
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::light_accumulate(hits, mats, pc, pd, pw, po, pout, threads, stop);
+    }
+}
+
+}  // namespace
+
+void bind_vpl_shade(py::module_& m) {
+    m.def("vpl_prepare", &vpl_prepare_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
+          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "vpl_pos"_a.noconvert(),
+          "vpl_normal"_a.noconvert(), "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(),
+          "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "ray_count"_a.noconvert(),
+          "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(), "ray_len"_a.noconvert(),
+          "ray_contrib"_a.noconvert(), "threads"_a = 0,
+          R"doc(Pass 1 of a display frame: per (pixel, VPL) pair the unoccluded contribution
+and a shadow ray where it is non-zero.
+
+Inputs are C-contiguous: hit_pos (P, 3) float64, hit_normal / hit_ng / hit_wo
+(P, 3) float32 unit vectors on the viewer's side, hit_material (P,) int32
+(-1: not shaded), per-material mat_albedo (M, 3), mat_rs (M, 3), mat_nu,
+mat_nv (M,) float32, mat_glossy (M,) uint8; vpl_pos (K, 3) float64,
+vpl_normal (K, 3), vpl_weight (K, 3) = (TA/n) B/pi, vpl_area (K,) float32,
+vpl_pa (K,) float32: n_v times the area pdf of VPLs combined with gather rays
+(their weight is B/pi; n_gather rays per pixel), 0 for the others.
+
+Outputs, written in place (buffers reused across frames, room for >= P*K
+rays): ray_count (P,) int64, ray_org (C, 3), ray_dir (C, 3), ray_len (C,),
+ray_contrib (C, 3) float32, rays pixel-major in VPL order. Returns the
+number R of rays written (the first R rows).)doc");
+
+    m.def("vpl_light", &vpl_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
+          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "vpl_pos"_a.noconvert(),
+          "vpl_normal"_a.noconvert(), "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(),
+          "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "scene"_a,
+          "pixel_set"_a.noconvert() = py::none(), "set_start"_a.noconvert() = py::none(),
+          "threads"_a = 0,
+          R"doc(vpl_prepare, the shadow rays against scene (a RayScene) and vpl_accumulate,
+pixel by pixel without ray arrays: the same (P, 3) float32 sums, and the
+number of shadow rays traced. With pixel_set (P,) int32 and set_start (S+1,)
+int64, pixel p sees only the VPLs of set pixel_set[p].)doc");
+
+    m.def("vpl_accumulate", &vpl_accumulate_py, "ray_count"_a.noconvert(),
+          "ray_contrib"_a.noconvert(), "occluded"_a.noconvert(), "threads"_a = 0,
+          R"doc(Pass 2 of a display frame: per pixel, the sum of the contributions of the
+rays not occluded (uint8 (R,)), in ray order. Returns (P, 3) float32.)doc");
+
+    m.def("light_accumulate", &light_accumulate_py, "hit_pos"_a.noconvert(),
+          "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(),
+          "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(),
+          "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(),
+          "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(), "ray_weight"_a.noconvert(),
+          "occluded"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0,
+          R"doc(Light along known directions (delta lights, environment samples, escaped
+gather rays): adds f(wi, wo) max(0, n.wi) weight into out (P, 3) for each ray
+(pixel-major, ray_count (P,) int64) not occluded (uint8 (R,), or empty: none).)doc");
+
+    m.def("shade_brdf", &shade_brdf_py, "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(),
+          "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(),
+          "material"_a.noconvert(), "n"_a.noconvert(), "k1"_a.noconvert(), "k2"_a.noconvert(),
+          R"doc(The display's BRDF f(k1, k2) (1/sr) for Q direction pairs (tests):
+rho/pi, or Ashikhmin-Shirley coupled diffuse + specular where mat_glossy.)doc");
+}

@@ -1,0 +1,191 @@
+"""Extract Bitterli's Mitsuba interiors from a git mirror and make them renderable.
+
+The scenes (Benedikt Bitterli's "Rendering resources", Mitsuba 0.5 XML; CC0
+and CC-BY, each folder with its LICENSE.txt) are third-party data and are
+never part of this repository: this script writes them outside it.
+
+For each scene folder of the mirror (a bare git directory holding the
+``jgarciapueyo/mitsuba2-transient-scenes`` snapshot) it
+
+1. writes every file the snapshot holds, one by one (``git cat-file``; the
+   snapshot lacks files of 4 MiB and more, which are skipped and counted);
+2. reports whether the scene is *whole*: every file its ``scene.xml``
+   references (meshes, textures, environment maps) is present;
+3. applies the small edits Mitsuba 3 needs to load the file, the same file
+   that voxgi reads, so that both renderers see the same scene (the original
+   is kept as ``scene.original.xml``);
+4. for a whole scene, writes the diffuse-approximated variant that both
+   renderers render: ``voxgi.Scene.load(scene.xml)`` (every material as voxgi
+   approximates it) saved with ``Scene.save`` as ``diffuse/scene.toml``;
+   ``voxgi.mitsuba.to_mitsuba`` exports that same scene to Mitsuba.
+
+Usage::
+
+    python scripts/extract_bitterli.py                       # every scene, to /work/scenes
+    python scripts/extract_bitterli.py living-room staircase2 --out /tmp/scenes
+    python scripts/extract_bitterli.py --list                # what the mirror holds
+
+Exit status 0 when every requested scene was extracted (whole or not).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+MIRROR = Path("/work/.mirror/jgarciapueyo+mitsuba2-transient-scenes/repo")
+OUT = Path("/work/scenes")
+
+#: Bitterli's interiors in the snapshot (the Cornell boxes and the Veach
+#: scene are left out: voxgi has its own Cornell box).
+SCENES = (
+    "bathroom",  # Salle de bain
+    "bathroom2",  # Contemporary Bathroom
+    "dining-room",  # The Breakfast Room
+    "kitchen",  # Country Kitchen
+    "living-room",  # The Grey & White Room
+    "staircase",  # The Wooden Staircase
+    "staircase2",  # Modern Hall
+)
+
+#: Edits for Mitsuba 3, as (pattern, replacement, why). The scenes' film sets
+#: ``high_quality_edges`` (Mitsuba 0.6's ``highQualityEdges``), which Mitsuba 3
+#: rejects as an unused property; it only changes how pixels at the image's
+#: border are filtered, which neither renderer needs.
+EDITS = (
+    (
+        re.compile(r'[ \t]*<boolean name="(?:high_quality_edges|highQualityEdges)"[^>]*/>\s*?\n?'),
+        "",
+        "film: removed high_quality_edges (Mitsuba 3 rejects it)",
+    ),
+)
+
+
+def _git(mirror: Path, *args: str, binary: bool = False):
+    out = subprocess.run(
+        ["git", "-C", str(mirror), *args], capture_output=True, check=False, text=not binary
+    )
+    return out
+
+
+def blobs(mirror: Path, folder: str) -> list[tuple[str, str, int | None]]:
+    """(path, object id, size or None where the snapshot lacks the object)."""
+    res = _git(mirror, "ls-tree", "-r", "-l", "HEAD", f"{folder}/")
+    if res.returncode != 0:
+        raise SystemExit(f"extract_bitterli: cannot list {folder} in {mirror}: {res.stderr}")
+    items = []
+    for line in res.stdout.splitlines():
+        meta, path = line.split("\t", 1)
+        _mode, kind, sha, size = meta.split()
+        if kind != "blob":
+            continue
+        present = _git(mirror, "cat-file", "-e", sha).returncode == 0
+        items.append((path, sha, int(size) if present and size != "-" else None))
+    return items
+
+
+def extract(mirror: Path, folder: str, out: Path) -> tuple[int, list[str]]:
+    """Write the folder's files under ``out``; returns (files written, paths missing)."""
+    written, missing = 0, []
+    for path, sha, size in blobs(mirror, folder):
+        if size is None:
+            missing.append(path)
+            continue
+        dest = out / path
+        if dest.is_file() and dest.stat().st_size == size:
+            written += 1
+            continue
+        data = _git(mirror, "cat-file", "blob", sha, binary=True)
+        if data.returncode != 0:
+            missing.append(path)
+            continue
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        tmp = dest.with_name(dest.name + ".part")
+        tmp.write_bytes(data.stdout)
+        tmp.replace(dest)
+        written += 1
+    return written, missing
+
+
+def referenced_files(xml_path: Path) -> list[str]:
+    """Relative paths of every ``filename`` the scene file names."""
+    root = ET.parse(xml_path).getroot()
+    return sorted(
+        {
+            el.get("value")
+            for el in root.iter("string")
+            if el.get("name") == "filename" and el.get("value")
+        }
+    )
+
+
+def apply_edits(folder: Path) -> list[str]:
+    """Edit ``scene.xml`` for Mitsuba 3 (the original kept beside it); returns what changed."""
+    xml, orig = folder / "scene.xml", folder / "scene.original.xml"
+    if not orig.exists():
+        orig.write_bytes(xml.read_bytes())
+    text = orig.read_text(encoding="utf-8")
+    done = []
+    for pattern, repl, why in EDITS:
+        text, n = pattern.subn(repl, text)
+        if n:
+            done.append(f"{why} ({n}x)")
+    xml.write_text(text, encoding="utf-8")
+    return done
+
+
+def write_diffuse(folder: Path) -> Path:
+    """``diffuse/scene.toml``: the scene as voxgi loads it, for both renderers."""
+    import warnings
+
+    import voxgi
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = voxgi.Scene.load(folder / "scene.xml")
+    for w in caught:
+        print(f"    voxgi: {w.message}")
+    return scene.save(folder / "diffuse" / "scene.toml")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("scenes", nargs="*", help=f"scene folders (default: {' '.join(SCENES)})")
+    ap.add_argument("--mirror", type=Path, default=MIRROR, help="bare git directory")
+    ap.add_argument("--out", type=Path, default=OUT, help="target folder (outside the repository)")
+    ap.add_argument("--no-diffuse", action="store_true", help="skip the diffuse variant")
+    ap.add_argument("--list", action="store_true", help="list the mirror's folders and exit")
+    args = ap.parse_args(argv)
+    if args.list:
+        print(_git(args.mirror, "ls-tree", "--name-only", "HEAD").stdout)
+        return 0
+    whole = []
+    for name in args.scenes or SCENES:
+        written, missing = extract(args.mirror, name, args.out)
+        folder = args.out / name
+        if not (folder / "scene.xml").is_file():
+            print(f"{name}: no scene.xml ({written} files written)")
+            continue
+        edits = apply_edits(folder)
+        refs = referenced_files(folder / "scene.xml")
+        absent = [r for r in refs if not (folder / r).is_file()]
+        state = "whole" if not absent else f"NOT whole: {len(absent)} referenced files missing"
+        print(f"{name}: {written} files, {len(missing)} absent from the snapshot; {state}")
+        for r in absent:
+            print(f"    missing {r}")
+        for e in edits:
+            print(f"    edit: {e}")
+        if not absent:
+            whole.append(name)
+            if not args.no_diffuse:
+                print(f"    diffuse variant: {write_diffuse(folder)}")
+    print("whole scenes:", " ".join(whole) if whole else "none")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,277 @@
+"""Progressive rendering: frames into the running mean until the estimated
+error meets the tolerance (``docs/design.md`` §6)."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..scene import Camera, Scene
+from .budget import _reflects_light, light_spread, ray_budget
+from .estimate import _Mean
+from .executor import FrameExecutor, FrameShaderSpec
+from .pixel_filter import _FILTER_REACH
+from .settings import RenderTuning, _check_executor, _check_render, _check_solution, _RenderSettings
+from .vpls import VPLSampler
+
+__all__ = ["RenderResult", "render"]
+
+
+@dataclass
+class RenderResult:
+    """Output of :func:`voxgi.render`.
+
+    Attributes
+    ----------
+    image : (H, W, 3) float32
+        Linear radiance; ``image[0, 0]`` is the top-left pixel.
+    frames : int
+        Progressive frames accumulated.
+    stderr : (H, W, 3) float32 or None
+        Per-pixel standard error estimate of ``image`` (radiance units), from
+        batch means of the frames with a heavy-tail guard (``docs/design.md``
+        §6); None with fewer than two frames.
+    stats : dict
+        ``seconds`` per phase, ray counts, VPLs used, what was skipped. The
+        phases: ``setup``; ``primary`` (camera rays and their hits);
+        ``shadow`` (the VPLs' light: shadow rays and the shading of the VPLs
+        they find); ``gather`` (gather rays and the shading of their hits);
+        ``shade`` only where the VPLs are shaded apart from their shadow rays
+        (the embreex path, ``docs/design.md`` §6); ``filter`` where the
+        indirect light is filtered; ``total`` and ``display``
+        (the same), plus ``voxelize`` and ``solve`` when :func:`voxgi.render`
+        ran them. The error estimate: ``est_rel_mse`` (the image's relMSE,
+        what ``tol`` bounds), ``est_max_rel_err`` and ``est_tail_rel_err``
+        (per-pixel relative errors), ``flagged_pixels`` (heavy-tailed pixels
+        the guard does not believe) and ``edge_pixels`` (pixels whose camera
+        rays met more than one surface; None when frames came without their
+        surfaces), ``docs/design.md`` §6.
+    solution : Solution or None
+        The voxel solution displayed (computed here when none was given).
+    """
+
+    image: np.ndarray
+    frames: int = 0
+    stderr: np.ndarray | None = None
+    stats: dict = field(default_factory=dict)
+    solution: object = None
+
+
+def _with_budget(opt: _RenderSettings, sol) -> _RenderSettings:
+    """``opt`` with its VPL and gather counts fixed from the solution's light."""
+    spread = light_spread(sol)
+    filtered = opt.indirect_filter > 0 and _reflects_light(sol)
+    k, g = ray_budget(spread, opt.K, opt.gather, filtered=filtered)
+    radius = opt.indirect_filter if filtered else 0
+    return replace(opt, K=k, gather=g, spread=spread, indirect_filter=radius)
+
+
+def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
+    """The VPL sampler and the shadow-ray offset of this scene and solution."""
+    sampler = VPLSampler(
+        sol,
+        opt.K,
+        opt.seed,
+        opt.emitter_share,
+        mis=opt.gather > 0,
+        pdf=opt.vpl_pdf,
+        on_surface=opt.vpl_on_surface,
+    )
+    diag = float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
+    # Shadow-ray offsets: well above float32 rounding of the coordinates
+    # (~1e-7 relative) and well below any feature of a sensible scene.
+    return FrameShaderSpec(
+        scene, opt.cam, sampler, 1e-4 * diag, opt.gather, opt.seed, opt.indirect_filter
+    )
+
+
+def _skipped(spec: FrameShaderSpec) -> list[str]:
+    """What this render leaves out, and why."""
+    sampler, skipped = spec.sampler, []
+    if not spec.glossy:
+        skipped.append("glossy: no material has a specular layer")
+    if sampler.counts[0] == 0:
+        skipped.append("emitter VPLs: no emitting record with power")
+    if sampler.counts[1] == 0:
+        skipped.append("non-emitter VPLs: no reflecting record with power")
+    if sampler.skipped_records:
+        skipped.append(
+            f"{sampler.skipped_records} records with zero radiosity or area "
+            "(back records) are never VPLs"
+        )
+    return skipped
+
+
+def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Mean, bool]:
+    """Frames 0, 1, ... from ``source`` into the running mean until the
+    stopping rule or ``max_frames``; Ctrl-C stops after the current frame.
+    Returns the mean and whether it was interrupted."""
+    from tqdm.auto import tqdm
+
+    cam = opt.cam
+    reach = _FILTER_REACH[cam.pixel_filter]
+    acc = _Mean.empty(
+        cam.height * cam.width,
+        opt.pixel_share,
+        opt.threads,
+        (cam.height, cam.width, reach) if reach else None,
+    )
+    interrupted = False
+    # With a tolerance the bar follows the error, not the frame cap that is
+    # rarely reached: the share of the way, in log scale, from the first
+    # estimate to tol (or the share of the frames, whichever is further).
+    bar = tqdm(
+        total=100,
+        disable=not progress,
+        desc="display",
+        unit="%",
+        leave=False,
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}{postfix}",
+    )
+    first = None
+    try:
+        for f in range(opt.max_frames):
+            x = source.frame(f, opt.seed).astype(np.float64)
+            acc.add(x, getattr(source, "surface", None))
+            share = (f + 1) / opt.max_frames
+            # the estimate is read only once the rule may stop on it
+            est = acc.est if opt.tol > 0 and acc.ready(opt) else math.nan
+            if np.isfinite(est) and est > 0:
+                first = est if first is None else first
+                if first > opt.tol:
+                    share = max(share, math.log(first / est) / math.log(first / opt.tol))
+            bar.update(int(100 * min(share, 1.0)) - bar.n)
+            known = f", est relMSE {est:.2e}" if np.isfinite(est) else ""
+            bar.set_postfix_str(f"frame {f + 1}{known}")
+            if acc.done(opt):
+                break
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        bar.close()
+        source.close()
+    return acc, interrupted
+
+
+def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) -> dict:
+    """Ray counts, VPLs, frames, the estimate and what was skipped."""
+    return {
+        "seconds": seconds,
+        "primary_rays": int(source.primary_rays),
+        "shadow_rays": int(source.shadow_rays),
+        "light_rays": int(getattr(source, "light_rays", 0)),
+        "gather_rays": int(source.gather_rays),
+        "gather_per_frame": spec.gather_per_frame,
+        "indirect_filter": int(spec.indirect_filter),
+        "vpls_per_frame": int(sum(spec.sampler.counts)),
+        "light_spread": opt.spread,
+        "vpls": int(acc.frames * sum(spec.sampler.counts)),
+        "vpl_split": [int(c) for c in spec.sampler.counts],
+        "vpl_pdf": spec.sampler.pdf,
+        "frames": int(acc.frames),
+        "est_rel_mse": acc.est,
+        "est_max_rel_err": acc.worst,
+        "est_tail_rel_err": acc.tail,
+        "flagged_pixels": acc.flagged,
+        "edge_pixels": None if acc.edge is None else int(np.count_nonzero(acc.edges())),
+        "batches": acc.count,
+        "batch_frames": acc.size,
+        "tol": opt.tol,
+        "eps": spec.eps,
+        "skipped": skipped,
+        "interrupted": interrupted,
+        "threads": opt.threads,
+    }
+
+
+def render(
+    scene,
+    sol,
+    vpls_per_frame: int | None = None,
+    max_frames: int | None = None,
+    tol: float | None = None,
+    seed: int = 0,
+    progress: bool = True,
+    threads: int | None = None,
+    executor: FrameExecutor | None = None,
+    *,
+    camera: Camera | None = None,
+    tuning: RenderTuning | None = None,
+) -> RenderResult:
+    r"""Render ``scene`` from its camera using the voxel solution ``sol``.
+
+    Each pixel's primary ray (Embree) hits a point x; its radiance is
+    ``Le(x)`` plus the light reflected from the records of ``sol``, each a
+    virtual point light of radiance ``B/π`` (``docs/design.md`` §6):
+
+    .. math:: L(x) = L_e(x) + \int f(x, \omega_i, \omega_o)\, \frac{B(y)}{\pi}\,
+              \frac{\cos\theta_x \cos\theta_y}{r^2 + \Delta A(y)/\pi} V(x, y)\, dA(y),
+
+    estimated with a few VPLs per frame and gather rays MIS-combined with
+    them, frames averaged until the estimated noise falls under ``tol``.
+
+    Parameters
+    ----------
+    scene : Scene
+        With a camera (``scene.camera``, or ``camera=``).
+    sol : Solution
+        The voxel solution of ``scene`` (``voxgi.render`` also takes None).
+    vpls_per_frame : int or None
+        VPLs per frame and pixel (>= 1; None: from the light's spread,
+        :func:`ray_budget`).
+    max_frames : int or None
+        At most this many frames (default 256).
+    tol : float or None
+        Bound on the estimated relMSE of the remaining noise (default 1e-3; 0:
+        run ``max_frames``).
+    seed : int
+        Seeds the VPL, sub-pixel and lens sequences.
+    progress, threads
+        A tqdm progress bar; worker threads (None: all cores).
+    executor : FrameExecutor or None
+        Where the frames are computed (None: here); the image is the local one.
+    camera : Camera, optional
+        Overrides ``scene.camera``.
+    tuning : RenderTuning or None
+        Expert settings (:class:`RenderTuning`).
+
+    Returns
+    -------
+    RenderResult
+        ``image`` (H, W, 3) float32 linear radiance, ``image[0, 0]`` top-left;
+        ``stderr``; ``frames``; ``stats`` (seconds, ray counts, ``est_rel_mse``,
+        ``skipped``, ``interrupted``: Ctrl-C stops after the current frame).
+
+    Raises
+    ------
+    ValueError, TypeError
+        No camera, a solution of another scene, bad arguments, too large an image.
+    """
+    t_start = time.perf_counter()
+    opt = _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads, tuning)
+    executor = _check_executor(executor)
+    _check_solution(scene, sol, opt.cam)
+    opt = _with_budget(opt, sol)
+    t0 = time.perf_counter()
+    spec = _shader_spec(scene, sol, opt)
+    source = executor.frames(spec, opt.max_frames, threads=opt.threads)
+    seconds = {"setup": time.perf_counter() - t0}
+    skipped = _skipped(spec)
+    tracer = getattr(source, "tracer", None)
+    if tracer is not None and tracer.why_not_native is not None:
+        skipped.append(
+            f"compiled ray tracing: {tracer.why_not_native}; the rays go through embreex's "
+            "Python calls in batches (the same image, slower)"
+        )
+    acc, interrupted = _progressive_mean(source, opt, progress)
+    image = acc.mean.reshape(opt.cam.height, opt.cam.width, 3).astype(np.float32)
+    seconds.update(source.seconds)
+    seconds["total"] = time.perf_counter() - t_start
+    seconds["display"] = seconds["total"]
+    stats = _render_stats(spec, source, acc, opt, skipped, interrupted, seconds)
+    return RenderResult(
+        image=image, frames=acc.frames, stderr=acc.stderr(image.shape), stats=stats, solution=sol
+    )

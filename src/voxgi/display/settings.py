@@ -1,0 +1,180 @@
+"""The settings of a render: :class:`RenderTuning` and the checks of
+:func:`voxgi.display.render`'s arguments."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _validate
+from ..radiosity import Solution
+from ..scene import Camera, Scene
+from ..voxels import available_memory
+from .estimate import PIXEL_FACTOR, PIXEL_SHARE
+from .executor import FrameExecutor, LocalFrames
+
+__all__ = ["RenderTuning"]
+
+
+@dataclass(frozen=True)
+class RenderTuning:
+    """Expert settings of :func:`render`, for studies and benchmarks.
+
+    Attributes
+    ----------
+    min_frames : int
+        Frames before the stopping rule is trusted (>= 2; the rule also
+        waits for 8 batches, ``docs/design.md`` §6).
+    emitter_share : float or None
+        Share of each frame's VPLs taken from emitters; None splits by power
+        (see :class:`VPLSampler`).
+    gather : int or None
+        Cosine-distributed gather rays per pixel and frame, MIS-combined
+        with the VPLs (0: VPLs only, the paper's display; None: from the
+        light's spread, see :func:`ray_budget`).
+    vpl_pdf : {"power", "area"}
+        VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
+        paper); see :class:`VPLSampler`.
+    vpl_on_surface : bool
+        Each frame places every VPL at a fresh point of its record's surface
+        (default); False keeps it at the record's centroid (the paper).
+    pixel_factor, pixel_share : float
+        The stopping rule's per-pixel bound: at most a share ``pixel_share``
+        (one in 1000) of the pixels with an estimated relative error
+        ``se / sqrt(L² + 0.01)`` over ``pixel_factor · sqrt(tol)`` (10;
+        ``inf``: the mean relMSE alone decides; ``pixel_share=0``: every
+        pixel).
+    indirect_filter : int
+        Each frame, the light of the records that do not emit (the indirect
+        light) is averaged over the pixels within this many pixels that see
+        the same smooth surface: the same material, a normal within about
+        25°, near the pixel's tangent plane (``docs/design.md`` §6). 0: off.
+        The direct light, from the emitting records and the lights, is
+        never filtered.
+
+    >>> RenderTuning(gather=0).min_frames
+    4
+    """
+
+    min_frames: int = 4
+    emitter_share: float | None = None
+    gather: int | None = None
+    vpl_pdf: str = "power"
+    vpl_on_surface: bool = True
+    pixel_factor: float = PIXEL_FACTOR
+    pixel_share: float = PIXEL_SHARE
+    indirect_filter: int = 1
+
+
+@dataclass(frozen=True)
+class _RenderSettings:
+    """The validated arguments of one render."""
+
+    cam: Camera
+    K: int | None
+    max_frames: int
+    tol: float
+    seed: int
+    min_frames: int
+    pixel_factor: float
+    pixel_share: float
+    emitter_share: float | None
+    gather: int | None
+    vpl_pdf: str
+    vpl_on_surface: bool
+    threads: int
+    indirect_filter: int = 0
+    spread: float = math.nan
+
+
+def _check_render(
+    scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads, tuning
+) -> _RenderSettings:
+    """Image checks: scene, solution, camera and numbers; TypeError/ValueError naming them."""
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
+    scene.check_nonempty()
+    if sol is None:
+        raise TypeError(
+            "sol: expected a voxgi.Solution (voxgi.render, the pipeline's "
+            "render, solves the scene first when given none)"
+        )
+    cam = camera if camera is not None else scene.camera
+    if cam is None:
+        raise ValueError("render: the scene has no camera (set scene.camera or pass camera=)")
+    if not isinstance(cam, Camera):
+        raise TypeError(f"camera: expected voxgi.Camera, got {type(cam).__name__}")
+    t = RenderTuning() if tuning is None else tuning
+    if not isinstance(t, RenderTuning):
+        raise TypeError(f"tuning: expected voxgi.RenderTuning or None, got {type(t).__name__}")
+    tol = _validate.real(tol, "tol", low=0.0, allow_none=True)
+    return _RenderSettings(
+        cam=cam,
+        K=_validate.integer(vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16, allow_none=True),
+        max_frames=_validate.integer(max_frames, "max_frames", low=1, allow_none=True) or 256,
+        tol=1e-3 if tol is None else tol,
+        seed=_validate.integer(seed, "seed"),
+        min_frames=_validate.integer(t.min_frames, "min_frames", low=2),
+        pixel_factor=(
+            math.inf
+            if t.pixel_factor == math.inf
+            else _validate.real(t.pixel_factor, "pixel_factor", low=0.0, low_open=True)
+        ),
+        pixel_share=_validate.real(t.pixel_share, "pixel_share", low=0.0, high=1.0, high_open=True),
+        emitter_share=_validate.real(
+            t.emitter_share, "emitter_share", low=0.0, high=1.0, allow_none=True
+        ),
+        gather=_validate.integer(t.gather, "gather", low=0, high=4096, allow_none=True),
+        vpl_pdf=t.vpl_pdf,
+        vpl_on_surface=bool(t.vpl_on_surface),
+        threads=_validate.threads(threads),
+        indirect_filter=_validate.integer(t.indirect_filter, "indirect_filter", low=0, high=16),
+    )
+
+
+def _check_image_memory(cam: Camera) -> None:
+    """Refuse an image that cannot fit before allocating anything: a render
+    holds about 1400 bytes per pixel (the running sums, 32 batch means,
+    hit records, frame buffers) plus about 30 MB of tile buffers and 50 MB
+    for the batch statistics."""
+    need = 1500 * cam.width * cam.height + (80 << 20)
+    budget = available_memory() // 2
+    if need > budget:
+        raise ValueError(
+            f"render: a {cam.width}x{cam.height} image needs about {need:,} bytes "
+            f"(~1500 bytes per pixel), over the budget of {budget:,} bytes (half "
+            "the available memory); lower Camera.width/height"
+        )
+
+
+def _check_solution(scene: Scene, sol, cam: Camera) -> None:
+    """The image fits in memory; the solution is a :class:`Solution` of this
+    scene, one radiosity per record."""
+    _check_image_memory(cam)
+    if not isinstance(sol, Solution):
+        raise TypeError(f"sol: expected voxgi.Solution or None, got {type(sol).__name__}")
+    fp = getattr(sol.vox, "scene_fingerprint", "")
+    if fp != scene.fingerprint():
+        raise ValueError(
+            f"sol: this solution was computed for another scene (fingerprint {fp!r}, this "
+            f"scene's is {scene.fingerprint()!r}); solve this scene or pass sol=None"
+        )
+    n = len(sol.vox)
+    r = np.asarray(sol.radiosity)
+    if r.shape != (n, 3):
+        raise ValueError(f"sol.radiosity: expected shape ({n}, 3), got {r.shape}")
+
+
+def _check_executor(executor) -> FrameExecutor:
+    """The executor given, or the local one for None."""
+    if executor is None:
+        return LocalFrames()
+    if not callable(getattr(executor, "frames", None)):
+        raise TypeError(
+            f"executor: expected an object with a frames(spec, max_frames, threads=...) method "
+            f"(voxgi.display.FrameExecutor) or None, got {type(executor).__name__}; "
+            "voxgi.render also takes a dask.distributed.Client as client="
+        )
+    return executor

@@ -1,0 +1,175 @@
+"""The virtual point lights: which records light a frame, and with what
+weight (``docs/design.md`` §6)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import _validate
+from ..lights import LUMINANCE
+
+__all__ = ["VPLSampler"]
+
+
+def _morton(ijk: np.ndarray) -> np.ndarray:
+    """30-bit interleaved (Morton) keys of voxel coordinates (10 bits each)."""
+
+    def spread(v):
+        v = (v.astype(np.int64) - v.min()) & 0x3FF
+        v = (v | (v << 16)) & 0x030000FF
+        v = (v | (v << 8)) & 0x0300F00F
+        v = (v | (v << 4)) & 0x030C30C3
+        v = (v | (v << 2)) & 0x09249249
+        return v
+
+    return spread(ijk[:, 0]) | (spread(ijk[:, 1]) << 1) | (spread(ijk[:, 2]) << 2)
+
+
+class VPLSampler:
+    """The fixed VPL sequence of a solution: two sets, emitters and the rest.
+
+    As in the paper, records are drawn from a cumulative table by binary
+    search, with replacement, in two sets (emitters and non-emitters), each
+    set with its own count per frame. Records with zero radiosity (black back
+    records above all) can send no light and are left out of the table; that
+    changes no expectation.
+
+    ``pdf="power"`` (the default) draws a record with probability
+    proportional to its power ``ΔA · B`` (luminance) instead of its area
+    (``pdf="area"``, the paper's choice): the estimator weight is then
+    ``B / (π n p(y))`` with the area density ``p(y) = lum(B_y) / Σ ΔA lum(B)``,
+    so every VPL carries the same power. With area sampling a few bright
+    records (on the Cornell box, those on top of the tall block, B ≈ 11× the
+    mean) are drawn in one frame of several and then light a wall alone: a
+    heavy-tailed error that the between-frame spread underestimates.
+
+    Each frame draws its ``n_d`` emitter and ``n_i`` other VPLs stratified
+    along the cumulative table, whose records are in Morton (Z-curve) order:
+    every draw still has its probability, but a frame's VPLs are spread over
+    the surfaces instead of clumped. Frames draw their VPLs independently;
+    the render estimates the error of their mean from batch means of frames
+    (``docs/design.md`` §6).
+
+    The split: ``n_d / K = Φ_d / (Φ_d + Φ_i)`` with Φ the power
+    ``Σ ΔA · B`` (luminance) of each set, at least one VPL for a set with
+    power; with equal relative spread per VPL this is the Neyman allocation
+    (samples ∝ each set's standard deviation, which scales with its power).
+    ``emitter_share`` overrides it.
+
+    Parameters
+    ----------
+    sol : Solution
+    vpls_per_frame : int
+    seed : int
+    emitter_share : float in [0, 1] or None
+    mis : bool
+        The VPLs of both sets are combined with gather rays (their weight is
+        then ``B/π`` and ``pa`` carries ``n p(y)`` of their set).
+    pdf : {"power", "area"}
+    on_surface : bool
+        Each VPL of a frame sits at a point drawn uniformly on its record's
+        own surface (``docs/design.md`` §6) instead of at the
+        record's fixed centroid.
+    """
+
+    def __init__(
+        self,
+        sol,
+        vpls_per_frame: int = 16,
+        seed: int = 0,
+        emitter_share: float | None = None,
+        mis: bool = False,
+        pdf: str = "power",
+        on_surface: bool = True,
+    ):
+        if pdf not in ("power", "area"):
+            raise ValueError(f"pdf: expected 'power' or 'area', got {pdf!r}")
+        vox = sol.vox
+        n = len(vox)
+        B = _validate.as_c_array(sol.radiosity, np.float64, (n, 3), "sol.radiosity")
+        area = _validate.as_c_array(vox.area, np.float64, (n,), "vox.area")
+        if np.any(B < 0) or np.any(area < 0):
+            raise ValueError("sol.radiosity and vox.area must be >= 0")
+        back = np.asarray(vox.back, dtype=bool) if vox.back is not None else np.zeros(n, bool)
+        emit = np.any(np.asarray(vox.emission) > 0, axis=1) & ~back
+        useful = ~back & (area > 0) & np.any(B > 0, axis=1)
+        self.skipped_records = int(n - useful.sum())
+        order = np.argsort(_morton(np.asarray(vox.ijk)), kind="stable")
+        lum = B @ LUMINANCE
+        self.pdf = pdf
+        self.sets = []
+        for sel in (useful & emit, useful & ~emit):
+            idx = order[sel[order]]
+            w = area[idx] * lum[idx] if pdf == "power" else area[idx]
+            cum = np.cumsum(w)
+            power = float(np.sum(area[idx] * lum[idx]))
+            # Density per unit area of each record of the set: p(y) = w_y / (ΔA_y W).
+            dens = np.zeros(n)
+            if len(idx):
+                dens[idx] = (lum[idx] if pdf == "power" else 1.0) / cum[-1]
+            self.sets.append((idx, cum, power, dens))
+        self.K = int(vpls_per_frame)
+        (_, cum_d, pd, dens_d), (_, cum_i, pi, dens_i) = self.sets
+        has_d, has_i = len(cum_d) > 0 and pd > 0, len(cum_i) > 0 and pi > 0
+        if emitter_share is None:
+            share = pd / (pd + pi) if (pd + pi) > 0 else 0.0
+        else:
+            share = float(emitter_share)
+        if has_d and has_i and self.K >= 2:
+            nd = int(np.clip(round(self.K * share), 1, self.K - 1))
+        elif has_d:
+            nd = self.K
+        else:
+            nd = 0
+        if not has_i:
+            nd = self.K if has_d else 0
+        self.counts = (nd, self.K - nd if has_i else 0)
+        self.seed = int(seed)
+        self.mis = bool(mis) and sum(self.counts) > 0
+        #: (N,) float32 n p(y) of every record in an MIS set (n its set's VPLs
+        #: per frame, 0 elsewhere): the VPL side of the MIS weights, for VPLs
+        #: and gather hits alike.
+        pa = self.counts[0] * dens_d + self.counts[1] * dens_i if self.mis else np.zeros(n)
+        self.record_pa = pa.astype(np.float32)
+        self.pos = np.ascontiguousarray(vox.centroid, dtype=np.float64)
+        self.normal = np.ascontiguousarray(vox.normal, dtype=np.float32)
+        self.area32 = area.astype(np.float32)
+        self.B = B
+        self.vox = vox
+        self.on_surface = bool(on_surface)
+
+    @property
+    def empty(self) -> bool:
+        return sum(self.counts) == 0
+
+    def frame(self, f: int, group: int = 0) -> dict:
+        """The VPLs of frame ``f`` for the pixels of interleaving group
+        ``group``: the same for every view."""
+        rng = np.random.default_rng([self.seed, int(f), 0x1B1, *([int(group)] if group else [])])
+        idx_all, w_all, pa_all = [], [], []
+        for (idx, cum, _, dens), k in zip(self.sets, self.counts, strict=True):
+            if k == 0:
+                continue
+            u = (np.arange(k) + rng.random(k)) / k * float(cum[-1])  # stratified along the table
+            pick = idx[np.minimum(np.searchsorted(cum, u, side="right"), len(idx) - 1)]
+            idx_all.append(pick)
+            if self.mis:
+                # An MIS VPL carries B/π; the kernel divides by n p(y) + the gather pdf.
+                w_all.append(np.ones(k))
+                pa_all.append(self.record_pa[pick])
+            else:
+                # E ≈ (1/n) Σ (B/π) G V / p(y): the estimator weight times the radiance.
+                w_all.append(1.0 / (k * dens[pick]))
+                pa_all.append(np.zeros(k, np.float32))
+        idx = np.concatenate(idx_all)
+        w = np.concatenate(w_all)
+        return {
+            "pa": np.ascontiguousarray(np.concatenate(pa_all), dtype=np.float32),
+            "index": idx,
+            "pos": np.ascontiguousarray(self.pos[idx]),
+            "normal": np.ascontiguousarray(self.normal[idx]),
+            "weight": np.ascontiguousarray((w[:, None] * self.B[idx] / math.pi).astype(np.float32)),
+            "area": np.ascontiguousarray(self.area32[idx]),
+        }

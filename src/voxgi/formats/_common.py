@@ -1,0 +1,89 @@
+"""What every scene-file reader shares: the data a loader returns, the warning
+that lists what it approximated or left out, and the albedo bound."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+class SceneWarning(UserWarning):
+    """A scene file held something voxgi approximated or left out."""
+
+
+@dataclass
+class MeshData:
+    """One mesh of a loaded scene, in world space.
+
+    ``vertices`` (V, 3) float64, ``faces`` (F, 3) int64 (counter-clockwise
+    around the front normal), ``albedo`` and ``emission`` (3,) float64 linear
+    RGB (emission is radiance), ``two_sided`` as :meth:`voxgi.Scene.add`.
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    albedo: np.ndarray
+    emission: np.ndarray
+    two_sided: bool = False
+    source: str | None = None
+
+
+@dataclass
+class SceneData:
+    """What a loader read: meshes, the keyword arguments of a Camera (or None),
+    and the lights in the tables of a TOML scene."""
+
+    meshes: list[MeshData] = field(default_factory=list)
+    camera: dict | None = None
+    #: ``[[light]]`` tables of a TOML scene (``type`` and the light's fields)
+    lights: list[dict] = field(default_factory=list)
+    #: the ``[environment]`` table of a TOML scene, or None
+    environment: dict | None = None
+
+
+#: Largest albedo a Material holds (below 1 in float32, docs/design.md §12).
+ALBEDO_MAX = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
+
+
+class Notes:
+    """What a loader approximated or dropped, for one warning per kind."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.approximated: list[str] = []
+        self.unsupported: list[str] = []
+
+    def approx(self, what: str) -> None:
+        if what not in self.approximated:
+            self.approximated.append(what)
+
+    def drop(self, what: str) -> None:
+        if what not in self.unsupported:
+            self.unsupported.append(what)
+
+    def emit(self) -> None:
+        # stacklevel 4: the warning points at the caller of Scene.load
+        if self.approximated:
+            warnings.warn(
+                SceneWarning(f"{self.path}: approximated: " + "; ".join(self.approximated)),
+                stacklevel=4,
+            )
+        if self.unsupported:
+            warnings.warn(
+                SceneWarning(
+                    f"{self.path}: not supported, left out: " + "; ".join(self.unsupported)
+                ),
+                stacklevel=4,
+            )
+
+
+def clamp_albedo(albedo, what: str, notes: Notes) -> np.ndarray:
+    a = np.asarray(albedo, dtype=np.float64)
+    if np.any(a > ALBEDO_MAX):
+        notes.approx(f"{what}: albedo {a.tolist()} clamped below 1")
+        a = np.minimum(a, ALBEDO_MAX)
+    return a

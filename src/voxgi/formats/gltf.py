@@ -1,0 +1,249 @@
+"""glTF 2.0 (``.gltf`` and ``.glb``): one mesh per primitive, the first
+perspective camera."""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from ._common import MeshData, Notes, SceneData, clamp_albedo
+from .textures import image_mean
+
+__all__ = ["load_gltf"]
+
+
+def _gltf_json(path: Path) -> tuple[dict, bytes | None]:
+    """The glTF JSON document (and a GLB's binary chunk)."""
+    buf = path.read_bytes()
+    binary = None
+    if buf[:4] == b"glTF":
+        if len(buf) < 20:
+            raise ValueError(f"scene file {path}: truncated GLB header")
+        n, kind = struct.unpack_from("<I4s", buf, 12)
+        if kind != b"JSON":
+            raise ValueError(f"scene file {path}: GLB's first chunk is not JSON")
+        text = buf[20 : 20 + n]
+        rest = buf[20 + n :]
+        if len(rest) >= 8 and rest[4:8] == b"BIN\0":
+            binary = rest[8 : 8 + struct.unpack_from("<I", rest, 0)[0]]
+    else:
+        text = buf
+    try:
+        doc = json.loads(text.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"scene file {path}: malformed glTF JSON: {exc}") from None
+    if not isinstance(doc, dict) or "asset" not in doc:
+        raise ValueError(f"scene file {path}: not a glTF 2.0 document (no 'asset')")
+    return doc, binary
+
+
+def _gltf_node_matrix(node: dict, where: str) -> np.ndarray:
+    if "matrix" in node:
+        m = np.asarray(node["matrix"], np.float64)
+        if m.shape != (16,):
+            raise ValueError(f"{where}: 'matrix' needs 16 numbers")
+        return m.reshape(4, 4).T  # column-major
+    t = np.asarray(node.get("translation", [0, 0, 0]), np.float64)
+    q = np.asarray(node.get("rotation", [0, 0, 0, 1]), np.float64)  # x, y, z, w
+    s = np.asarray(node.get("scale", [1, 1, 1]), np.float64)
+    if t.shape != (3,) or q.shape != (4,) or s.shape != (3,):
+        raise ValueError(f"{where}: translation/rotation/scale have the wrong length")
+    r = trimesh.transformations.quaternion_matrix([q[3], q[0], q[1], q[2]])
+    return trimesh.transformations.translation_matrix(t) @ r @ np.diag([*s, 1.0])
+
+
+def _gltf_camera(doc: dict, path: Path) -> dict | None:
+    """Camera keyword arguments of the first node holding a perspective camera."""
+    nodes = doc.get("nodes", [])
+    parents = {c: i for i, n in enumerate(nodes) for c in n.get("children", [])}
+    for i, node in enumerate(nodes):
+        if "camera" not in node:
+            continue
+        try:
+            cam = doc["cameras"][node["camera"]]
+        except (KeyError, IndexError, TypeError):
+            raise ValueError(
+                f"scene file {path}: nodes[{i}]: camera {node['camera']!r} not in 'cameras'"
+            ) from None
+        if cam.get("type") != "perspective":
+            continue
+        persp = cam.get("perspective", {})
+        where = f"scene file {path}: cameras[{node['camera']}]"
+        yfov = persp.get("yfov")
+        if not isinstance(yfov, (int, float)) or not 0 < yfov < math.pi:
+            raise ValueError(f"{where}: yfov {yfov!r} must be in (0, pi) radians")
+        m, j = np.eye(4), i
+        while j is not None:
+            m = _gltf_node_matrix(nodes[j], f"scene file {path}: nodes[{j}]") @ m
+            j = parents.get(j)
+        aspect = float(persp.get("aspectRatio", 1.0))
+        height = 512
+        # glTF cameras look down -z with +y up.
+        eye = m[:3, 3]
+        fwd = -m[:3, 2] / np.linalg.norm(m[:3, 2])
+        return {
+            "eye": tuple(eye.tolist()),
+            "target": tuple((eye + fwd).tolist()),
+            "up": tuple(m[:3, 1].tolist()),
+            "fov": math.degrees(yfov),
+            "width": max(1, round(height * aspect)),
+            "height": height,
+        }
+    return None
+
+
+def _check_gltf_references(doc: dict, path: Path) -> None:
+    """ValueError naming the element when a mesh or buffer points nowhere."""
+
+    def table(key):
+        t = doc.get(key, [])
+        if not isinstance(t, list):
+            raise ValueError(f"scene file {path}: '{key}' must be an array")
+        return t
+
+    accessors, views, buffers = table("accessors"), table("bufferViews"), table("buffers")
+
+    def need(index, items, key, where):
+        if not isinstance(index, int) or not 0 <= index < len(items):
+            raise ValueError(
+                f"scene file {path}: {where}: {key} {index!r} not in '{key}s' "
+                f"({len(items)} of them)"
+            )
+
+    for m, mesh in enumerate(table("meshes")):
+        for k, prim in enumerate(mesh.get("primitives", [])):
+            where = f"meshes[{m}].primitives[{k}]"
+            for name, index in prim.get("attributes", {}).items():
+                need(index, accessors, "accessor", f"{where}.attributes.{name}")
+            if "indices" in prim:
+                need(prim["indices"], accessors, "accessor", f"{where}.indices")
+    for a, acc in enumerate(accessors):
+        if "bufferView" in acc:
+            need(acc["bufferView"], views, "bufferView", f"accessors[{a}]")
+    for v, view in enumerate(views):
+        need(view.get("buffer"), buffers, "buffer", f"bufferViews[{v}]")
+    for b, buf in enumerate(buffers):
+        uri = buf.get("uri")
+        if isinstance(uri, str) and not uri.startswith("data:"):
+            if not (path.parent / uri).exists():
+                raise ValueError(
+                    f"scene file {path}: buffers[{b}]: file not found: {path.parent / uri}"
+                )
+
+
+def _gltf_material(m: dict | None, tm, where: str, path: Path, notes: Notes):
+    """(albedo, emission, two_sided) of a primitive: its glTF material ``m`` when
+    its name is unique, else trimesh's reading ``tm`` of it."""
+    if m is not None:
+        pbr = m.get("pbrMetallicRoughness", {})
+        base = np.asarray(pbr.get("baseColorFactor", [1, 1, 1, 1]), np.float64)[:3]
+        emission = np.asarray(m.get("emissiveFactor", [0, 0, 0]), np.float64)
+        strength = m.get("extensions", {}).get("KHR_materials_emissive_strength", {})
+        emission = emission * float(strength.get("emissiveStrength", 1.0))
+        two_sided = bool(m.get("doubleSided", False))
+        # glTF's metallicFactor defaults to 1: a metal, read as diffuse
+        metallic = pbr.get("metallicFactor", 1.0)
+        if metallic or "metallicRoughnessTexture" in pbr:
+            notes.approx(f"{where}: metallic {metallic} read as diffuse base colour")
+        extra = sorted(
+            {*m.get("extensions", {}), "emissiveTexture" in m and "emissiveTexture"}
+            - {"KHR_materials_emissive_strength", False}
+        )
+        if extra:
+            notes.approx(f"{where}: {', '.join(extra)} left out")
+        if (
+            base.shape != (3,)
+            or emission.shape != (3,)
+            or not np.all(np.isfinite(np.r_[base, emission]))
+        ):
+            raise ValueError(f"scene file {path}: {where}: bad baseColorFactor or emissiveFactor")
+        has_texture = "baseColorTexture" in pbr
+    elif tm is not None and hasattr(tm, "baseColorFactor"):
+        # materials without a unique name: trimesh's (8-bit) factors
+        base = (
+            np.asarray(
+                tm.baseColorFactor if tm.baseColorFactor is not None else [255] * 4, np.float64
+            )[:3]
+            / 255
+        )
+        emission = np.asarray(
+            tm.emissiveFactor if tm.emissiveFactor is not None else [0, 0, 0], np.float64
+        )
+        two_sided = bool(tm.doubleSided)
+        has_texture = tm.baseColorTexture is not None
+    else:
+        base, emission, two_sided, has_texture = np.ones(3), np.zeros(3), False, False
+    if has_texture:
+        image = getattr(tm, "baseColorTexture", None)
+        if image is not None:
+            base = base * image_mean(image)
+            notes.approx(f"{where}: baseColorTexture reduced to its mean colour")
+        else:
+            notes.approx(f"{where}: baseColorTexture unreadable: factor 1")
+    return base, emission, two_sided
+
+
+def load_gltf(path) -> SceneData:
+    """Read a glTF 2.0 scene (``.gltf`` or ``.glb``): one mesh per primitive.
+
+    The albedo is ``baseColorFactor`` (times the mean linear colour of
+    ``baseColorTexture``), the radiance ``emissiveFactor`` times
+    ``KHR_materials_emissive_strength``; ``doubleSided`` gives a two-sided
+    surface; node transforms are applied; the first perspective camera
+    (``yfov``, ``aspectRatio``, 512 pixels high) becomes the camera.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        As :func:`load_mitsuba`, naming the file and the glTF element.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"scene file not found: {path}")
+    doc, _ = _gltf_json(path)
+    _check_gltf_references(doc, path)
+    notes = Notes(path)
+    by_name: dict[str, list] = {}
+    for k, m in enumerate(doc.get("materials", [])):
+        by_name.setdefault(m.get("name", f"material{k}"), []).append(m)
+    try:
+        loaded = trimesh.load(path, force="scene", process=False)
+        geoms = loaded.dump()
+    except Exception as exc:
+        raise ValueError(f"scene file {path}: malformed glTF: {exc}") from None
+    data = SceneData(camera=_gltf_camera(doc, path))
+    lights = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
+    for k, light in enumerate(lights):
+        # (where punctual lights would become voxgi lights)
+        notes.drop(f"KHR_lights_punctual light {k} ({light.get('type', '?')})")
+    for k, g in enumerate(geoms):
+        if not isinstance(g, trimesh.Trimesh) or len(g.faces) == 0:
+            continue
+        tm = getattr(g.visual, "material", None)
+        mname = getattr(tm, "name", None)
+        found = by_name.get(mname, [])
+        m = found[0] if len(found) == 1 else None
+        where = f"material {mname!r}"
+        base, emission, two_sided = _gltf_material(m, tm, where, path, notes)
+        base = clamp_albedo(base, where, notes)
+        name = str(g.metadata.get("name") or mname or f"primitive{k}")
+        data.meshes.append(
+            MeshData(
+                name,
+                np.asarray(g.vertices, np.float64),
+                np.asarray(g.faces, np.int64),
+                base,
+                emission,
+                two_sided,
+                str(path),
+            )
+        )
+    if not data.meshes:
+        raise ValueError(f"scene file {path}: the glTF holds no triangles")
+    notes.emit()
+    return data

@@ -1,0 +1,435 @@
+"""Mitsuba 3 plugins to voxgi: BSDFs to albedos, emitters to radiance and
+lights, shapes to meshes, the sensor to a camera (docs/design.md §12)."""
+
+from __future__ import annotations
+
+import math
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from ._common import MeshData, Notes, SceneData, clamp_albedo
+from .mitsuba_xml import PLUGIN_TAGS, Node, Plugin, XmlReader, parse_xml
+from .serialized import read_serialized
+from .textures import image_mean
+
+__all__ = ["load_mitsuba"]
+
+
+#: BSDFs that hold another (the one whose albedo is used).
+_WRAPPER_BSDFS = {"twosided", "mask", "bumpmap", "normalmap"}
+#: BSDFs that scatter on both sides by themselves.
+_TWO_SIDED_BSDFS = {"dielectric", "thindielectric", "roughdielectric"}
+#: Properties whose colour approximates another BSDF's diffuse albedo.
+_ALBEDO_KEYS = ("reflectance", "diffuse_reflectance", "base_color")
+
+
+def _colour(v, p: Plugin, key: str, notes: Notes) -> np.ndarray:
+    """An RGB colour from a float, an rgb/spectrum value or a texture plugin."""
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return np.full(3, float(v))
+    if isinstance(v, np.ndarray):
+        return v.astype(np.float64)
+    if isinstance(v, Plugin) and v.tag == "texture":
+        if v.type == "bitmap" and "filename" in v.props:
+            img_path = Path(str(v.props["filename"]))  # resolved by the reader
+            try:
+                from PIL import Image  # (a scikit-image dependency)
+
+                with Image.open(img_path) as im:
+                    mean = image_mean(im, raw=bool(v.props.get("raw", False)))
+                notes.approx(f"{v.label()}: bitmap {img_path.name} reduced to its mean colour")
+                return mean
+            except (OSError, ValueError) as exc:
+                raise ValueError(f"{v.where()}: cannot read bitmap {img_path}: {exc}") from None
+        if v.type == "checkerboard":
+            c0 = _colour(v.props.get("color0", 0.4), v, "color0", notes)
+            c1 = _colour(v.props.get("color1", 0.2), v, "color1", notes)
+            notes.approx(f"{v.label()}: checkerboard reduced to its mean colour")
+            return 0.5 * (c0 + c1)
+        notes.approx(f"{v.label()}: texture replaced by grey 0.5")
+        return np.full(3, 0.5)
+    raise ValueError(f"{p.where()}: property {key!r} is not a colour: {v!r}")
+
+
+def _bsdf(p: Plugin, notes: Notes) -> tuple[np.ndarray, bool]:
+    """(albedo, two_sided) of a BSDF plugin (docs/design.md §12)."""
+    nested = p.nested("bsdf")
+    if p.type == "diffuse":
+        return _colour(p.props.get("reflectance", 0.5), p, "reflectance", notes), False
+    if p.type in _WRAPPER_BSDFS:
+        if not nested:
+            raise ValueError(f"{p.where()}: needs a nested <bsdf>")
+        albedo, _ = _bsdf(nested[0], notes)
+        if p.type == "twosided":
+            if len(nested) > 1:
+                notes.approx(f"{p.label()}: its back BSDF replaced by the front one")
+            return albedo, True
+        notes.approx(f"{p.label()}: replaced by its nested BSDF")
+        return albedo, False
+    if p.type == "blendbsdf" and len(nested) == 2:
+        w = p.props.get("weight", 0.5)
+        w = (
+            float(w)
+            if isinstance(w, (int, float))
+            else float(_colour(w, p, "weight", notes).mean())
+        )
+        (a0, s0), (a1, s1) = _bsdf(nested[0], notes), _bsdf(nested[1], notes)
+        notes.approx(f"{p.label()}: the blend of its BSDFs' albedos")
+        return (1 - w) * a0 + w * a1, s0 and s1
+    if p.type in _TWO_SIDED_BSDFS:
+        notes.approx(
+            f"glass {p.label()}: an opaque diffuse surface of albedo 0.5 (no light passes it)"
+        )
+        return np.full(3, 0.5), True
+    key = next((k for k in _ALBEDO_KEYS if k in p.props), None)
+    albedo = np.full(3, 0.5) if key is None else _colour(p.props[key], p, key, notes)
+    notes.approx(f"{p.label()}: diffuse with albedo {'0.5' if key is None else key}")
+    return albedo, p.type in _TWO_SIDED_BSDFS
+
+
+def _emission(p: Plugin, notes: Notes) -> np.ndarray:
+    """Radiance of an emitter attached to a shape (only ``area`` is one)."""
+    if p.type != "area":
+        notes.drop(f"{p.label()} on a shape")
+        return np.zeros(3)
+    if "radiance" not in p.props:
+        raise ValueError(f"{p.where()}: missing property 'radiance'")
+    return _colour(p.props["radiance"], p, "radiance", notes)
+
+
+def _scene_emitter(p: Plugin, data: SceneData, notes: Notes) -> None:
+    """A scene-level emitter: Mitsuba's ``point``, ``spot``, ``directional``,
+    ``constant`` and ``envmap`` become voxgi's lights in their own units
+    (``docs/design.md`` §11, §12); any other is listed as left out."""
+    m = np.asarray(p.props.get("to_world", np.eye(4)), np.float64)
+
+    def colour(key: str) -> list[float]:
+        return [float(x) for x in _colour(p.props.get(key, 1.0), p, key, notes)]
+
+    def unit(v) -> list[float]:
+        v = np.asarray(v, np.float64)
+        n = float(np.linalg.norm(v))
+        if not n > 0:
+            raise ValueError(f"{p.where()}: a zero direction")
+        return [float(x) for x in v / n]
+
+    if p.type == "point":
+        pos = p.props.get("position", m[:3, 3])
+        data.lights.append(
+            {"type": "point", "position": [float(x) for x in pos], "intensity": colour("intensity")}
+        )
+    elif p.type == "spot":
+        # Mitsuba's spot shines along its local +z from its local origin.
+        cutoff = float(p.props.get("cutoff_angle", 20.0))
+        data.lights.append(
+            {
+                "type": "spot",
+                "position": [float(x) for x in m[:3, 3]],
+                "direction": unit(m[:3, 2]),
+                "intensity": colour("intensity"),
+                "cutoff_angle": cutoff,
+                "beam_width": float(p.props.get("beam_width", 0.75 * cutoff)),
+            }
+        )
+    elif p.type == "directional":
+        d = p.props.get("direction", m[:3, 2])
+        data.lights.append(
+            {"type": "directional", "direction": unit(d), "irradiance": colour("irradiance")}
+        )
+    elif p.type in ("constant", "envmap"):
+        if data.environment is not None:
+            notes.drop(f"{p.label()} at line {p.line} (only the first environment is used)")
+            return
+        if p.type == "constant":
+            data.environment = {"radiance": colour("radiance")}
+        else:
+            if "filename" not in p.props:
+                raise ValueError(f"{p.where()}: missing property 'filename'")
+            image = Path(str(p.props["filename"]))  # resolved by the reader
+            data.environment = {
+                "image": str(image),
+                "scale": float(p.props.get("scale", 1.0)),
+                "to_world": m.tolist(),
+            }
+    else:
+        notes.drop(f"{p.label()} at line {p.line}")
+
+
+def _unit_disk(n: int = 128) -> tuple[np.ndarray, np.ndarray]:
+    t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    v = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([np.cos(t), np.sin(t), 0 * t], 1)])
+    i = np.arange(n)
+    return v, np.stack([np.zeros(n, np.int64), 1 + i, 1 + (i + 1) % n], 1)
+
+
+def _canonical_shape(p: Plugin) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices, faces, object-to-world) of Mitsuba's built-in shapes."""
+    to_world = p.props.get("to_world", np.eye(4))
+    if p.type == "rectangle":
+        v = np.array([[-1.0, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
+        return v, np.array([[0, 1, 2], [0, 2, 3]]), to_world
+    if p.type == "cube":
+        box = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
+        return np.asarray(box.vertices), np.asarray(box.faces), to_world
+    if p.type == "disk":
+        v, f = _unit_disk()
+        return v, f, to_world
+    # sphere: the unit sphere placed by center and radius, then to_world
+    s = trimesh.creation.icosphere(subdivisions=4)
+    center = p.props.get("center", np.zeros(3))
+    radius = float(p.props.get("radius", 1.0))
+    place = trimesh.transformations.translation_matrix(center) @ np.diag([radius] * 3 + [1.0])
+    return np.asarray(s.vertices), np.asarray(s.faces), to_world @ place
+
+
+def _shape_mesh(p: Plugin) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """World-space (vertices, faces, source file) of a shape plugin."""
+    if p.type in ("rectangle", "cube", "sphere", "disk"):
+        v, f, m = _canonical_shape(p)
+        source = None
+    else:
+        if "filename" not in p.props:
+            raise ValueError(f"{p.where()}: missing property 'filename'")
+        mesh_path = Path(str(p.props["filename"]))  # resolved by the reader
+        if not mesh_path.exists():
+            raise ValueError(f"{p.where()}: mesh file not found: {mesh_path}")
+        if p.type == "serialized":
+            v, f = read_serialized(mesh_path, int(p.props.get("shape_index", 0)))
+        else:
+            try:
+                with warnings.catch_warnings():
+                    # trimesh's numpy warnings on a mesh's texture coordinates
+                    # (an all-NaN median) say nothing about the geometry read
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                    mesh = trimesh.load(
+                        mesh_path,
+                        file_type=p.type,
+                        force="mesh",
+                        process=False,
+                        maintain_order=True,
+                    )
+                v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+            except Exception as exc:
+                raise ValueError(f"{p.where()}: cannot load mesh {mesh_path}: {exc}") from None
+        if len(f) == 0:
+            raise ValueError(f"{p.where()}: mesh {mesh_path} has no triangles")
+        m = p.props.get("to_world", np.eye(4))
+        source = str(mesh_path)
+    v = np.asarray(v, np.float64) @ m[:3, :3].T + m[:3, 3]
+    f = np.asarray(f, np.int64)
+    # Mitsuba's analytic rectangle, disk and sphere carry their normal through
+    # to_world as a normal, so a mirroring transform keeps their front; a
+    # mesh's front follows its winding, which the mirror turns (§12).
+    if p.type in ("rectangle", "disk", "sphere") and np.linalg.det(m[:3, :3]) < 0:
+        f = f[:, ::-1]
+    if p.props.get("flip_normals", False):
+        f = f[:, ::-1]
+    return v, np.ascontiguousarray(f), source
+
+
+def _has_area(v: np.ndarray, f: np.ndarray) -> bool:
+    """Whether any face has an area, by :class:`~voxgi.Scene`'s rule for
+    degenerate faces (twice the area against the longest edge squared)."""
+    t = v[f]
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    dbl_area = np.linalg.norm(np.cross(e1, e2), axis=1)
+    edge2 = np.max([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e2 - e1)], axis=0)
+    return bool(np.any(dbl_area > 1e-12 * edge2))
+
+
+def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
+    """The meshes of a shape plugin: one, or two for a two-sided emitter."""
+    if p.type not in ("obj", "ply", "serialized", "rectangle", "cube", "sphere", "disk"):
+        notes.drop(f"{p.label()} at line {p.line}")
+        return []
+    bsdfs, emitters = p.nested("bsdf"), p.nested("emitter")
+    for c in [*p.children, *(v for v in p.props.values() if isinstance(v, Plugin))]:
+        if c.tag not in ("bsdf", "emitter"):
+            notes.drop(f"{c.label()} inside {p.label()}")
+    emission = np.zeros(3)
+    for e in emitters:
+        emission = emission + _emission(e, notes)
+    if bsdfs:
+        albedo, two_sided = _bsdf(bsdfs[0], notes)
+    else:
+        # Mitsuba's default BSDF: diffuse 0.5, black on an emitter.
+        albedo, two_sided = np.full(3, 0.0 if emitters else 0.5), False
+    v, f, source = _shape_mesh(p)
+    name = p.id or (Path(source).stem if source else f"{p.type}{index}")
+    if not _has_area(v, f):
+        # Mitsuba loads such a mesh and it draws nothing; so does voxgi
+        notes.drop(f"{p.label()} {name!r}: every face has zero area")
+        return []
+    albedo = clamp_albedo(albedo, p.label(), notes)
+    if max(emission) > 0 and two_sided:
+        # Mitsuba's area emitter lights the front side only, whatever the
+        # BSDF: the back becomes a second, reflecting-only surface (§12).
+        return [
+            MeshData(name, v, f, albedo, emission, False, source),
+            MeshData(
+                name + "_back",
+                v,
+                np.ascontiguousarray(f[:, ::-1]),
+                albedo,
+                np.zeros(3),
+                False,
+                source,
+            ),
+        ]
+    return [MeshData(name, v, f, albedo, emission, two_sided, source)]
+
+
+def _fov_y(fov: float, axis: str, width: int, height: int) -> float:
+    """Vertical field of view (degrees) of Mitsuba's ``fov`` along ``fov_axis``."""
+    if axis == "smaller":
+        axis = "x" if width < height else "y"
+    elif axis == "larger":
+        axis = "x" if width > height else "y"
+    t = math.tan(math.radians(fov) / 2)
+    if axis == "x":
+        t *= height / width
+    elif axis == "diagonal":
+        t *= height / math.hypot(width, height)
+    return math.degrees(2 * math.atan(t))
+
+
+def _sensor(p: Plugin, notes: Notes) -> dict | None:
+    """Camera keyword arguments of a ``perspective`` or ``thinlens`` sensor."""
+    if p.type not in ("perspective", "thinlens"):
+        notes.drop(f"{p.label()} (no camera)")
+        return None
+    films = p.nested("film")
+    width = int(films[0].props.get("width", 768)) if films else 768
+    height = int(films[0].props.get("height", 576)) if films else 576
+    if width < 1 or height < 1:
+        raise ValueError(f"{p.where()}: film size {width}x{height} must be positive")
+    filters = films[0].nested("rfilter") if films else []
+    rfilter = filters[0].type if filters else "gaussian"  # Mitsuba's default
+    pixel_filter = "box"
+    if (
+        rfilter == "gaussian"
+        and float(filters[0].props.get("stddev", 0.5) if filters else 0.5) == 0.5
+    ):
+        pixel_filter = "gaussian"
+    elif rfilter != "box":
+        notes.approx(f"film rfilter {rfilter!r} (voxgi's pixels are box-filtered)")
+    axis = str(p.props.get("fov_axis", "x")).lower()
+    if axis not in ("x", "y", "smaller", "larger", "diagonal"):
+        raise ValueError(
+            f"{p.where()}: fov_axis={axis!r}; expected x, y, smaller, larger or diagonal"
+        )
+    if "fov" in p.props:
+        fov = float(p.props["fov"])
+    else:
+        fl = str(p.props.get("focal_length", "50mm"))
+        m = re.fullmatch(r"\s*([0-9.eE+-]+)\s*(mm)?\s*", fl)
+        if m is None or float(m.group(1)) <= 0:
+            raise ValueError(f"{p.where()}: focal_length={fl!r} is not a length like '50mm'")
+        # 35 mm film equivalent: a 36 mm wide frame
+        fov = math.degrees(2 * math.atan(36.0 / (2 * float(m.group(1)))))
+    if not 0 < fov < 180:
+        raise ValueError(f"{p.where()}: fov={fov} must be in (0, 180) degrees")
+    for k in ("principal_point_offset_x", "principal_point_offset_y"):
+        if float(p.props.get(k, 0.0)) != 0.0:
+            notes.drop(f"{p.label()}: {k}")
+    m4 = p.props.get("to_world", np.eye(4))
+    lin = m4[:3, :3]
+    if np.linalg.det(lin) < 0:
+        notes.approx(f"{p.label()}: its to_world mirrors the image; voxgi renders it unmirrored")
+    eye = m4[:3, 3]
+    fwd = lin @ np.array([0.0, 0.0, 1.0])
+    fwd /= np.linalg.norm(fwd)
+    cam = {
+        "eye": tuple(eye.tolist()),
+        "target": tuple((eye + fwd).tolist()),
+        "up": tuple((lin @ np.array([0.0, 1.0, 0.0])).tolist()),
+        "fov": _fov_y(fov, axis, width, height),
+        "width": width,
+        "height": height,
+        "pixel_filter": pixel_filter,
+    }
+    if p.type == "thinlens":
+        cam["aperture"] = float(p.props.get("aperture_radius", 0.0))
+        if "focus_distance" in p.props:
+            cam["focus_distance"] = float(p.props["focus_distance"])
+    return cam
+
+
+def load_mitsuba(path) -> SceneData:
+    """Read a Mitsuba 3 XML scene.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.xml`` file; mesh, include and texture files are relative to
+        the file that names them.
+
+    Returns
+    -------
+    SceneData
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        Malformed XML, unknown elements or ids, bad values, missing mesh
+        files: the message names the file, line and element.
+
+    Warns
+    -----
+    SceneWarning
+        One listing the approximated BSDFs and textures, one listing what was
+        left out (emitters other than ``area``, other shapes and sensors).
+    """
+    path = Path(path)
+    reader = XmlReader(path)
+    root = parse_xml(path)
+    try:
+        return _read_mitsuba(reader, path, root)
+    except RecursionError:
+        raise ValueError(f"scene file {path}: elements nested too deeply") from None
+
+
+def _read_mitsuba(reader: XmlReader, path: Path, root: Node) -> SceneData:
+    data = SceneData()
+    children = reader.scene_children(path, root)
+    for file, node in children:
+        if node.tag in PLUGIN_TAGS and "id" in node.attrs:
+            reader.pending[reader.attr(file, node, "id")] = (file, node)
+    for file, node in children:
+        if node.tag not in PLUGIN_TAGS:
+            reader.fail(file, node, "unknown top-level element")
+        ident = reader.attr(file, node, "id")
+        if ident in reader.ids and ident not in reader.pending:
+            p = reader.ids[ident]  # read already, through a reference
+        else:
+            reader.pending.pop(ident, None)
+            p = reader.plugin(file, node)
+        if p.tag == "shape":
+            data.meshes += _shape(p, len(data.meshes), reader.notes)
+        elif p.tag == "sensor":
+            if data.camera is None:
+                data.camera = _sensor(p, reader.notes)
+            else:
+                reader.notes.drop(f"{p.label()} (only the first sensor is used)")
+        elif p.tag == "emitter":
+            if p.type != "area":  # (an area emitter is attached to shapes by reference)
+                _scene_emitter(p, data, reader.notes)
+        elif p.tag == "integrator":
+            # voxgi is its own integrator and computes every bounce
+            depth = p.props.get("max_depth", -1)
+            if depth != -1:
+                reader.notes.drop(f"{p.label()}: max_depth {depth} (voxgi computes every bounce)")
+        elif p.tag in ("bsdf", "texture"):
+            pass  # used through refs
+        else:
+            reader.notes.drop(f"{p.label()} at line {p.line}")
+    if not data.meshes:
+        raise ValueError(f"{path}: no shape voxgi can read")
+    reader.notes.emit()
+    return data

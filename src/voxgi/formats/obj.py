@@ -1,0 +1,154 @@
+"""Wavefront OBJ with its MTL materials: one mesh per material."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from ._common import MeshData, Notes, SceneData, clamp_albedo
+from .textures import texture_mean
+
+__all__ = ["load_obj"]
+
+
+def _parse_mtl(path: Path, notes: Notes) -> dict[str, dict]:
+    """``{material: {"Kd": (3,), "Ke": (3,), "map_Kd": Path}}`` of an MTL file."""
+    mats: dict[str, dict] = {}
+    cur = None
+    for k, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+        parts = line.split("#", 1)[0].split()
+        if not parts:
+            continue
+        key = parts[0]
+        if key == "newmtl":
+            cur = mats.setdefault(" ".join(parts[1:]), {})
+        elif cur is None:
+            continue
+        elif key in ("Kd", "Ke"):
+            try:
+                c = np.array([float(x) for x in parts[1:4]], np.float64)
+            except ValueError:
+                raise ValueError(
+                    f"{path}: line {k}: {key}: not numbers: {line.strip()!r}"
+                ) from None
+            if c.size == 1:
+                c = np.repeat(c, 3)
+            if c.shape != (3,) or not np.all(np.isfinite(c)) or np.any(c < 0):
+                raise ValueError(
+                    f"{path}: line {k}: {key}: expected 3 numbers >= 0: {line.strip()!r}"
+                )
+            cur[key] = c
+        elif key == "map_Kd":
+            cur["map_Kd"] = path.parent / parts[-1]
+    return mats
+
+
+def _absolute_obj_indices(text: str) -> str:
+    """OBJ text with relative (negative) face indices made absolute.
+
+    In OBJ, ``f -4 -3 -2 -1`` names the last four vertices defined *before*
+    the face; trimesh counts them back from the end of the file instead.
+    Only the face lines holding a negative index are rewritten.
+    """
+    if not re.search(r"^f[ \t][^\n]*(?<![\d/])-\d", text, flags=re.MULTILINE):
+        return text
+    starts = [
+        np.array([m.start() for m in re.finditer(rf"^{k}[ \t]", text, flags=re.MULTILINE)])
+        for k in ("v", "vt", "vn")
+    ]
+
+    def line(m):
+        # counts of v, vt, vn defined before this face
+        n = [int(np.searchsorted(s, m.start())) for s in starts]
+
+        def token(t):
+            parts = t.group(0).split("/")
+            return "/".join(
+                str(int(q) + n[i] + 1) if q.startswith("-") else q for i, q in enumerate(parts)
+            )
+
+        return m.group(1) + re.sub(r"\S+", token, m.group(2))
+
+    return re.sub(r"^(f[ \t]+)([^\n]*)", line, text, flags=re.MULTILINE)
+
+
+def load_obj(path) -> SceneData:
+    """Read an OBJ file and its MTL materials: one mesh per material.
+
+    ``Kd`` is the albedo (default 0.8 when the MTL gives none), ``Ke`` the
+    emitted radiance; a ``map_Kd`` texture multiplies ``Kd`` by its mean
+    linear colour. A missing MTL file or material gives grey 0.5. All
+    surfaces are one-sided (OBJ has no flag for it).
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        As :func:`load_mitsuba`, naming the OBJ or MTL file.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"scene file not found: {path}")
+    notes = Notes(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"scene file {path}: cannot be read as OBJ text ({exc})") from None
+    mats: dict[str, dict] = {}
+    for line in text.splitlines():
+        if line.startswith("mtllib"):
+            for name in line.split()[1:]:
+                mtl = path.parent / name
+                if mtl.exists():
+                    mats.update(_parse_mtl(mtl, notes))
+                else:
+                    notes.approx(f"material library {name} not found: grey 0.5")
+    try:
+        loaded = trimesh.load(
+            trimesh.util.wrap_as_stream(_absolute_obj_indices(text)),
+            file_type="obj",
+            resolver=trimesh.resolvers.FilePathResolver(path),
+            process=False,
+            group_material=True,
+            maintain_order=True,
+        )
+    except Exception as exc:
+        raise ValueError(f"scene file {path}: cannot load OBJ: {exc}") from None
+    geoms = (
+        list(loaded.geometry.items())
+        if isinstance(loaded, trimesh.Scene)
+        else [(path.stem, loaded)]
+    )
+    data = SceneData()
+    for gname, g in geoms:
+        if not isinstance(g, trimesh.Trimesh) or len(g.faces) == 0:
+            continue
+        mat = getattr(getattr(g.visual, "material", None), "name", None)
+        m = mats.get(mat)
+        if m is None:
+            if mats:
+                notes.approx(f"material {mat!r} not in the MTL: grey 0.5")
+            albedo, emission = np.full(3, 0.5), np.zeros(3)
+        else:
+            albedo = m.get("Kd", np.full(3, 0.8))
+            emission = m.get("Ke", np.zeros(3))
+            if "map_Kd" in m:
+                albedo = albedo * texture_mean(m["map_Kd"], path, notes, f"material {mat!r}")
+        albedo = clamp_albedo(albedo, f"material {mat!r}", notes)
+        data.meshes.append(
+            MeshData(
+                str(mat or gname),
+                np.asarray(g.vertices, np.float64),
+                np.asarray(g.faces, np.int64),
+                albedo,
+                emission,
+                False,
+                str(path),
+            )
+        )
+    if not data.meshes:
+        raise ValueError(f"scene file {path}: the OBJ holds no faces")
+    notes.emit()
+    return data

@@ -1,0 +1,142 @@
+"""The solve: direct light, the gathering iteration, the traced passes."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..solution import Solution
+from ..voxels import VoxelSet
+from .diagnostics import back_fraction, energy_balance, lost_fraction
+from .direct_strategies import direct_light
+from .iteration import State, iterate
+from .linesystem import Gatherer, LineExecutor, LocalExecutor
+from .memory import check_memory
+from .problem import Problem, build_problem, gatherer, normalise, open_backend, zero_solution
+from .records import check_vox
+from .traced_passes import traced_bounces
+from .tuning import Settings, SolveTuning, settings
+
+__all__ = ["solve"]
+
+
+def _check_executor(executor, vox: VoxelSet, opt: Settings, tuning) -> LineExecutor:
+    """The executor given, or the local one for None (whose memory estimate
+    is checked here, before anything is allocated)."""
+    if executor is None:
+        executor = LocalExecutor()
+    if isinstance(executor, LocalExecutor):
+        check_memory(vox, opt, tuning)
+        return executor
+    if not callable(getattr(executor, "line_system", None)):
+        raise TypeError(
+            f"executor: expected an object with a line_system(records, progress=...) method "
+            f"(voxgi.radiosity.LineExecutor) or None, got {type(executor).__name__}; "
+            "voxgi.solve also takes a dask.distributed.Client as client="
+        )
+    return executor
+
+
+def _statistics(p: Problem, gather: Gatherer, s: State, shoot_rays: int) -> None:
+    """Ray counts, phases, pair cache and what was skipped, into ``p.stats``."""
+    p.stats.update(
+        rays=int(shoot_rays + s.gather_rays),
+        shoot_rays=int(shoot_rays),
+        gather_rays=int(s.gather_rays),
+        seconds=p.seconds,
+        bounces=s.it,
+        lines_walked=int(s.lines_walked),
+        pair_cache=p.stats.get("pair_cache", {**gather.info, "replayed_passes": gather.replayed}),
+        epsilon=p.opt.epsilon,
+        history=p.opt.history,
+    )
+    if s.it and p.lds is not None:
+        p.stats["skipped"]["finer_directions_after"] = p.opt.later_after
+    if gather.replayed:
+        p.stats["skipped"]["line_walks"] = (
+            f"{gather.replayed} gathering passes replayed the recorded pairs"
+        )
+
+
+def solve(
+    vox: VoxelSet,
+    directions: int = 22,
+    max_bounces: int | None = None,
+    tol: float = 1e-4,
+    threads: int | None = None,
+    executor: LineExecutor | None = None,
+    *,
+    progress: bool = True,
+    tuning: SolveTuning | None = None,
+) -> Solution:
+    """Solve the discrete radiosity equation on the records of ``vox``.
+
+    Shooting from the emitter records first (direct light, radius
+    ``tuning.shoot_directions``), then Jacobi gathering of the reflected
+    light (radius ``directions``) with geometric-tail extrapolation, until
+    the estimated remaining error falls under ``tol`` (``docs/design.md`` §5).
+
+    Parameters
+    ----------
+    vox : VoxelSet
+        Records from :func:`voxgi.voxelize`; left unchanged.
+    directions : int
+        Radius R >= 1 of the gathering direction sphere (22: 5982 directions).
+    max_bounces : int or None
+        At most this many gathering iterations (None: until converged; 0: direct light).
+    tol : float
+        Bound on the estimated remaining relative error ``r λ / (1 − λ)``, ``r``
+        the area-weighted residual (``residuals``), ``λ`` the largest albedo.
+    threads : int or None
+        Threads (None: all hardware threads). Results do not depend on it.
+    executor : LineExecutor or None
+        Where the passes run (None: here; ``voxgi.solve`` also takes a Client).
+    progress : bool
+        Show a tqdm progress bar over iterations.
+    tuning : SolveTuning or None
+        Expert settings (:class:`SolveTuning`).
+
+    Returns
+    -------
+    Solution
+        ``radiosity`` (N, 3) float32, always finite; ``stats`` with ray counts,
+        ``seconds``, ``lost_fraction``, ``energy`` (of the lines), ``skipped``,
+        ``stopped`` and, after traced bounces, ``traced`` (passes, rays,
+        residuals, the change of the reflected power against the lines, and
+        the records whose sum came out negative and were set to zero).
+
+    Raises
+    ------
+    TypeError, ValueError, MemoryError
+        Bad arguments; an estimate (:func:`solve_memory`) over the memory available.
+
+    Warns
+    -----
+    RuntimeWarning
+        No emitter; not converged; stalled or non-finite (the last finite
+        iterate is returned).
+    """
+    t_start = time.perf_counter()
+    a = check_vox(vox)
+    opt = settings(directions, max_bounces, tol, threads, tuning)
+    executor = _check_executor(executor, vox, opt, tuning)
+    p = build_problem(vox, a, opt)
+    if p.stats["emitters"] == 0 and not p.lights:
+        return zero_solution(p)
+    open_backend(p, executor, progress)
+    try:
+        normalise(p)
+        Hd, shoot_escape, shoot_rays = direct_light(p)
+        gather = gatherer(p)
+        s = iterate(p, gather, Hd, progress)
+        p.stats["energy"] = energy_balance(p, Hd, s, lost_fraction(p, gather, s.vis), shoot_escape)
+        back_fraction(p, gather)
+        s.R = traced_bounces(p, Hd, s.R)
+    finally:
+        if hasattr(p.sysm, "close"):
+            p.sysm.close()
+    p.seconds["total"] = time.perf_counter() - t_start
+    _statistics(p, gather, s, shoot_rays)
+    B = (p.E + s.R).astype(np.float32)
+    return Solution(vox=vox, radiosity=B, bounces=s.it, residuals=s.residuals, stats=p.stats)

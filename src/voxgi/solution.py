@@ -1,0 +1,201 @@
+"""The radiosity of a voxel set and its ``.npz`` file format.
+
+:class:`Solution` holds what :func:`voxgi.solve` found for every record of a
+:class:`~voxgi.VoxelSet`; :meth:`Solution.save` and :meth:`Solution.load`
+write and read it with its records (the scene stays with its own files).
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+from .io import atomic_path
+from .voxels import VoxelSet
+
+__all__ = ["Solution"]
+
+
+@dataclass
+class Solution:
+    """Radiosity of every record of a :class:`VoxelSet`.
+
+    Attributes
+    ----------
+    vox : VoxelSet
+        The records solved for.
+    radiosity : (N, 3) float32
+        ``B`` per record (W/m² per channel, i.e. ``pi`` times radiance).
+    bounces : int
+        Gathering iterations run.
+    residuals : list of float
+        Relative residual after each iteration.
+    stats : dict
+        ``rays``, ``shoot_rays``, ``gather_rays``, ``seconds`` (phase -> s),
+        and what was skipped.
+    """
+
+    vox: VoxelSet
+    radiosity: np.ndarray
+    bounces: int = 0
+    residuals: list = field(default_factory=list)
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def radiance(self) -> np.ndarray:
+        """(N, 3) float32 outgoing radiance ``B / pi``."""
+        return (self.radiosity / np.float32(np.pi)).astype(np.float32)
+
+    def save(self, path) -> Path:
+        """Save records and radiosity to a ``.npz`` file (see :meth:`load`).
+
+        Parameters
+        ----------
+        path : str or Path
+            Destination; ``.npz`` is appended by numpy when missing.
+
+        Returns
+        -------
+        Path
+            The file written.
+        """
+        path = Path(path)
+        if path.suffix != ".npz":
+            path = path.with_name(path.name + ".npz")
+        arrays = {}
+        meta = {
+            "bounces": int(self.bounces),
+            "residuals": [float(r) for r in self.residuals],
+            "stats": self.stats,
+            "vox_stats": self.vox.stats,
+        }
+        for f in fields(VoxelSet):
+            v = getattr(self.vox, f.name)
+            if isinstance(v, np.ndarray):
+                arrays["vox_" + f.name] = v
+            elif f.name not in ("stats", "scene"):  # the scene stays with its files
+                meta["vox_" + f.name] = v
+        arrays["radiosity"] = self.radiosity
+        arrays["meta"] = np.frombuffer(
+            json.dumps(meta, default=_json_default).encode(), dtype=np.uint8
+        )
+        # (the temporary name keeps the .npz suffix, so numpy adds none)
+        with atomic_path(path) as tmp:
+            np.savez_compressed(tmp, **arrays)
+        return path
+
+    @classmethod
+    def load(cls, path) -> Solution:
+        """Load a solution written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or Path
+            A ``.npz`` file from :meth:`save`.
+
+        Returns
+        -------
+        Solution
+            With its :class:`VoxelSet`.
+        """
+        import zlib
+
+        path = Path(path)
+        if not path.exists():
+            raise FileNotFoundError(f"solution file not found: {path}")
+        if path.is_file() and path.stat().st_size == 0:
+            raise ValueError(f"{path}: empty file (0 bytes), not a voxgi solution file")
+        try:
+            sol = cls._load(path)
+        except (
+            OSError,
+            EOFError,
+            ValueError,
+            KeyError,
+            TypeError,
+            zlib.error,
+            zipfile.BadZipFile,
+        ) as exc:
+            # (json and Unicode decoding errors are ValueErrors)
+            raise ValueError(
+                f"{path}: not a readable voxgi solution file ({type(exc).__name__}: {exc})"
+            ) from None
+        vox = sol.vox
+        ijk = np.asarray(vox.ijk)
+        if ijk.ndim != 2:
+            raise ValueError(f"{path}: vox_ijk must have shape (N, 3), got {ijk.shape}")
+        n = len(ijk)
+        # Every per-record array has the record count and the type VoxelSet
+        # documents: a short one would otherwise load and fail later in render.
+        want = {
+            "ijk": ((n, 3), np.int32),
+            "normal": ((n, 3), np.float32),
+            "area": ((n,), np.float32),
+            "albedo": ((n, 3), np.float32),
+            "emission": ((n, 3), np.float32),
+            "centroid": ((n, 3), np.float64),
+            "object_id": ((n,), np.int32),
+            "back": ((n,), np.bool_),
+            "side": ((n,), np.int8),
+            "origin": ((3,), np.float64),
+        }
+        for name, (shape, dtype) in want.items():
+            a = getattr(vox, name)
+            if a is None and name == "side":
+                continue
+            a = np.asarray(a)
+            if a.shape != shape or a.dtype != dtype:
+                raise ValueError(
+                    f"{path}: vox_{name} must be {np.dtype(dtype).name} of shape "
+                    f"{shape} for {n} records, got {a.dtype} {a.shape}"
+                )
+            if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+                raise ValueError(f"{path}: vox_{name} has non-finite values")
+        if n and ijk.min() < 0:
+            raise ValueError(f"{path}: vox_ijk has negative voxel coordinates")
+        if not (np.isfinite(vox.pitch) and vox.pitch > 0) or vox.resolution < 2:
+            raise ValueError(f"{path}: bad grid (pitch {vox.pitch}, resolution {vox.resolution})")
+        r = np.asarray(sol.radiosity)
+        if r.shape != (n, 3) or r.dtype.kind != "f":
+            raise ValueError(
+                f"{path}: radiosity must be floats of shape ({n}, 3), got {r.dtype} {r.shape}"
+            )
+        with np.errstate(over="ignore"):
+            sol.radiosity = r.astype(np.float32)
+        if not np.all(np.isfinite(sol.radiosity)):
+            raise ValueError(f"{path}: radiosity has values that are not finite in float32")
+        return sol
+
+    @classmethod
+    def _load(cls, path: Path) -> Solution:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(bytes(z["meta"]).decode())
+            kw = {}
+            for f in fields(VoxelSet):
+                if "vox_" + f.name in z.files:
+                    kw[f.name] = z["vox_" + f.name]
+                elif "vox_" + f.name in meta:
+                    kw[f.name] = meta["vox_" + f.name]
+            kw["stats"] = meta.get("vox_stats", {})
+            kw["pitch"] = float(kw["pitch"])
+            kw["resolution"] = int(kw["resolution"])
+            vox = VoxelSet(**kw)
+            return cls(
+                vox=vox,
+                radiosity=z["radiosity"],
+                bounces=meta["bounces"],
+                residuals=meta["residuals"],
+                stats=meta["stats"],
+            )
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"cannot store {type(o).__name__} in Solution stats")
