@@ -107,8 +107,8 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
                      F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
                      double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided,
                      I64 rec_sorted_key, I32 rec_cell_start, F32 rec_packed, I64 grid_dims,
-                     I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count, F32 ray_dir,
-                     I32 prim, F32Out out, int threads) {
+                     I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count, F32 ray_org,
+                     F32 ray_dir, I32 prim, F32Out out, int threads) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
@@ -121,18 +121,20 @@ auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hi
     check_1d(ray_count, P, "ray_count");
     check_2d(ray_dir, -1, 3, "ray_dir");
     const py::ssize_t R = ray_dir.shape(0);
+    check_2d(ray_org, R, 3, "ray_org");
     check_1d(prim, R, "prim");
     check_ray_counts(ray_count, R);
     check_2d(out, P, 3, "out");
     check_inplace(out, "out");
     const int64_t* pc = ray_count.data();
+    const float* pr = ray_org.data();
     const float* pd = ray_dir.data();
     const int32_t* pp = prim.data();
     float* po = out.mutable_data();
     auto stop = make_stop_check();
     {
         py::gil_scoped_release release;
-        voxgi::gather_shade(hits, mats, mis, tris, grid, pc, pd, pp, po, threads, stop);
+        voxgi::gather_shade(hits, mats, mis, tris, grid, pc, pr, pd, pp, po, threads, stop);
     }
 }
 
@@ -183,9 +185,10 @@ ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc"
           "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "rec_sorted_key"_a.noconvert(),
           "rec_cell_start"_a.noconvert(), "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(),
           "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a,
-          "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(), "prim"_a.noconvert(),
-          "out"_a.noconvert(), "threads"_a = 0,
-          R"doc(Shade the gather rays (prim: first triangle hit, -1 none) with the radiance
+          "ray_count"_a.noconvert(), "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(),
+          "prim"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0,
+          R"doc(Shade the gather rays (ray_org, ray_dir as gather_rays wrote them; prim: the
+first triangle hit, -1 none) with the radiance
 of the record at each hit point, MIS-weighted against the VPLs; adds into
 out (P, 3) float32.)doc");
 

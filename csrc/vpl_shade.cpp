@@ -349,16 +349,19 @@ inline void cell_records(const RecordGrid& g, int64_t i, int64_t j, int64_t k, i
 //   slab thinner than a voxel, or that face's black back);
 // - or across another surface: some record o of another object, or of an
 //   orientation more than 60° away (another cluster of the voxelization),
-//   has y and r's centroid strictly on opposite sides of its plane. Those
+//   has y strictly on one side of its plane and r's centroid not on it. Those
 //   are the planes junction cutting split r's surface by, so this keeps a
 //   hit on one side of a thin wall from reading the record on the other.
 bool separated(const RecordGrid& g, const double y[3], const float n[3], const PackedRecord& r,
                int64_t q0, int64_t q1) {
-    // The planes come from float centroids: about 1e-7 of the scene's size.
-    const double tol = 1e-4 * g.pitch;
     for (int64_t q = q0; q < q1; ++q) {
         const PackedRecord& o = g.rec[q];
         if (&o == &r) continue;
+        // o's plane is as good as its float centroid: a few units in the
+        // last place of its coordinates.
+        const double tol =
+            1e-6 * g.pitch + 3e-7 * std::max({std::fabs(o.centroid[0]), std::fabs(o.centroid[1]),
+                                              std::fabs(o.centroid[2])});
         double sy = 0.0, sr = 0.0, behind = 0.0;
         for (int a = 0; a < 3; ++a) {
             const double rc = double(r.centroid[a]) - o.centroid[a];
@@ -371,7 +374,9 @@ bool separated(const RecordGrid& g, const double y[3], const float n[3], const P
             continue;
         }
         if (o.object == r.object && dot3(o.normal, r.normal) > 0.5f) continue;  // r's own sheet
-        if ((sy > tol && sr < -tol) || (sy < -tol && sr > tol)) return true;
+        // A centroid on that plane (a sliver cut off at a junction) is on
+        // neither side: it does not stand for a point off the plane.
+        if ((sy > tol && sr < tol) || (sy < -tol && sr > -tol)) return true;
     }
     return false;
 }
@@ -462,13 +467,17 @@ void nearest_on_triangle(const double p[3], const double a[3], const double b[3]
     put(a, vb * den, ab, vc * den, ac);
 }
 
-// The hit of pixel p's gather ray along df (unit up to float rounding) that
-// first meets triangle t (-1: none). key -2 when it brings no light: a miss,
-// a direction below the surface, a black back.
+// The hit of pixel p's gather ray from ro along df (unit up to float
+// rounding) that first meets triangle t (-1: none). key -2 when it brings no light: a miss, a
+// direction below the surface, a black back.
 void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordGrid& grid,
-                int64_t p, const float df[3], int32_t t, GatherHit& h) {
+                int64_t p, const float* ro, const float df[3], int32_t t, GatherHit& h) {
     h.key = -2;
     const double* x = hits.pos + 3 * p;
+    // The hit point on the ray as traced: the same direction from the
+    // pixel's own point meets the plane up to the offset away, which near a
+    // surface meeting the triangle can be on that surface's far side.
+    const double o[3] = {ro[0], ro[1], ro[2]};
     const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
     if (t < 0 || t >= tris.count) return;
     const double d[3] = {df[0], df[1], df[2]};
@@ -488,13 +497,11 @@ void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordG
     const double dn = (d[0] * nt[0] + d[1] * nt[1] + d[2] * nt[2]) / dl;
     if (dn == 0.0) return;
     const double tt =
-        ((v0[0] - x[0]) * nt[0] + (v0[1] - x[1]) * nt[1] + (v0[2] - x[2]) * nt[2]) / dn;
-    // The ray from x stands for one from x's offset origin: on a grazing
-    // ray the two meet the plane apart, and the point beyond the
-    // triangle's edge can lie on the far side of a surface that meets it
-    // there; the lookup needs the point on the triangle.
+        ((v0[0] - o[0]) * nt[0] + (v0[1] - o[1]) * nt[1] + (v0[2] - o[2]) * nt[2]) / dn;
+    // Kept on the triangle: in float the ray can meet it a little beyond its
+    // edge, where another surface may meet it.
     double on_plane[3];
-    for (int a = 0; a < 3; ++a) on_plane[a] = x[a] + tt * h.wi[a];
+    for (int a = 0; a < 3; ++a) on_plane[a] = o[a] + tt * h.wi[a];
     nearest_on_triangle(on_plane, v0, v1, v2, h.y);
     const bool front = dn < 0.0;
     h.obj = tris.object[t];
@@ -524,12 +531,13 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.cos_x / denom;
 }
 
-// Add the light of pixel p's gather ray along df that first meets triangle t into s.
+// Add the light of pixel p's gather ray from ro along df that first meets
+// triangle t into s.
 void gather_ray_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                       const ShadeTriangles& tris, const RecordGrid& grid, int64_t p,
-                      const float df[3], int32_t t, double s[3]) {
+                      const float ro[3], const float df[3], int32_t t, double s[3]) {
     GatherHit h;
-    gather_hit(hits, tris, grid, p, df, t, h);
+    gather_hit(hits, tris, grid, p, ro, df, t, h);
     if (h.key == -2) return;
     gather_hit_light(hits, mats, mis, grid, p, h, lookup_in_cell(grid, h.y, h.ns, h.obj, h.c), s);
 }
@@ -538,8 +546,8 @@ void gather_ray_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
 
 void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                   const ShadeTriangles& tris, const RecordGrid& grid, const int64_t* ray_count,
-                  const float* ray_dir, const int32_t* prim, float* out, int threads,
-                  const StopCheck& stop) {
+                  const float* ray_org, const float* ray_dir, const int32_t* prim, float* out,
+                  int threads, const StopCheck& stop) {
     const int64_t P = hits.count;
     const std::vector<int64_t> offset = ray_offsets(ray_count, P);
     for_each_pixel(P, threads, stop, [&](int64_t p) {
@@ -547,7 +555,8 @@ void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
         if (m < 0 || offset[p + 1] == offset[p]) return;
         double s[3] = {0.0, 0.0, 0.0};
         for (int64_t r = offset[p]; r < offset[p + 1]; ++r)
-            gather_ray_light(hits, mats, mis, tris, grid, p, ray_dir + 3 * r, prim[r], s);
+            gather_ray_light(hits, mats, mis, tris, grid, p, ray_org + 3 * r, ray_dir + 3 * r,
+                             prim[r], s);
         for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += float(s[ch]);
     });
 }
@@ -583,7 +592,7 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                 gather_pixel_rays(
                     hits, n_gather, base, eps, p, [&](int k, const float* ro, const float* rd) {
                         const int32_t t = scene.intersect(ro, rd, nullptr, nullptr, nullptr);
-                        gather_hit(hits, tris, grid, p, rd, t, h[k]);
+                        gather_hit(hits, tris, grid, p, ro, rd, t, h[k]);
                         if (h[k].key >= 0 && grid.cell_start)
                             __builtin_prefetch(grid.cell_start + h[k].key);
                     });

@@ -143,8 +143,8 @@ int64_t gather_rays(const ShadeHits& hits, int n_gather, uint64_t seed, int64_t 
 // nearest centroid) and add the MIS-weighted f L term. Adds into out (P, 3).
 void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                   const ShadeTriangles& tris, const RecordGrid& grid, const int64_t* ray_count,
-                  const float* ray_dir, const int32_t* prim, float* out, int threads,
-                  const StopCheck& stop);
+                  const float* ray_org, const float* ray_dir, const int32_t* prim, float* out,
+                  int threads, const StopCheck& stop);
 
 // gather_rays, their first hits in `scene` and gather_shade, pixel by pixel,
 // without the ray arrays: the same sums, added into out (P, 3). Writes the

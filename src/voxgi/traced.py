@@ -240,6 +240,7 @@ class TracedGather:
                 **self._tri,
                 **self._grid,
                 ray_count=count,
+                ray_org=org[:r],
                 ray_dir=dirs[:r],
                 prim=prim,
                 out=out[a:b],

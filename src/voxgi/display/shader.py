@@ -525,6 +525,7 @@ class _FrameShader:
             **self._tri,
             **self._grid,
             ray_count=count,
+            ray_org=org_buf[:n],
             ray_dir=dir_buf[:n],
             prim=prim,
             out=out[a:b],
