@@ -342,18 +342,22 @@ inline void cell_records(const RecordGrid& g, int64_t i, int64_t j, int64_t k, i
     }
 }
 
-// Whether record r stands apart from the hit point y (on a surface seen from
-// the side of normal n) by the records [q0, q1) of a voxel:
-// - behind the hit's own sheet: some record o whose plane holds y, facing
-//   n's side, has r's centroid strictly behind it (the other face of a
-//   slab thinner than a voxel, or that face's black back);
+// How far record r stands apart from the hit point y (on a surface seen from
+// the side of normal n) by the records [q0, q1) of a voxel: 2 when
+// - it lies behind the hit's own sheet: some record o whose plane holds y,
+//   facing n's side, has r's centroid strictly behind it (the other face of
+//   a slab thinner than a voxel, or that face's black back);
 // - or across another surface: some record o of another object, or of an
 //   orientation more than 60° away (another cluster of the voxelization),
-//   has y strictly on one side of its plane and r's centroid not on it. Those
-//   are the planes junction cutting split r's surface by, so this keeps a
-//   hit on one side of a thin wall from reading the record on the other.
-bool separated(const RecordGrid& g, const double y[3], const float n[3], const PackedRecord& r,
+//   has y strictly on one side of its plane and r's centroid not on that
+//   side. Those are the planes junction cutting split r's surface by, so
+//   this keeps a hit on one side of a thin wall from reading the record on
+//   the other;
+// 1 when it is apart only by the signs of y's distances within rounding of
+// such a plane (the best guess there); 0 otherwise.
+int separation(const RecordGrid& g, const double y[3], const float n[3], const PackedRecord& r,
                int64_t q0, int64_t q1) {
+    int level = 0;
     for (int64_t q = q0; q < q1; ++q) {
         const PackedRecord& o = g.rec[q];
         if (&o == &r) continue;
@@ -370,15 +374,16 @@ bool separated(const RecordGrid& g, const double y[3], const float n[3], const P
             behind += rc * n[a];
         }
         if (std::fabs(sy) <= tol && dot3(o.normal, n) > 0.5f) {
-            if (behind < -tol) return true;
+            if (behind < -tol) return 2;
             continue;
         }
         if (o.object == r.object && dot3(o.normal, r.normal) > 0.5f) continue;  // r's own sheet
         // A centroid on that plane (a sliver cut off at a junction) is on
         // neither side: it does not stand for a point off the plane.
-        if ((sy > tol && sr < tol) || (sy < -tol && sr > -tol)) return true;
+        if ((sy > tol && sr < tol) || (sy < -tol && sr > -tol)) return 2;
+        if ((sy > 0.0 && sr < 0.0) || (sy < 0.0 && sr > 0.0)) level = 1;
     }
-    return false;
+    return level;
 }
 
 // Position in the grid's order of the record that stands for the surface
@@ -392,7 +397,7 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
                        const int64_t c[3]) {
     const double p2 = g.pitch * g.pitch;
     int64_t best = -1, h0, h1;
-    bool best_apart = false;
+    int best_apart = 0;
     double best_score = 0.0, best_penalty = 0.0;
     cell_records(g, c[0], c[1], c[2], h0, h1);
     auto scan = [&](int64_t i, int64_t j, int64_t k, bool own) {
@@ -406,15 +411,15 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
                          dz = y[2] - r.centroid[2];
             const double penalty = 4.0 * (1.0 - facing) + (r.object != obj ? 4.0 : 0.0);
             const double score = dx * dx + dy * dy + dz * dz + p2 * penalty;
-            if (best >= 0 && !best_apart && score >= best_score) continue;
-            const bool apart =
-                separated(g, y, n, r, h0, h1) || (!own && separated(g, y, n, r, q0, q1));
-            if (best < 0 || (best_apart && !apart) || (apart == best_apart && score < best_score))
+            if (best >= 0 && best_apart == 0 && score >= best_score) continue;
+            int apart = separation(g, y, n, r, h0, h1);
+            if (!own && apart < 2) apart = std::max(apart, separation(g, y, n, r, q0, q1));
+            if (best < 0 || apart < best_apart || (apart == best_apart && score < best_score))
                 best = q, best_score = score, best_penalty = penalty, best_apart = apart;
         }
     };
     scan(c[0], c[1], c[2], true);
-    if (best >= 0 && best_penalty < 0.5 && !best_apart) return best;
+    if (best >= 0 && best_penalty < 0.5 && best_apart == 0) return best;
     for (int di = -1; di <= 1; ++di)
         for (int dj = -1; dj <= 1; ++dj)
             for (int dk = -1; dk <= 1; ++dk)
