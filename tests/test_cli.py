@@ -16,7 +16,7 @@ PNG_MAGIC = b"\x89PNG"
 SMALL = [
     "--resolution",
     "12",
-    "--directions",
+    "--radius",
     "4",
     "--frames",
     "2",
@@ -38,7 +38,7 @@ def test_render_builtin_scene_writes_exr_png_and_metadata(tmp_path, capsys):
             str(out),
             "--resolution",
             "16",
-            "--directions",
+            "--radius",
             "6",
             "--frames",
             "6",
@@ -226,11 +226,12 @@ def test_help_shows_the_defaults(capsys):
     with pytest.raises(SystemExit):
         cli.main(["render", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    from voxgi.pipeline import RENDER_DIRECTIONS, RENDER_RESOLUTION
+    from voxgi.radiosity.tuning import TRACED_RADIUS
+    from voxgi.voxels import DEFAULT_RESOLUTION
 
     for want in (
-        f"(default: {RENDER_RESOLUTION})",
-        f"(default: {RENDER_DIRECTIONS})",
+        f"(default: {DEFAULT_RESOLUTION})",
+        f"(default: {TRACED_RADIUS})",
         "(default: 256)",
         "(default: 0.001)",
         "(default: 0.0)",

@@ -20,6 +20,21 @@ def test_seconds_to_an_error_interpolates_in_log_log():
     assert _seconds_to(10**-2.5, sweep) == pytest.approx(10**0.5)
     assert _seconds_to(1e-4, sweep) is None  # never reached
     assert _seconds_to(0.1, sweep) == 1.0  # reached by the first render
+    # a render whose error, less the reference's noise, is nil: its time bounds it
+    assert _seconds_to(1e-4, [(1, 1.0, 1e-2), (2, 10.0, 0.0)]) == 10.0
+
+
+def test_normals_are_turned_to_face_the_camera():
+    from voxgi.mitsuba import facing_camera
+
+    # the wall's camera looks down -z: a normal along -z points away from it
+    cam = _lamp_on_a_wall("box").camera
+    n = np.zeros((cam.height, cam.width, 3), np.float32)
+    n[..., 2] = -1.0
+    n[:, :4] = [0.0, 0.0, 1.0]
+    out = facing_camera(n, cam)
+    np.testing.assert_array_equal(out[..., 2], 1.0)
+    np.testing.assert_array_equal(out[..., :2], 0.0)
 
 
 def _lamp_on_a_wall(pixel_filter: str) -> voxgi.Scene:
@@ -67,8 +82,16 @@ def test_without_mitsuba_the_error_says_how_to_install(monkeypatch, tmp_path):
         cli.main(["compare", "sky-objects", "--width", "8", "--height", "8", "-o", str(tmp_path)])
 
 
+def test_without_oidn_the_denoised_comparison_says_how_to_install(monkeypatch):
+    pytest.importorskip("mitsuba")
+    monkeypatch.setitem(sys.modules, "mitsuba_oidn", None)
+    with pytest.raises(ImportError, match=r"voxgi\[bench\].*denoise=False"):
+        compare(voxgi.scenes.sky_objects(8, 8), spp=4)
+
+
 def test_compare_writes_both_images_and_prints_the_table(tmp_path, capsys):
     pytest.importorskip("mitsuba")
+    pytest.importorskip("mitsuba_oidn")
     code = cli.main(
         [
             *("compare", "sky-objects", "--width", "16", "--height", "16", "--spp", "64"),
@@ -77,11 +100,27 @@ def test_compare_writes_both_images_and_prints_the_table(tmp_path, capsys):
     )
     assert code == 0
     out = capsys.readouterr().out
-    assert re.search(r"^voxgi\s+[\d.]+\s+[\d.e+-]+\s+\(", out, flags=re.MULTILINE), out
+    number = r"\s+[\d.e+-]+"
+    assert re.search(rf"^voxgi{number * 4}", out, flags=re.MULTILINE), out
+    assert re.search(rf"^mitsuba\+oidn\s+4{number * 4}", out, flags=re.MULTILINE), out
     assert "mitsuba to voxgi's relMSE" in out
+    assert "mitsuba+oidn to voxgi's relMSE" in out
     for name in ("voxgi.exr", "reference.exr", "difference.png"):
         assert (tmp_path / name).is_file()
     ref = voxgi.io.read_exr(tmp_path / "reference.exr")
     # the sky (radiance 1) fills the top rows of the picture in both renders
     np.testing.assert_allclose(ref[0], 1.0, rtol=1e-5)
     np.testing.assert_allclose(voxgi.io.read_exr(tmp_path / "voxgi.exr")[0], 1.0, rtol=1e-5)
+
+
+def test_the_denoiser_lowers_mitsubas_error_at_few_samples():
+    pytest.importorskip("mitsuba")
+    pytest.importorskip("mitsuba_oidn")
+    res = compare(voxgi.scenes.sky_objects(32, 32), spp=256, sweep_spp=(4,), resolution=16)
+    (plain,) = [r for r in res.rows if r["method"] == "mitsuba"]
+    (denoised,) = [r for r in res.rows if r["method"] == "mitsuba+oidn"]
+    # at 4 spp the path tracer's error is its per-pixel noise, which OIDN
+    # with the albedo and normal buffers takes most of (measured: 2.4e-2 to
+    # 3.2e-3 at 32x32); a quarter is far from either
+    assert denoised["rel_mse"] < 0.25 * plain["rel_mse"]
+    assert denoised["ssim"] > plain["ssim"]

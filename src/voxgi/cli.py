@@ -121,7 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_render_arguments(r: argparse.ArgumentParser) -> None:
     """Add the ``render`` subcommand's arguments to its parser ``r``."""
-    from .pipeline import RENDER_DIRECTIONS, RENDER_RESOLUTION
+    from .radiosity.tuning import TRACED_RADIUS
+    from .voxels import DEFAULT_RESOLUTION
 
     r.add_argument(
         "scene",
@@ -141,16 +142,19 @@ def _add_render_arguments(r: argparse.ArgumentParser) -> None:
         "--resolution",
         metavar="N",
         type=_at_least(2),
-        default=RENDER_RESOLUTION,
+        default=DEFAULT_RESOLUTION,
         help="voxels along the scene's longest side",
     )
     r.add_argument(
-        "--directions",
+        "--radius",
         metavar="R",
         type=_at_least(1),
-        default=RENDER_DIRECTIONS,
-        help="radius R of the solve's gathering direction set",
+        default=TRACED_RADIUS,
+        help="radius R of the solve's gathering direction set, whose answer its traced "
+        "passes finish",
     )
+    # the option's former name, kept working
+    r.add_argument("--directions", dest="radius", type=_at_least(1), help=argparse.SUPPRESS)
     _add_display_arguments(r)
     r.add_argument(
         "--threads",
@@ -192,6 +196,11 @@ def _add_compare_arguments(c: argparse.ArgumentParser) -> None:
         metavar="DIR",
         default=None,
         help="folder for voxgi.exr, reference.exr, difference.png (default: compare_SCENE)",
+    )
+    c.add_argument(
+        "--no-denoise",
+        action="store_true",
+        help="leave out Mitsuba + OIDN (the denoised sweep; it needs mitsuba-oidn)",
     )
     c.add_argument("--plot", action="store_true", help="also plot relMSE against seconds")
     c.add_argument("--seed", metavar="S", type=int, default=0, help="voxgi's seed")
@@ -352,12 +361,10 @@ def _run_voxelize(args, scene):
 
 def _run_solve(args, vox):
     """Solve the radiosity for the display and report it; returns ``(sol, seconds)``."""
-    from .pipeline import solve_for_display
+    from .pipeline import solve
 
     t0 = time.perf_counter()
-    sol = solve_for_display(
-        vox, directions=args.directions, threads=args.threads, progress=not args.quiet
-    )
+    sol = solve(vox, radius=args.radius, threads=args.threads, progress=not args.quiet)
     t_sol = time.perf_counter() - t0
     traced = sol.stats.get("traced")
     then = (
@@ -424,7 +431,7 @@ def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
         "height": cam.height,
         "resolution": vox.resolution,
         "records": len(vox),
-        "directions": args.directions,
+        "radius": res.solution.stats["directions"]["gather"]["radius"],
         "frames": res.frames,
         "max_frames": args.frames,
         "tol": args.tol,
@@ -507,6 +514,7 @@ def run_compare(args) -> int:
             threads=args.threads,
             out_dir=out_dir,
             plot=args.plot,
+            denoise=not args.no_denoise,
         )
     except ImportError as exc:
         raise SystemExit(f"voxgi compare: error: {exc}") from None

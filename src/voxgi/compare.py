@@ -1,10 +1,14 @@
 """Render one scene with voxgi's defaults and with Mitsuba 3, and compare (``voxgi compare``).
 
 This module sits above the pipeline (:mod:`voxgi.pipeline`) and imports
-Mitsuba lazily; Mitsuba is the optional ``bench`` extra. The comparison
-follows ``docs/design.md`` §9: a Mitsuba reference at high spp, voxgi's
-relMSE against it, and Mitsuba's own time to reach that relMSE, from renders
-at doubling spp (interpolated in log-log between the two that bracket it).
+Mitsuba lazily; Mitsuba and OIDN are the optional ``bench`` extra. The
+comparison follows ``docs/design.md`` §9: a Mitsuba reference at high spp,
+voxgi's relMSE against it, and Mitsuba's own time to reach voxgi's relMSE and
+fixed targets, plain and denoised by OIDN with albedo and normal buffers from
+Mitsuba's ``aov`` integrator (their time included), from renders at a
+series of spp (log-log interpolation between the two that bracket a target).
+Every error is also given as SSIM and, with ``flip-evaluator``, FLIP, which
+see the detail a denoiser blurs away where relMSE barely does.
 """
 
 from __future__ import annotations
@@ -19,12 +23,19 @@ import numpy as np
 
 from . import _validate
 from .display import camera_rays
-from .metrics import rel_mse
+from .metrics import flip, rel_mse, ssim
 from .pipeline import render as pipeline_render
+from .pipeline import solve
 from .rays import Tracer
 from .scene import Scene
+from .voxels import voxelize
 
 __all__ = ["Comparison", "compare"]
+
+#: relMSE targets whose time :func:`compare` reports for each renderer.
+TARGETS = (5e-3, 1e-3)
+#: Mitsuba's sample counts, in order (the sweep stops once every target is met).
+SWEEP_SPP = (4, 16, 64, 256, 1024)
 
 
 @dataclass
@@ -34,19 +45,28 @@ class Comparison:
     Attributes
     ----------
     rows : list of dict
-        One per renderer (``"voxgi"``, ``"mitsuba"`` at the spp that reached
-        voxgi's error, ``"reference"``): ``method``, ``spp`` (Mitsuba),
-        ``seconds``, ``rel_mse`` against the reference, ``brightness`` (3,)
-        the ratio of summed radiance to the reference's over the pixels whose
-        whole footprint sees surfaces that do not emit.
+        voxgi's, each of Mitsuba's sweep renders (``"mitsuba"`` plain,
+        ``"mitsuba+oidn"`` denoised) and the reference's: ``method``,
+        ``spp`` (Mitsuba), ``seconds``, ``rel_mse`` against the reference,
+        ``rel_mse_net`` (less the reference's own noise, floored at 0),
+        ``ssim``, ``flip`` (None without ``flip-evaluator``), ``brightness``
+        (3,) the ratio of summed radiance to the reference's over the pixels
+        whose whole footprint sees surfaces that do not emit. voxgi's row also
+        has ``frames`` and ``phases`` (seconds of voxelize, solve, display).
     voxgi, reference : (H, W, 3) float32
         The two images.
-    sweep : list of (spp, seconds, rel_mse)
-        Mitsuba's renders at doubling spp.
-    mitsuba_seconds_to_match : float or None
-        Mitsuba's time to voxgi's relMSE (interpolated; None if not reached).
+    sweep : list of (spp, seconds, rel_mse_net)
+        Mitsuba's plain renders.
+    sweep_denoised : list of (spp, seconds, rel_mse_net)
+        Mitsuba's denoised renders (render with AOVs plus OIDN), empty when
+        not asked for.
+    time_to : dict
+        ``{method: {target: seconds or None}}`` for ``"mitsuba"`` and
+        ``"mitsuba+oidn"``, targets ``"voxgi"`` (voxgi's own net relMSE) and
+        each of :data:`TARGETS`; None where the sweep did not reach it.
     reference_noise : float
-        A quarter of the relMSE between the reference's two halves.
+        The reference's own relMSE: a quarter of the relMSE between its two
+        halves.
     files : dict
         Paths written (``out_dir``).
     """
@@ -55,26 +75,46 @@ class Comparison:
     voxgi: np.ndarray
     reference: np.ndarray
     sweep: list
-    mitsuba_seconds_to_match: float | None
+    sweep_denoised: list
+    time_to: dict
     reference_noise: float
     files: dict = field(default_factory=dict)
 
+    @property
+    def mitsuba_seconds_to_match(self) -> float | None:
+        """Plain Mitsuba's time to voxgi's relMSE (None if not reached)."""
+        return self.time_to["mitsuba"]["voxgi"]
+
     def table(self) -> str:
-        """The rows as an aligned text table."""
-        head = f"{'method':<10} {'spp':>6} {'seconds':>9} {'relMSE':>10}  brightness (R, G, B)"
+        """The rows as an aligned text table, then the times to each target."""
+        head = (
+            f"{'method':<13} {'spp':>6} {'seconds':>9} {'relMSE':>10} {'net':>10} "
+            f"{'SSIM':>6} {'FLIP':>6}  brightness (R, G, B)"
+        )
         lines = [head, "-" * len(head)]
         for r in self.rows:
             spp = "" if r["spp"] is None else str(r["spp"])
             b = ", ".join(f"{x:.4f}" for x in r["brightness"])
+            fl = "" if r["flip"] is None else f"{r['flip']:.4f}"
             lines.append(
-                f"{r['method']:<10} {spp:>6} {r['seconds']:9.2f} {r['rel_mse']:10.3e}  ({b})"
+                f"{r['method']:<13} {spp:>6} {r['seconds']:9.2f} {r['rel_mse']:10.3e} "
+                f"{r['rel_mse_net']:10.3e} {r['ssim']:6.4f} {fl:>6}  ({b})"
             )
-        t = self.mitsuba_seconds_to_match
+        v = self.rows[0]
+        ph = v["phases"]
         lines.append(
-            "mitsuba to voxgi's relMSE: "
-            + ("not reached in the sweep" if t is None else f"{t:.2f} s (interpolated)")
+            f"voxgi seconds: voxelize {ph['voxelize']:.2f}, solve {ph['solve']:.2f}, "
+            f"display {ph['display']:.2f} ({v['frames']} frames)"
         )
-        lines.append(f"reference noise (estimated relMSE): {self.reference_noise:.2e}")
+        for method, times in self.time_to.items():
+            parts = []
+            for target, t in times.items():
+                what = "voxgi's relMSE" if target == "voxgi" else f"relMSE {target:.0e}"
+                parts.append(f"{what}: " + ("not reached" if t is None else f"{t:.3g} s"))
+            lines.append(f"{method} to " + "; ".join(parts) + " (interpolated)")
+        lines.append(
+            f"reference noise (estimated relMSE, subtracted as net): {self.reference_noise:.2e}"
+        )
         return "\n".join(lines)
 
 
@@ -130,6 +170,8 @@ def _seconds_to(err: float, sweep: list) -> float | None:
         if e0 >= err >= e1 and e0 > 0 and e1 > 0 and e0 != e1:
             f = math.log(e0 / err) / math.log(e0 / e1)
             return math.exp(math.log(t0) + f * (math.log(t1) - math.log(t0)))
+        if e0 >= err and e1 <= 0:
+            return t1  # (below the reference's own noise: no slope to follow)
     if sweep and sweep[0][2] <= err:
         return sweep[0][1]
     return None
@@ -139,7 +181,9 @@ def compare(
     scene: Scene,
     *,
     spp: int = 1024,
-    max_sweep_spp: int | None = None,
+    reference: tuple[np.ndarray, float] | None = None,
+    sweep_spp=SWEEP_SPP,
+    denoise: bool = True,
     resolution: int | None = None,
     width: int | None = None,
     height: int | None = None,
@@ -159,9 +203,15 @@ def compare(
     spp : int
         Samples per pixel of Mitsuba's reference (>= 2; rendered as two
         halves of different seeds, whose difference estimates its noise).
-    max_sweep_spp : int or None
-        Largest spp of Mitsuba's doubling sweep (None: ``spp // 4``); the
-        sweep stops once it reaches voxgi's relMSE.
+    reference : (image, noise) or None
+        A reference rendered already (of this scene and camera size) and its
+        own relMSE, instead of rendering one.
+    sweep_spp : sequence of int
+        Mitsuba's sample counts, increasing; each of the plain and the
+        denoised sweeps stops once it has met voxgi's relMSE and every one
+        of :data:`TARGETS`.
+    denoise : bool
+        Also run the denoised sweep (needs ``mitsuba-oidn``).
     resolution : int or None
         voxgi's voxel resolution (None: the pipeline's default).
     width, height : int or None
@@ -175,8 +225,8 @@ def compare(
         (``|voxgi − reference|``, tone-mapped) and, with ``plot``,
         ``time_vs_error.png``.
     plot : bool
-        Also plot relMSE against time for both (matplotlib); voxgi's curve
-        comes from extra renders at looser tolerances of the same solution.
+        Also plot relMSE against time (matplotlib); voxgi's curve comes from
+        extra renders at looser tolerances of the same solution.
     progress : bool
     variant : str or None
         Mitsuba variant (None: ``llvm_ad_rgb`` where it works).
@@ -188,15 +238,17 @@ def compare(
     Raises
     ------
     ImportError
-        Mitsuba is not installed (``pip install 'voxgi[bench]'``).
+        Mitsuba (or, with ``denoise``, OIDN) is not installed
+        (``pip install 'voxgi[bench]'``).
     """
-    from .mitsuba import mitsuba_module, to_mitsuba
+    from .mitsuba import mitsuba_module, to_mitsuba, with_aovs
 
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
     spp = _validate.integer(spp, "spp", low=2)
-    sweep_cap = _validate.integer(max_sweep_spp, "max_sweep_spp", low=1, allow_none=True)
-    sweep_cap = max(1, spp // 4) if sweep_cap is None else sweep_cap
+    counts = [_validate.integer(n, "sweep_spp", low=1) for n in sweep_spp]
+    if not counts or counts != sorted(set(counts)):
+        raise ValueError(f"sweep_spp: expected increasing sample counts, got {list(sweep_spp)}")
     cam = scene.camera
     if cam is None:
         raise ValueError("compare: the scene has no camera")
@@ -204,68 +256,116 @@ def compare(
     if changes:
         cam = cam.replace(**changes)
     mi = mitsuba_module(variant)
+    if denoise:
+        _require_oidn()  # before the renders, not after them
 
     # voxgi with its defaults: voxelize + solve + display
     t0 = time.perf_counter()
-    out = pipeline_render(
-        scene, camera=cam, resolution=resolution, seed=seed, threads=threads, progress=progress
-    )
+    sol, seconds = None, {}
+    if resolution is not None:
+        vox = voxelize(scene, resolution, threads=threads)
+        seconds["voxelize"] = time.perf_counter() - t0
+        sol = solve(vox, threads=threads, progress=progress)
+        seconds["solve"] = time.perf_counter() - t0 - seconds["voxelize"]
+    out = pipeline_render(scene, sol, camera=cam, seed=seed, threads=threads, progress=progress)
+    out.stats["seconds"].update(seconds)
     t_voxgi = time.perf_counter() - t0
     img = out.image
 
-    # Mitsuba: one scene, a warm-up render, then the reference and the sweep
-    sc = mi.load_dict(to_mitsuba(scene, spp=1, camera=cam))
-
-    def mitsuba(n: int, s: int) -> tuple[np.ndarray, float]:
-        t = time.perf_counter()
-        im = np.array(mi.render(sc, spp=int(n), seed=int(s)), dtype=np.float32)[..., :3]
-        return np.ascontiguousarray(im), time.perf_counter() - t
-
-    mitsuba(1, 7)
-    half_a, ta = mitsuba(spp // 2, 1001)
-    half_b, tb = mitsuba(spp - spp // 2, 2002)
-    ref = 0.5 * (half_a + half_b)
-    ref_noise = 0.25 * rel_mse(half_a, half_b)
-    err_voxgi = rel_mse(img, ref)
-    sweep = []
-    n = 1
-    while n <= sweep_cap:
-        im, t = mitsuba(n, 3003 + n)
-        sweep.append((n, t, rel_mse(im, ref)))
-        if sweep[-1][2] <= err_voxgi:
-            break
-        n *= 2
-    match = _seconds_to(err_voxgi, sweep)
+    plain = mi.load_dict(to_mitsuba(scene, spp=1, camera=cam))
+    if reference is None:
+        half_a, ta = _mitsuba(mi, plain, spp // 2, 1001)
+        half_b, tb = _mitsuba(mi, plain, spp - spp // 2, 2002)
+        ref = 0.5 * (half_a + half_b)
+        ref_noise = 0.25 * rel_mse(half_a, half_b)
+        ref_seconds = ta + tb
+    else:
+        ref, ref_noise = np.asarray(reference[0], np.float32), float(reference[1])
+        ref_seconds = None
+        if ref.shape != img.shape:
+            raise ValueError(f"reference: shape {ref.shape}, the camera's image is {img.shape}")
     mask = _non_emitter_mask(scene, cam)
-    last = sweep[-1]
-    rows = [
-        {
-            "method": "voxgi",
-            "spp": None,
-            "seconds": t_voxgi,
-            "rel_mse": err_voxgi,
-            "brightness": _brightness(img, ref, mask),
-            "frames": out.frames,
-        },
-        {
-            "method": "mitsuba",
-            "spp": last[0],
-            "seconds": last[1],
-            "rel_mse": last[2],
-            "brightness": _brightness(im, ref, mask),
-        },
+    rows = [_row("voxgi", None, t_voxgi, img, ref, ref_noise, mask)]
+    rows[0]["frames"] = out.frames
+    secs = out.stats["seconds"]
+    vs = float(secs.get("voxelize", 0.0)), float(secs.get("solve", 0.0))
+    rows[0]["phases"] = {"voxelize": vs[0], "solve": vs[1], "display": t_voxgi - sum(vs)}
+    goal = min(rows[0]["rel_mse_net"], *TARGETS)
+
+    sweeps = {"mitsuba": []}
+    _mitsuba(mi, plain, 1, 7)  # warm-up: the JIT's first kernels
+    for n in counts:
+        im, t = _mitsuba(mi, plain, n, 3003 + n)
+        rows.append(_row("mitsuba", n, t, im, ref, ref_noise, mask))
+        sweeps["mitsuba"].append((n, t, rows[-1]["rel_mse_net"]))
+        if rows[-1]["rel_mse_net"] <= goal:
+            break
+    if denoise:
+        from .mitsuba import denoise_oidn
+
+        sweeps["mitsuba+oidn"] = []
+        aov = mi.load_dict(with_aovs(to_mitsuba(scene, spp=1, camera=cam)))
+        denoise_oidn(_mitsuba(mi, aov, 1, 7, channels=9)[0], cam)  # warm-up
+        for n in counts:
+            t = time.perf_counter()
+            im = denoise_oidn(_mitsuba(mi, aov, n, 5005 + n, channels=9)[0], cam)[0]
+            t = time.perf_counter() - t
+            rows.append(_row("mitsuba+oidn", n, t, im, ref, ref_noise, mask))
+            sweeps["mitsuba+oidn"].append((n, t, rows[-1]["rel_mse_net"]))
+            if rows[-1]["rel_mse_net"] <= goal:
+                break
+    rows.append(
         {
             "method": "reference",
-            "spp": spp,
-            "seconds": ta + tb,
+            "spp": spp if reference is None else None,
+            "seconds": float("nan") if ref_seconds is None else ref_seconds,
             "rel_mse": ref_noise,
+            "rel_mse_net": 0.0,
+            "ssim": 1.0,
+            "flip": 0.0,
             "brightness": [1.0, 1.0, 1.0],
-        },
-    ]
-    result = Comparison(rows, img, ref, sweep, match, ref_noise)
+        }
+    )
+    targets = {"voxgi": rows[0]["rel_mse_net"], **{t: t for t in TARGETS}}
+    time_to = {m: {k: _seconds_to(e, sw) for k, e in targets.items()} for m, sw in sweeps.items()}
+    result = Comparison(
+        rows, img, ref, sweeps["mitsuba"], sweeps.get("mitsuba+oidn", []), time_to, ref_noise
+    )
     if out_dir is not None:
         result.files = _write(result, Path(out_dir), out, plot, scene, cam, seed, threads)
     return result
+
+
+def _require_oidn() -> None:
+    try:
+        import mitsuba_oidn  # noqa: F401
+    except ImportError as exc:
+        raise ImportError(
+            "OIDN is needed for the denoised comparison: pip install 'voxgi[bench]' "
+            "(or pip install mitsuba-oidn), or pass denoise=False (--no-denoise)"
+        ) from exc
+
+
+def _mitsuba(mi, sc, n: int, seed: int, channels: int = 3) -> tuple[np.ndarray, float]:
+    """One Mitsuba render of ``n`` spp: (image, seconds to the finished array)."""
+    t = time.perf_counter()
+    im = np.array(mi.render(sc, spp=int(n), seed=int(seed)), dtype=np.float32)[..., :channels]
+    return np.ascontiguousarray(im), time.perf_counter() - t
+
+
+def _row(method: str, spp, seconds: float, img, ref, ref_noise: float, mask) -> dict:
+    """One row of the table: errors against the reference, its noise taken off."""
+    err = rel_mse(img, ref)
+    return {
+        "method": method,
+        "spp": spp,
+        "seconds": float(seconds),
+        "rel_mse": err,
+        "rel_mse_net": max(err - ref_noise, 0.0),
+        "ssim": ssim(img, ref),
+        "flip": flip(img, ref),
+        "brightness": _brightness(img, ref, mask),
+    }
 
 
 def _write(result: Comparison, out_dir: Path, out, plot, scene, cam, seed, threads) -> dict:
@@ -307,9 +407,9 @@ def _plot(result: Comparison, path: Path, out, scene, cam, seed, threads) -> Pat
         pts.append((solve_t + time.perf_counter() - t, rel_mse(r.image, result.reference)))
     fig, ax = plt.subplots(figsize=(5, 4))
     ax.loglog(*zip(*pts, strict=True), "o-", label="voxgi (tol 1e-2 .. 3e-4)")
-    ax.loglog(
-        [s[1] for s in result.sweep], [s[2] for s in result.sweep], "s-", label="Mitsuba (spp x2)"
-    )
+    for sweep, label in ((result.sweep, "Mitsuba"), (result.sweep_denoised, "Mitsuba + OIDN")):
+        if sweep:
+            ax.loglog([s[1] for s in sweep], [s[2] for s in sweep], "s-", label=label)
     ax.set_xlabel("seconds")
     ax.set_ylabel("relMSE against the reference")
     ax.legend()

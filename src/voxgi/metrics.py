@@ -66,6 +66,19 @@ def ssim(img, ref, *, exposure: float = 0.0) -> float:
     return float(structural_similarity(b, a, channel_axis=-1, data_range=255, win_size=max(win, 3)))
 
 
+def flip(img, ref, *, exposure: float = 0.0) -> float | None:
+    """Mean LDR-FLIP error of the 8-bit sRGB tone-mapped images (0: equal,
+    1: most different), or None when ``flip-evaluator`` is not installed."""
+    try:
+        import flip_evaluator
+    except ImportError:
+        return None
+    a, b = _tonemapped(img, ref, exposure)
+    to_unit = lambda x: np.ascontiguousarray(x, np.float32) / 255.0  # noqa: E731
+    _, mean, _ = flip_evaluator.evaluate(to_unit(b), to_unit(a), "LDR", applyMagma=False)
+    return float(mean)
+
+
 @dataclass
 class ErrorTime:
     """One point of a time-versus-error study, shared by benchmarks and notebooks."""

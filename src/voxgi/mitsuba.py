@@ -36,7 +36,14 @@ import numpy as np
 from .lights import DirectionalLight, Environment, SpotLight
 from .scene import Camera, Scene
 
-__all__ = ["mitsuba_module", "render_mitsuba", "to_mitsuba"]
+__all__ = [
+    "denoise_oidn",
+    "facing_camera",
+    "mitsuba_module",
+    "render_mitsuba",
+    "to_mitsuba",
+    "with_aovs",
+]
 
 
 def mitsuba_module(variant: str | None = None):
@@ -261,3 +268,67 @@ def render_mitsuba(
     sc = mi.load_dict(to_mitsuba(scene, spp=spp, camera=camera, seed=seed))
     img = mi.render(sc, spp=int(spp), seed=int(seed))
     return np.ascontiguousarray(np.array(img, dtype=np.float32)[..., :3])
+
+
+#: The AOVs OIDN takes, from Mitsuba's ``aov`` integrator: the first hit's
+#: albedo and shading normal.
+AOVS = "albedo:albedo,nn:sh_normal"
+
+
+def with_aovs(scene_dict: dict) -> dict:
+    """``scene_dict`` (from :func:`to_mitsuba`) with its integrator wrapped in
+    Mitsuba's ``aov`` integrator: a render then has 9 channels, the path
+    tracer's RGB, the albedo and the shading normal (:data:`AOVS`)."""
+    out = dict(scene_dict)
+    out["integrator"] = {"type": "aov", "aovs": AOVS, "integrator": scene_dict["integrator"]}
+    return out
+
+
+def denoise_oidn(image: np.ndarray, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """OIDN's denoised picture of a render of :func:`with_aovs`' scene.
+
+    Parameters
+    ----------
+    image : (H, W, 9) array
+        RGB, albedo, shading normal.
+    camera : Camera
+        The render's camera: each normal is turned to face it, as OIDN
+        expects of the normals of the surfaces seen (Mitsuba's ``sh_normal``
+        of a one-sided surface seen from behind points away).
+
+    Returns
+    -------
+    (H, W, 3) float32, (H, W, 3) float32
+        The denoised picture and the plain one.
+
+    Raises
+    ------
+    ImportError
+        When ``mitsuba-oidn`` is not installed (``pip install 'voxgi[bench]'``).
+    """
+    try:
+        import mitsuba_oidn
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "OIDN is needed for the denoised comparison: pip install 'voxgi[bench]' "
+            "(or pip install mitsuba-oidn)"
+        ) from exc
+    img = np.asarray(image, np.float32)
+    if img.ndim != 3 or img.shape[2] != 9:
+        raise ValueError(f"denoise_oidn: expected an (H, W, 9) render, got {img.shape}")
+    colour = np.ascontiguousarray(img[..., :3])
+    albedo = np.ascontiguousarray(np.clip(img[..., 3:6], 0.0, 1.0))
+    normal = facing_camera(img[..., 6:9], camera)
+    out = mitsuba_oidn.denoise(colour, albedo, normal, hdr=True)
+    return np.ascontiguousarray(np.asarray(out, np.float32)), colour
+
+
+def facing_camera(normal: np.ndarray, camera: Camera) -> np.ndarray:
+    """(H, W, 3) float32 normals, each turned to face ``camera`` (against its
+    pixel's ray through the pixel centre)."""
+    from .display import camera_rays
+
+    n = np.asarray(normal, np.float32).reshape(-1, 3)
+    _, dirs = camera_rays(camera, (0.5, 0.5))
+    away = np.einsum("ij,ij->i", n, dirs.reshape(-1, 3)) > 0
+    return np.ascontiguousarray(np.where(away[:, None], -n, n).reshape(np.shape(normal)))

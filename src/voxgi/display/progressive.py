@@ -39,9 +39,9 @@ class RenderResult:
         phases: ``setup``; ``primary`` (camera rays and their hits);
         ``shadow`` (the VPLs' light: shadow rays and the shading of the VPLs
         they find); ``gather`` (gather rays and the shading of their hits);
-        ``shade`` only where the VPLs are shaded apart from their shadow rays
-        (the embreex path, ``docs/design.md`` §6); ``filter`` where the
-        indirect light is filtered; ``total`` and ``display``
+        ``lights`` where the scene has lights or an environment (their
+        shadow rays and samples); ``filter`` where the indirect light is
+        filtered; ``total`` and ``display``
         (the same), plus ``voxelize`` and ``solve`` when :func:`voxgi.render`
         ran them. The error estimate: ``est_rel_mse`` (the image's relMSE,
         what ``tol`` bounds), ``est_max_rel_err`` and ``est_tail_rel_err``
@@ -260,12 +260,6 @@ def render(
     source = executor.frames(spec, opt.max_frames, threads=opt.threads)
     seconds = {"setup": time.perf_counter() - t0}
     skipped = _skipped(spec)
-    tracer = getattr(source, "tracer", None)
-    if tracer is not None and tracer.why_not_native is not None:
-        skipped.append(
-            f"compiled ray tracing: {tracer.why_not_native}; the rays go through embreex's "
-            "Python calls in batches (the same image, slower)"
-        )
     acc, interrupted = _progressive_mean(source, opt, progress)
     image = acc.mean.reshape(opt.cam.height, opt.cam.width, 3).astype(np.float32)
     seconds.update(source.seconds)
