@@ -241,3 +241,52 @@ def test_help_shows_the_defaults(capsys):
     ):
         assert want in text, want
     assert "(default: None)" not in text
+
+
+def test_read_only_output_exits_2_before_any_work(tmp_path, capsys):
+    out = tmp_path / "out.exr"
+    out.write_bytes(b"kept")
+    out.chmod(0o444)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["render", "cornell-box", "-o", str(out), *SMALL])
+    assert exc.value.code == 2
+    cap = capsys.readouterr()
+    assert cap.out == ""  # nothing voxelized or solved
+    assert cap.err == f"voxgi render: error: cannot write {out}: the file is read-only\n"
+    assert out.read_bytes() == b"kept"
+
+
+def test_missing_output_folders_are_created(tmp_path, capsys):
+    out = tmp_path / "new" / "deeper" / "img.png"
+    assert cli.main(["render", "cornell-box", "-o", str(out), *SMALL]) == 0
+    assert out.is_file()
+    assert out.with_suffix(".exr").is_file()
+
+
+def test_scene_without_camera_exits_1_with_how_to_give_one(tmp_path, capsys):
+    (tmp_path / "mesh.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["render", str(tmp_path / "mesh.obj"), "-o", str(tmp_path / "o.exr")])
+    assert re.fullmatch(
+        r"voxgi render: error: scene file .*mesh\.obj: has no camera to render from .*"
+        r"\[camera\] table .*",
+        str(exc.value.code),
+    )
+    assert capsys.readouterr().out == ""
+
+
+def test_search_path_and_allow_outside_widen_what_a_scene_reads(tmp_path, capsys):
+    (tmp_path / "shared").mkdir()
+    (tmp_path / "room").mkdir()
+    (tmp_path / "shared" / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    scene = tmp_path / "room" / "scene.toml"
+    scene.write_text(
+        "[camera]\neye = [0.3, 0.3, 2]\ntarget = [0.3, 0.3, 0]\nwidth = 8\nheight = 8\n"
+        '[[object]]\nmesh = "../shared/tri.obj"\nemission = 1.0\n'
+    )
+    argv = ["render", str(scene), "-o", str(tmp_path / "o.exr"), *SMALL]
+    with pytest.raises(SystemExit) as exc:
+        cli.main(argv)
+    assert "outside the folders this scene may read" in str(exc.value.code)
+    assert cli.main([*argv, "--search-path", str(tmp_path / "shared")]) == 0
+    assert cli.main([*argv, "--allow-outside"]) == 0

@@ -2,8 +2,8 @@
 
 Exit codes: 0 done; 1 a scene file or value that cannot be used; 2 a bad
 command line or an output that cannot be written (both checked before any
-work); 130 interrupted (Ctrl-C). Errors are one line on stderr, never a
-traceback.
+work; missing output folders are created); 130 interrupted (Ctrl-C).
+Errors are one line on stderr, never a traceback.
 """
 
 from __future__ import annotations
@@ -95,8 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
         "The EXR also holds each pixel's estimated standard error in the channels "
         "stderr.R, stderr.G, stderr.B. "
         "Exit codes: 0 done, 1 a scene or value that cannot be used, 2 a bad "
-        "command line or an output that cannot be written (checked before any "
-        "work), 130 interrupted by Ctrl-C (a partial image is written only if a "
+        "command line or an output that cannot be written (a read-only file, a folder "
+        "that cannot be written; checked before any work, and missing folders are "
+        "created), 130 interrupted by Ctrl-C (a partial image is written only if a "
         "frame finished; its EXR header says so).",
     )
     _add_render_arguments(r)
@@ -156,6 +157,7 @@ def _add_render_arguments(r: argparse.ArgumentParser) -> None:
     # the option's former name, kept working
     r.add_argument("--directions", dest="radius", type=_at_least(1), help=argparse.SUPPRESS)
     _add_display_arguments(r)
+    _add_path_arguments(r)
     r.add_argument(
         "--threads",
         metavar="N",
@@ -178,6 +180,7 @@ def _add_render_arguments(r: argparse.ArgumentParser) -> None:
 def _add_compare_arguments(c: argparse.ArgumentParser) -> None:
     """Add the ``compare`` subcommand's arguments to its parser ``c``."""
     c.add_argument("scene", help="scene TOML file, or a built-in scene name (see 'voxgi scenes')")
+    _add_path_arguments(c)
     c.add_argument(
         "--spp", metavar="N", type=_at_least(2), default=1024, help="spp of Mitsuba's reference"
     )
@@ -277,12 +280,20 @@ def check_writable(paths) -> None:
     """Fail now, before any work, if a file cannot be written at each of ``paths``.
 
     Creates missing folders, then a temporary file in each folder (removed
-    at once): the same steps the final writes take.
+    at once): the same steps the final writes take. A read-only file
+    (:func:`voxgi.io.is_read_only`) is refused, as the final write would.
     """
+    from .io import is_read_only
+
     for path in paths:
         path = Path(path)
         if path.is_dir():
             raise UsageError(f"cannot write {path}: it is a folder")
+        if is_read_only(path):
+            raise UsageError(f"cannot write {path}: the file is read-only")
+        blocker = next((p for p in path.parents if p.exists() and not p.is_dir()), None)
+        if blocker is not None:
+            raise UsageError(f"cannot write {path}: {blocker} is a file, not a folder")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             with tempfile.NamedTemporaryFile(
@@ -327,18 +338,48 @@ def _interrupted(text: str) -> int:
     return EXIT_INTERRUPTED
 
 
+def _load_scene(args, src: Path | None, name: str):
+    """The scene of a file (through the path policy the options widen) or a
+    built-in name; a scene without a camera is a ValueError (exit 1)."""
+    from . import scenes
+    from .scene import Scene
+
+    if src is None:
+        return scenes.get(name)
+    scene = Scene.load(src, search_paths=args.search_path or (), allow_outside=args.allow_outside)
+    if scene.camera is None:
+        raise ValueError(
+            f"scene file {src}: has no camera to render from (an OBJ holds none); "
+            "name the file in a TOML scene with a [camera] table (docs/scene-files.md)"
+        )
+    return scene
+
+
+def _add_path_arguments(r: argparse.ArgumentParser) -> None:
+    """The options that widen what a scene file may read (docs/scene-files.md)."""
+    r.add_argument(
+        "--search-path",
+        metavar="DIR",
+        action="append",
+        default=None,
+        help="a folder besides the scene file's own that its meshes, includes and "
+        "textures may lie in (repeatable)",
+    )
+    r.add_argument(
+        "--allow-outside",
+        action="store_true",
+        help="let the scene file read any path it names",
+    )
+
+
 def _prepare_render(args):
     """Resolve the scene and outputs (checked writable), load the scene and size its
     camera; returns ``(scene, name, exr, png)``."""
-    from . import scenes
-    from .scene import Scene
 
     src, name = _scene_source(args.scene)
     exr, png = output_paths(args.output if args.output else f"{name}.exr")
     check_writable((exr, png))
-    scene = Scene.load(src) if src is not None else scenes.get(name)
-    if scene.camera is None:
-        raise UsageError(f"scene {name!r} has no camera")
+    scene = _load_scene(args, src, name)
     changes = {k: v for k, v in (("width", args.width), ("height", args.height)) if v is not None}
     if changes:
         scene.camera = scene.camera.replace(**changes)
@@ -493,16 +534,12 @@ def run_render(args) -> int:
 
 def run_compare(args) -> int:
     """``voxgi compare``: voxgi against Mitsuba 3 on one scene; prints the table."""
-    from . import scenes
     from .compare import compare
-    from .scene import Scene
 
     src, name = _scene_source(args.scene)
     out_dir = Path(args.out_dir if args.out_dir else f"compare_{name}")
     check_writable([out_dir / "voxgi.exr"])
-    scene = Scene.load(src) if src is not None else scenes.get(name)
-    if scene.camera is None:
-        raise UsageError(f"scene {name!r} has no camera")
+    scene = _load_scene(args, src, name)
     try:
         res = compare(
             scene,
@@ -574,9 +611,16 @@ def main(argv: list[str] | None = None) -> int:
     except UsageError as exc:
         print(f"voxgi {args.command}: error: {exc}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE) from None
-    except (ValueError, TypeError, FileNotFoundError) as exc:
-        # bad scene files and values: a message, not a traceback
+    except (ValueError, TypeError, OSError) as exc:
+        # bad or unreadable scene files and values: a message, not a traceback
         raise SystemExit(f"voxgi {args.command}: error: {exc}") from None
+    except MemoryError:
+        raise SystemExit(
+            f"voxgi {args.command}: error: out of memory (a lower --resolution or a smaller "
+            "image needs less)"
+        ) from None
+    except RecursionError:
+        raise SystemExit(f"voxgi {args.command}: error: input nested too deeply") from None
     except KeyboardInterrupt:
         print(f"voxgi {args.command}: interrupted; nothing written", file=sys.stderr)
         return EXIT_INTERRUPTED
