@@ -528,12 +528,15 @@ int clip_pieces(const Context& ctx, const int64_t cell[3], const Pair* pairs, in
     return n_pieces;
 }
 
-// Whether point c (voxel units) lies in the plane of cluster cl's first piece,
-// within kInPlane voxel units.
-constexpr double kInPlane = 1e-3;
-bool in_plane(const double c[3], const Cluster& cl) {
-    const double d[3] = {c[0] - cl.seed_c[0], c[1] - cl.seed_c[1], c[2] - cl.seed_c[2]};
-    return std::fabs(dot3(d, cl.seed)) <= kInPlane;
+// Whether piece pc meets the plane of cluster cl's first piece: has vertices
+// on both sides of it or on it, within kMeetsPlane voxel units.
+constexpr double kMeetsPlane = 1e-3;
+bool meets_plane(const Piece& pc, const Cluster& cl, const std::vector<double>& verts) {
+    const PolyView poly{reinterpret_cast<const double (*)[3]>(verts.data() + 3 * size_t(pc.v_off)),
+                        pc.v_n};
+    double mn, mx;
+    signed_range(poly, cl.seed, dot3(cl.seed, cl.seed_c), mn, mx);
+    return mn <= kMeetsPlane && mx >= -kMeetsPlane;
 }
 
 // Clusters: per object (ascending), greedy by orientation in triangle order;
@@ -559,12 +562,13 @@ void cluster_pieces(const Context& ctx, int n_pieces, Scratch& S, ChunkStats& cs
         int found = -1;
         for (size_t q = obj_first; q < clusters.size(); ++q) {
             const double dd = dot3(pc.tn, clusters[q].seed);
-            // Two-sided surfaces have no preferred side: a flipped winding in
-            // the cluster's plane joins it with its normal turned around. Off
-            // that plane it is another face (the far face of a two-sided slab
-            // thinner than a voxel), whose sides must stay records of their own.
+            // Two-sided surfaces have no preferred side: a flipped winding
+            // that meets the cluster's plane joins it with its normal turned
+            // around. One wholly in front of or behind that plane is another
+            // face (the far face of a two-sided slab thinner than a voxel),
+            // whose two sides must stay records of their own.
             if (dd >= P.cos_cluster ||
-                (ts && -dd >= P.cos_cluster && in_plane(pc.c, clusters[q]))) {
+                (ts && -dd >= P.cos_cluster && meets_plane(pc, clusters[q], S.verts))) {
                 found = int(q);
                 if (dd < 0)
                     for (int d = 0; d < 3; ++d) pc.n[d] = -pc.tn[d];

@@ -17,7 +17,6 @@ import trimesh
 
 import voxgi
 from voxgi.direct import direct_irradiance
-from voxgi.pipeline import solve_for_display
 from voxgi.traced import TracedGather
 
 RES = 32
@@ -115,12 +114,13 @@ def test_a_traced_pass_reads_nothing_across_the_wall(split):
     assert np.count_nonzero(H[dark | inside]) == 0
 
 
-def test_the_render_solve_keeps_the_dark_room_dark():
-    # The exact direct light and the traced passes leave in the dark room
-    # only what the lines' first guess put there, shrunk pass by pass.
+def test_the_solve_keeps_the_dark_room_dark():
+    # The solve's defaults (the render's): the exact direct light and the
+    # traced passes leave in the dark room only what the lines' first guess
+    # put there, shrunk pass by pass.
     vox = voxgi.voxelize(split_box("sheet"), RES, progress=False)
     dark, lit, _ = rooms(vox, "sheet")
-    sol = solve_for_display(vox, progress=False)
+    sol = voxgi.solve(vox, progress=False)
     L = sol.radiance.mean(axis=1) * vox.area
     ratio = (L[dark].sum() / vox.area[dark].sum()) / (L[lit].sum() / vox.area[lit].sum())
     assert ratio <= 1e-3
