@@ -79,49 +79,6 @@ voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_cell_start
     return grid;
 }
 
-// The environment of escaped gather rays: all four tables, or none.
-std::optional<voxgi::EnvironmentMap> make_environment(const std::optional<F64>& radiance,
-                                                      const std::optional<F64>& to_world,
-                                                      const std::optional<F64>& texel_pdf,
-                                                      const std::optional<F64>& row_solid_angle,
-                                                      double samples) {
-    const int given = int(radiance.has_value()) + int(to_world.has_value()) +
-                      int(texel_pdf.has_value()) + int(row_solid_angle.has_value());
-    if (given == 0) return std::nullopt;
-    if (given != 4)
-        throw py::value_error(
-            "env_radiance, env_to_world, env_texel_pdf and env_row_solid_angle go together");
-    if (radiance->ndim() != 3 || radiance->shape(2) != 3 || radiance->shape(0) < 1 ||
-        radiance->shape(1) < 1)
-        throw py::value_error("env_radiance must have shape (H, W, 3)");
-    const py::ssize_t H = radiance->shape(0), W = radiance->shape(1);
-    check_2d(*to_world, 3, 3, "env_to_world");
-    check_1d(*texel_pdf, H * W, "env_texel_pdf");
-    check_1d(*row_solid_angle, H, "env_row_solid_angle");
-    const double* omega = row_solid_angle->data();
-    for (py::ssize_t r = 0; r < H; ++r)
-        if (!(omega[r] > 0.0) || !std::isfinite(omega[r]))
-            throw py::value_error("env_row_solid_angle must be finite and > 0");
-    const double* pdf = texel_pdf->data();
-    for (py::ssize_t i = 0; i < H * W; ++i)
-        if (!(pdf[i] >= 0.0) || !std::isfinite(pdf[i]))
-            throw py::value_error("env_texel_pdf must be finite and >= 0");
-    for (int i = 0; i < 9; ++i)
-        if (!std::isfinite(to_world->data()[i]))
-            throw py::value_error("env_to_world must be finite");
-    if (!(samples >= 0.0) || !std::isfinite(samples))
-        throw py::value_error("env_samples must be finite and >= 0");
-    voxgi::EnvironmentMap env;
-    env.width = W;
-    env.height = H;
-    env.radiance = radiance->data();
-    env.to_world = to_world->data();
-    env.texel_pdf = pdf;
-    env.row_solid_angle = omega;
-    env.n_samples = samples;
-    return env;
-}
-
 int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                         F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
                         int n_gather, uint64_t seed, int64_t frame, double eps, F64 tri_v,

@@ -2,8 +2,11 @@
 // materials, primary hits, the MIS weights and per-pixel ray counts.
 #pragma once
 
+#include <pybind11/stl.h>
+
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <string>
 
 #include "bind_common.h"
@@ -79,6 +82,64 @@ inline void check_scene(const voxgi::RayScene& scene, int64_t triangles) {
     if (scene.triangle_count() != triangles)
         throw py::value_error("scene holds " + std::to_string(scene.triangle_count()) +
                               " triangles, tri_v " + std::to_string(triangles));
+}
+
+// The environment of escaped gather rays: all four tables, or none.
+inline std::optional<voxgi::EnvironmentMap> make_environment(
+    const std::optional<F64>& radiance, const std::optional<F64>& to_world,
+    const std::optional<F64>& texel_pdf, const std::optional<F64>& row_solid_angle, double samples,
+    const F64* texel_cdf = nullptr, const F64* row_cos = nullptr) {
+    const int given = int(radiance.has_value()) + int(to_world.has_value()) +
+                      int(texel_pdf.has_value()) + int(row_solid_angle.has_value());
+    if (given == 0) return std::nullopt;
+    if (given != 4)
+        throw py::value_error(
+            "env_radiance, env_to_world, env_texel_pdf and env_row_solid_angle go together");
+    if (radiance->ndim() != 3 || radiance->shape(2) != 3 || radiance->shape(0) < 1 ||
+        radiance->shape(1) < 1)
+        throw py::value_error("env_radiance must have shape (H, W, 3)");
+    const py::ssize_t H = radiance->shape(0), W = radiance->shape(1);
+    check_2d(*to_world, 3, 3, "env_to_world");
+    check_1d(*texel_pdf, H * W, "env_texel_pdf");
+    check_1d(*row_solid_angle, H, "env_row_solid_angle");
+    const double* omega = row_solid_angle->data();
+    for (py::ssize_t r = 0; r < H; ++r)
+        if (!(omega[r] > 0.0) || !std::isfinite(omega[r]))
+            throw py::value_error("env_row_solid_angle must be finite and > 0");
+    const double* pdf = texel_pdf->data();
+    for (py::ssize_t i = 0; i < H * W; ++i)
+        if (!(pdf[i] >= 0.0) || !std::isfinite(pdf[i]))
+            throw py::value_error("env_texel_pdf must be finite and >= 0");
+    for (int i = 0; i < 9; ++i)
+        if (!std::isfinite(to_world->data()[i]))
+            throw py::value_error("env_to_world must be finite");
+    if (!(samples >= 0.0) || !std::isfinite(samples))
+        throw py::value_error("env_samples must be finite and >= 0");
+    voxgi::EnvironmentMap env;
+    if (texel_cdf) {
+        check_1d(*texel_cdf, H * W, "env_texel_cdf");
+        const double* c = texel_cdf->data();
+        for (py::ssize_t i = 0; i < H * W; ++i)
+            if (!(c[i] >= (i ? c[i - 1] : 0.0)) || !(c[i] <= 1.0))
+                throw py::value_error("env_texel_cdf must ascend within [0, 1]");
+        env.texel_cdf = c;
+    }
+    if (row_cos) {
+        check_1d(*row_cos, H + 1, "env_row_cos");
+        const double* c = row_cos->data();
+        for (py::ssize_t r = 0; r <= H; ++r)
+            if (!(c[r] >= -1.0 && c[r] <= 1.0))
+                throw py::value_error("env_row_cos must be in [-1, 1]");
+        env.row_cos = c;
+    }
+    env.width = W;
+    env.height = H;
+    env.radiance = radiance->data();
+    env.to_world = to_world->data();
+    env.texel_pdf = pdf;
+    env.row_solid_angle = omega;
+    env.n_samples = samples;
+    return env;
 }
 
 }  // namespace voxgi::py_helpers

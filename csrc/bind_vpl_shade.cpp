@@ -123,9 +123,55 @@ auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I3
     }
 }
 
+int64_t environment_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
+                             F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
+                             const F64& env_radiance, const F64& env_to_world,
+                             const F64& env_texel_pdf, const F64& env_row_solid_angle,
+                             const F64& env_texel_cdf, const F64& env_row_cos, int env_samples,
+                             double n_gather, uint64_t seed, int64_t frame, double eps,
+                             const voxgi::RayScene& scene, F32Out out, int threads) {
+    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    voxgi::ShadeHits hits =
+        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    if (env_samples < 0 || env_samples > 4096)
+        throw py::value_error("env_samples must be in [0, 4096]");
+    if (!(n_gather >= 0.0) || !std::isfinite(n_gather))
+        throw py::value_error("n_gather must be finite and >= 0");
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    const voxgi::EnvironmentMap env =
+        *make_environment(env_radiance, env_to_world, env_texel_pdf, env_row_solid_angle,
+                          double(env_samples), &env_texel_cdf, &env_row_cos);
+    check_2d(out, hits.count, 3, "out");
+    check_inplace(out, "out");
+    float* po = out.mutable_data();
+    int64_t rays = 0;
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::environment_light(hits, mats, env, n_gather, seed, frame, eps, scene, po, &rays,
+                                 threads, stop);
+    }
+    return rays;
+}
+
 }  // namespace
 
 void bind_vpl_shade(py::module_& m) {
+    m.def("environment_light", &environment_light_py, "hit_pos"_a.noconvert(),
+          "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(),
+          "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(),
+          "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(),
+          "env_radiance"_a.noconvert(), "env_to_world"_a.noconvert(), "env_texel_pdf"_a.noconvert(),
+          "env_row_solid_angle"_a.noconvert(), "env_texel_cdf"_a.noconvert(),
+          "env_row_cos"_a.noconvert(), "env_samples"_a, "n_gather"_a, "seed"_a, "frame"_a, "eps"_a,
+          "scene"_a, "out"_a.noconvert(), "threads"_a = 0,
+          R"doc(The environment's light at the hits: env_samples directions per shaded
+pixel drawn from the environment's tables (as voxgi.Environment.sample:
+env_texel_cdf (H*W,), env_row_cos (H+1,)), each weighed by the balance
+heuristic against n_gather cosine-distributed gather rays and traced in
+scene (a RayScene) as it is made; the free ones' f cos L / density added into
+out (P, 3) float32. Returns the number of rays traced.)doc");
+
     m.def("vpl_light", &vpl_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
           "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
           "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),

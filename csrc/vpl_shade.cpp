@@ -4,7 +4,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <vector>
+
+#include "util/random.h"
 
 namespace voxgi {
 
@@ -191,19 +194,6 @@ void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPL
         return n;
     });
 }
-
-namespace {
-
-inline uint64_t splitmix64(uint64_t x) {
-    x += 0x9E3779B97F4A7C15ull;
-    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-    x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-    return x ^ (x >> 31);
-}
-
-inline double to_unit(uint64_t x) { return double(x >> 11) * (1.0 / 9007199254740992.0); }
-
-}  // namespace
 
 namespace {
 
@@ -491,21 +481,6 @@ void gather_escape_light(const ShadeHits& hits, const ShadeMaterials& mats, cons
 }
 
 }  // namespace
-
-int64_t environment_texel(const EnvironmentMap& env, const double d[3]) {
-    const double* m = env.to_world;
-    double loc[3];
-    for (int j = 0; j < 3; ++j) loc[j] = d[0] * m[j] + d[1] * m[3 + j] + d[2] * m[6 + j];
-    const double len =
-        std::max(std::sqrt(loc[0] * loc[0] + loc[1] * loc[1] + loc[2] * loc[2]), 1e-300);
-    for (double& c : loc) c /= len;
-    double u = std::atan2(loc[0], -loc[2]) / (2.0 * kPi);
-    u -= std::floor(u);
-    const double v = std::acos(std::clamp(loc[1], -1.0, 1.0)) / kPi;
-    const int64_t col = std::min(int64_t(u * double(env.width)), env.width - 1);
-    const int64_t row = std::min(int64_t(v * double(env.height)), env.height - 1);
-    return row * env.width + col;
-}
 
 void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                   int n_gather, uint64_t seed, int64_t frame, double eps,

@@ -9,6 +9,7 @@
 
 #include <cstdint>
 
+#include "environment.h"
 #include "ray_scene.h"
 #include "util/parallel.h"
 
@@ -84,23 +85,6 @@ struct RecordGrid {
     double origin[3] = {0.0, 0.0, 0.0};
     double pitch = 1.0;
 };
-
-// The environment that gather rays leaving the scene see (docs/design.md
-// §11): a latitude-longitude radiance image, Mitsuba's convention (image y
-// up; direction (sin t sin f, cos t, -sin t cos f) at u = f / 2 pi, v = t /
-// pi), and the density its own samples are drawn with, for the balance
-// heuristic between those samples and the gather rays.
-struct EnvironmentMap {
-    int64_t width = 0, height = 0;
-    const double* radiance = nullptr;         // (height, width, 3) linear radiance
-    const double* to_world = nullptr;         // (3, 3) row-major rotation, image -> world
-    const double* texel_pdf = nullptr;        // (height * width,) probability of each texel
-    const double* row_solid_angle = nullptr;  // (height,) solid angle of one texel of each row
-    double n_samples = 0.0;                   // environment samples per pixel and frame
-};
-
-// The texel of world direction d (any length): its index row * width + col.
-int64_t environment_texel(const EnvironmentMap& env, const double d[3]);
 
 // Scene triangles for the gather rays' hit points.
 struct ShadeTriangles {

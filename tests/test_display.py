@@ -620,22 +620,25 @@ def _ground_under_sky(rho: float) -> voxgi.Scene:
     return scene
 
 
-def test_gather_rays_that_escape_see_the_environment_in_its_mis_share():
+@pytest.mark.parametrize("gather", [0, 4, 9])
+def test_the_environment_samples_and_escaping_gather_rays_share_its_light(gather):
     # Every ground point sees the whole upper hemisphere: E = Σ L_q ∫ cos dω
     # over its quarters = (π/4)(1 + 2 + 3 + 4), and L = (ρ/π) E = 2.5 ρ. The
     # ground's own records light nothing of it (coplanar VPLs), so the light
-    # is the environment's alone, shared by its samples and the gather rays
-    # that leave the scene (balance heuristic, docs/design.md §11): drop
-    # either share, or weigh it with another density, and the mean moves by
-    # far more than the noise.
+    # is the environment's alone, from its samples (max(1, gather) a pixel,
+    # texels by luminance x solid angle, stratified) and, with gather rays,
+    # the ones that leave the scene (balance heuristic, docs/design.md §11):
+    # drop either share, or weigh it with another density, and the mean
+    # moves by far more than the noise.
     rho = 0.6
     scene = _ground_under_sky(rho)
     sol = triangle_solution(scene, lambda v: np.full((len(v), 3), math.pi * rho))
     out = voxgi.render(
-        scene, sol, progress=False, max_frames=16, tol=0.0, tuning=voxgi.RenderTuning(gather=9)
+        scene, sol, progress=False, max_frames=16, tol=0.0, tuning=voxgi.RenderTuning(gather=gather)
     )
-    assert out.stats["gather_per_frame"] == 9
-    assert out.stats["gather_rays"] > 0
+    assert out.stats["gather_per_frame"] == gather
+    # the samples above the ground (by the sky's luminance, 5/7 of them) are traced
+    assert out.stats["light_rays"] >= 0.6 * 24 * 24 * 16 * max(1, gather)
     img, se = out.image[..., 0].astype(np.float64), out.stderr[..., 0].astype(np.float64)
     want = 2.5 * rho
     # the mean of 576 pixels: its standard error is at most the pixels' rms

@@ -324,21 +324,6 @@ def test_environment_reads_radiance_hdr_files(tmp_path):
         voxgi.Environment(tmp_path / "bad.hdr")
 
 
-def test_stratified_environment_samples_are_unbiased():
-    # each point must be uniform in the cube: E[u0 u1] = E[u0 u2] = 1/4 even
-    # though u0 and (u1, u2) are stratified separately (k = 4: 2 x 2 grid)
-    from voxgi.display.lighting import _stratified
-
-    u = _stratified(np.random.default_rng(5), 50000, 4).reshape(50000, 4, 3)
-    for a, b in ((0, 1), (0, 2)):
-        est = (u[..., a] * u[..., b]).mean(axis=1)
-        assert abs(est.mean() - 0.25) < 4 * est.std() / math.sqrt(len(est))
-    # and stratified: every pixel's four points fill the 2 x 2 grid and the 4 strata of u0
-    assert np.all(np.sort((u[..., 0] * 4).astype(int), axis=1) == np.arange(4))
-    cells = (u[..., 1] * 2).astype(int) + 2 * (u[..., 2] * 2).astype(int)
-    assert np.all(np.sort(cells, axis=1) == np.arange(4))
-
-
 def test_closed_box_receives_all_of_a_point_lights_power():
     # Gauss: the surfaces around a point light receive its whole power 4π I;
     # the records' centroid quadrature of I cos θ / r² (measured within 2e-4

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_hits', 'camera_rays', 'direct_light_traced', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'voxelize', 'vpl_light']
+__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_hits', 'camera_rays', 'direct_light_traced', 'environment_light', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'voxelize', 'vpl_light']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -192,6 +192,15 @@ def direct_light_traced(emitters: tuple, point: numpy.typing.NDArray[numpy.float
     emitter_scene (a RayScene of the emitters' corners alone, in their order;
     None: not used): a hemisphere ray is traced against the emitters, and
     against scene only up to the nearest emitter it meets.
+    """
+def environment_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], env_radiance: numpy.typing.NDArray[numpy.float64], env_to_world: numpy.typing.NDArray[numpy.float64], env_texel_pdf: numpy.typing.NDArray[numpy.float64], env_row_solid_angle: numpy.typing.NDArray[numpy.float64], env_texel_cdf: numpy.typing.NDArray[numpy.float64], env_row_cos: numpy.typing.NDArray[numpy.float64], env_samples: typing.SupportsInt | typing.SupportsIndex, n_gather: typing.SupportsFloat | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> int:
+    """
+    The environment's light at the hits: env_samples directions per shaded
+    pixel drawn from the environment's tables (as voxgi.Environment.sample:
+    env_texel_cdf (H*W,), env_row_cos (H+1,)), each weighed by the balance
+    heuristic against n_gather cosine-distributed gather rays and traced in
+    scene (a RayScene) as it is made; the free ones' f cos L / density added into
+    out (P, 3) float32. Returns the number of rays traced.
     """
 def gather_families(ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing.NDArray[numpy.float32], point: numpy.typing.NDArray[numpy.float32], families: numpy.typing.NDArray[numpy.int32], weights: numpy.typing.NDArray[numpy.float64], values: numpy.typing.NDArray[numpy.float32], family_indices: numpy.typing.NDArray[numpy.int64], epsilon: typing.SupportsFloat | typing.SupportsIndex = 0.05000000074505806, history: typing.SupportsInt | typing.SupportsIndex = 8, threads: typing.SupportsInt | typing.SupportsIndex = 0, stand_in: numpy.typing.NDArray[numpy.bool] | None = None) -> numpy.typing.NDArray[numpy.float64]:
     """

@@ -317,13 +317,21 @@ class Environment:
             self._tables = (p, cdf, omega_row, cos_edges)
         return self._tables
 
-    def density_tables(self) -> tuple[np.ndarray, np.ndarray]:
-        """The tables of :meth:`pdf`: each texel's probability (H*W,) float64,
-        row-major, and the solid angle of one texel of each row (H,) float64;
-        the density at a direction is its texel's probability over its row's
+    def tables(self) -> dict:
+        """The tables :meth:`sample` and :meth:`pdf` read, as the compiled
+        kernels take them (float64): ``texel_pdf`` (H*W,) each texel's
+        probability, row-major, ``texel_cdf`` (H*W,) their running sum (last
+        1), ``row_solid_angle`` (H,) the solid angle of one texel of each row
+        and ``row_cos`` (H+1,) cos θ at the rows' edges, from +1 down. The
+        density at a direction is its texel's probability over its row's
         solid angle."""
-        p, _, omega_row, _ = self._build()
-        return p, omega_row
+        p, cdf, omega_row, cos_edges = self._build()
+        return {
+            "texel_pdf": p,
+            "texel_cdf": cdf,
+            "row_solid_angle": omega_row,
+            "row_cos": cos_edges,
+        }
 
     def pdf(self, dirs: np.ndarray) -> np.ndarray:
         """(N,) solid-angle density of :meth:`sample` at world directions."""

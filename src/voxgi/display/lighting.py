@@ -1,10 +1,8 @@
 """The light of the scene's lights and environment at one frame's hits: a
-shadow ray to each delta light and environment samples MIS-combined with the
-gather rays (``docs/design.md`` §11)."""
+shadow ray to each delta light, and environment samples MIS-combined with the
+gather rays (``docs/design.md`` §11), each kind in one compiled kernel."""
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 
@@ -16,24 +14,6 @@ __all__: list[str] = []
 
 #: What the shading kernels read of a pixel's primary hit.
 _HIT_KEYS = ("pos", "normal", "ng", "wo", "material")
-
-
-def _stratified(rng, n: int, k: int) -> np.ndarray:
-    """(n * k, 3) points of [0, 1)³, k per pixel and jittered in strata: the
-    first coordinate (the environment's texel) in k strata, the other two
-    (the direction inside it) in a √k x √k grid when k is a square. The first
-    coordinate's strata are shuffled per pixel (Latin-hypercube pairing), so
-    each point is uniform in the cube and the mean stays unbiased for any
-    integrand, not only for one separable in the two groups."""
-    u = rng.random((n, k, 3))
-    i = np.arange(k)
-    shuffled = np.argsort(rng.random((n, k)), axis=1)
-    u[..., 0] = (shuffled + u[..., 0]) / k
-    s = math.isqrt(k)
-    if s * s == k and k > 1:
-        u[..., 1] = (i % s + u[..., 1]) / s
-        u[..., 2] = (i // s + u[..., 2]) / s
-    return u.reshape(-1, 3)
 
 
 class _SceneLights:
@@ -83,54 +63,57 @@ class _SceneLights:
         MIS-combined with its :attr:`n_env` samples."""
         if self.env is None:
             return {}
-        pdf, solid_angle = self.env.density_tables()
+        t = self.env.tables()
         return {
             "env_radiance": self.env.image,
             "env_to_world": np.ascontiguousarray(self.env.to_world, np.float64),
-            "env_texel_pdf": pdf,
-            "env_row_solid_angle": solid_angle,
+            "env_texel_pdf": t["texel_pdf"],
+            "env_row_solid_angle": t["row_solid_angle"],
             "env_samples": float(self.n_env),
         }
 
-    def _env_weight(self, dirs: np.ndarray, cos: np.ndarray, gathering: int) -> np.ndarray:
-        """(R, 3) environment radiance over the balance heuristic's combined
-        density of the environment samples and the gather rays,
-        ``n_e p_e(ω) + n_g cos θ / π`` (docs/design.md §11)."""
-        dens = self.n_env * self.env.pdf(dirs) + gathering * np.maximum(cos, 0.0) / math.pi
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = np.where(dens > 0, 1.0 / dens, 0.0)
-        return self.env.eval(dirs) * inv[:, None]
+    def add(self, h: dict, out: np.ndarray, frame: int, gathering: int, tile: int) -> None:
+        """Add the light of every pixel into ``out``: one shadow ray to each
+        delta light (pixels in tiles of ``tile``), :attr:`n_env` environment
+        samples weighted against ``gathering`` gather rays per pixel."""
+        P = len(h["material"])
+        if self.lights:
+            for a in range(0, P, tile):
+                self._add_delta(h, a, min(P, a + tile), out)
+        if self.env is not None and self.n_env > 0:
+            t = self.env.tables()
+            self.rays += _core.environment_light(
+                *(h[k] for k in _HIT_KEYS),
+                *self.materials,
+                self.env.image,
+                np.ascontiguousarray(self.env.to_world, np.float64),
+                t["texel_pdf"],
+                t["row_solid_angle"],
+                t["texel_cdf"],
+                t["row_cos"],
+                self.n_env,
+                float(gathering),
+                self.seed,
+                frame,
+                self.eps,
+                self.tracer.native,
+                out,
+                self.threads,
+            )
 
-    def _rays(self, h: dict, a: int, b: int, pix: np.ndarray, frame: int, gathering: int):
-        """(pixel, direction, length, weight) of each ray of pixels ``pix``
-        of [a, b), one part per light and one for the environment."""
-        pos = h["pos"][a:b][pix]
-        n = h["normal"][a:b][pix].astype(np.float64)
-        world = pos + self.tracer.centre
-        parts = []
-        for light in self.lights:
-            w, dist, e = light.incident(world)
-            length = np.where(np.isfinite(dist), np.maximum(dist - 2 * self.eps, 0.0), np.inf)
-            parts.append((pix, w, length, e))
-        if self.env is not None:
-            k = self.n_env
-            rng = np.random.default_rng([self.seed, frame, a, 0xE4F])
-            w, _ = self.env.sample(_stratified(rng, len(pix), k))
-            cos = np.einsum("ij,ij->i", w, np.repeat(n, k, axis=0))
-            weight = self._env_weight(w, cos, gathering)
-            parts.append((np.repeat(pix, k), w, np.full(len(w), np.inf), weight))
-        return parts
-
-    def add(self, h: dict, a: int, b: int, out: np.ndarray, frame: int, gathering: int) -> None:
-        """Add the light of pixels [a, b) into ``out[a:b]``: one shadow ray
-        to each delta light, :attr:`n_env` environment samples weighted
-        against ``gathering`` gather rays per pixel."""
+    def _add_delta(self, h: dict, a: int, b: int, out: np.ndarray) -> None:
+        """Add the delta lights' light of pixels [a, b) into ``out[a:b]``."""
         pix = np.flatnonzero(h["material"][a:b] >= 0)
         if len(pix) == 0:
             return
         ng = h["ng"][a:b][pix].astype(np.float64)
         org = h["pos"][a:b][pix] + self.eps * ng
-        parts = self._rays(h, a, b, pix, frame, gathering)
+        world = h["pos"][a:b][pix] + self.tracer.centre
+        parts = []  # (pixel, direction, length, irradiance) per light
+        for light in self.lights:
+            w, dist, e = light.incident(world)
+            length = np.where(np.isfinite(dist), np.maximum(dist - 2 * self.eps, 0.0), np.inf)
+            parts.append((pix, w, length, e))
         p_all = np.concatenate([q[0] for q in parts])
         order = np.argsort(p_all, kind="stable")  # pixel-major, as the kernel takes them
         w_all = np.concatenate([q[1] for q in parts])[order]
@@ -145,9 +128,8 @@ class _SceneLights:
             occ[live] = self.tracer.occluded(org[at][live], w_all[live], len_all[live])
         self.rays += int(np.count_nonzero(live))
         count = np.bincount(p_all, minlength=b - a).astype(np.int64)
-        hh = [h[k][a:b] for k in _HIT_KEYS]
         _core.light_accumulate(
-            *hh,
+            *(h[k][a:b] for k in _HIT_KEYS),
             *self.materials,
             count,
             np.ascontiguousarray(w_all, np.float32),

@@ -4,8 +4,8 @@ lights and environment, the indirect filter (``docs/design.md`` §6).
 Every ray workload runs in one compiled kernel that makes its rays, traces
 them in the scene's Embree scene as they are made and sums their light pixel
 by pixel: ``camera_hits``, ``vpl_light``, ``gather_light`` (the environment
-included) and, for the delta lights and the environment samples, the
-tracer's batch queries and ``light_accumulate``.
+included), ``environment_light`` (the environment's samples) and, for the
+delta lights, the tracer's batch queries and ``light_accumulate``.
 """
 
 from __future__ import annotations
@@ -209,8 +209,7 @@ class _FrameShader:
         if self.lights.any:
             t0 = time.perf_counter()
             gathering = self.gather if has_vpls else 0
-            for a in range(0, P, self.tile):
-                self.lights.add(h, a, min(P, a + self.tile), out, self._frame, gathering)
+            self.lights.add(h, out, self._frame, gathering, self.tile)
             self.seconds["lights"] = self.seconds.get("lights", 0.0) + time.perf_counter() - t0
         if not has_vpls:
             return out
