@@ -26,6 +26,19 @@ def rel_mse(img, ref, *, eps: float = 0.01) -> float:
     """Relative MSE: mean over pixels and channels of ``(x - r)² / (r² + eps)``.
 
     ``eps = 0.01`` as in ``docs/design.md`` §9.
+
+    Parameters
+    ----------
+    img, ref : array_like
+        The image and the reference, of one shape (e.g. (H, W, 3)), linear
+        radiance.
+    eps : float
+        Added to ``r²`` so that black reference pixels count as absolute errors.
+
+    Returns
+    -------
+    float
+        The relMSE (0 for equal images).
     """
     a, b = _pair(img, ref)
     return float(np.mean((a - b) ** 2 / (b * b + eps)))
@@ -99,7 +112,19 @@ def error_autocorrelation(img, ref, lags=(1, 2, 3, 4), *, eps: float = 0.01, mas
 
 
 def rmse(img, ref) -> float:
-    """Root-mean-square error on linear radiance."""
+    """Root-mean-square error on linear radiance.
+
+    Parameters
+    ----------
+    img, ref : array_like
+        The image and the reference, of one shape (e.g. (H, W, 3)), linear
+        radiance.
+
+    Returns
+    -------
+    float
+        ``sqrt(mean((img - ref)²))`` in radiance units.
+    """
     a, b = _pair(img, ref)
     return float(np.sqrt(np.mean((a - b) ** 2)))
 
@@ -114,7 +139,22 @@ def _tonemapped(img, ref, exposure: float):
 
 
 def psnr(img, ref, *, exposure: float = 0.0) -> float:
-    """PSNR (dB) between the 8-bit sRGB tone-mapped images (scikit-image)."""
+    """PSNR (dB) between the 8-bit sRGB tone-mapped images (scikit-image).
+
+    Parameters
+    ----------
+    img, ref : array_like
+        The image and the reference, of one shape (e.g. (H, W, 3)), linear
+        radiance.
+    exposure : float
+        Exposure in stops applied to both before the sRGB tone mapping
+        (:func:`voxgi.io.to_srgb8`).
+
+    Returns
+    -------
+    float
+        Peak signal-to-noise ratio in dB; ``inf`` for equal 8-bit images.
+    """
     from skimage.metrics import peak_signal_noise_ratio
 
     a, b = _tonemapped(img, ref, exposure)
@@ -124,7 +164,22 @@ def psnr(img, ref, *, exposure: float = 0.0) -> float:
 
 
 def ssim(img, ref, *, exposure: float = 0.0) -> float:
-    """Structural similarity of the 8-bit sRGB tone-mapped images (scikit-image)."""
+    """Structural similarity of the 8-bit sRGB tone-mapped images (scikit-image).
+
+    Parameters
+    ----------
+    img, ref : array_like
+        The image and the reference, of one shape (e.g. (H, W, 3)), linear
+        radiance.
+    exposure : float
+        Exposure in stops applied to both before the sRGB tone mapping
+        (:func:`voxgi.io.to_srgb8`).
+
+    Returns
+    -------
+    float
+        SSIM in [-1, 1], 1 for equal images (a window of at most 7 pixels).
+    """
     from skimage.metrics import structural_similarity
 
     a, b = _tonemapped(img, ref, exposure)
@@ -135,7 +190,22 @@ def ssim(img, ref, *, exposure: float = 0.0) -> float:
 
 def flip(img, ref, *, exposure: float = 0.0) -> float | None:
     """Mean LDR-FLIP error of the 8-bit sRGB tone-mapped images (0: equal,
-    1: most different), or None when ``flip-evaluator`` is not installed."""
+    1: most different), or None when ``flip-evaluator`` is not installed.
+
+    Parameters
+    ----------
+    img, ref : array_like
+        The image and the reference, of one shape (e.g. (H, W, 3)), linear
+        radiance.
+    exposure : float
+        Exposure in stops applied to both before the sRGB tone mapping
+        (:func:`voxgi.io.to_srgb8`).
+
+    Returns
+    -------
+    float or None
+        The mean FLIP error.
+    """
     try:
         import flip_evaluator
     except ImportError:

@@ -12,7 +12,7 @@ import numpy as np
 from ..scene import Camera, Scene
 from .aovs import AOVMean
 from .budget import _reflects_light, light_spread, ray_budget
-from .estimate import _Mean
+from .estimate import _MIN_BATCHES, _Mean
 from .executor import FrameExecutor, FrameShaderSpec
 from .pixel_filter import _FILTER_REACH
 from .settings import RenderTuning, _check_executor, _check_render, _check_solution, _RenderSettings
@@ -152,7 +152,7 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
     """Frames 0, 1, ... from ``source`` into the running mean until the
     stopping rule or ``max_frames``; Ctrl-C stops after the current frame.
     Returns the mean, the AOVs' mean and whether it was interrupted."""
-    from tqdm.auto import tqdm
+    from .. import _progress
 
     cam = opt.cam
     reach = _FILTER_REACH[cam.pixel_filter]
@@ -164,32 +164,22 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
     )
     aovs = AOVMean()
     interrupted = False
-    # With a tolerance the bar follows the error, not the frame cap that is
-    # rarely reached: the share of the way, in log scale, from the first
-    # estimate to tol (or the share of the frames, whichever is further).
-    bar = tqdm(
-        total=100,
-        disable=not progress,
-        desc="display",
-        unit="%",
-        leave=False,
-        bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}{postfix}",
-    )
-    first = None
+    # The bar counts frames against the frames the render is predicted to
+    # need (the stopping rule's floor, then relMSE ∝ 1/frames), not against
+    # the frame cap that is rarely reached.
+    floor = max(opt.min_frames, _MIN_BATCHES)
+    need = _progress.frames_needed(0, math.nan, opt.tol, floor, opt.max_frames)
+    bar = _progress.bar("display", need, enabled=progress, unit="frame")
     try:
         for f in range(opt.max_frames):
             x = source.frame(f, opt.seed).astype(np.float64)
             surface = getattr(source, "surface", None)
             acc.add(x, surface)
             aovs.add(getattr(source, "aovs", None), None if surface is None else surface[0])
-            share = (f + 1) / opt.max_frames
             # the estimate is read only once the rule may stop on it
             est = acc.est if opt.tol > 0 and acc.ready(opt) else math.nan
-            if np.isfinite(est) and est > 0:
-                first = est if first is None else first
-                if first > opt.tol:
-                    share = max(share, math.log(first / est) / math.log(first / opt.tol))
-            bar.update(int(100 * min(share, 1.0)) - bar.n)
+            bar.total = _progress.frames_needed(f + 1, est, opt.tol, floor, opt.max_frames)
+            bar.update(1)
             known = f", est relMSE {est:.2e}" if np.isfinite(est) else ""
             bar.set_postfix_str(f"frame {f + 1}{known}")
             if acc.done(opt):
@@ -277,7 +267,7 @@ def render(
     seed : int
         Seeds the VPL, sub-pixel and lens sequences.
     progress, threads
-        A tqdm progress bar; worker threads (None: all cores).
+        A progress bar on a terminal or in a notebook; worker threads (None: all cores).
     executor : FrameExecutor or None
         Where the frames are computed (None: here); the image is the local one.
     camera : Camera, optional
