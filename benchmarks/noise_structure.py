@@ -55,9 +55,7 @@ def _row(out, ref, seconds: float) -> dict:
 
 def measure(name: str, frames: int, size: int, ref_frames: int, seeds: int, radius: int) -> dict:
     scene = voxgi.scenes.get(name, width=size, height=size)
-    sol = voxgi.pipeline.solve_for_display(
-        voxgi.voxelize(scene, resolution=voxgi.pipeline.RENDER_RESOLUTION), progress=False
-    )
+    sol = voxgi.solve(voxgi.voxelize(scene), progress=False)
     ref = voxgi.render(scene, sol, max_frames=ref_frames, tol=0.0, seed=1000, progress=False)
     tuning = voxgi.RenderTuning(indirect_filter=radius)
     out = {"scene": name, "ref_frames": ref_frames, "defaults": [], "fixed": []}
