@@ -93,7 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="voxelize, solve and render a scene to EXR + PNG",
         description="Render a scene to a linear EXR and a tone-mapped PNG preview beside it. "
         "The EXR also holds each pixel's estimated standard error in the channels "
-        "stderr.R, stderr.G, stderr.B. "
+        "stderr.R, stderr.G, stderr.B, and the pixel AOVs of the camera hits: "
+        "albedo.R/G/B, normal.X/Y/Z, depth.Z and object_id. "
         "Exit codes: 0 done, 1 a scene or value that cannot be used, 2 a bad "
         "command line or an output that cannot be written (a read-only file, a folder "
         "that cannot be written; checked before any work, and missing folders are "
@@ -214,6 +215,8 @@ def _add_compare_arguments(c: argparse.ArgumentParser) -> None:
 
 def _add_display_arguments(r: argparse.ArgumentParser) -> None:
     """Add the ``render`` options of the display and its image (frames to seed)."""
+    from .io import TONEMAPS
+
     r.add_argument(
         "--frames",
         "--spp",
@@ -235,8 +238,24 @@ def _add_display_arguments(r: argparse.ArgumentParser) -> None:
         "--exposure",
         metavar="EV",
         type=_finite(),
-        default=0.0,
-        help="exposure of the PNG preview in stops (the EXR stays linear)",
+        default=None,
+        help="exposure of the PNG preview in stops (the EXR stays linear) (default: the "
+        "exposure that maps the image's log-average luminance to middle grey, 0.18)",
+    )
+    r.add_argument(
+        "--denoise",
+        action="store_true",
+        help="denoise the image with Intel Open Image Denoise guided by the render's "
+        "albedo and normal AOVs (needs pip install 'voxgi[denoise]'); --tol still bounds "
+        "the undenoised image's estimated error, and the EXR keeps that image in the "
+        "channels undenoised.R/G/B",
+    )
+    r.add_argument(
+        "--tonemap",
+        choices=TONEMAPS,
+        default="reinhard",
+        help="tone curve of the PNG preview: 'reinhard' compresses the highlights so "
+        "that only the brightest 0.1%% of pixels reach white, 'clip' clips at 1",
     )
     r.add_argument(
         "--width",
@@ -379,6 +398,13 @@ def _prepare_render(args):
     src, name = _scene_source(args.scene)
     exr, png = output_paths(args.output if args.output else f"{name}.exr")
     check_writable((exr, png))
+    if args.denoise:
+        from .denoise import load_oidn
+
+        try:
+            load_oidn()
+        except ImportError as exc:  # before any work, as the outputs are checked
+            raise UsageError(f"--denoise: {exc}") from None
     scene = _load_scene(args, src, name)
     changes = {k: v for k, v in (("width", args.width), ("height", args.height)) if v is not None}
     if changes:
@@ -423,7 +449,7 @@ def _run_solve(args, vox):
 
 def _run_display(args, scene, sol):
     """Render the image by progressive display frames."""
-    from .display import render
+    from .display import RenderTuning, render
 
     return render(
         scene,
@@ -433,6 +459,7 @@ def _run_display(args, scene, sol):
         seed=args.seed,
         progress=not args.quiet,
         threads=args.threads,
+        tuning=RenderTuning(denoise=True) if args.denoise else None,
     )
 
 
@@ -463,7 +490,7 @@ def _timings(t_vox: float, t_sol: float, sec: dict) -> dict:
     return timings
 
 
-def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
+def _render_metadata(args, name: str, cam, vox, res, timings: dict, exposure: float) -> dict:
     """The EXR header's record of the render: its settings, sizes and timings."""
     s = res.stats
     return {
@@ -483,7 +510,10 @@ def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
         "gather_per_frame": s["gather_per_frame"],
         "light_spread": s["light_spread"],
         "seed": args.seed,
-        "exposure": args.exposure,
+        "exposure": exposure,
+        "exposure_auto": args.exposure is None,
+        "tonemap": args.tonemap,
+        "denoised": bool(res.stats.get("denoised")),
         "interrupted": bool(s.get("interrupted")),
         "seconds": timings,
         "skipped": s["skipped"],
@@ -516,12 +546,13 @@ def run_render(args) -> int:
         return _interrupted("interrupted before the first display frame finished; nothing written")
     _report_display(args, res, interrupted)
     timings = _timings(t_vox, t_sol, res.stats["seconds"])
-    meta = _render_metadata(args, name, cam, vox, res, timings)
+    exposure = io.auto_exposure(res.image) if args.exposure is None else args.exposure
+    meta = _render_metadata(args, name, cam, vox, res, timings, exposure)
     # Each write is atomic (voxgi.io.atomic_path): a Ctrl-C here leaves every
     # file either as it was or complete.
     try:
-        io.write_exr(exr, res.image, metadata=meta, stderr=res.stderr)
-        io.write_png(png, res.image, exposure=args.exposure)
+        io.write_exr(exr, res.image, metadata=meta, stderr=res.stderr, layers=res.exr_layers())
+        io.write_png(png, res.image, exposure=exposure, tonemap=args.tonemap)
     except KeyboardInterrupt:
         return _interrupted("interrupted while writing; the outputs are whole (old or new)")
     if interrupted:

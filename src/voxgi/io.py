@@ -20,10 +20,13 @@ from pathlib import Path
 import numpy as np
 
 __all__ = [
+    "TONEMAPS",
     "atomic_path",
+    "auto_exposure",
     "check_solution_records",
     "is_read_only",
     "read_exr",
+    "read_exr_channels",
     "read_exr_header",
     "read_npz",
     "to_srgb8",
@@ -119,7 +122,9 @@ def _check_image(image, what: str = "image") -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
-def write_exr(path, image, metadata: dict | None = None, *, stderr=None) -> Path:
+def write_exr(
+    path, image, metadata: dict | None = None, *, stderr=None, layers: dict | None = None
+) -> Path:
     """Write a linear RGB float32 OpenEXR file (ZIP compression).
 
     Parameters
@@ -134,6 +139,11 @@ def write_exr(path, image, metadata: dict | None = None, *, stderr=None) -> Path
         Per-pixel standard error of ``image`` (``RenderResult.stderr``),
         written as the channels ``stderr.R``, ``stderr.G``, ``stderr.B``
         (read back with ``read_exr(path, layer="stderr")``).
+    layers : dict, optional
+        More channels, ``name -> (H, W) array`` of the image's height and
+        width, written as float32 (``RenderResult.exr_layers()``: the pixel
+        AOVs ``albedo.R``, ``normal.X``, ``depth.Z``, ...); read back with
+        :func:`read_exr_channels`, or ``read_exr(path, layer="albedo")``.
     """
     import OpenEXR
 
@@ -146,6 +156,15 @@ def write_exr(path, image, metadata: dict | None = None, *, stderr=None) -> Path
         channels.update(
             {f"stderr.{c}": np.ascontiguousarray(se[:, :, i]) for i, c in enumerate("RGB")}
         )
+    for name, a in (layers or {}).items():
+        if not isinstance(name, str) or not name or name in channels or name in "RGB":
+            raise ValueError(f"layers: bad or repeated channel name {name!r}")
+        arr = np.asarray(a)
+        if arr.dtype == object or not np.issubdtype(arr.dtype, np.number):
+            raise TypeError(f"layers[{name!r}]: expected a numeric array, got dtype {arr.dtype}")
+        if arr.shape != img.shape[:2]:
+            raise ValueError(f"layers[{name!r}]: expected shape {img.shape[:2]}, got {arr.shape}")
+        channels[name] = np.ascontiguousarray(arr, dtype=np.float32)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for k, v in (metadata or {}).items():
         header[f"voxgi_{k}"] = v if isinstance(v, str) else json.dumps(v, default=float)
@@ -158,14 +177,14 @@ def write_exr(path, image, metadata: dict | None = None, *, stderr=None) -> Path
     return path
 
 
-def _open_exr(path: Path):
+def _open_exr(path: Path, **options):
     """Open an EXR for reading: FileNotFoundError if absent, ValueError if unreadable."""
     import OpenEXR
 
     if not path.exists():
         raise FileNotFoundError(f"EXR file not found: {path}")
     try:
-        return OpenEXR.File(str(path))
+        return OpenEXR.File(str(path), **options)
     except RuntimeError as exc:  # not an EXR, truncated, unreadable
         raise ValueError(f"{path}: cannot be read as OpenEXR ({exc})") from None
 
@@ -174,7 +193,8 @@ def read_exr(path, layer: str | None = None) -> np.ndarray:
     """Read an OpenEXR file's RGB channels as (H, W, 3) float32.
 
     ``layer`` reads the channels ``<layer>.R``, ``<layer>.G``, ``<layer>.B``
-    instead (``"stderr"``: the error estimate :func:`write_exr` stores).
+    (or ``.X``, ``.Y``, ``.Z``) instead (``"stderr"``: the error estimate
+    :func:`write_exr` stores; ``"albedo"``, ``"normal"``: the pixel AOVs).
     """
     path = Path(path)
     with _open_exr(path) as f:
@@ -184,6 +204,8 @@ def read_exr(path, layer: str | None = None) -> np.ndarray:
                 px = ch[layer].pixels
             elif all(f"{layer}.{c}" in ch for c in "RGB"):
                 px = np.stack([ch[f"{layer}.{c}"].pixels for c in "RGB"], axis=-1)
+            elif all(f"{layer}.{c}" in ch for c in "XYZ"):
+                px = np.stack([ch[f"{layer}.{c}"].pixels for c in "XYZ"], axis=-1)
             else:
                 raise ValueError(f"{path}: no {layer}.R/G/B channels (has {sorted(ch)})")
         elif "RGB" in ch:
@@ -195,6 +217,17 @@ def read_exr(path, layer: str | None = None) -> np.ndarray:
         else:
             raise ValueError(f"{path}: no RGB or Y channels (has {sorted(ch)})")
     return np.ascontiguousarray(px, dtype=np.float32)
+
+
+def read_exr_channels(path) -> dict:
+    """Every channel of an EXR file, by its full name (``R``, ``stderr.R``,
+    ``albedo.R``, ``depth.Z``, ...), as (H, W) float32."""
+    path = Path(path)
+    with _open_exr(path, separate_channels=True) as f:
+        return {
+            name: np.ascontiguousarray(c.pixels, dtype=np.float32)
+            for name, c in f.channels().items()
+        }
 
 
 def read_exr_header(path) -> dict:
@@ -212,25 +245,105 @@ def read_exr_header(path) -> dict:
     return out
 
 
-def to_srgb8(image, exposure: float = 0.0) -> np.ndarray:
-    """Tone-map linear radiance to 8-bit sRGB: scale by ``2**exposure``,
-    clip to [0, 1], apply the sRGB transfer curve. NaN maps to 0."""
+TONEMAPS = ("reinhard", "clip")
+"""The PNG preview's tone curves (:func:`to_srgb8`)."""
+
+_KEY = 0.18  # Reinhard et al. 2002: the "normal" key, middle grey
+_WHITE_PERCENTILE = 99.9  # the white point ignores the brightest 0.1% (fireflies)
+_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 / sRGB primaries
+
+
+def _finite_image(image) -> np.ndarray:
+    img = _check_image(image).astype(np.float64)
+    return np.clip(np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0), 0.0, None)
+
+
+def _check_exposure(exposure) -> float:
     if isinstance(exposure, bool) or not isinstance(exposure, (int, float, np.number)):
         raise TypeError(f"exposure: expected a number, got {exposure!r}")
     if not np.isfinite(exposure):
         raise ValueError(f"exposure: must be finite, got {exposure}")
-    img = _check_image(image).astype(np.float64) * (2.0 ** float(exposure))
-    img = np.clip(np.nan_to_num(img, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+    return float(exposure)
+
+
+def auto_exposure(image) -> float:
+    """The exposure, in stops, that maps an image's log-average luminance to
+    middle grey (0.18).
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) array
+        Linear radiance; NaN, infinite and negative values count as 0.
+
+    Returns
+    -------
+    exposure : float
+        ``log2(0.18 / Lavg)`` with ``Lavg = exp(mean(log(1e-6 + L)))`` over
+        the pixels' luminance ``L`` (Reinhard et al. 2002, "Photographic Tone
+        Reproduction for Digital Images", eq. 1-2); 0 for a black image.
+    """
+    lum = _finite_image(image) @ _LUMINANCE
+    if not np.any(lum > 0.0):
+        return 0.0
+    log_average = float(np.exp(np.mean(np.log(1e-6 + lum))))
+    return float(np.log2(_KEY / log_average))
+
+
+def to_srgb8(image, exposure: float = 0.0, tonemap: str = "clip") -> np.ndarray:
+    """Tone-map linear radiance to 8-bit sRGB.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) array
+        Linear radiance. NaN and negative values map to black, +inf to white.
+    exposure : float, optional
+        Scale by ``2**exposure`` first.
+    tonemap : {"clip", "reinhard"}, optional
+        ``"clip"``: clip to [0, 1]. ``"reinhard"``: Reinhard et al.'s extended
+        curve ``x (1 + x / w²) / (1 + x)`` per channel, with the white point
+        ``w`` the larger of 1 and the 99.9th percentile of the exposed
+        luminance: the identity where nothing exceeds 1, otherwise the
+        highlights are compressed so that only the brightest 0.1% reach white.
+        Then the sRGB transfer curve.
+
+    Returns
+    -------
+    srgb : (H, W, 3) uint8
+    """
+    exposure = _check_exposure(exposure)
+    if tonemap not in TONEMAPS:
+        raise ValueError(f"tonemap: expected one of {TONEMAPS}, got {tonemap!r}")
+    # Bounded so that the curve's x² stays finite in float64 for any exposure.
+    img = np.minimum(_finite_image(image) * (2.0**exposure), 1e150)
+    burnt = np.isposinf(_check_image(image))
+    if tonemap == "reinhard":
+        white = max(1.0, float(np.percentile(img @ _LUMINANCE, _WHITE_PERCENTILE)))
+        img = img / (1.0 + img) * (1.0 + img / (white * white))
+    img = np.where(burnt, 1.0, np.clip(img, 0.0, 1.0))
     srgb = np.where(img <= 0.0031308, 12.92 * img, 1.055 * np.power(img, 1 / 2.4) - 0.055)
     return np.round(srgb * 255.0).astype(np.uint8)
 
 
-def write_png(path, image, exposure: float = 0.0) -> Path:
-    """Write a tone-mapped 8-bit sRGB PNG preview of a linear image."""
+def write_png(path, image, exposure: float | None = None, tonemap: str = "reinhard") -> Path:
+    """Write a tone-mapped 8-bit sRGB PNG preview of a linear image.
+
+    Parameters
+    ----------
+    path : str or Path
+    image : (H, W, 3) or (H, W) array
+        Linear radiance.
+    exposure : float, optional
+        Exposure in stops; ``None`` chooses it from the image
+        (:func:`auto_exposure`).
+    tonemap : {"reinhard", "clip"}, optional
+        The tone curve (:func:`to_srgb8`).
+    """
     from skimage.io import imsave
 
     path = Path(path)
-    srgb = to_srgb8(image, exposure)
+    if exposure is None:
+        exposure = auto_exposure(image)
+    srgb = to_srgb8(image, exposure, tonemap)
     with atomic_path(path) as tmp:
         imsave(str(tmp), srgb, check_contrast=False)
     return path

@@ -20,6 +20,7 @@ from .. import _core
 from ..rays import Tracer
 from ..scene import Camera, Scene
 from ..traced import record_grid
+from .aovs import frame_aovs
 from .lighting import _HIT_KEYS, _SceneLights
 from .pixel_filter import gaussian_pixel_filter
 from .samples import frame_samples
@@ -118,6 +119,8 @@ class _FrameShader:
         self.primary_rays = 0
         #: :func:`frame_surface` of the last frame
         self.surface: tuple[np.ndarray, np.ndarray] | None = None
+        #: :func:`frame_aovs` of the last frame, pixel-filtered as its image
+        self.aovs: np.ndarray | None = None
         self.shadow_rays = 0
         self.gather_rays = 0
         # the VPLs' and gather rays' shading is timed with their rays
@@ -318,6 +321,9 @@ class _FrameShader:
         h = self.camera_hits(offset, lens)
         self.seconds["primary"] += time.perf_counter() - t0
         self.surface = frame_surface(h)
+        self.aovs = frame_aovs(
+            h, self.mat_albedo, np.asarray(self.cam.eye) - self.tracer.centre, self.cam.frame()[2]
+        )
         vpls = None
         if not self.sampler.empty:
             vpls = [self.sampler.frame(f, g) for g in range(len(self._groups[1]) - 1)]
@@ -333,7 +339,11 @@ class _FrameShader:
             ]
         img = self.shade(h, vpls)
         if self.cam.pixel_filter == "gaussian":
-            img = gaussian_pixel_filter(img, self.cam.width, self.cam.height, offset)
+            # the AOVs through the same filter as the image, in the same pass
+            both = gaussian_pixel_filter(
+                np.concatenate([img, self.aovs], axis=1), self.cam.width, self.cam.height, offset
+            )
+            img, self.aovs = np.ascontiguousarray(both[:, :3]), both[:, 3:]
         return img
 
     @staticmethod
