@@ -109,7 +109,7 @@ def _documented_parameters(doc: str) -> set[str]:
     return names
 
 
-@pytest.mark.parametrize("module", ["voxgi.scenes", "voxgi.metrics"])
+@pytest.mark.parametrize("module", ["voxgi", "voxgi.scenes", "voxgi.metrics"])
 def test_public_functions_document_every_parameter(module):
     # help() on a public function explains each of its arguments (numpydoc).
     import importlib
@@ -125,3 +125,27 @@ def test_public_functions_document_every_parameter(module):
             for p in inspect.signature(fn).parameters.values()
         }
         assert params <= _documented_parameters(inspect.getdoc(fn) or ""), (name, params)
+
+
+@pytest.mark.parametrize("name", ["voxelize", "solve", "render"])
+def test_readme_api_rows_are_the_signatures(name):
+    # The README's API table writes each stage's signature out in full.
+    import inspect
+
+    import voxgi
+
+    parts, starred = [], False
+    for p in inspect.signature(getattr(voxgi, name)).parameters.values():
+        if p.kind is p.KEYWORD_ONLY and not starred:
+            parts.append("*")
+            starred = True
+        parts.append(p.name if p.default is p.empty else f"{p.name}={p.default!r}")
+    assert f"`voxgi.{name}({', '.join(parts)})`" in _readme()
+
+
+def test_ci_runs_the_readme_test_command():
+    # CI runs exactly what the README tells a newcomer to run, in a fresh venv.
+    blocks = re.findall(r"```bash\n(.*?)```", _readme(), flags=re.DOTALL)
+    ci = (ROOT / ".ci" / "run").read_text().splitlines()
+    assert blocks[1].strip() in ci
+    assert any(line.startswith("python3 -m venv") for line in ci)
