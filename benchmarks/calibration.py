@@ -51,8 +51,8 @@ def make_scene(name: str, size: int) -> voxgi.Scene:
 def measure(name: str, size: int, ref_frames: int, seeds: int) -> dict:
     scene = make_scene(name, size)
     t0 = time.perf_counter()
-    vox = voxgi.voxelize(scene, resolution=voxgi.pipeline.RENDER_RESOLUTION)
-    sol = voxgi.pipeline.solve_for_display(vox, progress=False)
+    vox = voxgi.voxelize(scene)
+    sol = voxgi.solve(vox, progress=False)
     solve_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     ref = voxgi.render(scene, sol, max_frames=ref_frames, tol=0.0, seed=1000, progress=False)

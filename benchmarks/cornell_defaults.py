@@ -29,10 +29,10 @@ from voxgi.metrics import rel_mse
 def main() -> int:
     scene = voxgi.scenes.cornell_box(width=256, height=256)
     t0 = time.perf_counter()
-    vox = voxgi.voxelize(scene, resolution=voxgi.pipeline.RENDER_RESOLUTION)
+    vox = voxgi.voxelize(scene)
     t1 = time.perf_counter()
     # exactly what voxgi.render(scene) and `voxgi render` run without a solution
-    sol = voxgi.pipeline.solve_for_display(vox, progress=False)
+    sol = voxgi.solve(vox, progress=False)
     t2 = time.perf_counter()
     res = {
         "records": len(vox),

@@ -36,7 +36,7 @@ def _direct_by_shooting(vox, threads):
         max_bounces=0,
         threads=threads,
         progress=False,
-        tuning=voxgi.SolveTuning(diagnostics=False),
+        tuning=voxgi.SolveTuning.paper(diagnostics=False),
     )
     rho = vox.albedo.astype(np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -101,15 +101,15 @@ def furnace(resolution: int, threads: int, directions: int = 8) -> dict:
     # the paper's shooting at its own radius (35), and at the gathering's,
     # where one gathering pass stands in for it with the same answer
     runs = {
-        "exact": voxgi.SolveTuning(direct_light="exact", diagnostics=False),
-        "shoot": voxgi.SolveTuning(direct_light="shoot", diagnostics=False),
-        f"shoot at R {directions}": voxgi.SolveTuning(
-            direct_light="shoot", shoot_directions=directions, diagnostics=False
+        "exact": voxgi.SolveTuning.paper(direct_light="exact", diagnostics=False),
+        "shoot": voxgi.SolveTuning.paper(direct_light="shoot", diagnostics=False),
+        f"shoot at R {directions}": voxgi.SolveTuning.paper(
+            direct_light="shoot", shoot_radius=directions, diagnostics=False
         ),
         # and with the reflected light finished by traced bounces
-        f"shoot at R {directions}, traced bounces": voxgi.SolveTuning(
+        f"shoot at R {directions}, traced bounces": voxgi.SolveTuning.paper(
             direct_light="shoot",
-            shoot_directions=directions,
+            shoot_radius=directions,
             diagnostics=False,
             indirect_light="traced",
         ),
@@ -117,9 +117,7 @@ def furnace(resolution: int, threads: int, directions: int = 8) -> dict:
     out["runs"] = list(runs)
     for method, tuning in runs.items():
         t = time.perf_counter()
-        sol = voxgi.solve(
-            vox, directions=directions, threads=threads, progress=False, tuning=tuning
-        )
+        sol = voxgi.solve(vox, radius=directions, threads=threads, progress=False, tuning=tuning)
         total = time.perf_counter() - t
         err = np.abs(sol.radiance[front, 0] * (1 - rho) / le - 1)
         sec = sol.stats["seconds"]

@@ -99,8 +99,8 @@ def _frame_noise(x: np.ndarray, image: np.ndarray) -> float:
 
 def measure(name: str, size: int, frames: int) -> dict:
     scene = make_scene(name, size)
-    vox = voxgi.voxelize(scene, resolution=voxgi.pipeline.RENDER_RESOLUTION, progress=False)
-    sol = voxgi.pipeline.solve_for_display(vox, progress=False)
+    vox = voxgi.voxelize(scene)
+    sol = voxgi.solve(vox, progress=False)
     emits = np.any(np.asarray(vox.emission) > 0, axis=1)[:, None]
     B = np.asarray(sol.radiosity)
     x, spf = _run(scene, sol, frames, *BUDGETS[0])

@@ -145,10 +145,10 @@ def main(argv=None) -> int:
     vox = voxgi.voxelize(scene, resolution=args.resolution)
     t_vox = time.perf_counter() - t
     skw = dict(
-        directions=args.directions,
+        radius=args.directions,
         max_bounces=args.max_bounces,
         progress=False,
-        tuning=voxgi.SolveTuning(shoot_directions=args.shoot_directions),
+        tuning=voxgi.SolveTuning.paper(shoot_radius=args.shoot_directions),
     )
     rkw = dict(max_frames=args.frames, tol=0.0, seed=1, progress=False)
     print(

@@ -33,11 +33,11 @@ def main() -> None:
             t = time.perf_counter()
             sol = voxgi.solve(
                 vox,
-                directions=8,
+                radius=8,
                 progress=False,
                 tol=1e-5,
                 threads=args.threads,
-                tuning=voxgi.SolveTuning(shoot_directions=16, diagnostics=False),
+                tuning=voxgi.SolveTuning.paper(shoot_radius=16, diagnostics=False),
             )
             e = sol.stats["energy"]
             print(

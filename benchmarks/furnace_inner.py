@@ -27,7 +27,7 @@ def run(kind, inner, rho, res, R, closed=None):
     v = voxgi.voxelize(s, res)
     t = time.perf_counter()
     sol = voxgi.solve(
-        v, directions=R, progress=False, tuning=voxgi.SolveTuning(shoot_directions=R, closed=closed)
+        v, radius=R, progress=False, tuning=voxgi.SolveTuning.paper(shoot_radius=R, closed=closed)
     )
     dt = time.perf_counter() - t
     e = sol.radiance[:, 0] * (1 - rho) - 1

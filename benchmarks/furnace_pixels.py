@@ -48,8 +48,8 @@ def cameras(scene: voxgi.Scene) -> dict[str, voxgi.Camera]:
 
 def measure(rho: float, budgets: list[str]) -> list[dict]:
     scene = voxgi.scenes.furnace_sphere(albedo=rho, width=WIDTH, height=HEIGHT)
-    vox = voxgi.voxelize(scene, resolution=voxgi.pipeline.RENDER_RESOLUTION, progress=False)
-    sol = voxgi.pipeline.solve_for_display(vox, progress=False)
+    vox = voxgi.voxelize(scene)
+    sol = voxgi.solve(vox, progress=False)
     exact = 1.0 / (1.0 - rho)
     rows = []
     for budget in budgets:

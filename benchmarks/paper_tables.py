@@ -196,12 +196,12 @@ def run_scene(key: str, args) -> dict:
     bounces = lpl - 1  # light path length = reflections + 1; the first is the shooting
     sol = voxgi.solve(
         vox,
-        directions=lr,
+        radius=lr,
         max_bounces=bounces - 1,
         tol=1e-12,
         threads=args.threads,
         progress=False,
-        tuning=voxgi.SolveTuning(shoot_directions=sr, direct_light=args.direct_light),
+        tuning=voxgi.SolveTuning.paper(shoot_radius=sr, direct_light=args.direct_light),
     )
     out = voxgi.render(
         scene, sol, threads=args.threads, progress=False, max_frames=8 if args.quick else None

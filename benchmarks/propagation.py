@@ -131,7 +131,7 @@ def furnace(args) -> None:
             vox = voxgi.voxelize(make(rho), resolution=res)
             t = time.perf_counter()
             sol = voxgi.solve(
-                vox, directions=R, progress=False, tol=1e-6, tuning=SolveTuning(shoot_directions=R)
+                vox, radius=R, progress=False, tol=1e-6, tuning=SolveTuning.paper(shoot_radius=R)
             )
             dt = time.perf_counter() - t
             mean, mx = _front_err(sol, 1.0 / (1 - rho))
@@ -233,7 +233,9 @@ def junctions(args) -> None:
             }
             if res == ress[0]:
                 t = time.perf_counter()
-                sol = voxgi.solve(vox, directions=R, progress=False, tol=1e-5)
+                sol = voxgi.solve(
+                    vox, radius=R, progress=False, tol=1e-5, tuning=SolveTuning.paper()
+                )
                 row["seconds"] = time.perf_counter() - t
                 err = np.abs(sol.radiance[front, 0] * (1 - rho) - 1)
                 row.update(
@@ -272,14 +274,14 @@ def thin_walls(args) -> None:
             vox = voxgi.voxelize(_divided_box(kind, rho), resolution=res, progress=False)
             front = ~vox.back & (vox.area > 0)
             for how, samples in configs:
-                tuning = voxgi.SolveTuning(
-                    shoot_directions=R,
+                tuning = SolveTuning.paper(
+                    shoot_radius=R,
                     diagnostics=False,
                     indirect_light=how,
                     traced_samples=samples,
                 )
                 t = time.perf_counter()
-                sol = voxgi.solve(vox, directions=R, progress=False, tuning=tuning)
+                sol = voxgi.solve(vox, radius=R, progress=False, tuning=tuning)
                 err = sol.radiance[front, 0] * (1 - rho) - 1
                 rows.append(
                     {
@@ -337,7 +339,7 @@ def cap(args) -> None:
             vox = voxs[res]
             t = time.perf_counter()
             sol = voxgi.solve(
-                vox, directions=R, progress=False, tol=1e-5, tuning=SolveTuning(shoot_directions=R)
+                vox, radius=R, progress=False, tol=1e-5, tuning=SolveTuning.paper(shoot_radius=R)
             )
             dt = time.perf_counter() - t
             mean, mx = _front_err(sol, _cap_exact(vox, rho))
@@ -386,7 +388,7 @@ def cornell(args) -> None:
                 continue  # the trend is clear from 32 and 64
             t = time.perf_counter()
             sol = voxgi.solve(
-                vox, directions=8, progress=False, tol=1e-5, tuning=SolveTuning(shoot_directions=16)
+                vox, radius=8, progress=False, tol=1e-5, tuning=SolveTuning.paper(shoot_radius=16)
             )
             dt = time.perf_counter() - t
             e = sol.stats["energy"]
@@ -432,16 +434,16 @@ def later(args) -> None:
     res = 48 if args.quick else 64
     vox = voxgi.voxelize(voxgi.scenes.cornell_box(width=32, height=32), resolution=res)
     ref = voxgi.solve(
-        vox, directions=22, progress=False, tol=1e-6, tuning=SolveTuning(shoot_directions=22)
+        vox, radius=22, progress=False, tol=1e-6, tuning=SolveTuning.paper(shoot_radius=22)
     )
     for R, Rl in ((22, None), (22, 22), (22, 11), (22, 8), (16, None), (11, None), (8, None)):
         t = time.perf_counter()
         sol = voxgi.solve(
             vox,
-            directions=R,
+            radius=R,
             progress=False,
             tol=1e-6,
-            tuning=SolveTuning(shoot_directions=22, later_directions=Rl, later_after=2),
+            tuning=SolveTuning.paper(shoot_radius=22, later_radius=Rl, later_after=2),
         )
         dt = time.perf_counter() - t
         err = _err_vs(sol, ref, vox)
@@ -587,11 +589,11 @@ def paper(args) -> None:
         t = time.perf_counter()
         sol = voxgi.solve(
             vox,
-            directions=22,
+            radius=22,
             max_bounces=4,
             threads=th,
             progress=False,
-            tuning=SolveTuning(shoot_directions=35, pair_cache=cache),
+            tuning=SolveTuning.paper(shoot_radius=35, pair_cache=cache),
         )
         dt = time.perf_counter() - t
         sec = sol.stats["seconds"]
@@ -702,11 +704,11 @@ def energy(args) -> None:
         t = time.perf_counter()
         sol = voxgi.solve(
             vox,
-            directions=R,
+            radius=R,
             progress=False,
             tol=1e-5,
             threads=th,
-            tuning=SolveTuning(shoot_directions=Rs, pair_cache=True),
+            tuning=SolveTuning.paper(shoot_radius=Rs, pair_cache=True),
         )
         dt = time.perf_counter() - t
         e = sol.stats["energy"]

@@ -5,11 +5,13 @@ Per scene (the Cornell box, ``shadow``, ``geometric``, the window room) at
 
 * one voxelize + solve and one ``voxgi.render`` with the defaults: its
   frames, rays per pixel and frame, and seconds per phase;
-* the camera, shadow and gather rays of the first two frames of that
-  display, kept as arrays (from a render through embreex's batches, whose
-  rays are the same) and traced alone through :class:`voxgi.rays.Tracer`
-  (Embree called from the compiled core), on 1 and on 2 threads:
-  nanoseconds per ray, best of ``--repeats``;
+* rays of the three kinds of that display, as arrays, traced alone through
+  :class:`voxgi.rays.Tracer` (Embree called from the compiled core), on 1
+  and on 2 threads: nanoseconds per ray, best of ``--repeats``. The camera
+  rays are the display's (:func:`voxgi.display.camera_rays`); the shadow
+  rays run from the camera hits to 16 random records each, the gather rays
+  leave them in 9 cosine-distributed directions each: rays of the same
+  kinds and lengths as the display's, not the same rays;
 * for each phase of the default render, the share of its time that its rays
   alone take at that cost; the rest is making the rays, shading their hits
   and, for the gather rays, finding the record each one lands on.
@@ -24,7 +26,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import time
@@ -39,38 +40,42 @@ SCENES = ("cornell_box", "shadow", "geometric", "window_room")
 GATHER, SHADOW = 9, 16
 
 
-@contextlib.contextmanager
-def _recorded_rays(pixels: int):
-    """Within it, renders trace through embreex in batches (the two-pass
-    path, whose rays are arrays), and every batch is kept: first-hit
-    batches of one ray a pixel are the camera rays, the others the gather
-    rays; occlusion batches are the shadow rays."""
-    kept = {"primary": [], "gather": [], "shadow": []}
-    saved = (voxgi.rays.embree_library, Tracer.intersect, Tracer.occluded)
-
-    def intersect(tr, org, dirs):
-        kind = "primary" if len(org) == pixels else "gather"
-        kept[kind].append((np.array(org, np.float32), np.array(dirs, np.float32)))
-        return saved[1](tr, org, dirs)
-
-    def occluded(tr, org, dirs, length):
-        kept["shadow"].append(tuple(np.array(a, np.float32) for a in (org, dirs, length)))
-        return saved[2](tr, org, dirs, length)
-
-    voxgi.rays.embree_library = lambda: None
-    Tracer.intersect, Tracer.occluded = intersect, occluded
-    try:
-        yield kept
-    finally:
-        voxgi.rays.embree_library, Tracer.intersect, Tracer.occluded = saved
-
-
-def display_rays(scene: voxgi.Scene, sol, frames: int) -> dict:
-    """The camera, shadow and gather rays of the first ``frames`` frames of
-    the default display, as arrays."""
-    with _recorded_rays(scene.camera.width * scene.camera.height) as kept:
-        voxgi.render(scene, sol, max_frames=frames, tol=0.0, progress=False)
-    return {k: [np.concatenate(p) for p in zip(*v, strict=True)] for k, v in kept.items()}
+def display_rays(scene: voxgi.Scene, sol) -> dict:
+    """Camera, shadow and gather rays of one frame of the display, as
+    (origins, directions[, lengths]) arrays in the tracer's frame."""
+    rng = np.random.default_rng(0)
+    org, dirs = voxgi.display.camera_rays(scene.camera)
+    with Tracer(scene, 2) as tr:
+        org = org - tr.centre
+        prim, u, v = tr.first_hit(org, dirs)
+        t = tr.tris[np.maximum(prim, 0)]
+        x = t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
+        x = x[prim >= 0]
+        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])[prim >= 0]
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        n *= -np.sign(np.einsum("ij,ij->i", n, dirs[prim >= 0]))[:, None]
+        x = x + 1e-4 * n
+        y = np.asarray(sol.vox.centroid, np.float64)[
+            rng.integers(0, len(sol.vox), (len(x), SHADOW))
+        ]
+        seg = y - tr.centre - x[:, None]
+        length = np.linalg.norm(seg, axis=2)
+        shadow = (
+            np.repeat(x, SHADOW, axis=0),
+            (seg / length[..., None]).reshape(-1, 3),
+            (0.999 * length).reshape(-1),
+        )
+        w = rng.normal(size=(len(x), GATHER, 3))
+        w /= np.linalg.norm(w, axis=2, keepdims=True)
+        w = w + n[:, None]  # a unit sphere moved onto the normal: cosine-distributed
+        w /= np.linalg.norm(w, axis=2, keepdims=True)
+        gather = (np.repeat(x, GATHER, axis=0), w.reshape(-1, 3))
+    f32 = [np.ascontiguousarray(a, np.float32) for a in (org, dirs)]
+    return {
+        "primary": f32,
+        "shadow": [np.ascontiguousarray(a, np.float32) for a in shadow],
+        "gather": [np.ascontiguousarray(a, np.float32) for a in gather],
+    }
 
 
 def time_rays(tracer: Tracer, rays: dict, repeats: int) -> dict:
@@ -88,12 +93,12 @@ def time_rays(tracer: Tracer, rays: dict, repeats: int) -> dict:
 
 def measure(name: str, size: int, repeats: int) -> dict:
     scene = voxgi.scenes.get(name, width=size, height=size)
-    vox = voxgi.voxelize(scene, resolution=voxgi.pipeline.RENDER_RESOLUTION, progress=False)
-    sol = voxgi.pipeline.solve_for_display(vox, progress=False)
+    vox = voxgi.voxelize(scene)
+    sol = voxgi.solve(vox, progress=False)
     out = voxgi.render(scene, sol, progress=False)
     st, sec = out.stats, out.stats["seconds"]
     pixel_frames = size * size * out.frames
-    rays = display_rays(scene, sol, frames=2)
+    rays = display_rays(scene, sol)
     row = {
         "scene": name,
         "triangles": int(sum(o.n_triangles for o in scene.objects)),
@@ -101,7 +106,7 @@ def measure(name: str, size: int, repeats: int) -> dict:
     }
     for threads in (1, 2):
         with Tracer(scene, threads) as tr:
-            row["library"] = "compiled" if tr.native is not None else "embreex"
+            row["library"] = f"Embree {tr.native.embree_version}"
             row[f"ns_per_ray_{threads}"] = time_rays(tr, rays, repeats)
     ns = row[f"ns_per_ray_{min(2, st['threads'])}"]
     row["render"] = {

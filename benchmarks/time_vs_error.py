@@ -56,7 +56,7 @@ from voxgi.metrics import rel_mse
 RESULTS = Path(__file__).resolve().parent / "results"
 
 # (label, voxelize resolution, solve directions, render kwargs); None = library default.
-_RES, _R = voxgi.pipeline.RENDER_RESOLUTION, voxgi.pipeline.RENDER_DIRECTIONS
+_RES, _R = voxgi.voxels.DEFAULT_RESOLUTION, voxgi.radiosity.tuning.TRACED_RADIUS
 #: what voxgi.render(scene) runs
 MAIN = f"res{_RES} R{_R} tol1e-3"
 VOXGI_SETTINGS = [
@@ -70,8 +70,8 @@ VOXGI_SETTINGS = [
     (f"res96 R{_R} tol1e-3", 96, _R, {}),
     ("res64 R12 tol1e-3", 64, 12, {}),
 ]
-#: voxelize + solve + render with every default (resolution 128, R 22, tol 1e-3):
-#: run with --defaults (it takes minutes with the current solver).
+#: voxelize + solve + render with every default (the MAIN setting, each
+#: default taken from the library): run with --defaults.
 DEFAULTS = ("defaults", None, None, {})
 #: one finer voxelization, run with --high (minutes on 2 cores).
 HIGH = (f"res128 R{_R} tol1e-3", 128, _R, {})
@@ -129,19 +129,8 @@ def run_voxgi(
     t0 = time.perf_counter()
     vox = voxgi.voxelize(scene, **({} if resolution is None else {"resolution": resolution}))
     t1 = time.perf_counter()
-    # solved as voxgi.render(scene) solves: to the display's tolerance, without
-    # the diagnostic pass (library defaults, with --defaults: tol 1e-4 and it)
-    fast = (
-        {}
-        if resolution is None
-        else {
-            "tol": voxgi.pipeline.RENDER_SOLVE_TOL,
-            "tuning": voxgi.pipeline.RENDER_SOLVE_TUNING,
-        }
-    )
-    sol = voxgi.solve(
-        vox, **({} if directions is None else {"directions": directions}), progress=False, **fast
-    )
+    # solved as voxgi.render(scene) solves, at the radius asked for
+    sol = voxgi.solve(vox, **({} if directions is None else {"radius": directions}), progress=False)
     t2 = time.perf_counter()
     out = voxgi.render(scene, sol, progress=False, seed=seed, **render_kw)
     t3 = time.perf_counter()

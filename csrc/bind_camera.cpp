@@ -43,37 +43,6 @@ voxgi::PrimaryScene make_primary_scene(const F64& tri_v, const F64& tri_ng,
     return sc;
 }
 
-py::tuple primary_hits_py(const F64& org, const F64& dirs, const I32& prim, const F64& tri_v,
-                          const F64& tri_ng, const std::optional<F64>& corner_normals,
-                          const I32& tri_object, const U8& obj_two_sided, const F32& obj_emission,
-                          int threads) {
-    check_2d(org, -1, 3, "org");
-    const py::ssize_t P = org.shape(0);
-    check_2d(dirs, P, 3, "dirs");
-    check_1d(prim, P, "prim");
-    const voxgi::PrimaryScene sc =
-        make_primary_scene(tri_v, tri_ng, corner_normals, tri_object, obj_two_sided, obj_emission);
-    const py::ssize_t F = tri_v.shape(0);
-    const int32_t* pp = prim.data();
-    for (py::ssize_t i = 0; i < P; ++i)
-        if (pp[i] >= F)
-            throw py::value_error("prim: triangle " + std::to_string(pp[i]) + " out of range (" +
-                                  std::to_string(F) + " triangles)");
-    F64 pos({P, py::ssize_t(3)});
-    F32 normal({P, py::ssize_t(3)}), ng({P, py::ssize_t(3)}), le({P, py::ssize_t(3)});
-    I32 material(P);
-    const double *o = org.data(), *d = dirs.data();
-    double* ppos = pos.mutable_data();
-    float *pn = normal.mutable_data(), *pg = ng.mutable_data(), *pl = le.mutable_data();
-    int32_t* pm = material.mutable_data();
-    auto stop = make_stop_check();
-    {
-        py::gil_scoped_release release;
-        voxgi::primary_hits(P, o, d, pp, sc, ppos, pn, pg, pm, pl, threads, stop);
-    }
-    return py::make_tuple(pos, normal, ng, material, le);
-}
-
 // (3,) finite vector `name` into out.
 void vector3(const F64& a, const char* name, double out[3]) {
     check_1d(a, 3, name);
@@ -83,13 +52,10 @@ void vector3(const F64& a, const char* name, double out[3]) {
     }
 }
 
-py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const F64& forward,
-                         double tan_half_fov, int64_t width, int64_t height, double aperture,
-                         double focus, std::pair<double, double> offset,
-                         std::pair<double, double> lens, const F64& tri_v, const F64& tri_ng,
-                         const std::optional<F64>& corner_normals, const I32& tri_object,
-                         const U8& obj_two_sided, const F32& obj_emission,
-                         const voxgi::RayScene& scene, int threads) {
+// The camera of camera_rays and camera_hits, checked.
+voxgi::PixelCamera make_camera(const F64& eye, const F64& right, const F64& up, const F64& forward,
+                               double tan_half_fov, int64_t width, int64_t height, double aperture,
+                               double focus) {
     voxgi::PixelCamera cam;
     vector3(eye, "eye", cam.eye);
     vector3(right, "right", cam.right);
@@ -103,14 +69,52 @@ py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const 
         throw py::value_error("aperture must be finite and >= 0");
     if (aperture > 0.0 && (!(focus > 0.0) || !std::isfinite(focus)))
         throw py::value_error("focus must be finite and > 0 with an aperture");
-    const double off[2] = {offset.first, offset.second}, ln[2] = {lens.first, lens.second};
-    for (double v : {off[0], off[1], ln[0], ln[1]})
-        if (!std::isfinite(v)) throw py::value_error("offset and lens must be finite");
     cam.tan_half_fov = tan_half_fov;
     cam.width = width;
     cam.height = height;
     cam.aperture = aperture;
     cam.focus = focus;
+    return cam;
+}
+
+// A frame's sub-pixel offset and lens point, checked.
+void frame_sample(std::pair<double, double> offset, std::pair<double, double> lens, double off[2],
+                  double ln[2]) {
+    off[0] = offset.first, off[1] = offset.second, ln[0] = lens.first, ln[1] = lens.second;
+    for (double v : {off[0], off[1], ln[0], ln[1]})
+        if (!std::isfinite(v)) throw py::value_error("offset and lens must be finite");
+}
+
+py::tuple camera_rays_py(const F64& eye, const F64& right, const F64& up, const F64& forward,
+                         double tan_half_fov, int64_t width, int64_t height, double aperture,
+                         double focus, std::pair<double, double> offset,
+                         std::pair<double, double> lens, int threads) {
+    const voxgi::PixelCamera cam =
+        make_camera(eye, right, up, forward, tan_half_fov, width, height, aperture, focus);
+    double off[2], ln[2];
+    frame_sample(offset, lens, off, ln);
+    const py::ssize_t P = width * height;
+    F64 org({P, py::ssize_t(3)}), dir({P, py::ssize_t(3)});
+    double *po = org.mutable_data(), *pd = dir.mutable_data();
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::camera_rays(cam, off, ln, po, pd, threads, stop);
+    }
+    return py::make_tuple(org, dir);
+}
+
+py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const F64& forward,
+                         double tan_half_fov, int64_t width, int64_t height, double aperture,
+                         double focus, std::pair<double, double> offset,
+                         std::pair<double, double> lens, const F64& tri_v, const F64& tri_ng,
+                         const std::optional<F64>& corner_normals, const I32& tri_object,
+                         const U8& obj_two_sided, const F32& obj_emission,
+                         const voxgi::RayScene& scene, int threads) {
+    const voxgi::PixelCamera cam =
+        make_camera(eye, right, up, forward, tan_half_fov, width, height, aperture, focus);
+    double off[2], ln[2];
+    frame_sample(offset, lens, off, ln);
     const voxgi::PrimaryScene sc =
         make_primary_scene(tri_v, tri_ng, corner_normals, tri_object, obj_two_sided, obj_emission);
     check_scene(scene, tri_v.shape(0));
@@ -135,24 +139,25 @@ py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const 
 }  // namespace
 
 void bind_camera(py::module_& m) {
+    m.def("camera_rays", &camera_rays_py, "eye"_a.noconvert(), "right"_a.noconvert(),
+          "up"_a.noconvert(), "forward"_a.noconvert(), "tan_half_fov"_a, "width"_a, "height"_a,
+          "aperture"_a, "focus"_a, "offset"_a, "lens"_a, "threads"_a = 0,
+          R"doc(Every pixel's camera ray through sub-pixel offset (x right, y down, in
+[0, 1)^2) and lens point (unit disc, scaled by aperture): origins and unit
+directions (P, 3) float64, P = width * height, row-major from the top-left
+pixel; right, up, forward the camera's unit frame (Camera.frame), a pinhole
+for aperture 0, else a thin lens focused at distance focus along forward.)doc");
+
     m.def("camera_hits", &camera_hits_py, "eye"_a.noconvert(), "right"_a.noconvert(),
           "up"_a.noconvert(), "forward"_a.noconvert(), "tan_half_fov"_a, "width"_a, "height"_a,
           "aperture"_a, "focus"_a, "offset"_a, "lens"_a, "tri_v"_a.noconvert(),
           "tri_ng"_a.noconvert(), "corner_normals"_a.noconvert(), "tri_object"_a.noconvert(),
           "obj_two_sided"_a.noconvert(), "obj_emission"_a.noconvert(), "scene"_a, "threads"_a = 0,
-          R"doc(Every pixel's camera ray (the rays of voxgi.display.camera_rays, with
-eye in the scene's frame), its first hit in scene (a RayScene built from
-tri_v) and primary_hits on it: pos (P, 3) float64, normal, ng and wo (the
-unit direction back to the eye) (P, 3) float32, material (P,) int32,
-emission (P, 3) float32 and the hit triangle (P,) int32 (-1: none),
+          R"doc(Every pixel's camera ray (camera_rays, with eye in the scene's frame), its
+first hit in scene (a RayScene built from tri_v) and the hit: the exact point
+on the hit triangle's plane pos (P, 3) float64, normal, ng and wo (the
+unit direction back to the eye) (P, 3) float32, the shading and geometric
+normals turned to the viewer, material (P,) int32 (-1: a miss or a one-sided
+back), its emission (P, 3) float32 and the hit triangle (P,) int32 (-1: none),
 P = width * height, row-major from the top-left pixel.)doc");
-
-    m.def("primary_hits", &primary_hits_py, "org"_a.noconvert(), "dirs"_a.noconvert(),
-          "prim"_a.noconvert(), "tri_v"_a.noconvert(), "tri_ng"_a.noconvert(),
-          "corner_normals"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),
-          "obj_emission"_a.noconvert(), "threads"_a = 0,
-          R"doc(Primary hits of camera rays (prim: first triangle, -1 none): the exact
-point on the hit triangle's plane (P, 3) float64, the shading and geometric
-normals turned to the viewer (P, 3) float32, the material (P,) int32 (-1: a
-miss or a one-sided back) and its emission (P, 3) float32.)doc");
 }

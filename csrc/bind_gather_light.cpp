@@ -1,4 +1,8 @@
 // pybind11 bindings for the display's gather rays (vpl_shade.h).
+#include <pybind11/stl.h>
+
+#include <optional>
+
 #include "bind_shade.h"
 
 namespace py = pybind11;
@@ -6,34 +10,6 @@ using namespace pybind11::literals;
 using namespace voxgi::py_helpers;
 
 namespace {
-
-auto gather_rays_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
-                    int n_gather, uint64_t seed, int64_t frame, double eps, I64Out ray_count,
-                    F32Out ray_org, F32Out ray_dir, int threads) {
-    voxgi::ShadeHits hits = make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material,
-                                      std::numeric_limits<int32_t>::max());
-    const py::ssize_t P = hits.count;
-    if (n_gather < 0 || n_gather > 4096) throw py::value_error("n_gather must be in [0, 4096]");
-    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
-    check_1d(ray_count, P, "ray_count");
-    check_2d(ray_org, -1, 3, "ray_org");
-    check_2d(ray_dir, ray_org.shape(0), 3, "ray_dir");
-    if (ray_org.shape(0) < P * n_gather)
-        throw py::value_error("ray buffers hold " + std::to_string(ray_org.shape(0)) +
-                              " rays, need " + std::to_string(P * n_gather));
-    check_inplace(ray_count, "ray_count");
-    check_inplace(ray_org, "ray_org");
-    check_inplace(ray_dir, "ray_dir");
-    int64_t* pc = ray_count.mutable_data();
-    float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data();
-    auto stop = make_stop_check();
-    int64_t n;
-    {
-        py::gil_scoped_release release;
-        n = voxgi::gather_rays(hits, n_gather, seed, frame, eps, pc, po, pd, threads, stop);
-    }
-    return n;
-}
 
 voxgi::ShadeTriangles make_triangles(const F64& tri_v, const I32& tri_object,
                                      const U8& obj_two_sided) {
@@ -103,37 +79,47 @@ voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_cell_start
     return grid;
 }
 
-auto gather_shade_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
-                     F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
-                     double n_gather, F64 tri_v, I32 tri_object, U8 obj_two_sided,
-                     I64 rec_sorted_key, I32 rec_cell_start, F32 rec_packed, I64 grid_dims,
-                     I64 grid_lo, F64 grid_origin, double pitch, I64 ray_count, F32 ray_dir,
-                     I32 prim, F32Out out, int threads) {
-    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
-    voxgi::ShadeHits hits =
-        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
-    const py::ssize_t P = hits.count;
-    voxgi::ShadeMIS mis = make_mis(n_gather);
-    if (!(n_gather > 0.0)) throw py::value_error("n_gather must be > 0");
-    voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
-    voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
-                                       grid_lo, grid_origin, pitch);
-    check_1d(ray_count, P, "ray_count");
-    check_2d(ray_dir, -1, 3, "ray_dir");
-    const py::ssize_t R = ray_dir.shape(0);
-    check_1d(prim, R, "prim");
-    check_ray_counts(ray_count, R);
-    check_2d(out, P, 3, "out");
-    check_inplace(out, "out");
-    const int64_t* pc = ray_count.data();
-    const float* pd = ray_dir.data();
-    const int32_t* pp = prim.data();
-    float* po = out.mutable_data();
-    auto stop = make_stop_check();
-    {
-        py::gil_scoped_release release;
-        voxgi::gather_shade(hits, mats, mis, tris, grid, pc, pd, pp, po, threads, stop);
-    }
+// The environment of escaped gather rays: all four tables, or none.
+std::optional<voxgi::EnvironmentMap> make_environment(const std::optional<F64>& radiance,
+                                                      const std::optional<F64>& to_world,
+                                                      const std::optional<F64>& texel_pdf,
+                                                      const std::optional<F64>& row_solid_angle,
+                                                      double samples) {
+    const int given = int(radiance.has_value()) + int(to_world.has_value()) +
+                      int(texel_pdf.has_value()) + int(row_solid_angle.has_value());
+    if (given == 0) return std::nullopt;
+    if (given != 4)
+        throw py::value_error(
+            "env_radiance, env_to_world, env_texel_pdf and env_row_solid_angle go together");
+    if (radiance->ndim() != 3 || radiance->shape(2) != 3 || radiance->shape(0) < 1 ||
+        radiance->shape(1) < 1)
+        throw py::value_error("env_radiance must have shape (H, W, 3)");
+    const py::ssize_t H = radiance->shape(0), W = radiance->shape(1);
+    check_2d(*to_world, 3, 3, "env_to_world");
+    check_1d(*texel_pdf, H * W, "env_texel_pdf");
+    check_1d(*row_solid_angle, H, "env_row_solid_angle");
+    const double* omega = row_solid_angle->data();
+    for (py::ssize_t r = 0; r < H; ++r)
+        if (!(omega[r] > 0.0) || !std::isfinite(omega[r]))
+            throw py::value_error("env_row_solid_angle must be finite and > 0");
+    const double* pdf = texel_pdf->data();
+    for (py::ssize_t i = 0; i < H * W; ++i)
+        if (!(pdf[i] >= 0.0) || !std::isfinite(pdf[i]))
+            throw py::value_error("env_texel_pdf must be finite and >= 0");
+    for (int i = 0; i < 9; ++i)
+        if (!std::isfinite(to_world->data()[i]))
+            throw py::value_error("env_to_world must be finite");
+    if (!(samples >= 0.0) || !std::isfinite(samples))
+        throw py::value_error("env_samples must be finite and >= 0");
+    voxgi::EnvironmentMap env;
+    env.width = W;
+    env.height = H;
+    env.radiance = radiance->data();
+    env.to_world = to_world->data();
+    env.texel_pdf = pdf;
+    env.row_solid_angle = omega;
+    env.n_samples = samples;
+    return env;
 }
 
 int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
@@ -141,7 +127,11 @@ int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32
                         int n_gather, uint64_t seed, int64_t frame, double eps, F64 tri_v,
                         I32 tri_object, U8 obj_two_sided, I64 rec_sorted_key, I32 rec_cell_start,
                         F32 rec_packed, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch,
-                        const voxgi::RayScene& scene, F32Out out, int threads) {
+                        const voxgi::RayScene& scene, F32Out out, int threads,
+                        const std::optional<F64>& env_radiance,
+                        const std::optional<F64>& env_to_world,
+                        const std::optional<F64>& env_texel_pdf,
+                        const std::optional<F64>& env_row_solid_angle, double env_samples) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
@@ -152,6 +142,8 @@ int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32
     check_scene(scene, tris.count);
     voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
                                        grid_lo, grid_origin, pitch);
+    const std::optional<voxgi::EnvironmentMap> env = make_environment(
+        env_radiance, env_to_world, env_texel_pdf, env_row_solid_angle, env_samples);
     check_2d(out, hits.count, 3, "out");
     check_inplace(out, "out");
     float* po = out.mutable_data();
@@ -159,8 +151,8 @@ int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32
     auto stop = make_stop_check();
     {
         py::gil_scoped_release release;
-        voxgi::gather_light(hits, mats, mis, n_gather, seed, frame, eps, tris, grid, scene, po,
-                            &rays, threads, stop);
+        voxgi::gather_light(hits, mats, mis, n_gather, seed, frame, eps, tris, grid,
+                            env ? &*env : nullptr, scene, po, &rays, threads, stop);
     }
     return rays;
 }
@@ -168,27 +160,6 @@ int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32
 }  // namespace
 
 void bind_gather_light(py::module_& m) {
-    m.def("gather_rays", &gather_rays_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
-          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
-          "n_gather"_a, "seed"_a, "frame"_a, "eps"_a, "ray_count"_a.noconvert(),
-          "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(), "threads"_a = 0,
-          R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
-hashed from seed/frame/pixel), written in place into ray_count (P,) int64 and
-ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.)doc");
-
-    m.def("gather_shade", &gather_shade_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
-          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
-          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
-          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "tri_v"_a.noconvert(),
-          "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "rec_sorted_key"_a.noconvert(),
-          "rec_cell_start"_a.noconvert(), "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(),
-          "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a,
-          "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(), "prim"_a.noconvert(),
-          "out"_a.noconvert(), "threads"_a = 0,
-          R"doc(Shade the gather rays (prim: first triangle hit, -1 none) with the radiance
-of the record at each hit point, MIS-weighted against the VPLs; adds into
-out (P, 3) float32.)doc");
-
     m.def("gather_light", &gather_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
           "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
           "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
@@ -197,7 +168,17 @@ out (P, 3) float32.)doc");
           "rec_sorted_key"_a.noconvert(), "rec_cell_start"_a.noconvert(),
           "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
           "grid_origin"_a.noconvert(), "pitch"_a, "scene"_a, "out"_a.noconvert(), "threads"_a = 0,
-          R"doc(gather_rays, their first hits in scene (a RayScene built from tri_v) and
-gather_shade, pixel by pixel without ray arrays: the same sums, added into
-out (P, 3) float32. Returns the number of gather rays.)doc");
+          "env_radiance"_a.noconvert() = py::none(), "env_to_world"_a.noconvert() = py::none(),
+          "env_texel_pdf"_a.noconvert() = py::none(),
+          "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
+          R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
+hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
+as they are made, each shaded with the radiance of the record at its hit
+point (rec_*, grid_*, pitch: voxgi.traced.record_grid), MIS-weighted against
+the VPLs; added into out (P, 3) float32. With the environment's tables
+(env_radiance (H, W, 3) float64, env_to_world (3, 3), env_texel_pdf (H*W,),
+env_row_solid_angle (H,) float64, as voxgi.Environment samples), a ray that
+meets nothing adds the environment's radiance MIS-weighted against
+env_samples environment samples per pixel. Returns the number of gather
+rays.)doc");
 }

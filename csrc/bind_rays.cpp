@@ -67,6 +67,10 @@ void bind_rays(py::module_& m) {
              "library"_a, "tris"_a,
              "Build the scene from (F, 3, 3) float32 corners with the Embree at `library`.")
         .def_property_readonly("triangle_count", &voxgi::RayScene::triangle_count)
+        .def_property_readonly(
+            "embree_version",
+            [](const voxgi::RayScene& s) { return voxgi::version_string(s.embree_version()); },
+            "The Embree library's version, \"major.minor.patch\".")
         .def("occluded", &occluded_py, "org"_a, "dirs"_a, "length"_a, "threads"_a = 0,
              "(R,) uint8: 1 where a triangle lies on [org, org + length * dirs).")
         .def("intersect", &intersect_py, "org"_a, "dirs"_a, "uv"_a = false, "threads"_a = 0,

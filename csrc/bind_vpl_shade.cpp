@@ -36,46 +36,6 @@ voxgi::ShadeVPLs make_vpls(const F64& vpl_pos, const F32& vpl_normal, const F32&
     return vpls;
 }
 
-auto vpl_prepare_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
-                    F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, F64 vpl_pos,
-                    F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa, double n_gather,
-                    double eps, I64Out ray_count, F32Out ray_org, F32Out ray_dir, F32Out ray_len,
-                    F32Out ray_contrib, int threads) {
-    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
-    voxgi::ShadeHits hits =
-        make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
-    const py::ssize_t P = hits.count;
-    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
-    voxgi::ShadeMIS mis = make_mis(n_gather);
-    voxgi::ShadeVPLs vpls = make_vpls(vpl_pos, vpl_normal, vpl_weight, vpl_area, vpl_pa, n_gather);
-    const py::ssize_t K = vpls.count;
-    // Output buffers, reused across frames by the caller: room for P*K rays.
-    check_1d(ray_count, P, "ray_count");
-    check_2d(ray_org, -1, 3, "ray_org");
-    const py::ssize_t cap = ray_org.shape(0);
-    if (cap < P * K)
-        throw py::value_error("ray buffers hold " + std::to_string(cap) + " rays, need " +
-                              std::to_string(P * K));
-    check_2d(ray_dir, cap, 3, "ray_dir");
-    check_1d(ray_len, cap, "ray_len");
-    check_2d(ray_contrib, cap, 3, "ray_contrib");
-    check_inplace(ray_count, "ray_count");
-    check_inplace(ray_org, "ray_org");
-    check_inplace(ray_dir, "ray_dir");
-    check_inplace(ray_len, "ray_len");
-    check_inplace(ray_contrib, "ray_contrib");
-    int64_t* pc = ray_count.mutable_data();
-    float *po = ray_org.mutable_data(), *pd = ray_dir.mutable_data(), *pl = ray_len.mutable_data(),
-          *pr = ray_contrib.mutable_data();
-    auto stop = make_stop_check();
-    int64_t n;
-    {
-        py::gil_scoped_release release;
-        n = voxgi::vpl_prepare(hits, mats, vpls, mis, eps, pc, po, pd, pl, pr, threads, stop);
-    }
-    return n;
-}
-
 py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                        F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
                        F64 vpl_pos, F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa,
@@ -115,25 +75,6 @@ py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 
         voxgi::vpl_light(hits, mats, vpls, mis, eps, ps, ss, scene, po, &rays, threads, stop);
     }
     return py::make_tuple(out, rays);
-}
-
-auto vpl_accumulate_py(I64 ray_count, F32 ray_contrib, U8 occluded, int threads) {
-    check_1d(ray_count, -1, "ray_count");
-    check_2d(ray_contrib, -1, 3, "ray_contrib");
-    const py::ssize_t R = ray_contrib.shape(0), P = ray_count.shape(0);
-    check_1d(occluded, R, "occluded");
-    check_ray_counts(ray_count, R);
-    const int64_t* pc = ray_count.data();
-    F32 out({P, py::ssize_t(3)});
-    float* po = out.mutable_data();
-    const float* pr = ray_contrib.data();
-    const uint8_t* po_cc = occluded.data();
-    auto stop = make_stop_check();
-    {
-        py::gil_scoped_release release;
-        voxgi::vpl_accumulate(P, pc, pr, po_cc, po, threads, stop);
-    }
-    return out;
 }
 
 auto shade_brdf_py(F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, I32 material,
@@ -185,30 +126,6 @@ auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I3
 }  // namespace
 
 void bind_vpl_shade(py::module_& m) {
-    m.def("vpl_prepare", &vpl_prepare_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
-          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
-          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
-          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "vpl_pos"_a.noconvert(),
-          "vpl_normal"_a.noconvert(), "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(),
-          "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "ray_count"_a.noconvert(),
-          "ray_org"_a.noconvert(), "ray_dir"_a.noconvert(), "ray_len"_a.noconvert(),
-          "ray_contrib"_a.noconvert(), "threads"_a = 0,
-          R"doc(Pass 1 of a display frame: per (pixel, VPL) pair the unoccluded contribution
-and a shadow ray where it is non-zero.
-
-Inputs are C-contiguous: hit_pos (P, 3) float64, hit_normal / hit_ng / hit_wo
-(P, 3) float32 unit vectors on the viewer's side, hit_material (P,) int32
-(-1: not shaded), per-material mat_albedo (M, 3), mat_rs (M, 3), mat_nu,
-mat_nv (M,) float32, mat_glossy (M,) uint8; vpl_pos (K, 3) float64,
-vpl_normal (K, 3), vpl_weight (K, 3) = (TA/n) B/pi, vpl_area (K,) float32,
-vpl_pa (K,) float32: n_v times the area pdf of VPLs combined with gather rays
-(their weight is B/pi; n_gather rays per pixel), 0 for the others.
-
-Outputs, written in place (buffers reused across frames, room for >= P*K
-rays): ray_count (P,) int64, ray_org (C, 3), ray_dir (C, 3), ray_len (C,),
-ray_contrib (C, 3) float32, rays pixel-major in VPL order. Returns the
-number R of rays written (the first R rows).)doc");
-
     m.def("vpl_light", &vpl_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
           "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
           "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
@@ -217,15 +134,19 @@ number R of rays written (the first R rows).)doc");
           "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "scene"_a,
           "pixel_set"_a.noconvert() = py::none(), "set_start"_a.noconvert() = py::none(),
           "threads"_a = 0,
-          R"doc(vpl_prepare, the shadow rays against scene (a RayScene) and vpl_accumulate,
-pixel by pixel without ray arrays: the same (P, 3) float32 sums, and the
-number of shadow rays traced. With pixel_set (P,) int32 and set_start (S+1,)
-int64, pixel p sees only the VPLs of set pixel_set[p].)doc");
+          R"doc(The VPLs' light at the hits: per (pixel, VPL) pair the unoccluded term and
+its shadow ray, traced in scene (a RayScene) as it is made; returns each
+pixel's sum over its free rays in VPL order (P, 3) float32 and the number of
+shadow rays traced.
 
-    m.def("vpl_accumulate", &vpl_accumulate_py, "ray_count"_a.noconvert(),
-          "ray_contrib"_a.noconvert(), "occluded"_a.noconvert(), "threads"_a = 0,
-          R"doc(Pass 2 of a display frame: per pixel, the sum of the contributions of the
-rays not occluded (uint8 (R,)), in ray order. Returns (P, 3) float32.)doc");
+Inputs are C-contiguous: hit_pos (P, 3) float64, hit_normal / hit_ng / hit_wo
+(P, 3) float32 unit vectors on the viewer's side, hit_material (P,) int32
+(-1: not shaded), per-material mat_albedo (M, 3), mat_rs (M, 3), mat_nu,
+mat_nv (M,) float32, mat_glossy (M,) uint8; vpl_pos (K, 3) float64,
+vpl_normal (K, 3), vpl_weight (K, 3) = (TA/n) B/pi, vpl_area (K,) float32,
+vpl_pa (K,) float32: n_v times the area pdf of VPLs combined with gather rays
+(their weight is B/pi; n_gather rays per pixel), 0 for the others. With pixel_set (P,) int32 and set_start (S+1,)
+int64, pixel p sees only the VPLs of set pixel_set[p].)doc");
 
     m.def("light_accumulate", &light_accumulate_py, "hit_pos"_a.noconvert(),
           "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(),

@@ -26,6 +26,13 @@ void camera_ray(const PixelCamera& cam, const double offset[2], const double len
     for (int c = 0; c < 3; ++c) dir[c] = d[c] / len;
 }
 
+void camera_rays(const PixelCamera& cam, const double offset[2], const double lens[2], double* org,
+                 double* dir, int threads, const StopCheck& stop) {
+    for_each_chunked(cam.width * cam.height, 512, threads, stop, [&](int64_t p) {
+        camera_ray(cam, offset, lens, p, org + 3 * p, dir + 3 * p);
+    });
+}
+
 void camera_hits(const PixelCamera& cam, const double offset[2], const double lens[2],
                  const RayScene& scene, const PrimaryScene& triangles, double* pos, float* normal,
                  float* ng, float* wo, int32_t* material, float* emission, int32_t* prim,

@@ -27,10 +27,13 @@ struct PixelCamera {
 
 // Origin and unit direction of pixel p's ray (row-major from the top-left
 // pixel) through sub-pixel position `offset` in [0, 1)^2 (x right, y down)
-// and lens point `lens` on the unit disc; the same arithmetic as
-// voxgi.display.camera_rays.
+// and lens point `lens` on the unit disc.
 void camera_ray(const PixelCamera& cam, const double offset[2], const double lens[2], int64_t p,
                 double org[3], double dir[3]);
+
+// camera_ray for every pixel: org, dir (P, 3), P = width * height.
+void camera_rays(const PixelCamera& cam, const double offset[2], const double lens[2], double* org,
+                 double* dir, int threads, const StopCheck& stop);
 
 // Every pixel's camera ray, its first hit in `scene` and primary_hit on it:
 // pos (P, 3), normal, ng, wo (the unit direction back to the eye) (P, 3),

@@ -127,50 +127,6 @@ inline void sample_rays(const EmitterTriangles& em, const DirectLightQuery& q, i
 
 }  // namespace
 
-void direct_light_rays(const EmitterTriangles& em, const DirectLightQuery& q, float* light_origin,
-                       float* light_direction, float* light_length, float* contribution,
-                       float* hemi_origin, float* hemi_direction, int threads,
-                       const StopCheck& stop) {
-    const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
-    parallel_for(tasks, threads, stop, [&](int64_t task, int) {
-        const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
-        for (int64_t r = task * kRecordsPerTask; r < r1; ++r)
-            for (int64_t s = 0; s < q.samples; ++s) {
-                const int64_t ray = r * q.samples + s;
-                sample_rays(em, q, r, s, light_origin + 3 * ray, light_direction + 3 * ray,
-                            light_length + ray, contribution + 3 * ray, hemi_origin + 3 * ray,
-                            hemi_direction + 3 * ray);
-            }
-    });
-}
-
-void direct_light_sum(const EmitterTriangles& em, const DirectLightQuery& q,
-                      const float* contribution, const int32_t* light_hit,
-                      const float* hemi_direction, const int32_t* hemi_hit, const float* hemi_u,
-                      const float* hemi_v, const int32_t* emitter_of, int64_t scene_triangles,
-                      double* irradiance, double* mean_square, int threads, const StopCheck& stop) {
-    const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
-    parallel_for(tasks, threads, stop, [&](int64_t task, int) {
-        const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
-        for (int64_t r = task * kRecordsPerTask; r < r1; ++r) {
-            double sum[3] = {0.0, 0.0, 0.0}, sq = 0.0;
-            for (int64_t s = 0; s < q.samples; ++s) {
-                const int64_t ray = r * q.samples + s;
-                const int32_t t = hemi_hit[ray];
-                const int32_t k = (t >= 0 && t < scene_triangles) ? emitter_of[t] : -1;
-                double pair[3];
-                sample_pair(em, q, r, contribution + 3 * ray, light_hit[ray] != -1,
-                            hemi_direction + 3 * ray, k, hemi_u[ray], hemi_v[ray], pair);
-                double lum = 0.0;
-                for (int i = 0; i < 3; ++i) sum[i] += pair[i], lum += kLuminance[i] * pair[i];
-                sq += lum * lum;
-            }
-            for (int i = 0; i < 3; ++i) irradiance[3 * r + i] = sum[i] / double(q.samples);
-            mean_square[r] = sq / double(q.samples);
-        }
-    });
-}
-
 void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
                          const int32_t* emitter_of, const RayScene& scene,
                          const RayScene* emitter_scene, double* irradiance, double* mean_square,

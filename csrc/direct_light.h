@@ -2,11 +2,9 @@
 // point, shadow rays to points drawn on the emitting triangles (light
 // sampling) and rays in cosine-distributed directions (hemisphere sampling),
 // combined by the power heuristic (Veach 1997), so that neither a small lamp far away
-// nor a large emitter next to the record gives unbounded variance. With a
-// RayScene, direct_light_traced makes, traces and sums the rays record by
-// record; without one, Embree traces them from Python between
-// direct_light_rays and direct_light_sum. No pybind11 here: plain pointers
-// and sizes.
+// nor a large emitter next to the record gives unbounded variance.
+// direct_light_traced makes, traces and sums the rays record by record
+// against a RayScene. No pybind11 here: plain pointers and sizes.
 #pragma once
 
 #include <cstdint>
@@ -41,40 +39,21 @@ struct DirectLightQuery {
     double offset = 0.0;               // ray offset from the surfaces, scene units
 };
 
-// The rays of every record and sample, record-major, as Embree takes them
-// (float32 origin, unit direction, length). Light rays end an offset short of
-// their emitter point and are asked "occluded?"; their `contribution` is
-// the RGB they add if unoccluded (already weighted). Hemisphere rays are
-// infinite and asked "which triangle first?". Light rays that cannot
-// contribute (a back face at either end, or closer than twice the offset)
-// get length 0.
-void direct_light_rays(const EmitterTriangles& em, const DirectLightQuery& q, float* light_origin,
-                       float* light_direction, float* light_length, float* contribution,
-                       float* hemi_origin, float* hemi_direction, int threads,
-                       const StopCheck& stop);
-
 // Per record: the direct irradiance (the mean over its samples of the pair
 // light + hemisphere sample) and the mean square of that pair's luminance
-// (for its variance). light_hit[k] != -1: light ray k occluded. hemi_hit[k]:
-// the scene triangle hemisphere ray k met first (-1: none), hemi_u/v its
-// barycentrics there; emitter_of[t]: the emitter index of scene triangle t,
-// or -1.
-void direct_light_sum(const EmitterTriangles& em, const DirectLightQuery& q,
-                      const float* contribution, const int32_t* light_hit,
-                      const float* hemi_direction, const int32_t* hemi_hit, const float* hemi_u,
-                      const float* hemi_v, const int32_t* emitter_of, int64_t scene_triangles,
-                      double* irradiance, double* mean_square, int threads, const StopCheck& stop);
-
-// direct_light_rays, the rays traced in `scene` (built from the scene's
-// triangles, which emitter_of indexes) and direct_light_sum, record by
-// record without the ray arrays. With `emitter_scene` (the emitter
-// triangles alone, in the order of `em`), a hemisphere ray is traced
-// against the emitters, and against the scene only up to the nearest
-// emitter it meets (an offset short of it); without, to its first hit in
-// the scene. Either way the sums are those of the two passes, but that with
-// `emitter_scene` a surface within the offset in front of an emitter does
-// not hide it from the hemisphere ray, as it does not hide it from the
-// light rays.
+// (for its variance), the rays traced in `scene` (built from the scene's
+// triangles, which emitter_of indexes: the emitter index of each scene
+// triangle, or -1). A light ray ends an offset short of its emitter point
+// and brings the sample's weighted light unless occluded; one that cannot
+// contribute (a back face at either end, or closer than twice the offset)
+// is not traced. A hemisphere ray brings its emitter's power-heuristic
+// share when an emitter is the first thing it meets. With `emitter_scene`
+// (the emitter triangles alone, in the order of `em`), a hemisphere ray is
+// traced against the emitters, and against the scene only up to the
+// nearest emitter it meets (an offset short of it); without, to its first
+// hit in the scene. With `emitter_scene` a surface within the offset in
+// front of an emitter does not hide it from the hemisphere ray, as it does
+// not hide it from the light rays.
 void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
                          const int32_t* emitter_of, const RayScene& scene,
                          const RayScene* emitter_scene, double* irradiance, double* mean_square,

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <limits>
 #include <map>
@@ -25,6 +26,7 @@ constexpr int kBufferVertex = 1;
 constexpr int kFormatUint3 = 0x5003;
 constexpr int kFormatFloat3 = 0x9003;
 constexpr int kSceneFlagRobust = 1 << 2;
+constexpr int kDevicePropertyVersion = 0;  // RTC_DEVICE_PROPERTY_VERSION: 10000 major + ...
 
 struct alignas(16) Ray {
     float org_x, org_y, org_z, tnear;
@@ -82,6 +84,7 @@ struct EmbreeApi {
     void (*release_geometry)(void*);
     void (*intersect1)(void*, RayHit*, void*);
     void (*occluded1)(void*, Ray*, void*);
+    ptrdiff_t (*get_device_property)(void*, int);
 };
 
 namespace {
@@ -132,6 +135,7 @@ const EmbreeApi* load_embree(const std::string& path) {
     bind(lib, path, "rtcReleaseGeometry", api.release_geometry);
     bind(lib, path, "rtcIntersect1", api.intersect1);
     bind(lib, path, "rtcOccluded1", api.occluded1);
+    bind(lib, path, "rtcGetDeviceProperty", api.get_device_property);
     return &loaded.emplace(path, api).first->second;
 }
 
@@ -139,12 +143,25 @@ constexpr int64_t kBatch = 4096;  // rays per task of a batch query
 
 }  // namespace
 
+std::string version_string(int64_t v) {
+    return std::to_string(v / 10000) + "." + std::to_string(v / 100 % 100) + "." +
+           std::to_string(v % 100);
+}
+
 RayScene::RayScene(const std::string& library, const float* tris, int64_t n_tris)
     : api_(load_embree(library)), n_tris_(n_tris) {
     if (n_tris < 0 || n_tris >= static_cast<int64_t>(kInvalidId) / 3)
         throw std::invalid_argument("RayScene: triangle count out of range");
     device_ = api_->new_device(nullptr);
     if (device_ == nullptr) throw std::runtime_error("Embree could not create a device");
+    // The ray and hit layouts above are Embree 4's; another major version
+    // would read and write them wrongly.
+    version_ = int64_t(api_->get_device_property(device_, kDevicePropertyVersion));
+    if (version_ / 10000 != kEmbreeMajor) {
+        api_->release_device(device_);
+        throw std::runtime_error(library + " is Embree " + version_string(version_) +
+                                 ", not the Embree 4 whose ray layout voxgi uses");
+    }
     scene_ = api_->new_scene(device_);
     api_->set_scene_flags(scene_, kSceneFlagRobust);
     if (n_tris > 0) {

@@ -14,16 +14,26 @@ namespace voxgi {
 
 struct EmbreeApi;  // the library's entry points (ray_scene.cpp)
 
+// The major version of Embree whose ABI RayScene declares.
+constexpr int64_t kEmbreeMajor = 4;
+
+// "major.minor.patch" of a version number as Embree reports it (10000 major +
+// 100 minor + patch).
+std::string version_string(int64_t version);
+
 class RayScene {
    public:
     // `library`: path of libembree4; `tris`: (n_tris, 3, 3) float32 corners.
-    // Throws std::runtime_error naming the library or Embree's error.
+    // Throws std::runtime_error naming the library or Embree's error, or the
+    // version when the library is not Embree 4.
     RayScene(const std::string& library, const float* tris, int64_t n_tris);
     ~RayScene();
     RayScene(const RayScene&) = delete;
     RayScene& operator=(const RayScene&) = delete;
 
     int64_t triangle_count() const { return n_tris_; }
+    // The library's version, 10000 major + 100 minor + patch.
+    int64_t embree_version() const { return version_; }
 
     // One ray: true when a triangle lies on [org, org + tfar·dir).
     bool occluded(const float org[3], const float dir[3], float tfar) const;
@@ -42,6 +52,7 @@ class RayScene {
     void* device_ = nullptr;
     void* scene_ = nullptr;
     int64_t n_tris_ = 0;
+    int64_t version_ = 0;
 };
 
 }  // namespace voxgi

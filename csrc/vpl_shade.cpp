@@ -166,56 +166,12 @@ void vpl_pixel_rays(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
 
 }  // namespace
 
-int64_t vpl_prepare(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPLs& vpls,
-                    const ShadeMIS& mis, double eps, int64_t* ray_count, float* ray_org,
-                    float* ray_dir, float* ray_len, float* ray_contrib, int threads,
-                    const StopCheck& stop) {
-    const int64_t P = hits.count, K = vpls.count;
-    const int64_t n_chunks = (P + kChunk - 1) / kChunk;
-    std::vector<int64_t> chunk_rays(n_chunks, 0);
-    // Each chunk writes its rays compacted from slot chunk_start*K on; a
-    // serial pass then moves the chunks' blocks together.
-    parallel_for(n_chunks, resolve_threads(threads), stop, [&](int64_t c, int) {
-        const int64_t p0 = c * kChunk, p1 = std::min(P, p0 + kChunk);
-        int64_t w = p0 * K;
-        for (int64_t p = p0; p < p1; ++p) {
-            const int64_t w0 = w;
-            vpl_pixel_rays(hits, mats, vpls, mis, eps, p,
-                           [&](const float* ro, const float* rd, float len, const float* cr) {
-                               for (int a = 0; a < 3; ++a) {
-                                   ray_org[3 * w + a] = ro[a];
-                                   ray_dir[3 * w + a] = rd[a];
-                                   ray_contrib[3 * w + a] = cr[a];
-                               }
-                               ray_len[w] = len;
-                               ++w;
-                           });
-            ray_count[p] = w - w0;
-        }
-        chunk_rays[c] = w - p0 * K;
-    });
-    // Serial compaction in increasing order: a chunk's destination ends where
-    // the next one's begins, never past the next chunk's source.
-    int64_t total = 0;
-    for (int64_t c = 0; c < n_chunks; ++c) {
-        const int64_t src = c * kChunk * K, n = chunk_rays[c];
-        if (src != total && n > 0) {
-            std::memmove(ray_org + 3 * total, ray_org + 3 * src, sizeof(float) * 3 * n);
-            std::memmove(ray_dir + 3 * total, ray_dir + 3 * src, sizeof(float) * 3 * n);
-            std::memmove(ray_len + total, ray_len + src, sizeof(float) * n);
-            std::memmove(ray_contrib + 3 * total, ray_contrib + 3 * src, sizeof(float) * 3 * n);
-        }
-        total += n;
-    }
-    return total;
-}
-
 void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPLs& vpls,
                const ShadeMIS& mis, double eps, const int32_t* pixel_set, const int64_t* set_start,
                const RayScene& scene, float* out, int64_t* rays, int threads,
                const StopCheck& stop) {
     *rays = sum_over_pixels(hits.count, threads, stop, [&](int64_t p) {
-        double s[3] = {0.0, 0.0, 0.0};  // in VPL order, as vpl_accumulate sums
+        double s[3] = {0.0, 0.0, 0.0};  // in VPL order: the same for any thread count
         int64_t n = 0;
         ShadeVPLs mine = vpls;
         if (pixel_set) {
@@ -289,31 +245,6 @@ void gather_pixel_rays(const ShadeHits& hits, int n_gather, uint64_t base, doubl
 
 }  // namespace
 
-int64_t gather_rays(const ShadeHits& hits, int n_gather, uint64_t seed, int64_t frame, double eps,
-                    int64_t* ray_count, float* ray_org, float* ray_dir, int threads,
-                    const StopCheck& stop) {
-    const int64_t P = hits.count;
-    std::vector<int64_t> offset(P + 1, 0);
-    for (int64_t p = 0; p < P; ++p) {
-        const int32_t m = hits.material[p];
-        ray_count[p] = m >= 0 ? n_gather : 0;
-        offset[p + 1] = offset[p] + ray_count[p];
-    }
-    const uint64_t base = gather_base(seed, frame);
-    for_each_pixel(P, threads, stop, [&](int64_t p) {
-        if (ray_count[p] == 0) return;
-        gather_pixel_rays(hits, n_gather, base, eps, p,
-                          [&](int k, const float* ro, const float* rd) {
-                              const int64_t w = offset[p] + k;
-                              for (int a = 0; a < 3; ++a) {
-                                  ray_org[3 * w + a] = ro[a];
-                                  ray_dir[3 * w + a] = rd[a];
-                              }
-                          });
-    });
-    return offset[P];
-}
-
 namespace {
 
 // The voxel of the grid that holds y.
@@ -372,11 +303,12 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
 struct GatherHit {
     double y[3];   // on the hit triangle's plane, in double
     float ns[3];   // the hit surface's normal on the side the ray came from
-    float wi[3];   // unit direction
+    float wi[3];   // unit direction; for a ray that met nothing, its direction as traced
     float cos_x;   // at the pixel
     int32_t obj;   // hit object
     int64_t c[3];  // voxel of y
     int64_t key;   // its key on the grid (-1: outside), or -2: no light to look up
+    bool escaped;  // met nothing: sees the environment
 };
 
 // The hit of pixel p's gather ray along df (unit up to float rounding) that
@@ -385,8 +317,11 @@ struct GatherHit {
 void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordGrid& grid,
                 int64_t p, const float df[3], int32_t t, GatherHit& h) {
     h.key = -2;
+    h.escaped = t < 0;
     const double* x = hits.pos + 3 * p;
     const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
+    if (h.escaped)
+        for (int a = 0; a < 3; ++a) h.wi[a] = df[a];
     if (t < 0 || t >= tris.count) return;
     const double d[3] = {df[0], df[1], df[2]};
     const double dl = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
@@ -435,38 +370,48 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.cos_x / denom;
 }
 
-// Add the light of pixel p's gather ray along df that first meets triangle t into s.
-void gather_ray_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
-                      const ShadeTriangles& tris, const RecordGrid& grid, int64_t p,
-                      const float df[3], int32_t t, double s[3]) {
-    GatherHit h;
-    gather_hit(hits, tris, grid, p, df, t, h);
-    if (h.key == -2) return;
-    gather_hit_light(hits, mats, mis, grid, p, h, lookup_in_cell(grid, h.y, h.ns, h.obj, h.c), s);
+// The environment's light along pixel p's escaped gather ray h, MIS-weighted
+// against the environment samples, added into s (the arithmetic of
+// light_accumulate with the weight the display computes for such a ray).
+void gather_escape_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
+                         const EnvironmentMap& env, int64_t p, const GatherHit& h, float s[3]) {
+    const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
+    const float cos_x = dot3(n, h.wi);
+    if (cos_x <= 0.f || dot3(ng, h.wi) <= 0.f) return;
+    const double d[3] = {h.wi[0], h.wi[1], h.wi[2]};
+    const int64_t texel = environment_texel(env, d);
+    const double cos = d[0] * double(n[0]) + d[1] * double(n[1]) + d[2] * double(n[2]);
+    const double pdf = env.texel_pdf[texel] / env.row_solid_angle[texel / env.width];
+    const double dens = env.n_samples * pdf + mis.n_gather * std::max(cos, 0.0) / kPi;
+    const double inv = dens > 0.0 ? 1.0 / dens : 0.0;
+    float f[3];
+    shade_brdf(mats, hits.material[p], n, h.wi, hits.wo + 3 * p, f);
+    const double* L = env.radiance + 3 * texel;
+    for (int ch = 0; ch < 3; ++ch) s[ch] += f[ch] * cos_x * float(L[ch] * inv);
 }
 
 }  // namespace
 
-void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
-                  const ShadeTriangles& tris, const RecordGrid& grid, const int64_t* ray_count,
-                  const float* ray_dir, const int32_t* prim, float* out, int threads,
-                  const StopCheck& stop) {
-    const int64_t P = hits.count;
-    const std::vector<int64_t> offset = ray_offsets(ray_count, P);
-    for_each_pixel(P, threads, stop, [&](int64_t p) {
-        const int32_t m = hits.material[p];
-        if (m < 0 || offset[p + 1] == offset[p]) return;
-        double s[3] = {0.0, 0.0, 0.0};
-        for (int64_t r = offset[p]; r < offset[p + 1]; ++r)
-            gather_ray_light(hits, mats, mis, tris, grid, p, ray_dir + 3 * r, prim[r], s);
-        for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += float(s[ch]);
-    });
+int64_t environment_texel(const EnvironmentMap& env, const double d[3]) {
+    const double* m = env.to_world;
+    double loc[3];
+    for (int j = 0; j < 3; ++j) loc[j] = d[0] * m[j] + d[1] * m[3 + j] + d[2] * m[6 + j];
+    const double len =
+        std::max(std::sqrt(loc[0] * loc[0] + loc[1] * loc[1] + loc[2] * loc[2]), 1e-300);
+    for (double& c : loc) c /= len;
+    double u = std::atan2(loc[0], -loc[2]) / (2.0 * kPi);
+    u -= std::floor(u);
+    const double v = std::acos(std::clamp(loc[1], -1.0, 1.0)) / kPi;
+    const int64_t col = std::min(int64_t(u * double(env.width)), env.width - 1);
+    const int64_t row = std::min(int64_t(v * double(env.height)), env.height - 1);
+    return row * env.width + col;
 }
 
 void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                   int n_gather, uint64_t seed, int64_t frame, double eps,
-                  const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
-                  float* out, int64_t* rays, int threads, const StopCheck& stop) {
+                  const ShadeTriangles& tris, const RecordGrid& grid, const EnvironmentMap* env,
+                  const RayScene& scene, float* out, int64_t* rays, int threads,
+                  const StopCheck& stop) {
     const uint64_t base = gather_base(seed, frame);
     const int64_t P = hits.count;
     if (n_gather <= 0) {
@@ -512,13 +457,20 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
             }
             if (shaded(p - 2)) {
                 const GatherHit* h = slot(p - 2);
-                double s[3] = {0.0, 0.0, 0.0};  // in ray order, as gather_shade sums
+                double s[3] = {0.0, 0.0, 0.0};  // in ray order: the same for any thread count
                 for (int k = 0; k < n_gather; ++k) {
                     if (h[k].key == -2) continue;
                     const int64_t rec = lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c);
                     gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s);
                 }
                 for (int ch = 0; ch < 3; ++ch) out[3 * (p - 2) + ch] += float(s[ch]);
+                if (env) {
+                    float se[3] = {0.f, 0.f, 0.f};
+                    for (int k = 0; k < n_gather; ++k)
+                        if (h[k].escaped)
+                            gather_escape_light(hits, mats, mis, *env, p - 2, h[k], se);
+                    for (int ch = 0; ch < 3; ++ch) out[3 * (p - 2) + ch] += se[ch];
+                }
             }
         }
         return n_traced;
@@ -581,28 +533,6 @@ void primary_hit(const double o[3], const double d[3], int32_t t, const PrimaryS
             for (int c = 0; c < 3; ++c) le[c] = scene.emission[3 * obj + c];
         }
     }
-}
-
-void primary_hits(int64_t P, const double* org, const double* dir, const int32_t* prim,
-                  const PrimaryScene& scene, double* pos, float* normal, float* ng,
-                  int32_t* material, float* emission, int threads, const StopCheck& stop) {
-    for_each_pixel(P, threads, stop, [&](int64_t p) {
-        primary_hit(org + 3 * p, dir + 3 * p, prim[p], scene, pos + 3 * p, normal + 3 * p,
-                    ng + 3 * p, material + p, emission + 3 * p);
-    });
-}
-
-void vpl_accumulate(int64_t n_pixels, const int64_t* ray_count, const float* ray_contrib,
-                    const uint8_t* occluded, float* out, int threads, const StopCheck& stop) {
-    const std::vector<int64_t> offset = ray_offsets(ray_count, n_pixels);
-    for_each_pixel(n_pixels, threads, stop, [&](int64_t p) {
-        double s[3] = {0.0, 0.0, 0.0};  // fixed order: the pixel's rays in VPL order
-        for (int64_t r = offset[p]; r < offset[p + 1]; ++r) {
-            if (occluded[r]) continue;
-            for (int ch = 0; ch < 3; ++ch) s[ch] += ray_contrib[3 * r + ch];
-        }
-        for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] = float(s[ch]);
-    });
 }
 
 void light_accumulate(const ShadeHits& hits, const ShadeMaterials& mats, const int64_t* ray_count,

@@ -1,15 +1,9 @@
 // VPL shading kernels for the anti-aliased display (docs/design.md §6).
 //
-// One frame shades P hit points with the same K virtual point lights (VPLs).
-// With a RayScene, vpl_light and gather_light trace each pixel's shadow and
-// gather rays as they are made. Without one (embreex's Python calls), the
-// same work runs in two passes around the visibility queries:
-//   1. vpl_prepare: per (pixel, VPL) pair the unoccluded contribution
-//      f(wi, wo) * W_k * G_bounded, and a shadow ray where it is non-zero;
-//      rays are written compacted, pixel by pixel, VPLs in order.
-//   2. vpl_accumulate: per pixel, the sum of the contributions whose shadow
-//      ray was not occluded, in ray order (independent of the thread count).
-// Both ways sum the same terms in the same order: the same image.
+// One frame shades P hit points with the same K virtual point lights (VPLs):
+// vpl_light and gather_light make each pixel's shadow and gather rays, trace
+// them in a RayScene as they are made and sum their light pixel by pixel,
+// in a fixed order (the same image for any thread count).
 // No pybind11 here: plain pointers and sizes.
 #pragma once
 
@@ -91,6 +85,23 @@ struct RecordGrid {
     double pitch = 1.0;
 };
 
+// The environment that gather rays leaving the scene see (docs/design.md
+// §11): a latitude-longitude radiance image, Mitsuba's convention (image y
+// up; direction (sin t sin f, cos t, -sin t cos f) at u = f / 2 pi, v = t /
+// pi), and the density its own samples are drawn with, for the balance
+// heuristic between those samples and the gather rays.
+struct EnvironmentMap {
+    int64_t width = 0, height = 0;
+    const double* radiance = nullptr;         // (height, width, 3) linear radiance
+    const double* to_world = nullptr;         // (3, 3) row-major rotation, image -> world
+    const double* texel_pdf = nullptr;        // (height * width,) probability of each texel
+    const double* row_solid_angle = nullptr;  // (height,) solid angle of one texel of each row
+    double n_samples = 0.0;                   // environment samples per pixel and frame
+};
+
+// The texel of world direction d (any length): its index row * width + col.
+int64_t environment_texel(const EnvironmentMap& env, const double d[3]);
+
 // Scene triangles for the gather rays' hit points.
 struct ShadeTriangles {
     int64_t count = 0;
@@ -99,24 +110,11 @@ struct ShadeTriangles {
     const uint8_t* two_sided = nullptr;  // (O,) per object
 };
 
-// Pass 1. Writes per pixel the number of shadow rays (`ray_count`, (P,)), and
-// for each ray, pixel-major: its origin (x offset along its geometric normal
-// by `eps`), unit direction, length (to the VPL offset by `eps` along its
-// normal, shortened by `eps`) and unoccluded RGB contribution. The output
-// arrays need room for P*K rays. Returns the number of rays written.
-int64_t vpl_prepare(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPLs& vpls,
-                    const ShadeMIS& mis, double eps, int64_t* ray_count, float* ray_org,
-                    float* ray_dir, float* ray_len, float* ray_contrib, int threads,
-                    const StopCheck& stop);
-
-// Pass 2. `ray_count` as written by vpl_prepare, `occluded` (R,) non-zero
-// where the shadow ray was blocked. Writes out (P, 3) the summed radiance.
-void vpl_accumulate(int64_t n_pixels, const int64_t* ray_count, const float* ray_contrib,
-                    const uint8_t* occluded, float* out, int threads, const StopCheck& stop);
-
-// Both passes and the shadow rays between them, pixel by pixel, against
-// `scene`: the same sums as vpl_prepare, occlusion queries and
-// vpl_accumulate, without the ray arrays. With `pixel_set` (P,) (nullable),
+// Per (pixel, VPL) pair the unoccluded contribution f(wi, wo) W_k G_bounded
+// and, where it is non-zero, a shadow ray from the pixel's point (offset
+// along its geometric normal by `eps`) to the VPL's point (offset along its
+// normal by `eps`, stopping `eps` short), traced against `scene`; each pixel
+// sums the contributions whose ray is free, in VPL order. With `pixel_set` (P,) (nullable),
 // pixel p sees only VPLs set_start[s] .. set_start[s + 1] - 1 of set
 // s = pixel_set[p] (interleaved sampling). Writes out (P, 3) and the number
 // of shadow rays traced into *rays.
@@ -128,31 +126,23 @@ void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPL
 // Gather rays: n_g cosine-distributed directions around the shading normal
 // of each shaded pixel (material >= 0), stratified (n_g = m² strata: m in
 // cos²θ x m in azimuth; any other n_g: n_g strata in cos²θ) and jittered
-// with a hash of (seed, frame, pixel, k): the same for any thread count.
-// Writes `ray_count` (P,) and rays pixel-major into org (R, 3) / dir (R, 3);
-// returns R.
-int64_t gather_rays(const ShadeHits& hits, int n_gather, uint64_t seed, int64_t frame, double eps,
-                    int64_t* ray_count, float* ray_org, float* ray_dir, int threads,
-                    const StopCheck& stop);
-
-// Shade the gather rays: `prim` (R,) the first triangle hit (-1: none).
-// Rays that hit the black back of a one-sided surface or nothing add
-// nothing; others (emitters too: both VPL sets are MIS-combined with the
-// gather rays) look up the record at
-// the hit point (same voxel or a neighbour, same side and object preferred,
-// nearest centroid) and add the MIS-weighted f L term. Adds into out (P, 3).
-void gather_shade(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
-                  const ShadeTriangles& tris, const RecordGrid& grid, const int64_t* ray_count,
-                  const float* ray_dir, const int32_t* prim, float* out, int threads,
-                  const StopCheck& stop);
-
-// gather_rays, their first hits in `scene` and gather_shade, pixel by pixel,
-// without the ray arrays: the same sums, added into out (P, 3). Writes the
-// number of gather rays traced into *rays.
+// with a hash of (seed, frame, pixel, k): the same for any thread count;
+// each traced in `scene` as it is made. A ray that hits the black back of a
+// one-sided surface adds nothing; one that hits a surface (emitters too:
+// both VPL sets are MIS-combined with the gather rays) looks up the record
+// at the hit point (same voxel or a neighbour, same side and object
+// preferred, nearest centroid) and adds the MIS-weighted f L term, summed
+// per pixel in ray order into out (P, 3). With `env`
+// (nullable), a ray that meets nothing brings the environment's radiance
+// L(w) over the combined density n_e p_e(w) + n_g cos / pi of the
+// environment samples and the gather rays, summed per pixel after the
+// records' light as light_accumulate sums. Writes the number of gather rays
+// traced into *rays.
 void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                   int n_gather, uint64_t seed, int64_t frame, double eps,
-                  const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
-                  float* out, int64_t* rays, int threads, const StopCheck& stop);
+                  const ShadeTriangles& tris, const RecordGrid& grid, const EnvironmentMap* env,
+                  const RayScene& scene, float* out, int64_t* rays, int threads,
+                  const StopCheck& stop);
 
 // Light arriving along known directions: point, spot and directional lights
 // (one shadow ray each), environment samples and gather rays that leave the
@@ -166,9 +156,8 @@ void light_accumulate(const ShadeHits& hits, const ShadeMaterials& mats, const i
                       const float* ray_dir, const float* ray_weight, const uint8_t* occluded,
                       float* out, int threads, const StopCheck& stop);
 
-// Primary hits of one frame's camera rays (P rays, `prim` (P,) the first
-// triangle hit, -1: none; origins and unit directions in double). Writes per
-// ray the exact point on the hit triangle's plane (`pos`), the shading normal
+// Primary hits of one frame's camera rays (camera.h). For each ray, the
+// exact point on the hit triangle's plane (`pos`), the shading normal
 // (corner normals interpolated where `corner_normals` is given, else the
 // winding normal) and the geometric normal, both turned to the viewer's side,
 // and the material (the hit object; -1 for a miss or the black back of a
@@ -187,10 +176,6 @@ struct PrimaryScene {
 // emission seen.
 void primary_hit(const double o[3], const double d[3], int32_t t, const PrimaryScene& scene,
                  double x[3], float ns_out[3], float ng_out[3], int32_t* material, float le[3]);
-// primary_hit for P rays with their hit triangles prim (P,).
-void primary_hits(int64_t P, const double* org, const double* dir, const int32_t* prim,
-                  const PrimaryScene& scene, double* pos, float* normal, float* ng,
-                  int32_t* material, float* emission, int threads, const StopCheck& stop);
 
 // The BRDF used by the display for one pair of directions (exposed for tests):
 // Lambertian rho/pi, or with a specular layer the Ashikhmin-Shirley pair

@@ -4,9 +4,10 @@ Render the Cornell box
 
 The classic Cornell box (its published dimensions, Mitsuba 3's colours)
 through voxgi's three stages: voxelize the surfaces into sparse records,
-propagate light between them along discrete lines (shooting from the light,
-then gathering the bounces), and display the result by progressive ray
-tracing with virtual point lights. Writes ``cornell_box.exr`` (linear
+solve their radiosity (direct light by shadow rays to the lamp, the bounces
+gathered along discrete lines, then finished by passes of rays against the
+triangles), and display the result by progressive ray tracing with virtual
+point lights. Writes ``cornell_box.exr`` (linear
 radiance) and ``cornell_box.png``.
 
 Run: ``python examples/cornell_box.py`` (about a minute on two cores).
@@ -19,12 +20,12 @@ scene = voxgi.scenes.cornell_box(width=256, height=256)
 vox = voxgi.voxelize(scene, resolution=96)
 print(f"voxelized at resolution 96: {len(vox):,} records (voxel edge {vox.pitch:.4f} scene units)")
 
-sol = voxgi.solve(vox, directions=16, progress=False)
+sol = voxgi.solve(vox, progress=False)
 s = sol.stats
 print(
-    f"solved: {sol.bounces} bounces, {s['shoot_rays']:,} shooting and {s['gather_rays']:,} "
-    f"gathering rays in {s['seconds']['total']:.1f} s; "
-    "energy imbalance (R / G / B) " + " / ".join(f"{x:+.2%}" for x in s["energy"]["imbalance"])
+    f"solved: {s['direct_light']['rays']:,} shadow rays, {sol.bounces} bounces along the lines "
+    f"({s['gather_rays']:,} gathering rays), then {s['traced']['passes']} traced passes "
+    f"({s['traced']['rays']:,} rays) in {s['seconds']['total']:.1f} s"
 )
 
 out = voxgi.render(scene, sol, progress=False)

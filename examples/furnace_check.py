@@ -22,8 +22,8 @@ inside, renders it, and compares both with the known answer:
   (``voxgi.display.ray_budget``).
 
 Every surface emits and the furnace's light is uniform, so the shooting
-radius 8 (``SolveTuning(shoot_directions=8)``) serves as well as the default
-35; with the gathering's radius, the solve gets the shot direct light by one
+radius 8 (``SolveTuning.paper(shoot_radius=8)``, the paper's method) serves as
+well as its 35; with the gathering's radius, the solve gets the shot direct light by one
 gathering pass over the emitters (``sol.stats["skipped"]["shooting"]``).
 
 Run: ``python examples/furnace_check.py`` (up to half a minute per albedo).
@@ -41,9 +41,7 @@ for rho in (0.5, 0.9):
     scene = voxgi.scenes.furnace_sphere(albedo=rho, emission=LE, inner=True, width=48, height=48)
     vox = voxgi.voxelize(scene, resolution=32)
     print(f"  voxelized at resolution 32: {len(vox):,} records")
-    sol = voxgi.solve(
-        vox, directions=8, progress=False, tuning=voxgi.SolveTuning(shoot_directions=8)
-    )
+    sol = voxgi.solve(vox, radius=8, progress=False, tuning=voxgi.SolveTuning.paper(shoot_radius=8))
     front = ~vox.back
     rec_err = sol.radiance[front] / exact - 1.0
     print(

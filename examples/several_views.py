@@ -16,7 +16,7 @@ import voxgi
 
 scene = voxgi.scenes.cornell_box(width=192, height=192)
 t0 = time.perf_counter()
-sol = voxgi.solve(voxgi.voxelize(scene, resolution=64), directions=8, progress=False)
+sol = voxgi.solve(voxgi.voxelize(scene), progress=False)
 print(f"voxelized and solved once in {time.perf_counter() - t0:.1f} s")
 sol.save("cornell_solution.npz")
 

@@ -1,7 +1,9 @@
-"""Shared fixtures: a seeded RNG and small scenes built once per run."""
+"""Shared fixtures: a seeded RNG and small scenes built once per run; the
+paper's solve settings with changes (:func:`paper`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import signal
 
 import numpy as np
@@ -31,3 +33,10 @@ def rng():
 @pytest.fixture(scope="session")
 def cornell():
     return voxgi.scenes.cornell_box(width=64, height=64)
+
+
+def paper(**changes) -> voxgi.SolveTuning:
+    """``voxgi.SolveTuning.paper()`` with ``changes``: shooting along the lines,
+    the lines alone, radius 22, tol 1e-4, diagnostics; ``changes`` may set the
+    experiment switches too (``later_radius``, ``epsilon``, ``closed``, ...)."""
+    return dataclasses.replace(voxgi.SolveTuning.paper(), **changes)

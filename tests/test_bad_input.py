@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from conftest import paper
 
 import voxgi
 from voxgi import _core
@@ -25,9 +26,7 @@ def small():
     s = voxgi.scenes.furnace_box(albedo=0.5, emission=1.0)
     s.camera = s.camera.replace(width=8, height=8)
     vox = voxgi.voxelize(s, resolution=8, progress=False)
-    sol = voxgi.solve(
-        vox, directions=4, tuning=voxgi.SolveTuning(shoot_directions=4), progress=False
-    )
+    sol = voxgi.solve(vox, radius=4, tuning=paper(shoot_radius=4), progress=False)
     return s, vox, sol
 
 
@@ -312,17 +311,17 @@ def test_voxelize_tiny_pitch_refused():
 def test_solve_bad_args(small):
     _, vox, _ = small
     with pytest.raises(TypeError, match="VoxelSet"):
-        voxgi.solve(np.zeros((3, 3)))
+        voxgi.solve(np.zeros((3, 3)), tuning=paper())
     for kw, exc, word in [
-        ({"directions": 0}, ValueError, "direction"),
-        ({"directions": 2.5}, TypeError, "direction"),
+        ({"radius": 0}, ValueError, "radius"),
+        ({"radius": 2.5}, TypeError, "radius"),
         ({"max_bounces": -1}, ValueError, "max_bounces"),
         ({"tol": 0.0}, ValueError, "tol"),
         ({"tol": NAN}, ValueError, "tol"),
         ({"tol": "1e-3"}, TypeError, "tol"),
         ({"threads": 0}, ValueError, "threads"),
-        ({"tuning": voxgi.SolveTuning(epsilon=-1.0)}, ValueError, "epsilon"),
-        ({"tuning": voxgi.SolveTuning(history=0)}, ValueError, "history"),
+        ({"tuning": paper(epsilon=-1.0)}, ValueError, "epsilon"),
+        ({"tuning": paper(history=0)}, ValueError, "history"),
         ({"tuning": "fast"}, TypeError, "tuning"),
     ]:
         with pytest.raises(exc, match=word):
@@ -360,13 +359,13 @@ def test_solve_corrupt_voxelset(small):
         with pytest.raises(exc, match=word):
             voxgi.solve(
                 _corrupt(vox, **changes),
-                directions=4,
+                radius=4,
                 progress=False,
-                tuning=voxgi.SolveTuning(shoot_directions=4),
+                tuning=paper(shoot_radius=4),
             )
     # the user's arrays are untouched by a failed and a successful call
     a0 = vox.area.copy()
-    voxgi.solve(vox, directions=4, tuning=voxgi.SolveTuning(shoot_directions=4), progress=False)
+    voxgi.solve(vox, radius=4, tuning=paper(shoot_radius=4), progress=False)
     assert np.array_equal(vox.area, a0)
 
 
@@ -382,7 +381,7 @@ def test_solve_empty_voxelset(small):
         centroid=vox.centroid[:0],
     )
     with pytest.raises(ValueError, match="no records"):
-        voxgi.solve(empty, progress=False)
+        voxgi.solve(empty, progress=False, tuning=paper())
 
 
 # ----------------------------------------------------------------- render
@@ -413,8 +412,10 @@ def test_render_bad_args(small):
         ({"tuning": voxgi.RenderTuning(vpl_pdf="uniform")}, ValueError, "pdf"),
         ({"client": 42}, TypeError, "client"),
     ]:
+        # (the VPLs a frame are the display's choice, not voxgi.render's)
+        render = voxgi.display.render if "vpls_per_frame" in kw else voxgi.render
         with pytest.raises(exc, match=word):
-            voxgi.render(s, sol, progress=False, **kw)
+            render(s, sol, progress=False, **kw)
     with pytest.raises(TypeError, match="executor"):
         voxgi.display.render(s, sol, progress=False, executor=object())
 
@@ -621,24 +622,33 @@ def test_core_takes_misaligned_arrays_as_aligned_copies():
     np.testing.assert_array_equal(got[0], want)
 
 
-def test_core_refuses_misaligned_arrays_it_writes_into():
-    # a copy would take the answer with it: in-place outputs are never converted
-    P, n = 4, 2
+def _light_accumulate_args(P=4):
+    """Arguments of _core.light_accumulate: P pixels facing +z, one ray each
+    straight up, weight 1, none occluded, and the output (P, 3)."""
     up = np.tile(np.array([0, 0, 1], np.float32), (P, 1))
     hits = (np.zeros((P, 3)), up, up, up, np.zeros(P, np.int32))
-    count, org = np.zeros(P, np.int64), np.zeros((P * n, 3), np.float32)
-    dirs = np.zeros_like(org)
-    assert _core.gather_rays(*hits, n, 0, 0, 1e-3, count, org, dirs) == P * n
-    np.testing.assert_array_equal(count, n)  # written in place
-    assert np.allclose(org[:, 2], 1e-3)
-    with pytest.raises(ValueError, match="ray_org must be aligned"):
-        _core.gather_rays(*hits, n, 0, 0, 1e-3, count, _misaligned(org), dirs)
-    with pytest.raises(ValueError, match="ray_count must be aligned"):
-        _core.gather_rays(*hits, n, 0, 0, 1e-3, _misaligned(count), org, dirs)
-    ro = org.copy()
+    mats = (
+        np.full((1, 3), 0.5, np.float32),
+        np.zeros((1, 3), np.float32),
+        np.ones(1, np.float32),
+        np.ones(1, np.float32),
+        np.zeros(1, np.uint8),
+    )
+    rays = (np.ones(P, np.int64), up.copy(), np.ones((P, 3), np.float32), np.zeros(P, np.uint8))
+    return hits, mats, rays, np.zeros((P, 3), np.float32)
+
+
+def test_core_refuses_misaligned_arrays_it_writes_into():
+    # a copy would take the answer with it: in-place outputs are never converted
+    hits, mats, rays, out = _light_accumulate_args()
+    _core.light_accumulate(*hits, *mats, *rays, out)
+    np.testing.assert_allclose(out, 0.5 / np.pi)  # (rho / pi) cos 0 x 1, written in place
+    with pytest.raises(ValueError, match="out must be aligned"):
+        _core.light_accumulate(*hits, *mats, *rays, _misaligned(out))
+    ro = out.copy()
     ro.flags.writeable = False
-    with pytest.raises(ValueError, match="ray_org must be writeable"):
-        _core.gather_rays(*hits, n, 0, 0, 1e-3, count, ro, dirs)
+    with pytest.raises(ValueError, match="out must be writeable"):
+        _core.light_accumulate(*hits, *mats, *rays, ro)
 
 
 def test_core_linesystem_out_of_range_indices():
@@ -721,18 +731,16 @@ def test_core_display_bad_arrays():
     ]:
         with pytest.raises((TypeError, ValueError)):
             _core.shade_brdf(*args)
-    cnt = np.array([2, 2], np.int64)
-    contrib = np.ones((4, 3), np.float32)
-    occ = np.zeros(4, np.uint8)
-    assert _core.vpl_accumulate(cnt, contrib, occ).shape == (2, 3)
-    for args in [
-        (np.array([2, 3], np.int64), contrib, occ),  # counts exceed the rays
-        (np.array([-1, 5], np.int64), contrib, occ),
-        (cnt, contrib, occ[:3].copy()),
-        (cnt.astype(np.int32), contrib, occ),
+    hits, mats, (cnt, dirs, weight, occ), out = _light_accumulate_args()
+    for rays in [
+        (np.array([2, 3, 0, 0], np.int64), dirs, weight, occ),  # counts exceed the rays
+        (np.array([-1, 5, 0, 0], np.int64), dirs, weight, occ),
+        (cnt, dirs, weight, occ[:3].copy()),
+        (cnt.astype(np.int32), dirs, weight, occ),
+        (cnt, dirs, weight[:3].copy(), occ),
     ]:
         with pytest.raises((TypeError, ValueError)):
-            _core.vpl_accumulate(*args)
+            _core.light_accumulate(*hits, *mats, *rays, out)
 
 
 def test_core_gather_families_bad_indices():

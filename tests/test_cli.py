@@ -16,7 +16,7 @@ PNG_MAGIC = b"\x89PNG"
 SMALL = [
     "--resolution",
     "12",
-    "--directions",
+    "--radius",
     "4",
     "--frames",
     "2",
@@ -38,7 +38,7 @@ def test_render_builtin_scene_writes_exr_png_and_metadata(tmp_path, capsys):
             str(out),
             "--resolution",
             "16",
-            "--directions",
+            "--radius",
             "6",
             "--frames",
             "6",
@@ -90,7 +90,7 @@ def test_png_output_writes_the_exr_beside_it(tmp_path, capsys):
 
 def test_exposure_and_tol(tmp_path):
     a, b = tmp_path / "a.exr", tmp_path / "b.exr"
-    assert cli.main(["render", "furnace-box", "-o", str(a), *SMALL]) == 0
+    assert cli.main(["render", "furnace-box", "-o", str(a), "--exposure", "0", *SMALL]) == 0
     assert (
         cli.main(
             ["render", "furnace-box", "-o", str(b), "--exposure", "-2", "--tol", "0.5", *SMALL]
@@ -226,17 +226,67 @@ def test_help_shows_the_defaults(capsys):
     with pytest.raises(SystemExit):
         cli.main(["render", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    from voxgi.pipeline import RENDER_DIRECTIONS, RENDER_RESOLUTION
+    from voxgi.radiosity.tuning import TRACED_RADIUS
+    from voxgi.voxels import DEFAULT_RESOLUTION
 
     for want in (
-        f"(default: {RENDER_RESOLUTION})",
-        f"(default: {RENDER_DIRECTIONS})",
+        f"(default: {DEFAULT_RESOLUTION})",
+        f"(default: {TRACED_RADIUS})",
         "(default: 256)",
         "(default: 0.001)",
-        "(default: 0.0)",
+        "(default: the exposure that maps the image's log-average luminance",
         "(default: the scene camera's)",
         "(default: all hardware threads)",
         "(default: SCENE.exr in the current folder)",
     ):
         assert want in text, want
     assert "(default: None)" not in text
+
+
+def test_read_only_output_exits_2_before_any_work(tmp_path, capsys):
+    out = tmp_path / "out.exr"
+    out.write_bytes(b"kept")
+    out.chmod(0o444)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["render", "cornell-box", "-o", str(out), *SMALL])
+    assert exc.value.code == 2
+    cap = capsys.readouterr()
+    assert cap.out == ""  # nothing voxelized or solved
+    assert cap.err == f"voxgi render: error: cannot write {out}: the file is read-only\n"
+    assert out.read_bytes() == b"kept"
+
+
+def test_missing_output_folders_are_created(tmp_path, capsys):
+    out = tmp_path / "new" / "deeper" / "img.png"
+    assert cli.main(["render", "cornell-box", "-o", str(out), *SMALL]) == 0
+    assert out.is_file()
+    assert out.with_suffix(".exr").is_file()
+
+
+def test_scene_without_camera_exits_1_with_how_to_give_one(tmp_path, capsys):
+    (tmp_path / "mesh.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["render", str(tmp_path / "mesh.obj"), "-o", str(tmp_path / "o.exr")])
+    assert re.fullmatch(
+        r"voxgi render: error: scene file .*mesh\.obj: has no camera to render from .*"
+        r"\[camera\] table .*",
+        str(exc.value.code),
+    )
+    assert capsys.readouterr().out == ""
+
+
+def test_search_path_and_allow_outside_widen_what_a_scene_reads(tmp_path, capsys):
+    (tmp_path / "shared").mkdir()
+    (tmp_path / "room").mkdir()
+    (tmp_path / "shared" / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    scene = tmp_path / "room" / "scene.toml"
+    scene.write_text(
+        "[camera]\neye = [0.3, 0.3, 2]\ntarget = [0.3, 0.3, 0]\nwidth = 8\nheight = 8\n"
+        '[[object]]\nmesh = "../shared/tri.obj"\nemission = 1.0\n'
+    )
+    argv = ["render", str(scene), "-o", str(tmp_path / "o.exr"), *SMALL]
+    with pytest.raises(SystemExit) as exc:
+        cli.main(argv)
+    assert "outside the folders this scene may read" in str(exc.value.code)
+    assert cli.main([*argv, "--search-path", str(tmp_path / "shared")]) == 0
+    assert cli.main([*argv, "--allow-outside"]) == 0

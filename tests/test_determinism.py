@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import paper
 
 import voxgi
 from voxgi import _core
@@ -117,10 +118,9 @@ def test_solve_and_display(scene_records):
     _, scene, vox, _, _ = scene_records
     # shooting radius 8: the furnace's every record emits, and at 35 its
     # shooting alone took seconds without testing more
-    tuning = voxgi.SolveTuning(shoot_directions=8)
+    tuning = paper(shoot_radius=8)
     sols = [
-        voxgi.solve(vox, directions=5, threads=th, progress=False, tuning=tuning)
-        for th in THREADS[:2]
+        voxgi.solve(vox, radius=5, threads=th, progress=False, tuning=tuning) for th in THREADS[:2]
     ]
     assert sols[0].bounces == sols[1].bounces
     assert np.array_equal(sols[0].radiosity, sols[1].radiosity)
@@ -144,7 +144,7 @@ def test_voxelize_threads_identical():
 def test_render_seed_decides_the_image():
     scene = SCENES["cornell_box"]()
     vox = voxgi.voxelize(scene, resolution=16, progress=False)
-    sol = voxgi.solve(vox, directions=4, progress=False)
+    sol = voxgi.solve(vox, radius=4, progress=False, tuning=paper())
     kw = dict(max_frames=2, progress=False, threads=2)
     a = voxgi.display.render(scene, sol, seed=7, **kw)
     b = voxgi.display.render(scene, sol, seed=7, **kw)
@@ -163,7 +163,10 @@ def test_full_pipeline_twice_identical(tmp_path):
     for _ in range(2):
         sc = voxgi.Scene.load(p)
         sol = voxgi.solve(
-            voxgi.voxelize(sc, resolution=10, progress=False), directions=4, progress=False
+            voxgi.voxelize(sc, resolution=10, progress=False),
+            radius=4,
+            progress=False,
+            tuning=paper(),
         )
         imgs.append(voxgi.display.render(sc, sol, max_frames=2, progress=False, seed=3).image)
     assert np.array_equal(imgs[0], imgs[1])

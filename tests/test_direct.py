@@ -201,22 +201,6 @@ def test_far_from_the_origin_gives_the_same_light():
     assert np.allclose(e_far, e_near, rtol=1e-3, atol=1e-6)
 
 
-@pytest.mark.skipif(voxgi.rays.embree_library() is None, reason="no Embree 4 library found")
-def test_rays_traced_as_they_are_made_give_the_two_pass_light(monkeypatch):
-    # With the compiled ray scene, each record's light and hemisphere rays are
-    # traced as they are made; through embreex they go in batches between two
-    # kernels. The same rays, the same sums: the same irradiance, bit for bit.
-    scene = voxgi.scenes.window_room()
-    vox = voxgi.voxelize(scene, resolution=24, progress=False)
-    H, st = direct_irradiance(scene, vox, samples=8, threads=2)
-    monkeypatch.setattr(voxgi.rays, "embree_library", lambda: None)
-    H2, st2 = direct_irradiance(scene, vox, samples=8, threads=2)
-    assert np.array_equal(H, H2)
-    assert st["rays"] == st2["rays"] > 0
-    assert st["refined_records"] == st2["refined_records"] > 0
-    assert np.count_nonzero(H[:, 0] > 0) > len(vox) // 4
-
-
 def test_sobol_points_are_scipys_sequence():
     # The record samples' base sequence is Sobol' (Joe-Kuo direction
     # numbers); scipy draws the same points in Gray-code order.
@@ -246,7 +230,8 @@ def test_direct_light_kernels_hold_the_emitter_arrays_they_convert():
 
     # hundreds of emitting triangles: arrays too large for NumPy's cache of
     # small buffers, so that a dropped one goes back to the allocator
-    em = EmitterSampler(voxgi.scenes.cap_sphere(subdivisions=3))
+    scene = voxgi.scenes.cap_sphere(subdivisions=3)
+    em = EmitterSampler(scene)
     assert em.arrays[0].nbytes > 1 << 14
     rng = np.random.default_rng(0)
     n = 4000
@@ -262,13 +247,15 @@ def test_direct_light_kernels_hold_the_emitter_arrays_they_convert():
         np.repeat(cdf, 2)[::2],
         np.repeat(dens, 2)[::2],
     )
-    want = _core.direct_light_rays(em.arrays, point, normal, shift, seq, 1e-4)
-    got = _core.direct_light_rays(converted, point, normal, shift, seq, 1e-4)
+    with voxgi.rays.Tracer(scene, 1) as tr:
+        args = (point, normal, shift, seq, 1e-4, em.emitter_of, tr.native)
+        want = _core.direct_light_traced(em.arrays, *args)
+        got = _core.direct_light_traced(converted, *args)
+    assert np.count_nonzero(want[0][:, 0] > 0) > n // 4
     for g, w in zip(got, want, strict=True):
         np.testing.assert_array_equal(g, w)
 
 
-@pytest.mark.skipif(voxgi.rays.embree_library() is None, reason="no Embree 4 library found")
 def test_hemisphere_rays_meet_the_emitters_first_only_where_few_triangles_emit():
     # A lamp of 2 triangles among 30: hemisphere rays go to the emitters'
     # own scene first; in a furnace, where every triangle emits, they go

@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import paper
 from test_display import triangle_solution
 
 import voxgi
@@ -140,10 +141,10 @@ def test_furnace_has_no_edges_and_the_cornell_box_its_outlines(cornell):
     # is at an edge. The Cornell box has its boxes' outlines and the room's
     # corners: a few percent of the pixels, not most.
     scene = voxgi.scenes.furnace_sphere(albedo=0.5, width=32, height=24)
-    sol = voxgi.solve(voxgi.voxelize(scene, resolution=16), progress=False)
+    sol = voxgi.solve(voxgi.voxelize(scene, resolution=16), progress=False, tuning=paper())
     out = voxgi.render(scene, sol, max_frames=8, tol=0.0, progress=False)
     assert out.stats["edge_pixels"] == 0
-    sol = voxgi.solve(voxgi.voxelize(cornell, resolution=16), progress=False)
+    sol = voxgi.solve(voxgi.voxelize(cornell, resolution=16), progress=False, tuning=paper())
     out = voxgi.render(cornell, sol, max_frames=8, tol=0.0, progress=False)
     pixels = cornell.camera.width * cornell.camera.height
     assert 0.02 * pixels < out.stats["edge_pixels"] < 0.3 * pixels
@@ -191,7 +192,7 @@ def test_frames_without_surfaces_leave_the_estimate_to_the_blocks(cornell):
     # Same frames, same image; without the surfaces no pixel is known to be
     # inside a surface, so every pixel takes the blocks' spread and the
     # estimate is not the local render's.
-    sol = voxgi.solve(voxgi.voxelize(cornell, resolution=16), progress=False)
+    sol = voxgi.solve(voxgi.voxelize(cornell, resolution=16), progress=False, tuning=paper())
     kw = dict(max_frames=8, tol=0.0, progress=False)
     local = voxgi.render(cornell, sol, **kw)
     bare = voxgi.display.render(cornell, sol, executor=_NoSurfaces(), **kw)
@@ -323,7 +324,7 @@ def test_cli_writes_the_stderr_channels(tmp_path):
     from voxgi import cli
 
     out = tmp_path / "f.exr"
-    args = ["render", "furnace-sphere", "-o", str(out), "--resolution", "12", "--directions"]
+    args = ["render", "furnace-sphere", "-o", str(out), "--resolution", "12", "--radius"]
     args += ["4", "--frames", "6", "--width", "8", "--height", "6", "-q"]
     assert cli.main(args) == 0
     se = voxgi.io.read_exr(out, layer="stderr")

@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import paper
 
 import voxgi
 
@@ -24,7 +25,7 @@ import voxgi
 # on a 2-core machine (a 20³ Cornell box has ~6k records; R = 5 gives 257
 # gathering families, R = 6 for shooting).
 RES, R, RS = 20, 5, 6
-TUNED = voxgi.SolveTuning(shoot_directions=RS)
+TUNED = paper(shoot_radius=RS)
 
 # The scheduler's HTTP routes on a free loopback port: with None it still
 # binds :8787, and a second cluster (or another process's) then warns,
@@ -41,7 +42,7 @@ def cornell_small():
 @pytest.fixture(scope="module")
 def local_solution(cornell_small):
     _, vox = cornell_small
-    return voxgi.solve(vox, directions=R, tuning=TUNED, progress=False, threads=1)
+    return voxgi.solve(vox, radius=R, tuning=TUNED, progress=False, threads=1)
 
 
 @pytest.fixture(scope="module")
@@ -83,8 +84,8 @@ def test_missing_extra_names_it(cornell_small, monkeypatch):
     # were not installed (the real import machinery, nothing mocked inside voxgi).
     monkeypatch.setitem(sys.modules, "distributed", None)
     with pytest.raises(ImportError, match=r'pip install "voxgi\[dask\]"'):
-        voxgi.solve(vox, directions=R, progress=False, client=object())
-    sol = voxgi.solve(vox, directions=R, tuning=TUNED, max_bounces=1, progress=False)
+        voxgi.solve(vox, radius=R, progress=False, client=object(), tuning=paper())
+    sol = voxgi.solve(vox, radius=R, tuning=TUNED, max_bounces=1, progress=False)
     with pytest.raises(ImportError, match=r"voxgi\[dask\]"):
         voxgi.render(scene, sol, max_frames=2, progress=False, client=object())
 
@@ -93,8 +94,8 @@ def test_not_a_client_is_a_type_error(cornell_small):
     pytest.importorskip("distributed")
     scene, vox = cornell_small
     with pytest.raises(TypeError, match="client"):
-        voxgi.solve(vox, directions=R, progress=False, client="tcp://127.0.0.1:8786")
-    sol = voxgi.solve(vox, directions=R, tuning=TUNED, max_bounces=1, progress=False)
+        voxgi.solve(vox, radius=R, progress=False, client="tcp://127.0.0.1:8786", tuning=paper())
+    sol = voxgi.solve(vox, radius=R, tuning=TUNED, max_bounces=1, progress=False)
     with pytest.raises(TypeError, match="client"):
         voxgi.render(scene, sol, max_frames=2, progress=False, client=42)
 
@@ -115,7 +116,7 @@ def test_worker_memory_too_small_is_refused_before_work(cornell_small):
     )
     with distributed.Client(cluster) as c:
         with pytest.raises(MemoryError, match="memory_limit"):
-            voxgi.solve(vox, directions=R, tuning=TUNED, progress=False, client=c)
+            voxgi.solve(vox, radius=R, tuning=TUNED, progress=False, client=c)
         # refused before anything was scattered or submitted
         assert not c.has_what()[next(iter(c.has_what()))]
     cluster.close()
@@ -126,7 +127,7 @@ def test_worker_memory_too_small_is_refused_before_work(cornell_small):
 
 def test_solve_equals_local(cornell_small, local_solution, client):
     _, vox = cornell_small
-    sol = voxgi.solve(vox, directions=R, tuning=TUNED, progress=False, client=client)
+    sol = voxgi.solve(vox, radius=R, tuning=TUNED, progress=False, client=client)
     # the partial sums are float64 added in chunk order instead of in one
     # pass: equal to float rounding of the float32 output
     assert _rel(sol.radiosity, local_solution.radiosity) < 1e-6
@@ -141,14 +142,14 @@ def test_solve_equals_local(cornell_small, local_solution, client):
 
 def test_solve_equals_local_three_workers_and_an_executor(cornell_small, local_solution, client3):
     _, vox = cornell_small
-    sol = voxgi.solve(vox, directions=R, tuning=TUNED, progress=False, client=client3)
+    sol = voxgi.solve(vox, radius=R, tuning=TUNED, progress=False, client=client3)
     assert _rel(sol.radiosity, local_solution.radiosity) < 1e-6
     # an executor object is taken as it is; the stage itself takes one too
     from voxgi.distributed import DaskExecutor
 
     ex = DaskExecutor(client3)
-    a = voxgi.solve(vox, directions=R, tuning=TUNED, progress=False, client=ex)
-    b = voxgi.radiosity.solve(vox, directions=R, tuning=TUNED, progress=False, executor=ex)
+    a = voxgi.solve(vox, radius=R, tuning=TUNED, progress=False, client=ex)
+    b = voxgi.radiosity.solve(vox, radius=R, tuning=TUNED, progress=False, executor=ex)
     np.testing.assert_array_equal(a.radiosity, b.radiosity)
     assert _rel(a.radiosity, local_solution.radiosity) < 1e-6
 
@@ -219,7 +220,7 @@ def test_killed_worker_is_survived(cornell_small, local_solution, client):
     th = threading.Thread(target=killer, daemon=True)
     th.start()
     try:
-        sol = voxgi.solve(vox, directions=R, tuning=TUNED, progress=False, client=client)
+        sol = voxgi.solve(vox, radius=R, tuning=TUNED, progress=False, client=client)
     finally:
         done.set()
         th.join()
@@ -251,13 +252,17 @@ def test_render_equals_local(cornell_small, local_solution, client):
         assert out.stats[k] == ref.stats[k], k
 
 
-def test_progress_bar_counts_finished_tasks(cornell_small, client, capsys, monkeypatch):
-    """With progress=True the tasks of each distributed call feed a tqdm bar."""
+def test_progress_bar_counts_finished_tasks(cornell_small, client, monkeypatch):
+    """With progress=True the tasks of each distributed call feed a progress bar."""
     _, vox = cornell_small
-    # bars are drawn only where someone watches: make capsys's stderr count as a terminal
+    # bars are drawn only where someone watches: count capsys's stderr as a terminal
     monkeypatch.setattr("voxgi._progress.interactive", lambda stream=None: True)
-    voxgi.solve(vox, directions=R, tuning=TUNED, max_bounces=2, progress=True, client=client)
-    err = capsys.readouterr().err
-    # one task per worker (2) per call: the bar reaches 2/2 for the gather calls
-    assert "gather tasks" in err
-    assert "2/2" in err
+    made, bar = [], voxgi._progress.bar
+    monkeypatch.setattr(
+        "voxgi._progress.bar", lambda *a, **kw: made.append(bar(*a, **kw)) or made[-1]
+    )
+    voxgi.solve(vox, radius=R, tuning=TUNED, max_bounces=2, progress=True, client=client)
+    # one task per worker (2) per call: each gather call's bar reaches 2 of 2
+    tasks = [b for b in made if b.desc == "gather tasks"]
+    assert tasks
+    assert all(b.n == b.total == 2 for b in tasks)

@@ -92,3 +92,36 @@ def _png_size(path: Path) -> tuple[int, int]:
     head = path.read_bytes()[:24]
     assert head[:8] == b"\x89PNG\r\n\x1a\n"
     return int.from_bytes(head[20:24], "big"), int.from_bytes(head[16:20], "big")
+
+
+def _documented_parameters(doc: str) -> set[str]:
+    """Names in a numpydoc Parameters section (``a, b : int`` names two)."""
+    part = re.search(
+        r"\n\s*Parameters\n\s*-+\n(.*?)(?:\n\s*\n\s*[A-Z][a-z]+\n\s*-+\n|\Z)", doc, re.S
+    )
+    if part is None:
+        return set()
+    names = set()
+    for line in part.group(1).splitlines():
+        if line.strip() and not line[0].isspace():  # a name line, not a description
+            head = line.split(" : ")[0].strip()
+            names |= {n.strip() for n in head.split(",")}
+    return names
+
+
+@pytest.mark.parametrize("module", ["voxgi.scenes", "voxgi.metrics"])
+def test_public_functions_document_every_parameter(module):
+    # help() on a public function explains each of its arguments (numpydoc).
+    import importlib
+    import inspect
+
+    mod = importlib.import_module(module)
+    for name in mod.__all__:
+        fn = getattr(mod, name)
+        if not inspect.isfunction(fn):
+            continue
+        params = {
+            ("**" if p.kind is p.VAR_KEYWORD else "") + p.name
+            for p in inspect.signature(fn).parameters.values()
+        }
+        assert params <= _documented_parameters(inspect.getdoc(fn) or ""), (name, params)

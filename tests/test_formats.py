@@ -621,7 +621,7 @@ def test_bad_files_of_each_kind(tmp_path):
     )
     with pytest.raises(
         ValueError,
-        match=r"refs\.gltf: meshes\[0\]\.primitives\[0\]\.attributes\.POSITION: accessor 5",
+        match=r"refs\.gltf: /meshes/0/primitives/0/attributes/POSITION: accessor 5",
     ):
         voxgi.Scene.load(tmp_path / "refs.gltf")
     (tmp_path / "broken.glb").write_bytes(b"glTF\x02\x00\x00\x00")
@@ -676,3 +676,162 @@ def test_cbox_xml_matches_mitsuba(tmp_path):
     # voxgi's defaults reach 1e-3 against a converged reference (README); the
     # reference's own noise at 4096 spp is about 5e-5 (two seeds compared)
     assert voxgi.metrics.rel_mse(out.image, np.array(ref)[..., :3]) < 1e-3
+
+
+# -- what a scene file may read (docs/scene-files.md) --------------------------
+
+TRI = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+
+
+def _outside(tmp_path: Path) -> tuple[Path, Path]:
+    """A ``room`` folder for the scene and a ``shared`` folder beside it."""
+    (tmp_path / "room").mkdir()
+    (tmp_path / "shared").mkdir()
+    (tmp_path / "shared" / "tri.obj").write_text(TRI)
+    return tmp_path / "room", tmp_path / "shared"
+
+
+def _policy(path: Path, shared: Path, link: Path | None = None):
+    """The rule, tried three ways: refused by default (the message naming the file
+    and the way to widen it), read with ``search_paths``, read with ``allow_outside``."""
+    with pytest.raises(ValueError, match=r"outside the folders this scene may read .*search_paths"):
+        _load_quiet(path)
+    assert len(_load_quiet_kw(path, search_paths=[shared]).objects) >= 1
+    assert len(_load_quiet_kw(path, allow_outside=True).objects) >= 1
+
+
+def _load_quiet_kw(path, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", voxgi.SceneWarning)
+        return voxgi.Scene.load(path, **kw)
+
+
+def test_policy_xml(tmp_path):
+    room, shared = _outside(tmp_path)
+    body = '<shape type="obj"><string name="filename" value="../shared/tri.obj"/></shape>'
+    _policy(_xml(room, body), shared)
+    # a symbolic link inside the folder that leaves it is outside too
+    (room / "link.obj").symlink_to(shared / "tri.obj")
+    body = '<shape type="obj"><string name="filename" value="link.obj"/></shape>'
+    _policy(_xml(room, body, "linked.xml"), shared)
+
+
+def test_policy_obj_mtl(tmp_path):
+    room, shared = _outside(tmp_path)
+    (shared / "m.mtl").write_text("newmtl red\nKd 0.5 0 0\n")
+    (room / "mesh.obj").write_text("mtllib ../shared/m.mtl\nusemtl red\n" + TRI)
+    _policy(room / "mesh.obj", shared)
+    (obj,) = _load_quiet_kw(room / "mesh.obj", search_paths=[shared]).objects
+    assert obj.material.albedo == (0.5, 0.0, 0.0)
+
+
+def test_policy_gltf(tmp_path):
+    room, shared = _outside(tmp_path)
+    blob = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], "<f4").tobytes()
+    (shared / "b.bin").write_bytes(blob)
+    doc = {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": 36, "uri": "../shared/b.bin"}],
+        "bufferViews": [{"buffer": 0, "byteLength": 36}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "nodes": [{"mesh": 0}],
+        "scenes": [{"nodes": [0]}],
+    }
+    (room / "scene.gltf").write_text(json.dumps(doc))
+    _policy(room / "scene.gltf", shared)
+
+
+def test_policy_toml(tmp_path):
+    room, shared = _outside(tmp_path)
+    (room / "scene.toml").write_text('[[object]]\nmesh = "../shared/tri.obj"\n')
+    _policy(room / "scene.toml", shared)
+    with pytest.raises(ValueError, match=r"outside the folders"):
+        voxgi.Scene.from_dict({"object": [{"mesh": "../shared/tri.obj"}]}, base_dir=room)
+    scene = voxgi.Scene.from_dict(
+        {"object": [{"mesh": "../shared/tri.obj"}]}, base_dir=room, search_paths=[shared]
+    )
+    assert len(scene.objects) == 1
+
+
+def test_limits_are_raised_per_call_and_by_environment(tmp_path, monkeypatch):
+    path = _xml(tmp_path, '<shape type="rectangle"/>' * 3)
+    with pytest.raises(ValueError, match=r"4 XML elements, above the limit of 3 .*VOXGI_MAX"):
+        voxgi.Scene.load(path, limits=formats.Limits(elements=3))
+    assert len(voxgi.Scene.load(path, limits=formats.Limits(elements=4)).objects) == 3
+    monkeypatch.setenv("VOXGI_MAX_ELEMENTS", "3")
+    assert formats.Limits.from_env().elements == 3
+    with pytest.raises(ValueError, match=r"above the limit of 3"):
+        voxgi.Scene.load(path)
+    monkeypatch.setenv("VOXGI_MAX_ELEMENTS", "many")
+    with pytest.raises(ValueError, match=r"VOXGI_MAX_ELEMENTS='many': expected an integer"):
+        voxgi.Scene.load(path)
+    with pytest.raises(ValueError, match=r"Limits.file_bytes: expected an integer >= 1"):
+        formats.Limits(file_bytes=0)
+
+
+def test_serialized_stream_is_read_to_its_header_counts_only(tmp_path):
+    # the header says one triangle; the stream holds 64 MiB more
+    payload = struct.pack("<I", 0x1000) + b"m\0" + struct.pack("<QQ", 3, 1)
+    payload += np.asarray(RECT[:3], "<f4").tobytes() + np.array([[0, 1, 2]], "<u4").tobytes()
+    data = struct.pack("<HH", 0x041C, 4) + zlib.compress(payload + bytes(64 << 20))
+    (tmp_path / "m.serialized").write_bytes(data)
+    with pytest.raises(ValueError, match=r"mesh 0: the stream holds more data than its header"):
+        formats.read_serialized(tmp_path / "m.serialized")
+    with pytest.raises(ValueError, match=r"mesh 0 \(3 vertices, 1 triangles\): .*mesh_bytes"):
+        formats.read_serialized(tmp_path / "m.serialized", limits=formats.Limits(mesh_bytes=40))
+
+
+def test_texture_mean_is_exact_from_the_histogram(rng):
+    from PIL import Image
+
+    from voxgi.formats.textures import image_mean
+
+    a = rng.integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    # the mean of the linear values (sRGB decoded), computed in float64
+    c = a / 255.0
+    want = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).reshape(-1, 3)
+    for mode in ("RGB", "RGBA"):
+        np.testing.assert_allclose(image_mean(Image.fromarray(a).convert(mode)), want.mean(0))
+    np.testing.assert_allclose(image_mean(a, raw=True), c.reshape(-1, 3).mean(0))
+    grey = Image.fromarray(a[:, :, 0])
+    np.testing.assert_allclose(image_mean(grey), want[:, 0].mean() * np.ones(3))
+
+
+def test_relative_scene_path_does_not_double_its_folder(tmp_path, monkeypatch):
+    (tmp_path / "room" / "models").mkdir(parents=True)
+    (tmp_path / "room" / "models" / "m.obj").write_text(TRI)
+    body = '<shape type="obj"><string name="filename" value="models/m.obj"/></shape>'
+    _xml(tmp_path / "room", body)
+    monkeypatch.chdir(tmp_path)
+    (obj,) = voxgi.Scene.load("room/scene.xml").objects
+    assert obj.source == "room/models/m.obj"
+
+
+def test_a_mesh_of_degenerate_faces_is_left_out_by_name(tmp_path):
+    (tmp_path / "flat.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
+    (tmp_path / "tri.obj").write_text(TRI)
+    (tmp_path / "scene.toml").write_text(
+        '[[object]]\nmesh = "tri.obj"\n[[object]]\nmesh = "flat.obj"\nname = "flat"\n'
+    )
+    with pytest.warns(
+        voxgi.SceneWarning, match=r"object #1 \('flat'\): .*every face is degenerate"
+    ):
+        scene = voxgi.Scene.load(tmp_path / "scene.toml")
+    assert [o.name for o in scene.objects] == ["tri"]
+
+
+def test_emission_beyond_float32_radiosity_is_refused_naming_the_object(tmp_path):
+    (tmp_path / "tri.obj").write_text(TRI)
+    (tmp_path / "s.toml").write_text(
+        '[[object]]\nmesh = "tri.obj"\nname = "lamp"\nemission = 3e37\nalbedo = 0.0\n'
+        '[[object]]\nmesh = "tri.obj"\nname = "wall"\nalbedo = 0.9\n'
+    )
+    # pi * 3e37 / (1 - 0.9) = 9.4e38 > 3.4e38; at albedo 0.5, 1.9e38 fits
+    with pytest.raises(ValueError, match=r"s\.toml: mesh 'lamp': emission .*radiosity up to 9\.42"):
+        voxgi.Scene.load(tmp_path / "s.toml")
+    (tmp_path / "s.toml").write_text(
+        '[[object]]\nmesh = "tri.obj"\nname = "lamp"\nemission = 3e37\nalbedo = 0.0\n'
+        '[[object]]\nmesh = "tri.obj"\nname = "wall"\nalbedo = 0.5\n'
+    )
+    assert len(voxgi.Scene.load(tmp_path / "s.toml").objects) == 2

@@ -16,6 +16,7 @@ import warnings
 import numpy as np
 import pytest
 import trimesh
+from conftest import paper
 
 import voxgi
 
@@ -180,9 +181,7 @@ def solved():
     s = voxgi.scenes.furnace_box(albedo=0.5, emission=1.0)
     s.camera = s.camera.replace(width=4, height=4)
     vox = voxgi.voxelize(s, resolution=4, progress=False)
-    sol = voxgi.solve(
-        vox, directions=2, tuning=voxgi.SolveTuning(shoot_directions=2), progress=False
-    )
+    sol = voxgi.solve(vox, radius=2, tuning=paper(shoot_radius=2), progress=False)
     return s, vox, sol
 
 
@@ -213,8 +212,8 @@ def test_fuzz_api_arguments(solved):
                     mb = b if not isinstance(b, int) or b < 10 else 2
                     voxgi.solve(
                         vox,
-                        directions=a if not isinstance(a, int) or a < 4 else 2,
-                        tuning=voxgi.SolveTuning(shoot_directions=2),
+                        radius=a if not isinstance(a, int) or a < 4 else 2,
+                        tuning=paper(shoot_radius=2),
                         max_bounces=mb,
                         tol=c,
                         progress=False,
@@ -222,7 +221,7 @@ def test_fuzz_api_arguments(solved):
                 elif which == 4:
                     k = a if not isinstance(a, int) or a < 64 else 4
                     f = b if not isinstance(b, int) or b < 4 else 2
-                    out = voxgi.render(
+                    out = voxgi.display.render(
                         s, sol, vpls_per_frame=k, max_frames=f, seed=c, progress=False
                     )
                     assert np.all(np.isfinite(out.image))

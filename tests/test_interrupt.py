@@ -20,6 +20,7 @@ import threading
 import time
 
 import pytest
+from conftest import paper
 
 import voxgi
 
@@ -73,7 +74,7 @@ def test_ctrl_c_during_voxelize(cornell):
 def test_ctrl_c_during_solve(cornell):
     vox = voxgi.voxelize(cornell, resolution=48, progress=False)
     with pytest.raises(KeyboardInterrupt), _CtrlC() as c:
-        voxgi.solve(vox, directions=30, progress=False)
+        voxgi.solve(vox, radius=30, progress=False, tuning=paper())
     assert c.sent is not None, "solve finished before the signal: make the workload larger"
     print(f"solve: control back {c.returned - c.sent:.3f} s after SIGINT")
     assert c.returned - c.sent < LIMIT
@@ -83,9 +84,7 @@ def test_ctrl_c_during_render_returns_partial_image(cornell):
     import numpy as np
 
     vox = voxgi.voxelize(cornell, resolution=24, progress=False)
-    sol = voxgi.solve(
-        vox, directions=4, progress=False, tuning=voxgi.SolveTuning(shoot_directions=4)
-    )
+    sol = voxgi.solve(vox, radius=4, progress=False, tuning=paper(shoot_radius=4))
     with _CtrlC() as c:
         out = voxgi.render(
             cornell,
@@ -119,7 +118,7 @@ if stage == "solve":
     def slow_solve(*args, **kwargs):
         print("MARK solve", flush=True)
         time.sleep(120)
-    voxgi.pipeline.solve_for_display = slow_solve
+    voxgi.pipeline.solve = slow_solve
 else:
     after = int(stage.split(":")[1])   # frames that finish before the slow one
     frame = voxgi.display.shader._FrameShader.frame
@@ -150,7 +149,7 @@ def _interrupted_cli(tmp_path, stage):
         str(exr),
         "--resolution",
         "8",
-        "--directions",
+        "--radius",
         "2",
         "--frames",
         "50",

@@ -29,7 +29,7 @@ def test_png_tone_mapping(tmp_path):
     assert io.to_srgb8(img, exposure=1.0)[1, 1, 0] == 255
     from skimage.io import imread
 
-    p = io.write_png(tmp_path / "a.png", img)
+    p = io.write_png(tmp_path / "a.png", img, exposure=0.0, tonemap="clip")
     np.testing.assert_array_equal(imread(p), srgb)
 
 
@@ -122,3 +122,36 @@ def test_a_symbolic_link_is_kept_and_its_target_replaced(tmp_path):
     assert link.is_symlink()
     np.testing.assert_array_equal(io.read_exr(real), np.ones((2, 2, 3), np.float32))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["link.exr", "real.exr"]
+
+
+def test_atomic_path_refuses_a_read_only_file_and_flushes_before_chmod(tmp_path):
+    target = tmp_path / "kept.txt"
+    target.write_text("old")
+    target.chmod(0o444)
+    with pytest.raises(PermissionError, match="read-only"), io.atomic_path(target) as tmp:
+        tmp.write_text("new")  # (never reached)
+    assert target.read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.txt"]
+    # a mode without the owner's write bit on a writable file is still copied
+    target.chmod(0o640)
+    with io.atomic_path(target) as tmp:
+        tmp.write_text("new")
+    assert target.read_text() == "new"
+    assert target.stat().st_mode & 0o777 == 0o640
+
+
+def test_read_npz_checks_headers_before_data(tmp_path):
+    path = tmp_path / "a.npz"
+    np.savez(path, ijk=np.zeros((5, 3), np.int32), v=np.zeros(5, np.float32))
+    want = {"ijk": (("n", 3), np.int32), "v": (("n",), np.float32)}
+    got = io.read_npz(path, want)
+    assert got["ijk"].shape == (5, 3)
+    assert got["v"].dtype == np.float32
+    with pytest.raises(ValueError, match=r"a\.npz: v must be float64 of shape \(5,\) for 5"):
+        io.read_npz(path, {**want, "v": (("n",), np.float64)})
+    np.savez(path, ijk=np.zeros((5, 3), np.int32), v=np.zeros(4, np.float32))
+    with pytest.raises(ValueError, match=r"v must be float32 of shape \(5,\) for 5 records, got"):
+        io.read_npz(path, want)
+    (tmp_path / "b.npz").write_text("no zip")
+    with pytest.raises(ValueError, match=r"not a \.npz file"):
+        io.read_npz(tmp_path / "b.npz", want)

@@ -14,6 +14,7 @@ import math
 import numpy as np
 import pytest
 import trimesh
+from conftest import paper
 
 import voxgi
 from voxgi.direct import light_irradiance
@@ -33,6 +34,11 @@ def _up_records(sc: voxgi.Scene, resolution: int = 48):
     up = vox.normal[:, 1] > 0.5
     assert up.sum() > 100
     return vox, up
+
+
+def _solved(sc: voxgi.Scene, resolution: int) -> voxgi.Solution:
+    """The solution ``voxgi.render(sc)`` would display, at ``resolution``."""
+    return voxgi.solve(voxgi.voxelize(sc, resolution), progress=False, threads=1)
 
 
 def test_point_light_over_plane_is_exact():
@@ -161,7 +167,7 @@ def test_display_of_plane_under_constant_environment_is_rho_l():
     cam = voxgi.Camera(eye=(0, 3, 0.01), target=(0, 0, 0), fov=40, width=16, height=16)
     sc = _plane(half=5.0, albedo=0.6, camera=cam)
     sc.environment = voxgi.Environment((1.0, 2.0, 0.5))
-    out = voxgi.render(sc, progress=False, resolution=16, max_frames=16, tol=0, threads=1)
+    out = voxgi.render(sc, _solved(sc, 16), progress=False, max_frames=16, tol=0, threads=1)
     want = 0.6 * np.array([1.0, 2.0, 0.5])
     mean = out.image.reshape(-1, 3).mean(axis=0)
     se = np.sqrt((out.stderr.reshape(-1, 3) ** 2).mean(axis=0) / out.image[..., 0].size)
@@ -174,7 +180,7 @@ def test_display_of_plane_under_sun_is_exact():
     cam = voxgi.Camera(eye=(0, 3, 0.01), target=(0, 0, 0), fov=40, width=12, height=12)
     sc = _plane(half=5.0, albedo=0.6, camera=cam)
     sc.add_light(voxgi.DirectionalLight((0.0, -1.0, 1.0), 2.0))
-    out = voxgi.render(sc, progress=False, resolution=16, max_frames=2, tol=0, threads=1)
+    out = voxgi.render(sc, _solved(sc, 16), progress=False, max_frames=2, tol=0, threads=1)
     np.testing.assert_allclose(out.image, 0.6 / math.pi * 2.0 / math.sqrt(2), rtol=1e-5)
 
 
@@ -182,7 +188,7 @@ def test_camera_rays_that_escape_see_the_environment():
     cam = voxgi.Camera(eye=(0, 1, 0), target=(0, 2, 0), up=(0, 0, 1), fov=30, width=8, height=8)
     sc = _plane(half=1.0, camera=cam)
     sc.environment = voxgi.Environment((0.25, 0.5, 1.0))
-    out = voxgi.render(sc, progress=False, resolution=8, max_frames=2, tol=0, threads=1)
+    out = voxgi.render(sc, _solved(sc, 8), progress=False, max_frames=2, tol=0, threads=1)
     np.testing.assert_allclose(out.image, np.broadcast_to([0.25, 0.5, 1.0], out.image.shape))
 
 
@@ -190,7 +196,7 @@ def test_solve_with_lights_uses_exact_direct_light_and_says_so():
     sc = _plane(half=2.0)
     sc.add_light(voxgi.PointLight((0, 1, 0), 1.0))
     vox = voxgi.voxelize(sc, resolution=16, progress=False)
-    sol = voxgi.solve(vox, directions=2, progress=False, threads=1)
+    sol = voxgi.solve(vox, radius=2, progress=False, threads=1, tuning=paper())
     assert sol.stats["direct_light"]["method"] == "exact"
     assert "shooting" in sol.stats["skipped"]
     assert sol.stats["direct_light"]["lights"]["lights"] == 1
@@ -286,7 +292,7 @@ def test_to_mitsuba_lights_match_mitsuba(kind):
     cam = voxgi.Camera(eye=(0, 3, 0.01), target=(0, 0, 0), fov=50, width=16, height=16)
     sc = _plane(half=5.0, camera=cam)
     _mitsuba_cases()[kind](sc)
-    out = voxgi.render(sc, progress=False, resolution=16, max_frames=64, tol=2e-4, threads=1)
+    out = voxgi.render(sc, _solved(sc, 16), progress=False, max_frames=64, tol=2e-4, threads=1)
     ref = render_mitsuba(sc, 1024)
     # a single plane has no indirect light: the two differ by noise only
     # (measured relMSE: delta lights <= 6e-5, environments <= 1.2e-3 with a
@@ -321,7 +327,7 @@ def test_environment_reads_radiance_hdr_files(tmp_path):
 def test_stratified_environment_samples_are_unbiased():
     # each point must be uniform in the cube: E[u0 u1] = E[u0 u2] = 1/4 even
     # though u0 and (u1, u2) are stratified separately (k = 4: 2 x 2 grid)
-    from voxgi.display.shader import _stratified
+    from voxgi.display.lighting import _stratified
 
     u = _stratified(np.random.default_rng(5), 50000, 4).reshape(50000, 4, 3)
     for a, b in ((0, 1), (0, 2)):
@@ -340,8 +346,8 @@ def test_closed_box_receives_all_of_a_point_lights_power():
     sc = voxgi.scenes.cornell_box(8, 8, closed=True, area_light=False)
     sc.add_light(voxgi.PointLight((0.278, 0.4, 0.2795), 0.25))
     vox = voxgi.voxelize(sc, resolution=32, progress=False)
-    tuning = voxgi.SolveTuning(direct_light="exact")
-    sol = voxgi.solve(vox, directions=4, progress=False, threads=1, tuning=tuning)
+    tuning = paper(direct_light="exact")
+    sol = voxgi.solve(vox, radius=4, progress=False, threads=1, tuning=tuning)
     e = sol.stats["energy"]
     np.testing.assert_allclose(e["emitted"], math.pi, rtol=1e-3)
     np.testing.assert_allclose(e["escaping_shoot"], 0.0, atol=1e-12)

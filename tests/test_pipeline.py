@@ -1,4 +1,4 @@
-"""The display's solve (voxgi.pipeline): its gathering radius."""
+"""voxgi.solve and voxgi.render (voxgi.pipeline): one set of defaults, and its radius."""
 
 import dataclasses
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import voxgi
-from voxgi import pipeline
+from voxgi.radiosity.tuning import LINES_RADIUS, TRACED_RADIUS
 
 
 @pytest.fixture(scope="module")
@@ -14,35 +14,66 @@ def cornell_records():
     return voxgi.voxelize(voxgi.scenes.cornell_box(), resolution=32, progress=False)
 
 
-def _relative_l1(vox, a, b) -> float:
-    """Area-weighted relative L1 distance of two solutions' radiosity."""
-    area = np.asarray(vox.area)[:, None]
-    return float((area * np.abs(a.radiosity - b.radiosity)).sum() / (area * b.radiosity).sum())
+def _area_l1(vox, x) -> float:
+    """Area-weighted L1 norm of per-record values ``x`` (N, 3)."""
+    return float((np.asarray(vox.area, np.float64)[:, None] * np.abs(x)).sum())
 
 
-def test_display_solve_takes_the_coarse_radius_only_where_it_traces(cornell_records):
+def test_render_solves_as_solve_does():
+    # render(scene) voxelizes and solves with the defaults of voxelize and
+    # solve: solving first gives the same picture, bit for bit.
+    scene = voxgi.scenes.cornell_box(width=24, height=24)
+    kw = dict(max_frames=4, tol=0.0, seed=5, progress=False)
+    one_call = voxgi.render(scene, **kw)
+    sol = voxgi.solve(voxgi.voxelize(scene), progress=False)
+    assert np.array_equal(sol.radiosity, one_call.solution.radiosity)
+    assert np.array_equal(voxgi.render(scene, sol, **kw).image, one_call.image)
+    # the comparison sees the solve: another radius, another picture
+    other = voxgi.solve(voxgi.voxelize(scene), radius=TRACED_RADIUS + 1, progress=False)
+    assert not np.array_equal(voxgi.render(scene, other, **kw).image, one_call.image)
+
+
+def test_the_radius_is_coarse_only_where_traced_passes_follow(cornell_records):
     vox = cornell_records
-    sol = pipeline.solve_for_display(vox, progress=False)
-    assert sol.stats["directions"]["gather"]["radius"] == pipeline.RENDER_DIRECTIONS
+    sol = voxgi.solve(vox, progress=False)
+    assert sol.stats["directions"]["gather"]["radius"] == TRACED_RADIUS
     assert sol.stats["traced"]["passes"] >= 2
+    assert sol.stats["direct_light"]["method"] == "exact"
     # records without their scene: the lines alone carry the reflected light
     bare = dataclasses.replace(vox, scene=None)
-    sol = pipeline.solve_for_display(bare, progress=False)
-    assert sol.stats["directions"]["gather"]["radius"] == pipeline.RENDER_DIRECTIONS_LINES_ONLY
+    sol = voxgi.solve(bare, progress=False)
+    assert sol.stats["directions"]["gather"]["radius"] == LINES_RADIUS
     assert "traced_bounces" in sol.stats["skipped"]
+    # a fixed number of bounces leaves the reflected light to the lines too
+    sol = voxgi.solve(vox, max_bounces=2, progress=False)
+    assert sol.stats["directions"]["gather"]["radius"] == LINES_RADIUS
+    # the paper's method: its own radius and tolerance
+    paper = voxgi.SolveTuning.paper()
+    sol = voxgi.solve(bare, max_bounces=1, progress=False, tuning=paper)
+    assert sol.stats["directions"]["gather"]["radius"] == 22
+    assert sol.stats["direct_light"]["method"] == "shoot"
 
 
-def test_traced_passes_make_the_lines_radius_immaterial(cornell_records):
-    # The traced passes carry the reflected light from the lines' answer on:
-    # at radius 4 and 12 their solutions agree within 1% (0.23% measured),
-    # where the lines alone differ by 1.3%.
+def test_traced_passes_shrink_the_lines_radius_error(cornell_records):
+    # The traced passes start from the lines' answer R0 and carry the light
+    # by rho T, T the transport against the exact triangles, estimated by rays
+    # whose seeds do not depend on R0. Were every pass's estimate the same,
+    # R0 would drop out of the answer but for its truncation, which the
+    # stopping rule bounds by tol of the total in each run. It survives in
+    # the passes' differences: rho times the rays' relative error on the
+    # start's difference, under 2 / sqrt(16) = 1/2 with at least 16 rays a
+    # record in every pass (two standard errors, the change being no
+    # rougher than the light). Hence, in the area-weighted L1 norm,
+    # |traced(4) - traced(12)| <= rho_max |lines(4) - lines(12)| / 2 + 2 tol |B|.
     vox = cornell_records
-    kw = {"tol": pipeline.RENDER_SOLVE_TOL, "progress": False}
-    traced = {
-        R: voxgi.solve(vox, directions=R, tuning=pipeline.RENDER_SOLVE_TUNING, **kw)
-        for R in (4, 12)
-    }
-    lines_only = dataclasses.replace(pipeline.RENDER_SOLVE_TUNING, indirect_light="lines")
-    lines = {R: voxgi.solve(vox, directions=R, tuning=lines_only, **kw) for R in (4, 12)}
-    assert _relative_l1(vox, traced[4], traced[12]) < 0.01
-    assert _relative_l1(vox, lines[4], lines[12]) > 0.01
+    traced = {R: voxgi.solve(vox, radius=R, progress=False) for R in (4, 12)}
+    lines_only = voxgi.SolveTuning(indirect_light="lines")
+    lines = {R: voxgi.solve(vox, radius=R, progress=False, tuning=lines_only) for R in (4, 12)}
+    rho_max = float(vox.albedo.max())
+    tol = voxgi.SolveTuning().tol
+    total = _area_l1(vox, traced[12].radiosity)
+    lines_gap = _area_l1(vox, lines[4].radiosity - lines[12].radiosity)
+    traced_gap = _area_l1(vox, traced[4].radiosity - traced[12].radiosity)
+    assert lines_gap > 0
+    assert traced_gap <= rho_max * lines_gap / 2 + 2 * tol * total, (traced_gap, lines_gap, total)
+    assert min(traced[4].stats["traced"]["samples"]) >= 16

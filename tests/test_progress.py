@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import math
+import re
 
 import pytest
 
@@ -95,3 +96,31 @@ def test_log_share_is_the_way_down_on_a_log_scale():
     assert _progress.log_share(1e-1, 1e-1, 1e-4) == 0.0
     assert _progress.log_share(1e-1, 1e-5, 1e-4) == 1.0
     assert _progress.log_share(1e-1, math.nan, 1e-4) == 0.0
+
+
+def test_no_bars_when_stderr_is_not_a_terminal(tmp_path, capsys):
+    # capsys's stderr is not a terminal, as a file or a pipe is not: the
+    # bars of the voxelization, the solve and the display write nothing.
+    argv = ["render", "cornell-box", "-o", str(tmp_path / "c.exr"), "--resolution", "8"]
+    assert main([*argv, "--frames", "2", "--width", "16", "--height", "16"]) == 0
+    err = capsys.readouterr().err
+    assert err == ""
+
+
+def test_the_display_bar_counts_towards_the_frames_it_needs(monkeypatch):
+    # On a terminal the display's bar shows "frames done/frames predicted";
+    # the render stops at the rule's floor of 8 frames here (a coarse
+    # Cornell box well under its tolerance), so the bar counts to 8 of 8
+    # and never towards the cap of 256 frames.
+    import voxgi
+
+    tty = _Terminal()
+    monkeypatch.setattr("sys.stderr", tty)
+    scene = voxgi.scenes.cornell_box(width=32, height=32)
+    vox = voxgi.voxelize(scene, resolution=16, progress=False)
+    sol = voxgi.solve(vox, progress=False)
+    res = voxgi.display.render(scene, sol, tol=0.5, max_frames=256, progress=True)
+    drawn = [(int(n), int(m)) for n, m in re.findall(r"(\d+)/(\d+) \[", tty.getvalue())]
+    assert drawn, tty.getvalue()
+    assert drawn[-1] == (res.frames, res.frames)
+    assert max(m for _, m in drawn) < 256

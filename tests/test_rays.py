@@ -1,4 +1,4 @@
-"""Embree ray queries (voxgi.rays): the compiled scene and embreex's calls."""
+"""Embree ray queries (voxgi.rays): the compiled scene, checked against embreex's own calls."""
 
 from __future__ import annotations
 
@@ -9,11 +9,7 @@ import pytest
 
 import voxgi
 from voxgi import _core
-from voxgi.rays import Tracer, embree_library
-
-needs_native = pytest.mark.skipif(
-    embree_library() is None, reason="no Embree 4 library found beside embreex"
-)
+from voxgi.rays import Tracer, embree_library, embree_version
 
 
 def unit_square_scene() -> voxgi.Scene:
@@ -31,17 +27,23 @@ def unit_square_scene() -> voxgi.Scene:
     return scene
 
 
-@pytest.fixture(params=[True, False], ids=["native", "embreex"])
-def native(request):
-    if request.param and embree_library() is None:
-        pytest.skip("no Embree 4 library found beside embreex")
-    return request.param
+def test_the_compiled_path_is_the_one_that_traces():
+    # The rays go through the compiled core and the Embree 4 of embreex, or
+    # nothing works: a render says nothing about another path.
+    assert embree_version().split(".")[0] == "4"
+    scene = voxgi.scenes.cornell_box(width=8, height=8)
+    with Tracer(scene, 1) as tr:
+        assert isinstance(tr.native, _core.RayScene)
+        assert tr.native.embree_version == embree_version()
+    vox = voxgi.voxelize(scene, resolution=8, progress=False)
+    sol = voxgi.solve(vox, radius=4, progress=False)
+    out = voxgi.display.render(scene, sol, max_frames=1, progress=False)
+    assert not any("embreex" in s or "compiled" in s for s in out.stats["skipped"])
 
 
-def test_rays_down_onto_a_square_hit_the_right_triangle_at_the_right_point(native):
+def test_rays_down_onto_a_square_hit_the_right_triangle_at_the_right_point():
     scene = unit_square_scene()
-    with Tracer(scene, 2, native=native) as tr:
-        assert (tr.native is not None) == native
+    with Tracer(scene, 2) as tr:
         rng = np.random.default_rng(1)
         xy = rng.uniform(0.02, 0.98, (5000, 2))
         xy = xy[np.abs(xy[:, 0] - xy[:, 1]) > 1e-3]  # off the shared diagonal
@@ -60,15 +62,16 @@ def test_rays_down_onto_a_square_hit_the_right_triangle_at_the_right_point(nativ
         np.testing.assert_array_equal(tr.intersect(org, down), prim)
         # the square lies 1 below: a segment of 0.99 misses it, one of 1.01 does not
         short = np.full(len(org), 0.99, np.float32)
-        assert not np.any(tr.occluded(org, down, short) != -1)
-        assert np.all(tr.occluded(org, down, short + 0.02) != -1)
+        occ = tr.occluded(org, down, short)
+        assert occ.dtype == np.uint8
+        assert not np.any(occ)
+        assert np.all(tr.occluded(org, down, short + 0.02) == 1)
         # upward rays meet nothing
         up = -down
         assert np.all(tr.intersect(org, up) == -1)
-        assert np.all(tr.occluded(org, up, np.full(len(org), np.inf, np.float32)) == -1)
+        assert np.all(tr.occluded(org, up, np.full(len(org), np.inf, np.float32)) == 0)
 
 
-@needs_native
 def test_the_compiled_scene_answers_as_embreex_does():
     scene = voxgi.scenes.cornell_box()
     rng = np.random.default_rng(0)
@@ -78,19 +81,30 @@ def test_the_compiled_scene_answers_as_embreex_does():
     d = rng.normal(size=(n, 3))
     d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
     length = rng.uniform(0.0, 0.6 * ext.max(), n).astype(np.float32)
-    answers = []
-    for native, threads in ((False, 1), (True, 1), (True, 2)):
-        with Tracer(scene, threads, native=native) as tr:
+    # embreex's own Python calls on the same triangles, with the robust flag
+    # the compiled scene sets, are the reference
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    with Tracer(scene, 1) as tr:
+        ref = rtcore_scene.EmbreeScene()
+        TriangleMesh(ref, np.ascontiguousarray(tr.tris, np.float32))
+        hit = ref.run(org, d, query="INTERSECT", output=1)
+        blocked = np.asarray(ref.run(org, d, query="OCCLUDED", dists=length)) != -1
+        answers = [
+            (blocked.astype(np.uint8), np.asarray(hit["primID"], np.int32), hit["u"], hit["v"])
+        ]
+    for threads in (1, 2):
+        with Tracer(scene, threads) as tr:
             answers.append((tr.occluded(org, d, length), *tr.first_hit(org, d)))
     # a mixture of hits and misses, of blocked and free segments
     assert 0.3 < np.mean(answers[0][1] >= 0) < 1.0
-    assert 0.1 < np.mean(answers[0][0] != -1) < 0.9
+    assert 0.1 < np.mean(answers[0][0]) < 0.9
     for other in answers[1:]:
         for a, b in zip(answers[0], other, strict=True):
             np.testing.assert_array_equal(a, b)
 
 
-@needs_native
 def test_an_empty_or_degenerate_query_meets_nothing():
     tris = np.zeros((0, 3, 3), np.float32)
     s = _core.RayScene(embree_library(), tris)
@@ -106,7 +120,6 @@ def test_an_empty_or_degenerate_query_meets_nothing():
     np.testing.assert_array_equal(s.occluded(org, d, length), [0, 0, 1])
 
 
-@needs_native
 def test_bad_libraries_and_arrays_are_named():
     tri = np.zeros((1, 3, 3), np.float32)
     with pytest.raises(RuntimeError, match="cannot open the Embree library /no/such/libembree"):
@@ -130,20 +143,12 @@ def test_bad_libraries_and_arrays_are_named():
         )
 
 
-def test_a_library_that_cannot_be_opened_is_named_and_the_queries_still_answer(
-    monkeypatch, tmp_path
-):
-    # A file that is not Embree where the library should be: the tracer says
-    # which file and why, and answers through embreex instead.
+def test_a_library_that_cannot_be_opened_is_named(monkeypatch, tmp_path):
+    # A file that is not Embree where the library should be: the tracer
+    # refuses with an ImportError that names the file and the embreex range.
     fake = tmp_path / "libembree4.so.4"
     fake.write_bytes(b"not a shared library")
     monkeypatch.setattr(voxgi.rays, "embree_library", lambda: str(fake))
-    scene = unit_square_scene()
-    with Tracer(scene, 1) as tr:
-        assert tr.native is None
-        assert str(fake) in tr.why_not_native
-        org = np.float32([[0.3 - tr.centre[0], 0.6 - tr.centre[1], 1.0 - tr.centre[2]]])
-        prim, _, _ = tr.first_hit(org, np.float32([[0, 0, -1]]))
-        assert prim.tolist() == [1]
-    with Tracer(scene, 1, native=False) as tr:
-        assert "native=False" in tr.why_not_native
+    with pytest.raises(ImportError, match=r"embreex>=4\.4,<5") as info:
+        Tracer(unit_square_scene(), 1)
+    assert str(fake) in str(info.value)

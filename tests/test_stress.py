@@ -15,10 +15,11 @@ import warnings
 import numpy as np
 import pytest
 import trimesh
+from conftest import paper
 
 import voxgi
 
-FAST = dict(directions=4, tuning=voxgi.SolveTuning(shoot_directions=4), progress=False)
+FAST = dict(radius=4, tuning=paper(shoot_radius=4), progress=False)
 
 
 def _quad(x, facing):

@@ -34,8 +34,7 @@ def _parallel_squares(h: float = 0.5, top_albedo: float = 0.5):
     return scene
 
 
-@pytest.mark.parametrize("native", [True, False])
-def test_a_point_under_a_square_gathers_its_form_factor(native):
+def test_a_point_under_a_square_gathers_its_form_factor():
     # Radiosity 1 on the top square, 0 on the floor: a floor record gathers
     # the point-to-rectangle form factor at its surface point. Rays drawn
     # uniformly over the hemisphere instead of by cos θ would give the solid
@@ -45,7 +44,7 @@ def test_a_point_under_a_square_gathers_its_form_factor(native):
     vox = voxgi.voxelize(scene, 8, progress=False)
     values = np.where((vox.object_id == 1)[:, None], 1.0, 0.0) * np.ones((1, 3))
     floor = np.flatnonzero((vox.object_id == 0) & ~vox.back & (vox.area > 0))
-    with TracedGather(scene, vox, threads=2, native=native) as g:
+    with TracedGather(scene, vox, threads=2) as g:
         H = g(values, 4096, seed=3)
         assert g.rays == 4096 * np.count_nonzero((vox.area > 0) & (vox.albedo[:, 0] > 0))
     for r in floor:
@@ -153,3 +152,41 @@ def test_a_small_bright_patch_lights_the_ceiling_without_fans():
     assert rms(by_lines[ceiling]) > 0.25  # the fans this test is about
     assert rms(traced[1024][ceiling]) < 0.16
     assert rms(traced[4096][ceiling]) < 0.6 * rms(traced[1024][ceiling])
+
+
+def test_a_grid_over_2_to_the_24_cells_finds_its_records_by_search():
+    # Up to 2^24 cells of the records' bounding grid, a dense table gives each
+    # voxel's first record; beyond, the kernels find a hit's voxel by binary
+    # search over the sorted keys. Two 0.1 squares 0.05 apart, and a speck
+    # at (1, 1, 1) that stretches the grid to 300^3 cells at resolution 300:
+    # a floor record still gathers its form factor from the top square.
+    from voxgi.traced import _record_grid, _voxel_order
+
+    h, a = 0.05, 0.1
+    floor = np.array([(0, 0, 0), (a, 0, 0), (a, a, 0), (0, a, 0)], float)
+    scene = voxgi.Scene()
+    scene.add(trimesh.Trimesh(floor, [[0, 1, 2], [0, 2, 3]], process=False), Material(0.5), "floor")
+    top = floor + np.array([0.0, 0.0, h])
+    scene.add(trimesh.Trimesh(top, [[0, 2, 1], [0, 3, 2]], process=False), Material(0.5), "top")
+    speck = np.array([(1, 1, 1), (0.999, 1, 1), (1, 0.999, 1)], float)
+    scene.add(trimesh.Trimesh(speck, [[0, 1, 2]], process=False), Material(0.0), "speck")
+    vox = voxgi.voxelize(scene, 300)
+    grid = _record_grid(
+        vox, np.zeros(3), np.zeros((len(vox), 3), np.float32), None, _voxel_order(vox)
+    )
+    assert int(np.prod(grid["grid_dims"])) > 1 << 24
+    assert grid["rec_cell_start"].size == 0  # the search, not the table
+    values = np.where((vox.object_id == 1)[:, None], 1.0, 0.0) * np.ones((1, 3))
+    n = 512
+    H, _ = traced_irradiance(scene, vox, values, samples=n, threads=2)
+    floor_rec = np.flatnonzero((vox.object_id == 0) & ~vox.back & (vox.area > 0))
+    for r in floor_rec[:: max(1, len(floor_rec) // 40)]:
+        x, y = vox.centroid[r, :2]
+        F = (
+            _corner_factor(a - x, a - y, h)
+            - _corner_factor(-x, a - y, h)
+            - _corner_factor(a - x, -y, h)
+            + _corner_factor(-x, -y, h)
+        )
+        sigma = math.sqrt(F * (1 - F) / n)
+        assert abs(H[r, 0] - F) < 4 * sigma + 1e-6, (r, H[r, 0], F)

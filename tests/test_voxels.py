@@ -404,7 +404,9 @@ def test_floor_is_cut_by_a_thin_divider():
         assert sorted(strips[vox.ijk[col, 2] == k]) == [0, 1, 2]
     assert vox.stats["cut_clusters"] >= len(np.unique(vox.ijk[col, 2]))
     # Without cutting: one floor record per voxel.
-    plain = voxgi.voxelize(_floor_and_divider(t), 16, cut=False)
+    plain = voxgi.voxels._voxelize(
+        _floor_and_divider(t), 16, threads=None, progress=False, max_memory=None, cut=False
+    )
     pf = front(plain) & (plain.object_id == 0) & (plain.ijk[:, 0] == i_wall)
     assert pf.sum() == len(np.unique(plain.ijk[pf], axis=0))
     assert plain.area[front(plain)].sum(dtype=np.float64) == pytest.approx(

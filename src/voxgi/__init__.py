@@ -8,7 +8,7 @@ Malgouyres, "Affichage non aliasé pour l'illumination globale par voxels").
 >>> import voxgi
 >>> scene = voxgi.scenes.cornell_box(width=64, height=64)
 >>> vox = voxgi.voxelize(scene, resolution=32)
->>> sol = voxgi.solve(vox, directions=4, progress=False)
+>>> sol = voxgi.solve(vox, radius=4, progress=False)
 >>> out = voxgi.render(scene, sol, max_frames=2, progress=False)
 >>> out.image.shape
 (64, 64, 3)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_hits', 'direct_light_rays', 'direct_light_sum', 'direct_light_traced', 'gather_families', 'gather_light', 'gather_rays', 'gather_shade', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'primary_hits', 'shade_brdf', 'voxelize', 'vpl_accumulate', 'vpl_light', 'vpl_prepare']
+__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_hits', 'camera_rays', 'direct_light_traced', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'voxelize', 'vpl_light']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -145,6 +145,11 @@ class RayScene:
         (R,) uint8: 1 where a triangle lies on [org, org + length * dirs).
         """
     @property
+    def embree_version(self) -> str:
+        """
+        The Embree library's version, "major.minor.patch".
+        """
+    @property
     def triangle_count(self) -> int:
         ...
 def batch_error(batches: numpy.typing.NDArray[numpy.float32], size: typing.SupportsFloat | typing.SupportsIndex, frames: typing.SupportsFloat | typing.SupportsIndex, crit: typing.SupportsFloat | typing.SupportsIndex, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
@@ -157,33 +162,33 @@ def batch_error(batches: numpy.typing.NDArray[numpy.float32], size: typing.Suppo
     """
 def camera_hits(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.NDArray[numpy.float64], up: numpy.typing.NDArray[numpy.float64], forward: numpy.typing.NDArray[numpy.float64], tan_half_fov: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, aperture: typing.SupportsFloat | typing.SupportsIndex, focus: typing.SupportsFloat | typing.SupportsIndex, offset: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], lens: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], tri_v: numpy.typing.NDArray[numpy.float64], tri_ng: numpy.typing.NDArray[numpy.float64], corner_normals: numpy.typing.NDArray[numpy.float64] | None, tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], obj_emission: numpy.typing.NDArray[numpy.float32], scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
     """
-    Every pixel's camera ray (the rays of voxgi.display.camera_rays, with
-    eye in the scene's frame), its first hit in scene (a RayScene built from
-    tri_v) and primary_hits on it: pos (P, 3) float64, normal, ng and wo (the
-    unit direction back to the eye) (P, 3) float32, material (P,) int32,
-    emission (P, 3) float32 and the hit triangle (P,) int32 (-1: none),
+    Every pixel's camera ray (camera_rays, with eye in the scene's frame), its
+    first hit in scene (a RayScene built from tri_v) and the hit: the exact point
+    on the hit triangle's plane pos (P, 3) float64, normal, ng and wo (the
+    unit direction back to the eye) (P, 3) float32, the shading and geometric
+    normals turned to the viewer, material (P,) int32 (-1: a miss or a one-sided
+    back), its emission (P, 3) float32 and the hit triangle (P,) int32 (-1: none),
     P = width * height, row-major from the top-left pixel.
     """
-def direct_light_rays(emitters: tuple, point: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float64], shift: numpy.typing.NDArray[numpy.float64], sequence: numpy.typing.NDArray[numpy.float64], offset: typing.SupportsFloat | typing.SupportsIndex, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+def camera_rays(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.NDArray[numpy.float64], up: numpy.typing.NDArray[numpy.float64], forward: numpy.typing.NDArray[numpy.float64], tan_half_fov: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, aperture: typing.SupportsFloat | typing.SupportsIndex, focus: typing.SupportsFloat | typing.SupportsIndex, offset: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], lens: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
     """
-    The light and hemisphere rays of records (samples each, record-major).
-    
-    emitters: (corners (E,3,3), normal (E,3), two_sided (E,) uint8, radiance (E,3),
-    cdf (E,), density (E,)), float64 but two_sided. point, normal (N,3), shift
-    (N,5), sequence (S,5) float64. Returns float32 arrays: light origin (M,3),
-    direction (M,3), length (M,), contribution (M,3), hemisphere origin (M,3) and
-    direction (M,3), M = N x S.
-    """
-def direct_light_sum(emitters: tuple, point: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float64], shift: numpy.typing.NDArray[numpy.float64], sequence: numpy.typing.NDArray[numpy.float64], offset: typing.SupportsFloat | typing.SupportsIndex, contribution: numpy.typing.NDArray[numpy.float32], light_hit: numpy.typing.NDArray[numpy.int32], hemi_direction: numpy.typing.NDArray[numpy.float32], hemi_hit: numpy.typing.NDArray[numpy.int32], hemi_u: numpy.typing.NDArray[numpy.float32], hemi_v: numpy.typing.NDArray[numpy.float32], emitter_of: numpy.typing.NDArray[numpy.int32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
-    """
-    Per record: direct irradiance (N,3) float64 and the mean square of
-    the luminance of each light + hemisphere sample pair (N,) float64.
+    Every pixel's camera ray through sub-pixel offset (x right, y down, in
+    [0, 1)^2) and lens point (unit disc, scaled by aperture): origins and unit
+    directions (P, 3) float64, P = width * height, row-major from the top-left
+    pixel; right, up, forward the camera's unit frame (Camera.frame), a pinhole
+    for aperture 0, else a thin lens focused at distance focus along forward.
     """
 def direct_light_traced(emitters: tuple, point: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float64], shift: numpy.typing.NDArray[numpy.float64], sequence: numpy.typing.NDArray[numpy.float64], offset: typing.SupportsFloat | typing.SupportsIndex, emitter_of: numpy.typing.NDArray[numpy.int32], scene: ..., emitter_scene: ... = None, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
     """
-    direct_light_rays, the rays traced in scene (a RayScene of the
-    triangles emitter_of indexes) and direct_light_sum, record by record without
-    ray arrays: the same per-record irradiance (N,3) and mean square (N,).
+    Direct light on records from emitting triangles: light and hemisphere
+    samples (samples each) combined by the power heuristic, traced in scene (a
+    RayScene of the triangles emitter_of (F,) int32 indexes) record by record.
+    
+    emitters: (corners (E,3,3), normal (E,3), two_sided (E,) uint8, radiance (E,3),
+    cdf (E,), density (E,)), float64 but two_sided. point, normal (N,3), shift
+    (N,5), sequence (S,5) float64. Returns the per-record irradiance (N,3) and
+    the mean square of the luminance of each light + hemisphere sample pair (N,),
+    float64.
     emitter_scene (a RayScene of the emitters' corners alone, in their order;
     None: not used): a hemisphere ray is traced against the emitters, and
     against scene only up to the nearest emitter it meets.
@@ -196,23 +201,18 @@ def gather_families(ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing
     families[family_indices] and returns the partial sums, (N, 3) float64 (see
     LineSystem.gather); sums from disjoint subsets add up to the full pass.
     """
-def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], n_gather: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, tri_v: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], rec_sorted_key: numpy.typing.NDArray[numpy.int64], rec_cell_start: numpy.typing.NDArray[numpy.int32], rec_packed: numpy.typing.NDArray[numpy.float32], grid_dims: numpy.typing.NDArray[numpy.int64], grid_lo: numpy.typing.NDArray[numpy.int64], grid_origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> int:
-    """
-    gather_rays, their first hits in scene (a RayScene built from tri_v) and
-    gather_shade, pixel by pixel without ray arrays: the same sums, added into
-    out (P, 3) float32. Returns the number of gather rays.
-    """
-def gather_rays(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], n_gather: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, ray_count: numpy.typing.NDArray[numpy.int64], ray_org: numpy.typing.NDArray[numpy.float32], ray_dir: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> int:
+def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], n_gather: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, tri_v: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], rec_sorted_key: numpy.typing.NDArray[numpy.int64], rec_cell_start: numpy.typing.NDArray[numpy.int32], rec_packed: numpy.typing.NDArray[numpy.float32], grid_dims: numpy.typing.NDArray[numpy.int64], grid_lo: numpy.typing.NDArray[numpy.int64], grid_origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, env_radiance: numpy.typing.NDArray[numpy.float64] | None = None, env_to_world: numpy.typing.NDArray[numpy.float64] | None = None, env_texel_pdf: numpy.typing.NDArray[numpy.float64] | None = None, env_row_solid_angle: numpy.typing.NDArray[numpy.float64] | None = None, env_samples: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> int:
     """
     Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
-    hashed from seed/frame/pixel), written in place into ray_count (P,) int64 and
-    ray_org / ray_dir (C >= P*n_gather, 3) float32. Returns the number of rays.
-    """
-def gather_shade(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], n_gather: typing.SupportsFloat | typing.SupportsIndex, tri_v: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], rec_sorted_key: numpy.typing.NDArray[numpy.int64], rec_cell_start: numpy.typing.NDArray[numpy.int32], rec_packed: numpy.typing.NDArray[numpy.float32], grid_dims: numpy.typing.NDArray[numpy.int64], grid_lo: numpy.typing.NDArray[numpy.int64], grid_origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, ray_count: numpy.typing.NDArray[numpy.int64], ray_dir: numpy.typing.NDArray[numpy.float32], prim: numpy.typing.NDArray[numpy.int32], out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
-    """
-    Shade the gather rays (prim: first triangle hit, -1 none) with the radiance
-    of the record at each hit point, MIS-weighted against the VPLs; adds into
-    out (P, 3) float32.
+    hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
+    as they are made, each shaded with the radiance of the record at its hit
+    point (rec_*, grid_*, pitch: voxgi.traced.record_grid), MIS-weighted against
+    the VPLs; added into out (P, 3) float32. With the environment's tables
+    (env_radiance (H, W, 3) float64, env_to_world (3, 3), env_texel_pdf (H*W,),
+    env_row_solid_angle (H,) float64, as voxgi.Environment samples), a ray that
+    meets nothing adds the environment's radiance MIS-weighted against
+    env_samples environment samples per pixel. Returns the number of gather
+    rays.
     """
 def geometry_filter(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_glossy: numpy.typing.NDArray[numpy.uint8], eye: numpy.typing.NDArray[numpy.float64], pixel_angle: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, radius: typing.SupportsInt | typing.SupportsIndex, reflected: numpy.typing.NDArray[numpy.float32], out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
     """
@@ -233,13 +233,6 @@ def light_accumulate(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: n
     Light along known directions (delta lights, environment samples, escaped
     gather rays): adds f(wi, wo) max(0, n.wi) weight into out (P, 3) for each ray
     (pixel-major, ray_count (P,) int64) not occluded (uint8 (R,), or empty: none).
-    """
-def primary_hits(org: numpy.typing.NDArray[numpy.float64], dirs: numpy.typing.NDArray[numpy.float64], prim: numpy.typing.NDArray[numpy.int32], tri_v: numpy.typing.NDArray[numpy.float64], tri_ng: numpy.typing.NDArray[numpy.float64], corner_normals: numpy.typing.NDArray[numpy.float64] | None, tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], obj_emission: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
-    """
-    Primary hits of camera rays (prim: first triangle, -1 none): the exact
-    point on the hit triangle's plane (P, 3) float64, the shading and geometric
-    normals turned to the viewer (P, 3) float32, the material (P,) int32 (-1: a
-    miss or a one-sided back) and its emission (P, 3) float32.
     """
 def shade_brdf(mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], material: numpy.typing.NDArray[numpy.int32], n: numpy.typing.NDArray[numpy.float32], k1: numpy.typing.NDArray[numpy.float32], k2: numpy.typing.NDArray[numpy.float32]) -> numpy.typing.NDArray[numpy.float32]:
     """
@@ -285,22 +278,12 @@ def voxelize(triangles: numpy.typing.NDArray[numpy.float64], tri_object: numpy.t
         ``object_id`` (N,) int32, ``back`` (N,) bool, ``side`` (N,) int8 and
         ``stats`` (dict of counts and seconds).
     """
-def vpl_accumulate(ray_count: numpy.typing.NDArray[numpy.int64], ray_contrib: numpy.typing.NDArray[numpy.float32], occluded: numpy.typing.NDArray[numpy.uint8], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> numpy.typing.NDArray[numpy.float32]:
-    """
-    Pass 2 of a display frame: per pixel, the sum of the contributions of the
-    rays not occluded (uint8 (R,)), in ray order. Returns (P, 3) float32.
-    """
 def vpl_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], vpl_pos: numpy.typing.NDArray[numpy.float64], vpl_normal: numpy.typing.NDArray[numpy.float32], vpl_weight: numpy.typing.NDArray[numpy.float32], vpl_area: numpy.typing.NDArray[numpy.float32], vpl_pa: numpy.typing.NDArray[numpy.float32], n_gather: typing.SupportsFloat | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., pixel_set: numpy.typing.NDArray[numpy.int32] | None = None, set_start: numpy.typing.NDArray[numpy.int64] | None = None, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
     """
-    vpl_prepare, the shadow rays against scene (a RayScene) and vpl_accumulate,
-    pixel by pixel without ray arrays: the same (P, 3) float32 sums, and the
-    number of shadow rays traced. With pixel_set (P,) int32 and set_start (S+1,)
-    int64, pixel p sees only the VPLs of set pixel_set[p].
-    """
-def vpl_prepare(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], vpl_pos: numpy.typing.NDArray[numpy.float64], vpl_normal: numpy.typing.NDArray[numpy.float32], vpl_weight: numpy.typing.NDArray[numpy.float32], vpl_area: numpy.typing.NDArray[numpy.float32], vpl_pa: numpy.typing.NDArray[numpy.float32], n_gather: typing.SupportsFloat | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, ray_count: numpy.typing.NDArray[numpy.int64], ray_org: numpy.typing.NDArray[numpy.float32], ray_dir: numpy.typing.NDArray[numpy.float32], ray_len: numpy.typing.NDArray[numpy.float32], ray_contrib: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> int:
-    """
-    Pass 1 of a display frame: per (pixel, VPL) pair the unoccluded contribution
-    and a shadow ray where it is non-zero.
+    The VPLs' light at the hits: per (pixel, VPL) pair the unoccluded term and
+    its shadow ray, traced in scene (a RayScene) as it is made; returns each
+    pixel's sum over its free rays in VPL order (P, 3) float32 and the number of
+    shadow rays traced.
     
     Inputs are C-contiguous: hit_pos (P, 3) float64, hit_normal / hit_ng / hit_wo
     (P, 3) float32 unit vectors on the viewer's side, hit_material (P,) int32
@@ -308,11 +291,7 @@ def vpl_prepare(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.
     mat_nv (M,) float32, mat_glossy (M,) uint8; vpl_pos (K, 3) float64,
     vpl_normal (K, 3), vpl_weight (K, 3) = (TA/n) B/pi, vpl_area (K,) float32,
     vpl_pa (K,) float32: n_v times the area pdf of VPLs combined with gather rays
-    (their weight is B/pi; n_gather rays per pixel), 0 for the others.
-    
-    Outputs, written in place (buffers reused across frames, room for >= P*K
-    rays): ray_count (P,) int64, ray_org (C, 3), ray_dir (C, 3), ray_len (C,),
-    ray_contrib (C, 3) float32, rays pixel-major in VPL order. Returns the
-    number R of rays written (the first R rows).
+    (their weight is B/pi; n_gather rays per pixel), 0 for the others. With pixel_set (P,) int32 and set_start (S+1,)
+    int64, pixel p sees only the VPLs of set pixel_set[p].
     """
 __version__: str = '0.1.0'

@@ -17,6 +17,9 @@ from __future__ import annotations
 import math
 import sys
 
+#: tqdm ``bar_format`` of a bar whose total is 100 (a share of the way, in percent).
+PERCENT = "{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}{postfix}"
+
 
 def interactive(stream=None) -> bool:
     """True when ``stream`` (default ``sys.stderr``) is watched: a terminal or

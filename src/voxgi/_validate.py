@@ -157,3 +157,28 @@ def threads(value, what: str = "threads") -> int:
     if value is None:
         return int(_core.hardware_threads())
     return integer(value, what, low=1, high=1024)  # type: ignore[return-value]
+
+
+def nondegenerate(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) bool: the faces with an area, relative to each triangle's own size.
+
+    Zero area, a repeated vertex or collinear corners (to 1e-12 of the
+    longest edge squared) make a face degenerate; the test is relative so that
+    a scene far from the origin or at any scale keeps its faces.
+    """
+    t = vertices[faces]
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    dbl_area = np.linalg.norm(np.cross(e1, e2), axis=1)
+    edge2 = np.max([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e2 - e1)], axis=0)
+    return dbl_area > 1e-12 * edge2
+
+
+def all_degenerate(vertices, faces) -> bool:
+    """Whether a mesh of finite vertices and valid faces has faces and every one
+    is degenerate (a mesh with other faults is for :meth:`voxgi.Scene.add` to name)."""
+    v, f = np.asarray(vertices, np.float64), np.asarray(faces)
+    if v.ndim != 2 or v.shape[1:] != (3,) or f.ndim != 2 or f.shape[1:] != (3,) or len(f) == 0:
+        return False
+    if not np.all(np.isfinite(v)) or f.min() < 0 or f.max() >= len(v):
+        return False
+    return not nondegenerate(v, f).any()

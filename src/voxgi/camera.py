@@ -61,7 +61,9 @@ class Camera:
         object.__setattr__(self, "target", tuple(target.tolist()))
         object.__setattr__(self, "up", tuple(up.tolist()))
         fwd = target - eye
-        if np.linalg.norm(fwd) <= 1e-12 * max(1.0, np.linalg.norm(eye)):
+        # relative to the camera's own scale: a scene in any unit has a camera
+        reach = max(np.linalg.norm(eye), np.linalg.norm(target))
+        if not np.linalg.norm(fwd) > 1e-12 * reach:
             raise ValueError(f"Camera: eye {eye.tolist()} and target {target.tolist()} coincide")
         side = np.linalg.norm(np.cross(fwd / np.linalg.norm(fwd), up))
         if side < 1e-6 * max(np.linalg.norm(up), 1e-300):

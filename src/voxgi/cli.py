@@ -2,8 +2,8 @@
 
 Exit codes: 0 done; 1 a scene file or value that cannot be used; 2 a bad
 command line or an output that cannot be written (both checked before any
-work); 130 interrupted (Ctrl-C). Errors are one line on stderr, never a
-traceback.
+work; missing output folders are created); 130 interrupted (Ctrl-C).
+Errors are one line on stderr, never a traceback.
 """
 
 from __future__ import annotations
@@ -93,10 +93,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="voxelize, solve and render a scene to EXR + PNG",
         description="Render a scene to a linear EXR and a tone-mapped PNG preview beside it. "
         "The EXR also holds each pixel's estimated standard error in the channels "
-        "stderr.R, stderr.G, stderr.B. "
+        "stderr.R, stderr.G, stderr.B, and the pixel AOVs of the camera hits: "
+        "albedo.R/G/B, normal.X/Y/Z, depth.Z and object_id. "
         "Exit codes: 0 done, 1 a scene or value that cannot be used, 2 a bad "
-        "command line or an output that cannot be written (checked before any "
-        "work), 130 interrupted by Ctrl-C (a partial image is written only if a "
+        "command line or an output that cannot be written (a read-only file, a folder "
+        "that cannot be written; checked before any work, and missing folders are "
+        "created), 130 interrupted by Ctrl-C (a partial image is written only if a "
         "frame finished; its EXR header says so).",
     )
     _add_render_arguments(r)
@@ -121,7 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_render_arguments(r: argparse.ArgumentParser) -> None:
     """Add the ``render`` subcommand's arguments to its parser ``r``."""
-    from .pipeline import RENDER_DIRECTIONS, RENDER_RESOLUTION
+    from .radiosity.tuning import TRACED_RADIUS
+    from .voxels import DEFAULT_RESOLUTION
 
     r.add_argument(
         "scene",
@@ -141,17 +144,21 @@ def _add_render_arguments(r: argparse.ArgumentParser) -> None:
         "--resolution",
         metavar="N",
         type=_at_least(2),
-        default=RENDER_RESOLUTION,
+        default=DEFAULT_RESOLUTION,
         help="voxels along the scene's longest side",
     )
     r.add_argument(
-        "--directions",
+        "--radius",
         metavar="R",
         type=_at_least(1),
-        default=RENDER_DIRECTIONS,
-        help="radius R of the solve's gathering direction set",
+        default=TRACED_RADIUS,
+        help="radius R of the solve's gathering direction set, whose answer its traced "
+        "passes finish",
     )
+    # the option's former name, kept working
+    r.add_argument("--directions", dest="radius", type=_at_least(1), help=argparse.SUPPRESS)
     _add_display_arguments(r)
+    _add_path_arguments(r)
     r.add_argument(
         "--threads",
         metavar="N",
@@ -174,6 +181,7 @@ def _add_render_arguments(r: argparse.ArgumentParser) -> None:
 def _add_compare_arguments(c: argparse.ArgumentParser) -> None:
     """Add the ``compare`` subcommand's arguments to its parser ``c``."""
     c.add_argument("scene", help="scene TOML file, or a built-in scene name (see 'voxgi scenes')")
+    _add_path_arguments(c)
     c.add_argument(
         "--spp", metavar="N", type=_at_least(2), default=1024, help="spp of Mitsuba's reference"
     )
@@ -207,6 +215,8 @@ def _add_compare_arguments(c: argparse.ArgumentParser) -> None:
 
 def _add_display_arguments(r: argparse.ArgumentParser) -> None:
     """Add the ``render`` options of the display and its image (frames to seed)."""
+    from .io import TONEMAPS
+
     r.add_argument(
         "--frames",
         "--spp",
@@ -228,8 +238,24 @@ def _add_display_arguments(r: argparse.ArgumentParser) -> None:
         "--exposure",
         metavar="EV",
         type=_finite(),
-        default=0.0,
-        help="exposure of the PNG preview in stops (the EXR stays linear)",
+        default=None,
+        help="exposure of the PNG preview in stops (the EXR stays linear) (default: the "
+        "exposure that maps the image's log-average luminance to middle grey, 0.18)",
+    )
+    r.add_argument(
+        "--denoise",
+        action="store_true",
+        help="denoise the image with Intel Open Image Denoise guided by the render's "
+        "albedo and normal AOVs (needs pip install 'voxgi[denoise]'); --tol still bounds "
+        "the undenoised image's estimated error, and the EXR keeps that image in the "
+        "channels undenoised.R/G/B",
+    )
+    r.add_argument(
+        "--tonemap",
+        choices=TONEMAPS,
+        default="reinhard",
+        help="tone curve of the PNG preview: 'reinhard' compresses the highlights so "
+        "that only the brightest 0.1%% of pixels reach white, 'clip' clips at 1",
     )
     r.add_argument(
         "--width",
@@ -273,12 +299,20 @@ def check_writable(paths) -> None:
     """Fail now, before any work, if a file cannot be written at each of ``paths``.
 
     Creates missing folders, then a temporary file in each folder (removed
-    at once): the same steps the final writes take.
+    at once): the same steps the final writes take. A read-only file
+    (:func:`voxgi.io.is_read_only`) is refused, as the final write would.
     """
+    from .io import is_read_only
+
     for path in paths:
         path = Path(path)
         if path.is_dir():
             raise UsageError(f"cannot write {path}: it is a folder")
+        if is_read_only(path):
+            raise UsageError(f"cannot write {path}: the file is read-only")
+        blocker = next((p for p in path.parents if p.exists() and not p.is_dir()), None)
+        if blocker is not None:
+            raise UsageError(f"cannot write {path}: {blocker} is a file, not a folder")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             with tempfile.NamedTemporaryFile(
@@ -323,18 +357,55 @@ def _interrupted(text: str) -> int:
     return EXIT_INTERRUPTED
 
 
+def _load_scene(args, src: Path | None, name: str):
+    """The scene of a file (through the path policy the options widen) or a
+    built-in name; a scene without a camera is a ValueError (exit 1)."""
+    from . import scenes
+    from .scene import Scene
+
+    if src is None:
+        return scenes.get(name)
+    scene = Scene.load(src, search_paths=args.search_path or (), allow_outside=args.allow_outside)
+    if scene.camera is None:
+        raise ValueError(
+            f"scene file {src}: has no camera to render from (an OBJ holds none); "
+            "name the file in a TOML scene with a [camera] table (docs/scene-files.md)"
+        )
+    return scene
+
+
+def _add_path_arguments(r: argparse.ArgumentParser) -> None:
+    """The options that widen what a scene file may read (docs/scene-files.md)."""
+    r.add_argument(
+        "--search-path",
+        metavar="DIR",
+        action="append",
+        default=None,
+        help="a folder besides the scene file's own that its meshes, includes and "
+        "textures may lie in (repeatable)",
+    )
+    r.add_argument(
+        "--allow-outside",
+        action="store_true",
+        help="let the scene file read any path it names",
+    )
+
+
 def _prepare_render(args):
     """Resolve the scene and outputs (checked writable), load the scene and size its
     camera; returns ``(scene, name, exr, png)``."""
-    from . import scenes
-    from .scene import Scene
 
     src, name = _scene_source(args.scene)
     exr, png = output_paths(args.output if args.output else f"{name}.exr")
     check_writable((exr, png))
-    scene = Scene.load(src) if src is not None else scenes.get(name)
-    if scene.camera is None:
-        raise UsageError(f"scene {name!r} has no camera")
+    if args.denoise:
+        from .denoise import load_oidn
+
+        try:
+            load_oidn()
+        except ImportError as exc:  # before any work, as the outputs are checked
+            raise UsageError(f"--denoise: {exc}") from None
+    scene = _load_scene(args, src, name)
     changes = {k: v for k, v in (("width", args.width), ("height", args.height)) if v is not None}
     if changes:
         scene.camera = scene.camera.replace(**changes)
@@ -357,12 +428,10 @@ def _run_voxelize(args, scene):
 
 def _run_solve(args, vox):
     """Solve the radiosity for the display and report it; returns ``(sol, seconds)``."""
-    from .pipeline import solve_for_display
+    from .pipeline import solve
 
     t0 = time.perf_counter()
-    sol = solve_for_display(
-        vox, directions=args.directions, threads=args.threads, progress=not args.quiet
-    )
+    sol = solve(vox, radius=args.radius, threads=args.threads, progress=not args.quiet)
     t_sol = time.perf_counter() - t0
     traced = sol.stats.get("traced")
     then = (
@@ -380,7 +449,7 @@ def _run_solve(args, vox):
 
 def _run_display(args, scene, sol):
     """Render the image by progressive display frames."""
-    from .display import render
+    from .display import RenderTuning, render
 
     return render(
         scene,
@@ -390,6 +459,7 @@ def _run_display(args, scene, sol):
         seed=args.seed,
         progress=not args.quiet,
         threads=args.threads,
+        tuning=RenderTuning(denoise=True) if args.denoise else None,
     )
 
 
@@ -420,7 +490,7 @@ def _timings(t_vox: float, t_sol: float, sec: dict) -> dict:
     return timings
 
 
-def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
+def _render_metadata(args, name: str, cam, vox, res, timings: dict, exposure: float) -> dict:
     """The EXR header's record of the render: its settings, sizes and timings."""
     s = res.stats
     return {
@@ -429,7 +499,7 @@ def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
         "height": cam.height,
         "resolution": vox.resolution,
         "records": len(vox),
-        "directions": args.directions,
+        "radius": res.solution.stats["directions"]["gather"]["radius"],
         "frames": res.frames,
         "max_frames": args.frames,
         "tol": args.tol,
@@ -440,7 +510,10 @@ def _render_metadata(args, name: str, cam, vox, res, timings: dict) -> dict:
         "gather_per_frame": s["gather_per_frame"],
         "light_spread": s["light_spread"],
         "seed": args.seed,
-        "exposure": args.exposure,
+        "exposure": exposure,
+        "exposure_auto": args.exposure is None,
+        "tonemap": args.tonemap,
+        "denoised": bool(res.stats.get("denoised")),
         "interrupted": bool(s.get("interrupted")),
         "seconds": timings,
         "skipped": s["skipped"],
@@ -473,12 +546,13 @@ def run_render(args) -> int:
         return _interrupted("interrupted before the first display frame finished; nothing written")
     _report_display(args, res, interrupted)
     timings = _timings(t_vox, t_sol, res.stats["seconds"])
-    meta = _render_metadata(args, name, cam, vox, res, timings)
+    exposure = io.auto_exposure(res.image) if args.exposure is None else args.exposure
+    meta = _render_metadata(args, name, cam, vox, res, timings, exposure)
     # Each write is atomic (voxgi.io.atomic_path): a Ctrl-C here leaves every
     # file either as it was or complete.
     try:
-        io.write_exr(exr, res.image, metadata=meta, stderr=res.stderr)
-        io.write_png(png, res.image, exposure=args.exposure)
+        io.write_exr(exr, res.image, metadata=meta, stderr=res.stderr, layers=res.exr_layers())
+        io.write_png(png, res.image, exposure=exposure, tonemap=args.tonemap)
     except KeyboardInterrupt:
         return _interrupted("interrupted while writing; the outputs are whole (old or new)")
     if interrupted:
@@ -491,16 +565,12 @@ def run_render(args) -> int:
 
 def run_compare(args) -> int:
     """``voxgi compare``: voxgi against Mitsuba 3 on one scene; prints the table."""
-    from . import scenes
     from .compare import compare
-    from .scene import Scene
 
     src, name = _scene_source(args.scene)
     out_dir = Path(args.out_dir if args.out_dir else f"compare_{name}")
     check_writable([out_dir / "voxgi.exr"])
-    scene = Scene.load(src) if src is not None else scenes.get(name)
-    if scene.camera is None:
-        raise UsageError(f"scene {name!r} has no camera")
+    scene = _load_scene(args, src, name)
     try:
         res = compare(
             scene,
@@ -572,9 +642,16 @@ def main(argv: list[str] | None = None) -> int:
     except UsageError as exc:
         print(f"voxgi {args.command}: error: {exc}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE) from None
-    except (ValueError, TypeError, FileNotFoundError) as exc:
-        # bad scene files and values: a message, not a traceback
+    except (ValueError, TypeError, OSError) as exc:
+        # bad or unreadable scene files and values: a message, not a traceback
         raise SystemExit(f"voxgi {args.command}: error: {exc}") from None
+    except MemoryError:
+        raise SystemExit(
+            f"voxgi {args.command}: error: out of memory (a lower --resolution or a smaller "
+            "image needs less)"
+        ) from None
+    except RecursionError:
+        raise SystemExit(f"voxgi {args.command}: error: input nested too deeply") from None
     except KeyboardInterrupt:
         print(f"voxgi {args.command}: interrupted; nothing written", file=sys.stderr)
         return EXIT_INTERRUPTED

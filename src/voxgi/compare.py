@@ -25,8 +25,10 @@ from . import _validate
 from .display import camera_rays
 from .metrics import flip, rel_mse, ssim
 from .pipeline import render as pipeline_render
+from .pipeline import solve
 from .rays import Tracer
 from .scene import Scene
+from .voxels import voxelize
 
 __all__ = ["Comparison", "compare"]
 
@@ -262,9 +264,14 @@ def compare(
 
     # voxgi with its defaults: voxelize + solve + display
     t0 = time.perf_counter()
-    out = pipeline_render(
-        scene, camera=cam, resolution=resolution, seed=seed, threads=threads, progress=progress
-    )
+    sol, seconds = None, {}
+    if resolution is not None:
+        vox = voxelize(scene, resolution, threads=threads)
+        seconds["voxelize"] = time.perf_counter() - t0
+        sol = solve(vox, threads=threads, progress=progress)
+        seconds["solve"] = time.perf_counter() - t0 - seconds["voxelize"]
+    out = pipeline_render(scene, sol, camera=cam, seed=seed, threads=threads, progress=progress)
+    out.stats["seconds"].update(seconds)
     t_voxgi = time.perf_counter() - t0
     img = out.image
 

@@ -25,7 +25,7 @@ import numpy as np
 from . import _core, _validate
 from ._qmc import sobol
 from .lights import LUMINANCE
-from .rays import Tracer, embree_library
+from .rays import Tracer, ray_scene
 from .scene import Scene
 from .voxels import VoxelSet
 
@@ -303,10 +303,8 @@ class _Rays:
         # emitter costs about its first hit, and the scene's ray would come
         # on top.
         self.emitter_scene = None
-        if self.tracer.native is not None and 0 < len(emit) <= len(self.tracer.tris) // 2:
-            self.emitter_scene = _core.RayScene(
-                embree_library(), np.ascontiguousarray(self.emitters[0], np.float32)
-            )
+        if 0 < len(emit) <= len(self.tracer.tris) // 2:
+            self.emitter_scene = ray_scene(np.ascontiguousarray(self.emitters[0], np.float32))
         self.point = np.asarray(vox.centroid, np.float64) - centre
         self.normal = np.asarray(vox.normal, np.float64)
         self.offset, self.threads = offset, threads
@@ -367,27 +365,8 @@ def _batch(args: tuple, rays: _Rays) -> tuple[np.ndarray, np.ndarray]:
     luminance (R,), from which the caller judges each record's noise.
     """
     tracer, nthreads, emitter_of = rays.tracer, rays.threads, rays.emitter_of
-    if tracer.native is not None:
-        return _core.direct_light_traced(
-            *args, emitter_of, tracer.native, rays.emitter_scene, threads=nthreads
-        )
-    lo, ld, length, contribution, ho, hd = _core.direct_light_rays(*args, threads=nthreads)
-    # light rays that cannot contribute (a back face at either end) have length 0
-    live = np.flatnonzero(length > 0)
-    light_hit = np.full(len(length), -1, np.int32)
-    if len(live):
-        light_hit[live] = tracer.occluded(lo[live], ld[live], length[live])
-    hit, u, v = tracer.first_hit(ho, hd)
-    return _core.direct_light_sum(
-        *args,
-        contribution,
-        light_hit,
-        hd,
-        hit,
-        np.ascontiguousarray(u, np.float32),
-        np.ascontiguousarray(v, np.float32),
-        emitter_of,
-        threads=nthreads,
+    return _core.direct_light_traced(
+        *args, emitter_of, tracer.native, rays.emitter_scene, threads=nthreads
     )
 
 
@@ -467,12 +446,7 @@ def _free(tracer: Tracer, org: np.ndarray, dirs: np.ndarray, length: np.ndarray)
     """(R,) bool: nothing on the segments (scene-centred origins)."""
     if len(org) == 0:
         return np.zeros(0, bool)
-    hit = tracer.occluded(
-        np.ascontiguousarray(org, np.float32),
-        np.ascontiguousarray(dirs, np.float32),
-        np.ascontiguousarray(length, np.float32),
-    )
-    return hit == -1
+    return tracer.occluded(org, dirs, length) == 0
 
 
 def _light_batch(scene, tracer, x, nrm, samples, rng, offset) -> tuple[np.ndarray, int]:

@@ -317,6 +317,14 @@ class Environment:
             self._tables = (p, cdf, omega_row, cos_edges)
         return self._tables
 
+    def density_tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """The tables of :meth:`pdf`: each texel's probability (H*W,) float64,
+        row-major, and the solid angle of one texel of each row (H,) float64;
+        the density at a direction is its texel's probability over its row's
+        solid angle."""
+        p, _, omega_row, _ = self._build()
+        return p, omega_row
+
     def pdf(self, dirs: np.ndarray) -> np.ndarray:
         """(N,) solid-angle density of :meth:`sample` at world directions."""
         p, _, omega_row, _ = self._build()

@@ -1,11 +1,12 @@
-"""Scene to image in one call: voxelize, solve and display with the defaults.
+"""Scene to image: ``voxgi.solve`` and ``voxgi.render``, with one set of defaults.
 
 This module sits above the stages (:mod:`voxgi.voxels`, :mod:`voxgi.radiosity`,
-:mod:`voxgi.display`) and only calls their public functions. ``voxgi.solve``
-and ``voxgi.render`` are :func:`solve` and :func:`render` from here: they
-take ``client=``, a ``dask.distributed.Client`` or an executor, and hand the
-stages its executor (:func:`voxgi.distributed.executor`); :func:`render`
-also accepts ``sol=None`` and then voxelizes and solves the scene first.
+:mod:`voxgi.display`) and only calls their public functions. :func:`solve`
+is :func:`voxgi.radiosity.solve` with ``client=``, a
+``dask.distributed.Client`` or an executor (:func:`voxgi.distributed.executor`);
+:func:`render` displays a solution, and with ``sol=None`` voxelizes and
+solves the scene first with the same defaults, so that
+``render(scene, solve(voxelize(scene)))`` is ``render(scene)``.
 """
 
 from __future__ import annotations
@@ -20,147 +21,151 @@ from .radiosity import solve as radiosity_solve
 from .scene import Camera, Scene
 from .voxels import VoxelSet, voxelize
 
-__all__ = [
-    "RENDER_DIRECTIONS",
-    "RENDER_DIRECTIONS_LINES_ONLY",
-    "RENDER_RESOLUTION",
-    "RENDER_SOLVE_TOL",
-    "RENDER_SOLVE_TUNING",
-    "render",
-    "solve",
-    "solve_for_display",
-]
-
-#: Voxel resolution used by ``render(scene)`` without a solution and by
-#: ``voxgi render``: on the Cornell box at 256x256 against a converged
-#: path-traced reference (``benchmarks/time_vs_error.py``), past resolution
-#: 64 the display's noise at its default tolerance, not the voxels, sets the
-#: picture's error.
-RENDER_RESOLUTION = 64
-#: Gathering radius of that solve. Its traced passes (below) carry the
-#: reflected light; the lines only give them a start, and a coarse start
-#: costs them nothing: against R 12, solutions at R 4 gave pictures within
-#: 1.1e-4 relMSE of theirs in six scenes (at most a ninth of the default
-#: tolerance; the door room, lit through a slit, the farthest) and the same
-#: error against the path-traced references of the Cornell box, ``shadow``
-#: and ``geometric``, for a solve about 25% shorter (``docs/design.md`` §5).
-#: R 3 takes a third traced pass and no less time.
-RENDER_DIRECTIONS = 4
-#: The radius when the records carry no scene to trace, so the lines alone
-#: carry the reflected light.
-RENDER_DIRECTIONS_LINES_ONLY = 8
-#: The solve's ``tol`` in that pipeline: tighter changes the picture's error
-#: by nothing the display can show, and costs more bounces.
-RENDER_SOLVE_TOL = 1e-3
-#: The rest of that solve's settings: no diagnostic passes, and direct light
-#: by shadow rays to the exact emitters (``docs/design.md`` §5), which thin
-#: occluders in front of a lamp or window cannot swallow, and whose cost does
-#: not grow with the number of emitter records. 16 sample pairs a record are
-#: enough for the picture: on the Cornell box at 256x256 its error after 64
-#: frames is that of 64 pairs (the display averages many records), and the
-#: solve takes less time than with the shooting. The reflected light then
-#: takes traced passes too (``docs/design.md`` §5): gaps, bars and walls
-#: thinner than a voxel act as they are, for 0.1-0.35 s at resolution 64
-#: in the built-in interiors.
-RENDER_SOLVE_TUNING = SolveTuning(
-    diagnostics=False, direct_light="exact", direct_samples=16, indirect_light="traced"
-)
+__all__ = ["render", "solve"]
 
 
 def solve(
     vox: VoxelSet,
-    directions: int = 22,
-    max_bounces: int | None = None,
-    tol: float = 1e-4,
-    threads: int | None = None,
-    client=None,
     *,
+    radius: int | None = None,
+    tol: float | None = None,
+    max_bounces: int | None = None,
+    threads: int | None = None,
     progress: bool = True,
+    client=None,
     tuning: SolveTuning | None = None,
 ) -> Solution:
-    """Solve the radiosity of ``vox``: :func:`voxgi.radiosity.solve`, whose
-    arguments these are, with ``client`` a ``dask.distributed.Client`` or an
-    executor (:mod:`voxgi.distributed`; ``pip install "voxgi[dask]"``) to
-    run the passes on.
+    """Solve the radiosity of every record of ``vox``.
 
+    By default the accurate pipeline, the one :func:`render` solves with:
+    direct light by shadow rays to the exact emitters, the reflected light
+    gathered along the discrete lines and then finished by passes of rays
+    against the exact triangles, to a remaining error of 1e-3
+    (``docs/design.md`` §5). ``tuning=voxgi.SolveTuning.paper()`` runs the
+    paper's method instead (shooting, lines only, radius 22, tol 1e-4).
+
+    Parameters
+    ----------
+    vox : VoxelSet
+        Records from :func:`voxgi.voxelize`; left unchanged.
+    radius : int or None
+        Radius R >= 1 of the gathering direction set (R 4: 198 directions,
+        R 8: 762, R 22: 5982). None: ``tuning.radius``, else 4 where traced
+        passes finish the reflected light and 8 where the lines alone carry
+        it (the records carry no scene, ``indirect_light="lines"``, or
+        ``max_bounces`` is set).
+    tol : float or None
+        Bound on the estimated remaining relative error of the reflected
+        light (area-weighted), for the lines and then for the traced passes.
+        None: ``tuning.tol`` (1e-3; the paper's 1e-4).
+    max_bounces : int or None
+        At most this many gathering iterations along the lines, and then no
+        traced passes (None: until converged; 0: direct light only).
+    threads : int or None
+        Threads (None: all hardware threads). Results do not depend on it.
+    progress : bool
+        Show a tqdm progress bar over the iterations.
+    client : dask.distributed.Client, executor or None
+        Where the passes run: None here; a Dask client or any
+        :class:`voxgi.radiosity.LineExecutor` (``pip install "voxgi[dask]"``;
+        :mod:`voxgi.distributed`). The answer is the local one to float rounding.
+    tuning : SolveTuning or None
+        What the solve computes and how (None: ``SolveTuning()``, the
+        accurate pipeline; :meth:`SolveTuning.paper`: the paper's method).
+
+    Returns
+    -------
+    Solution
+        ``radiosity`` (N, 3) float32 per record, ``bounces``, ``residuals``
+        and ``stats`` (ray counts, seconds per phase, what was skipped and why).
+
+    Raises
+    ------
+    TypeError, ValueError, MemoryError
+        Bad arguments; a memory estimate over what is available.
+
+    Examples
+    --------
     >>> import voxgi
-    >>> vox = voxgi.voxelize(voxgi.scenes.furnace_box(albedo=0.5), resolution=8, progress=False)
-    >>> sol = voxgi.solve(vox, directions=4, progress=False,
-    ...                   tuning=voxgi.SolveTuning(shoot_directions=4))
+    >>> vox = voxgi.voxelize(voxgi.scenes.furnace_box(albedo=0.5), resolution=8)
+    >>> sol = voxgi.solve(vox, progress=False)
     >>> bool(sol.radiosity.max() > 0)
     True
     """
     return radiosity_solve(
         vox,
-        directions,
-        max_bounces,
-        tol,
-        threads,
-        distributed.executor(client),
+        radius=radius,
+        tol=tol,
+        max_bounces=max_bounces,
+        threads=threads,
+        executor=distributed.executor(client),
         progress=progress,
         tuning=tuning,
-    )
-
-
-def solve_for_display(
-    vox: VoxelSet,
-    *,
-    directions: int | None = None,
-    threads: int | None = None,
-    progress: bool = True,
-    client=None,
-) -> Solution:
-    """Solve ``vox`` as the display needs it: :data:`RENDER_SOLVE_TOL` and
-    :data:`RENDER_SOLVE_TUNING` (exact direct light, no diagnostic passes).
-
-    Parameters
-    ----------
-    vox : VoxelSet
-        Records from :func:`voxgi.voxelize`.
-    directions : int or None
-        Gathering radius R (None: :data:`RENDER_DIRECTIONS`, or
-        :data:`RENDER_DIRECTIONS_LINES_ONLY` when ``vox.scene`` is None).
-    threads, progress, client
-        As for :func:`solve`.
-    """
-    if directions is None:
-        traced = getattr(vox, "scene", None) is not None
-        directions = RENDER_DIRECTIONS if traced else RENDER_DIRECTIONS_LINES_ONLY
-    return solve(
-        vox,
-        directions=directions,
-        tol=RENDER_SOLVE_TOL,
-        threads=threads,
-        progress=progress,
-        client=client,
-        tuning=RENDER_SOLVE_TUNING,
     )
 
 
 def render(
     scene: Scene,
     sol: Solution | None = None,
-    vpls_per_frame: int | None = None,
-    max_frames: int | None = None,
-    tol: float | None = None,
-    seed: int = 0,
-    progress: bool = True,
-    threads: int | None = None,
-    client=None,
     *,
+    tol: float | None = None,
+    max_frames: int | None = None,
     camera: Camera | None = None,
+    seed: int = 0,
+    threads: int | None = None,
+    progress: bool = True,
+    client=None,
     tuning: RenderTuning | None = None,
-    resolution: int | None = None,
-    directions: int | None = None,
 ) -> RenderResult:
-    """Render ``scene``; with ``sol=None``, voxelize and solve it first.
+    """Render ``scene`` from its camera; with ``sol=None``, voxelize and solve it first.
 
-    Takes the arguments of :func:`voxgi.display.render`, with ``client`` a
-    ``dask.distributed.Client`` or an executor, and when ``sol`` is None also
-    ``resolution`` (default :data:`RENDER_RESOLUTION`) and ``directions``
-    (default :data:`RENDER_DIRECTIONS`). The result's ``solution`` is the
-    solution displayed, and ``stats["seconds"]`` includes ``voxelize`` and
-    ``solve`` when they ran here.
+    Each pixel sees the scene's surfaces lit by the records of the solution,
+    each a virtual point light, in progressive frames averaged until the
+    estimated noise falls under ``tol`` (:func:`voxgi.display.render`,
+    ``docs/design.md`` §6). Without a solution the scene is voxelized at
+    :data:`voxgi.voxels.DEFAULT_RESOLUTION` (64) and solved with
+    :func:`solve`'s defaults, so that ``render(scene, solve(voxelize(scene)))``
+    gives the same picture; for another resolution, radius or solve tuning,
+    call :func:`voxgi.voxelize` and :func:`solve` and pass ``sol``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene, with a camera (``scene.camera``, or ``camera=``).
+    sol : Solution or None
+        The radiosity of ``scene``'s records (:func:`solve`); None: voxelize
+        and solve here.
+    tol : float or None
+        Bound on the estimated relMSE of the picture's remaining noise
+        (None: 1e-3; 0: run ``max_frames`` frames).
+    max_frames : int or None
+        At most this many frames (None: 256).
+    camera : Camera or None
+        Overrides ``scene.camera``.
+    seed : int
+        Seeds the VPL, sub-pixel and lens sequences: the same seed, the same
+        picture, whatever the threads.
+    threads : int or None
+        Threads (None: all hardware threads).
+    progress : bool
+        Show tqdm progress bars (the solve's and the frames').
+    client : dask.distributed.Client, executor or None
+        Where the solve's passes and the frames run (None: here;
+        :mod:`voxgi.distributed`). The picture is the local one.
+    tuning : RenderTuning or None
+        The display's expert settings (:class:`voxgi.RenderTuning`).
+
+    Returns
+    -------
+    RenderResult
+        ``image`` (H, W, 3) float32 linear radiance, ``stderr``, ``frames``,
+        ``solution`` (the one displayed) and ``stats``, whose ``seconds``
+        include ``voxelize`` and ``solve`` when they ran here.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Not a scene, no camera, a solution of another scene, bad arguments.
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
@@ -168,23 +173,20 @@ def render(
     seconds = {}
     if sol is None:
         t0 = time.perf_counter()
-        vox = voxelize(scene, resolution=RENDER_RESOLUTION if resolution is None else resolution)
+        vox = voxelize(scene, threads=threads)
         seconds["voxelize"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        sol = solve_for_display(
-            vox, directions=directions, threads=threads, progress=progress, client=ex
-        )
+        sol = solve(vox, threads=threads, progress=progress, client=ex)
         seconds["solve"] = time.perf_counter() - t0
     out = display_render(
         scene,
         sol,
-        vpls_per_frame,
-        max_frames,
-        tol,
-        seed,
-        progress,
-        threads,
-        ex,
+        max_frames=max_frames,
+        tol=tol,
+        seed=seed,
+        progress=progress,
+        threads=threads,
+        executor=ex,
         camera=camera,
         tuning=tuning,
     )

@@ -5,19 +5,21 @@ spacing at 1e7 is 1, so a scene far from the origin would lose its detail in
 world coordinates. Callers subtract :attr:`Tracer.centre` from their points.
 
 The queries run in the compiled core, on C++ threads with the GIL released,
-against the Embree library that the embreex wheel ships (found by
-:func:`embree_library`). Where that library cannot be found they fall back on
-embreex's own Python calls, split over a thread pool: the same answers, with
-more overhead per batch.
+against the Embree 4 library that the embreex wheel ships (found by
+:func:`embree_library`). There is no other path: where that library cannot
+be opened, or is not Embree 4, :class:`Tracer` raises an :class:`ImportError`
+that says which file and why.
+
+One convention for occlusion everywhere: a query answers (R,) uint8, 1 where
+something lies on the segment, 0 where it is free, as the compiled kernels
+take it.
 """
 
 from __future__ import annotations
 
 import functools
-import itertools
 import os
 import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -25,23 +27,39 @@ import numpy as np
 from . import _core
 from .scene import Scene
 
-__all__ = ["Tracer", "embree_library"]
+__all__ = ["EMBREEX_RANGE", "Tracer", "embree_library", "embree_version", "ray_scene"]
+
+#: The embreex releases whose bundled Embree the compiled core loads
+#: (``pyproject.toml`` pins the same range).
+EMBREEX_RANGE = ">=4.4,<5"
 
 
 @functools.cache
-def embree_library() -> str | None:
-    """Path of the Embree 4 shared library that embreex loads, or None.
+def embree_library() -> str:
+    """Path of the Embree 4 shared library that embreex loads.
 
     auditwheel and delocate put a wheel's bundled libraries beside the
     package (``embreex.libs``, ``embreex/.dylibs``); a source build of
     embreex links a system Embree, which the dynamic loader finds by name.
+
+    Raises
+    ------
+    ImportError
+        Without embreex, or on Windows, where the core cannot open Embree at
+        run time.
     """
     if sys.platform == "win32":
-        return None
+        raise ImportError(
+            "voxgi traces rays with the Embree 4 library opened at run time, "
+            "which is not supported on Windows"
+        )
     try:
         import embreex
-    except ImportError:
-        return None
+    except ImportError as e:
+        raise ImportError(
+            f"voxgi needs embreex{EMBREEX_RANGE} for its Embree 4 library: "
+            f"pip install 'embreex{EMBREEX_RANGE}' ({e})"
+        ) from None
     pkg = Path(embreex.__file__).parent
     for folder, pattern in (
         (pkg.parent / "embreex.libs", "libembree4*.so*"),
@@ -53,8 +71,45 @@ def embree_library() -> str | None:
     return "libembree4.dylib" if sys.platform == "darwin" else "libembree4.so.4"
 
 
+def ray_scene(tris: np.ndarray) -> _core.RayScene:
+    """The compiled Embree scene of triangles ``tris`` (F, 3, 3) float32.
+
+    Raises
+    ------
+    ImportError
+        Naming the library and what went wrong where it cannot be opened or
+        is not Embree 4.
+    """
+    lib = embree_library()
+    try:
+        return _core.RayScene(lib, tris)
+    except RuntimeError as e:
+        try:
+            from importlib.metadata import version
+
+            have = f"embreex {version('embreex')}"
+        except Exception:
+            have = "this embreex"
+        raise ImportError(
+            f"voxgi cannot trace rays: {e}. It needs the Embree 4 library of "
+            f"embreex{EMBREEX_RANGE}; {have} gave {lib}"
+        ) from None
+
+
+@functools.cache
+def embree_version() -> str:
+    """The version ("major.minor.patch") of the Embree library the rays go through.
+
+    Raises
+    ------
+    ImportError
+        Where the library cannot be opened or is not Embree 4.
+    """
+    return ray_scene(np.eye(3, dtype=np.float32)[None]).embree_version
+
+
 class Tracer:
-    """Occlusion and first-hit queries on ``scene``'s triangles, split over threads.
+    """Occlusion and first-hit queries on ``scene``'s triangles, on C++ threads.
 
     Parameters
     ----------
@@ -62,10 +117,7 @@ class Tracer:
         Its triangles, in the order of :meth:`Scene.triangles`, are the
         primitives; a query's answer is an index into them.
     threads : int
-        Worker threads for large batches (1: the calling thread only).
-    native : bool, optional
-        Trace in the compiled core where :func:`embree_library` finds Embree
-        (default); False: always through embreex's Python calls.
+        Worker threads of the queries (1: the calling thread only).
 
     Attributes
     ----------
@@ -73,44 +125,24 @@ class Tracer:
         The frame's origin in world coordinates (the middle of the scene's bounds).
     tris : (F, 3, 3) float64
         The triangles' corners in the centred frame.
-    native : voxgi._core.RayScene or None
+    native : voxgi._core.RayScene
         The compiled scene, which the display and the direct light also hand
-        to their kernels; None on the embreex path.
-    why_not_native : str or None
-        Why the queries go through embreex's Python calls (slower, the same
-        answers), or None when they do not.
+        to their kernels.
+
+    Raises
+    ------
+    ImportError
+        Where the Embree 4 library cannot be opened (:func:`embree_library`).
     """
 
-    def __init__(self, scene: Scene, threads: int, *, native: bool = True):
+    def __init__(self, scene: Scene, threads: int):
         self.centre = scene.bounds.mean(axis=0)
         self.tris = np.concatenate([o.vertices[o.faces] for o in scene.objects]) - self.centre
-        self._tri32 = np.ascontiguousarray(self.tris, dtype=np.float32)
         self.threads = max(1, int(threads))
-        self._pool = None
-        self.native = None
-        self.why_not_native = None
-        lib = embree_library() if native else None
-        if not native:
-            self.why_not_native = "the caller asked for embreex's calls (native=False)"
-        elif lib is None:
-            self.why_not_native = "no Embree 4 library found beside embreex"
-        else:
-            try:
-                self.native = _core.RayScene(lib, self._tri32)
-            except RuntimeError as e:  # not an Embree 4 we can open: embreex's calls below
-                self.why_not_native = str(e)
-        if self.native is None:
-            from embreex import rtcore_scene
-            from embreex.mesh_construction import TriangleMesh
-
-            self.embree = rtcore_scene.EmbreeScene()
-            self._mesh = TriangleMesh(self.embree, self._tri32)
-            self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+        self.native = ray_scene(np.ascontiguousarray(self.tris, dtype=np.float32))
 
     def close(self) -> None:
-        """Release the worker threads."""
-        if self._pool is not None:
-            self._pool.shutdown()
+        """Nothing to release: the compiled scene goes with the tracer."""
 
     def __enter__(self) -> Tracer:
         return self
@@ -119,48 +151,16 @@ class Tracer:
         self.close()
 
     def occluded(self, org: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
-        """(R,) int32: -1 where nothing lies on the segment [org, org + length * dirs)."""
-        if self.native is not None:
-            hit = self.native.occluded(_f32(org), _f32(dirs), _f32(length), self.threads)
-            return hit.astype(np.int32) - 1
-
-        def one(a: int, b: int) -> np.ndarray:
-            hit = self.embree.run(org[a:b], dirs[a:b], query="OCCLUDED", dists=length[a:b])
-            return np.asarray(hit, np.int32)
-
-        return self._split(len(org), one, np.concatenate)
+        """(R,) uint8: 1 where something lies on the segment [org, org + length * dirs), else 0."""
+        return self.native.occluded(_f32(org), _f32(dirs), _f32(length), self.threads)
 
     def intersect(self, org: np.ndarray, dirs: np.ndarray) -> np.ndarray:
         """(R,) int32 index of the first triangle each ray meets, -1 for a miss."""
-        if self.native is not None:
-            return self.native.intersect(_f32(org), _f32(dirs), False, self.threads)[0]
-
-        def one(a: int, b: int) -> np.ndarray:
-            return np.asarray(self.embree.run(org[a:b], dirs[a:b], query="INTERSECT"), np.int32)
-
-        return self._split(len(org), one, np.concatenate)
+        return self.native.intersect(_f32(org), _f32(dirs), False, self.threads)[0]
 
     def first_hit(self, org: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, ...]:
         """(R,) int32 first triangle (-1: none) and float32 barycentrics u, v there."""
-        if self.native is not None:
-            return self.native.intersect(_f32(org), _f32(dirs), True, self.threads)
-
-        def one(a: int, b: int):
-            h = self.embree.run(org[a:b], dirs[a:b], query="INTERSECT", output=1)
-            return np.asarray(h["primID"], np.int32), h["u"], h["v"]
-
-        def join(parts):
-            return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
-
-        return self._split(len(org), one, join)
-
-    def _split(self, n: int, one, join):
-        """``one(a, b)`` over [0, n) in one slice per thread (small batches whole)."""
-        if self._pool is None or n < 4096:
-            return one(0, n)
-        cuts = np.linspace(0, n, self.threads + 1).astype(np.int64)
-        futs = [self._pool.submit(one, int(a), int(b)) for a, b in itertools.pairwise(cuts)]
-        return join([f.result() for f in futs])
+        return self.native.intersect(_f32(org), _f32(dirs), True, self.threads)
 
 
 def _f32(a: np.ndarray) -> np.ndarray:

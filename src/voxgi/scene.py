@@ -9,6 +9,7 @@ written by :mod:`voxgi.formats`.
 from __future__ import annotations
 
 import hashlib
+import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from . import formats
+from . import _validate, formats
 from .camera import Camera
 from .lights import DELTA_LIGHTS, DirectionalLight, Environment, PointLight, SpotLight
 from .materials import AshikhminShirley, Material
@@ -80,14 +81,8 @@ def _mesh_arrays(mesh, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | 
         raise ValueError(f"mesh {name!r}: vertex {bad} is not finite: {v[bad].tolist()}")
     if f.min() < 0 or f.max() >= len(v):
         raise ValueError(f"mesh {name!r}: face indices out of range [0, {len(v)})")
-    # Degenerate faces (zero area, repeated vertex, collinear corners) carry
-    # no light: drop them. The test is relative to each triangle's own size,
-    # so that a scene far from the origin or at any scale keeps its faces.
-    t = v[f]
-    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    dbl_area = np.linalg.norm(np.cross(e1, e2), axis=1)
-    edge2 = np.max([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e2 - e1)], axis=0)
-    keep = dbl_area > 1e-12 * edge2
+    # Degenerate faces carry no light: drop them.
+    keep = _validate.nondegenerate(v, f)
     if not keep.all():
         warnings.warn(
             f"mesh {name!r}: skipped {int((~keep).sum())} degenerate face(s) (zero area)",
@@ -268,8 +263,15 @@ class Scene:
             ``triangles`` (F, 3, 3) float64 corner positions, ``object`` (F,)
             int32 index into :attr:`objects`, ``albedo``/``emission`` (O, 3)
             float32 per object, ``two_sided`` (O,) bool per object.
+
+        Raises
+        ------
+        ValueError
+            If the scene is empty, or its radiosity cannot fit float32
+            (:meth:`check_ranges`).
         """
         self.check_nonempty()
+        self.check_ranges()
         tri = np.concatenate([o.vertices[o.faces] for o in self.objects])
         obj = np.concatenate(
             [np.full(len(o.faces), i, np.int32) for i, o in enumerate(self.objects)]
@@ -298,13 +300,50 @@ class Scene:
             h.update(b"environment" + self.environment.digest().encode())
         return h.hexdigest()[:16]
 
+    def check_ranges(self, source: str = "scene") -> None:
+        """Refuse emitters and lights whose radiosity cannot be held in float32.
+
+        The radiosity of any surface is at most ``(pi Le_max + pi L_env +
+        E_sun) / (1 - rho_max)`` (each bounce returns at most ``rho_max`` of
+        what arrives; docs/design.md §2), so every solve's values fit in
+        float32 when that bound does; a point or spot light must keep its
+        power ``4 pi I`` there. The message names the object.
+        """
+        f32 = float(np.finfo(np.float32).max)
+        rho = max((max(o.material.albedo) for o in self.objects), default=0.0)
+        gain = 1.0 / (1.0 - rho)
+        terms = [
+            (math.pi * max(o.material.emission), f"mesh {o.name!r}: emission {o.material.emission}")
+            for o in self.objects
+            if o.material.is_emitter
+        ]
+        if self.environment is not None:
+            peak = float(self.environment.image.max()) if self.environment.image.size else 0.0
+            terms.append((math.pi * peak, f"environment: radiance up to {peak:.4g}"))
+        for k, light in enumerate(self.lights):
+            if hasattr(light, "irradiance"):
+                terms.append((max(light.irradiance), f"light #{k}: irradiance {light.irradiance}"))
+            elif 4 * math.pi * max(light.intensity) > f32:
+                raise ValueError(
+                    f"{source}: light #{k}: intensity {light.intensity} W/sr gives a power "
+                    f"4 pi I beyond float32's largest value {f32:.4g}"
+                )
+        total = sum(t for t, _ in terms) * gain
+        if total > f32:
+            worst = max(terms)[1]
+            raise ValueError(
+                f"{source}: {worst}: radiosity up to {total:.4g} (emitted, times "
+                f"1 / (1 - {rho:.6g}) for the highest albedo), beyond float32's largest value "
+                f"{f32:.4g}; scale the emission down (radiosity is linear in it)"
+            )
+
     @property
     def has_specular(self) -> bool:
         return any(o.material.specular is not None for o in self.objects)
 
     # -- files --------------------------------------------------------------
     @classmethod
-    def load(cls, path) -> Scene:
+    def load(cls, path, *, search_paths=(), allow_outside: bool = False, limits=None) -> Scene:
         """Load a scene file: voxgi's TOML, Mitsuba 3 XML, OBJ with MTL or glTF 2.0.
 
         The suffix picks the reader: ``.toml`` (below), ``.xml``, ``.obj``,
@@ -347,25 +386,63 @@ class Scene:
             radiance = [1, 1, 1]    # or image = "sky.exr" (lat-long, relative path)
             scale = 1.0             # optional; to_world = [[...3x3 or 4x4...]] optional
 
+        Parameters
+        ----------
+        path : str or Path
+            The scene file.
+        search_paths : sequence of path-like, optional
+            Folders besides the scene file's own that its meshes, includes,
+            textures and buffers may lie in (docs/scene-files.md).
+        allow_outside : bool, optional
+            Let the scene read any path it names.
+        limits : voxgi.formats.Limits, optional
+            Budgets of bytes, elements, includes and texture pixels (default:
+            :meth:`voxgi.formats.Limits.from_env`).
+
         Raises
         ------
+        FileNotFoundError
+            If ``path`` does not exist.
         ValueError
-            Malformed TOML (with line and column), unknown keys, bad values
-            (naming the object and key), missing mesh files.
+            Malformed files (naming the file and its line, or JSON pointer),
+            unknown keys, bad values (naming the object and key), missing or
+            refused files (outside the allowed folders, not regular, over a
+            limit), emission too strong for float32 radiosity.
+
+        Warns
+        -----
+        SceneWarning
+            What a format's reader approximated or left out, and meshes left
+            out because every face of theirs is degenerate.
         """
         path = Path(path)
+        access = formats.FileAccess(path, search_paths, allow_outside, limits)
         loader = formats.LOADERS.get(path.suffix.lower())
         if loader is not None:
-            return cls._from_data(loader(path), str(path))
-        return formats.toml.load_toml(cls(), path)
+            data = loader(
+                path, search_paths=search_paths, allow_outside=allow_outside, limits=limits
+            )
+            scene = cls._from_data(data, str(path), access)
+        else:
+            scene = formats.toml.load_toml(cls(), path, access)
+        scene.check_ranges(str(path))
+        return scene
 
     @classmethod
-    def _from_data(cls, data: formats.SceneData, source: str) -> Scene:
+    def _from_data(cls, data: formats.SceneData, source: str, access=None) -> Scene:
         """The scene of what a :mod:`voxgi.formats` loader read."""
         scene = cls()
         if data.camera is not None:
             scene.camera = formats.toml.camera_from_dict(data.camera, source)
         for m in data.meshes:
+            if _validate.all_degenerate(m.vertices, m.faces):
+                warnings.warn(
+                    formats.SceneWarning(
+                        f"{source}: mesh {m.name!r}: every face is degenerate; left out"
+                    ),
+                    stacklevel=3,
+                )
+                continue
             try:
                 mat = Material(albedo=m.albedo, emission=m.emission)
                 obj = scene.add(
@@ -374,21 +451,38 @@ class Scene:
                     name=m.name,
                     two_sided=m.two_sided,
                 )
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"{source}: mesh {m.name!r}: {exc}") from None
+            except (TypeError, ValueError) as exc:  # (the message names the mesh)
+                raise ValueError(f"{source}: {exc}") from None
             obj.source = m.source
         for k, entry in enumerate(data.lights):
             scene.add_light(formats.toml.light_from_dict(entry, f"{source}: light #{k}"))
         if data.environment is not None:
             scene.environment = formats.toml.environment_from_dict(
-                data.environment, source, Path(source).parent
+                data.environment, source, Path(source).parent, access
             )
+        if not scene.objects:
+            raise ValueError(f"{source}: no mesh with a face that is not degenerate")
         return scene
 
     @classmethod
-    def from_dict(cls, data: dict, base_dir=".", source: str = "<dict>") -> Scene:
-        """Build a scene from the parsed contents of a scene file (see :meth:`load`)."""
-        return formats.toml.fill_scene(cls(), data, base_dir=base_dir, source=source)
+    def from_dict(
+        cls,
+        data: dict,
+        base_dir=".",
+        source: str = "<dict>",
+        *,
+        search_paths=(),
+        allow_outside: bool = False,
+        limits=None,
+    ) -> Scene:
+        """Build a scene from the parsed contents of a scene file (see :meth:`load`);
+        mesh paths are relative to ``base_dir``, the folder the path policy roots."""
+        access = formats.FileAccess(
+            Path(base_dir) / "scene.toml", search_paths, allow_outside, limits
+        )
+        scene = formats.toml.fill_scene(cls(), data, source=source, access=access)
+        scene.check_ranges(source)
+        return scene
 
     def save(self, path) -> Path:
         """Write the scene as a TOML file with one mesh file per object beside it.

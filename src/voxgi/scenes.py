@@ -217,6 +217,8 @@ def furnace_sphere(
         Icosphere subdivision level (4: 5120 triangles).
     inner : bool
         Add a closed box inside with the same material (the answer must not change).
+    width, height : int
+        Image size of the camera, in pixels.
     """
     _validate.integer(subdivisions, "subdivisions", low=0, high=7)
     radius = _validate.real(radius, "radius", low=0.0, low_open=True)
@@ -247,6 +249,23 @@ def furnace_box(
 
     Every point has radiance ``Le / (1 - rho)``. With ``inner=True`` a closed
     sphere with the same material sits inside.
+
+    Parameters
+    ----------
+    albedo, emission : float or (3,) float
+        Uniform albedo ``rho`` in [0, 1) and emitted radiance ``Le``.
+    size : float
+        Edge length of the cube (scene units).
+    inner : bool
+        Add a closed sphere inside with the same material (the answer must
+        not change).
+    width, height : int
+        Image size of the camera, in pixels.
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     size = _validate.real(size, "size", low=0.0, low_open=True)
     mat = Material(albedo=albedo, emission=emission)
@@ -275,6 +294,25 @@ def cap_sphere(
     ``L(x) = Le(x) + rho * Le_mean / (1 - rho)`` with ``Le_mean`` the
     area-weighted mean emission (docs/design.md §1). Triangles whose centroid
     lies within ``cap_angle`` degrees of +y form the object ``cap``.
+
+    Parameters
+    ----------
+    albedo, emission : float or (3,) float
+        Uniform albedo ``rho`` in [0, 1), and the emitted radiance ``Le`` of
+        the cap (the rest emits nothing).
+    cap_angle : float
+        Half-angle of the emitting cap around +y, in degrees.
+    radius : float
+        Sphere radius (scene units).
+    subdivisions : int
+        Icosphere subdivision level (5: 20,480 triangles).
+    width, height : int
+        Image size of the camera, in pixels.
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     cap_angle = _validate.real(
         cap_angle, "cap_angle", low=0.0, high=180.0, low_open=True, high_open=True
@@ -309,6 +347,20 @@ def bunny_room(
 
     A 4 × 3 × 4 room (scene units), normals inward; the bunny is 1.8 units
     wide; a one-sided 1 × 1 area light hangs 0.01 under the ceiling.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size of the camera, in pixels.
+    bunny_albedo, room_albedo : float or (3,) float
+        Albedo of the bunny and of the room's walls, in [0, 1).
+    light_radiance : (3,) float
+        Emitted radiance of the ceiling light (W/(m² sr) per channel).
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     s = Scene(
         Camera(
@@ -388,6 +440,20 @@ def labyrinth(width: int = 512, height: int = 512, cells: int = 6, seed: int = 3
     a closed 6 × 1 × 6 room; a small ceiling light over cell (0, 0); the camera
     looks down into the maze from above the far corner. Long light paths
     (the paper's Labyrinth has light path length 9).
+
+    Parameters
+    ----------
+    width, height : int
+        Image size of the camera, in pixels.
+    cells : int
+        Cells along each side of the maze.
+    seed : int
+        Seed of the maze's depth-first construction.
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     _validate.integer(cells, "cells", low=2, high=32)
     rng = np.random.default_rng(seed)
@@ -458,6 +524,16 @@ def emission(width: int = 512, height: int = 512) -> Scene:
     A small intense quad, a large dim panel on a wall, and a glowing sphere
     (emission tests of Smits & Jensen): the display must sample small bright
     emitters without fireflies.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size of the camera, in pixels.
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     s = Scene(
         Camera(
@@ -494,6 +570,16 @@ def shadow(width: int = 512, height: int = 512) -> Scene:
 
     Thin plates and a sphere hang above the floor of a closed room; the
     shadows' penumbrae widen with the gap, which the display must resolve.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size of the camera, in pixels.
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     s = Scene(
         Camera(
@@ -526,6 +612,16 @@ def geometric(width: int = 512, height: int = 512) -> Scene:
 
     A torus, a cylinder, a cone, a thin slab leaning on a wall, a concave
     open box and a cluster of small cubes, under a ceiling light.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size of the camera, in pixels.
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     s = Scene(
         Camera(
@@ -589,6 +685,20 @@ def sponza_atrium(
     Columns (cylinders) carry arches (segmented half-rings) on two storeys
     around a 10 × 4 courtyard; a large emitting "sky" quad covers the opening.
     Built from primitives, several thousand triangles.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size of the camera, in pixels.
+    columns_per_side : int
+        Columns along each long side of the courtyard.
+    sections : int
+        Segments of each arch's half-ring.
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     _validate.integer(columns_per_side, "columns_per_side", low=2, high=40)
     _validate.integer(sections, "sections", low=6, high=128)
@@ -667,6 +777,21 @@ def window_room(
     do to direct light carried along discrete lines (``docs/design.md`` §5).
     ``window_radiance=None`` leaves the opening open, for a sun or sky
     outside (:func:`sun_room`).
+
+    Parameters
+    ----------
+    width, height : int
+        Image size of the camera, in pixels.
+    bar : float
+        Width of the window's four sash bars (metres).
+    window_radiance : float or None
+        Radiance of the emitter outside the window; None leaves the opening
+        open (no emitter).
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     W, H, D = 4.0, 2.6, 5.0
     x0, x1, y0, y1, t = 1.2, 2.8, 0.9, 2.1, -0.3
@@ -722,6 +847,16 @@ def point_lit_box(width: int = 256, height: int = 256) -> Scene:
     The point light hangs 15 cm under the centre of the ceiling with the
     on-axis intensity of the area light it replaces (its radiance times its
     area, W/sr): the same light straight down, more to the sides.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size of the camera, in pixels.
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     s = cornell_box(width, height, area_light=False)
     area = 0.130 * 0.105
@@ -736,6 +871,18 @@ def sun_room(width: int = 256, height: int = 256, irradiance: float = 20.0) -> S
     surface facing it) comes in through the window at about 30° below the
     horizon, so a patch of sunlight, striped by the sash bars' shadows, falls
     on the floor and the table; the rest of the room is lit by its bounces.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size of the camera, in pixels.
+    irradiance : float
+        Irradiance of the sun on a surface facing it (W/m²).
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     s = window_room(width, height, window_radiance=None)
     s.add_light(DirectionalLight((0.25, -0.55, 1.0), irradiance))
@@ -748,6 +895,18 @@ def sky_objects(width: int = 256, height: int = 256, sky: float = 1.0) -> Scene:
     Ground 8 x 8 m (albedo 0.5), a 1 m box (0.7, reddish) and a sphere of
     radius 0.6 m (0.7, bluish), lit only by a constant environment of
     radiance ``sky``; the camera sees the horizon, so some pixels see the sky.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size of the camera, in pixels.
+    sky : float
+        Radiance of the constant environment (W/(m² sr)).
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
     """
     cam = Camera(eye=(0.0, 1.6, 4.5), target=(0.0, 0.4, 0.0), fov=45, width=width, height=height)
     s = Scene(camera=cam)
@@ -840,7 +999,25 @@ def names() -> list[str]:
 
 
 def get(name: str, **kwargs) -> Scene:
-    """A built-in scene by its command-line name (``cornell-box``, ...)."""
+    """A built-in scene by its command-line name (``cornell-box``, ...).
+
+    Parameters
+    ----------
+    name : str
+        A name of :func:`names` (``cornell-box``; underscores are accepted).
+    **kwargs
+        Passed to the scene's function (``width=``, ``height=``, ...).
+
+    Returns
+    -------
+    Scene
+        A new scene with its camera set.
+
+    Raises
+    ------
+    ValueError
+        If ``name`` is not a built-in scene's name.
+    """
     key = name.replace("_", "-").lower()
     if key not in _REGISTRY:
         raise ValueError(f"unknown built-in scene {name!r}; known: {', '.join(names())}")

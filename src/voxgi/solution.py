@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import atomic_path
+from .io import atomic_path, check_solution_records, read_npz
 from .voxels import VoxelSet
 
 __all__ = ["Solution"]
@@ -72,6 +72,8 @@ class Solution:
             "residuals": [float(r) for r in self.residuals],
             "stats": self.stats,
             "vox_stats": self.vox.stats,
+            # (lets a loaded file's object ids be checked against the scene's count)
+            "objects": None if self.vox.scene is None else len(self.vox.scene.objects),
         }
         for f in fields(VoxelSet):
             v = getattr(self.vox, f.name)
@@ -168,29 +170,50 @@ class Solution:
             sol.radiosity = r.astype(np.float32)
         if not np.all(np.isfinite(sol.radiosity)):
             raise ValueError(f"{path}: radiosity has values that are not finite in float32")
+        check_solution_records(vox, sol.radiosity, str(path), sol.stats.pop("objects", None))
         return sol
 
     @classmethod
     def _load(cls, path: Path) -> Solution:
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(bytes(z["meta"]).decode())
-            kw = {}
-            for f in fields(VoxelSet):
-                if "vox_" + f.name in z.files:
-                    kw[f.name] = z["vox_" + f.name]
-                elif "vox_" + f.name in meta:
-                    kw[f.name] = meta["vox_" + f.name]
-            kw["stats"] = meta.get("vox_stats", {})
-            kw["pitch"] = float(kw["pitch"])
-            kw["resolution"] = int(kw["resolution"])
-            vox = VoxelSet(**kw)
-            return cls(
-                vox=vox,
-                radiosity=z["radiosity"],
-                bounces=meta["bounces"],
-                residuals=meta["residuals"],
-                stats=meta["stats"],
-            )
+        # each array's .npy header is checked against its shape before it is read
+        z = read_npz(path, _FILE_ARRAYS)
+        meta = json.loads(bytes(z["meta"]).decode())
+        kw = {}
+        for f in fields(VoxelSet):
+            if "vox_" + f.name in z:
+                kw[f.name] = z["vox_" + f.name]
+            elif "vox_" + f.name in meta:
+                kw[f.name] = meta["vox_" + f.name]
+        kw["stats"] = meta.get("vox_stats", {})
+        kw["pitch"] = float(kw["pitch"])
+        kw["resolution"] = int(kw["resolution"])
+        vox = VoxelSet(**kw)
+        sol = cls(
+            vox=vox,
+            radiosity=z["radiosity"],
+            bounces=meta["bounces"],
+            residuals=meta["residuals"],
+            stats=meta["stats"],
+        )
+        sol.stats["objects"] = meta.get("objects")
+        return sol
+
+
+#: The arrays of a solution file: shape ("n": the record count) and dtype.
+_FILE_ARRAYS = {
+    "vox_ijk": (("n", 3), np.int32),
+    "meta": ((-1,), np.uint8),
+    "vox_normal": (("n", 3), np.float32),
+    "vox_area": (("n",), np.float32),
+    "vox_albedo": (("n", 3), np.float32),
+    "vox_emission": (("n", 3), np.float32),
+    "vox_centroid": (("n", 3), np.float64),
+    "vox_object_id": (("n",), np.int32),
+    "vox_back": (("n",), np.bool_),
+    "vox_side": (("n",), np.int8),
+    "vox_origin": ((3,), np.float64),
+    "radiosity": (("n", 3), (np.float32, np.float64)),
+}
 
 
 def _json_default(o):

@@ -28,7 +28,7 @@ from .rays import Tracer
 from .scene import Scene
 from .voxels import VoxelSet
 
-__all__ = ["TracedGather", "record_grid", "traced_irradiance"]
+__all__ = ["DENSE_TABLE_CELLS", "TracedGather", "record_grid", "traced_irradiance"]
 
 
 #: Columns of a row of ``rec_packed``, float32, 64 bytes: the layout of
@@ -47,8 +47,19 @@ def _voxel_order(vox: VoxelSet) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
     return lo, dims, key, np.argsort(key, kind="stable")
 
 
+#: Cells of the records' bounding grid up to which a lookup reads a dense
+#: table of each voxel's first record (4 bytes a cell, 64 MB at most) instead
+#: of a binary search over the sorted keys.
+DENSE_TABLE_CELLS = 1 << 24
+
+
 def record_grid(
-    vox: VoxelSet, centre: np.ndarray, radiance: np.ndarray, pa: np.ndarray | None = None
+    vox: VoxelSet,
+    centre: np.ndarray,
+    radiance: np.ndarray,
+    pa: np.ndarray | None = None,
+    *,
+    dense_cells: int = DENSE_TABLE_CELLS,
 ) -> dict:
     """The records sorted by voxel, as the compiled gather kernels look them up.
 
@@ -62,6 +73,10 @@ def record_grid(
         What a ray that lands on each record reads.
     pa : (N,) float32 or None
         Each record's VPL density for the display's MIS (None: zeros, no MIS).
+    dense_cells : int
+        Largest bounding grid, in cells, given the dense table of each
+        voxel's first record; a larger one is searched by voxel key (the same
+        answers).
 
     Returns
     -------
@@ -72,17 +87,15 @@ def record_grid(
         lookup then reads a cache line or two, where separate arrays cost one
         each.
     """
-    return _record_grid(vox, centre, radiance, pa, _voxel_order(vox))
+    return _record_grid(vox, centre, radiance, pa, _voxel_order(vox), dense_cells)
 
 
-def _record_grid(vox, centre, radiance, pa, voxel_order) -> dict:
+def _record_grid(vox, centre, radiance, pa, voxel_order, dense_cells=DENSE_TABLE_CELLS) -> dict:
     """:func:`record_grid` from the records' :func:`_voxel_order`."""
     lo, dims, key, order = voxel_order
     sorted_key = np.ascontiguousarray(key[order])
     cells = int(np.prod(dims))
-    # A dense table of each voxel's first record (4 bytes a voxel of the
-    # bounding grid) replaces a binary search per hit, up to 64 MB.
-    if cells <= (1 << 24):
+    if cells <= dense_cells:
         start = np.zeros(cells + 1, np.int32)
         np.cumsum(np.bincount(sorted_key, minlength=cells), out=start[1:])
     else:
@@ -126,10 +139,6 @@ class TracedGather:
     offset : float or None
         Ray offset from the surface, scene units (None: 1e-4 of the scene's
         diagonal).
-    native : bool
-        Trace in the compiled core where Embree is found (default); False:
-        through embreex's Python calls (:class:`voxgi.rays.Tracer`), which
-        draws other rays of the same distribution.
     """
 
     def __init__(
@@ -139,7 +148,6 @@ class TracedGather:
         *,
         threads: int | None = None,
         offset: float | None = None,
-        native: bool = True,
     ):
         check_scene_and_records(scene, vox)
         self.threads = _validate.threads(threads)
@@ -147,7 +155,7 @@ class TracedGather:
             offset = 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
         self.offset = float(offset)
         self.vox = vox
-        self.tracer = Tracer(scene, self.threads, native=native)
+        self.tracer = Tracer(scene, self.threads)
         c = self.tracer.centre
         n = len(vox)
         normal = np.ascontiguousarray(vox.normal, np.float32)
@@ -198,53 +206,20 @@ class TracedGather:
             raise ValueError(f"values: expected shape ({n}, 3), got {values.shape}")
         self._grid["rec_packed"][:, _RADIANCE] = values[self._order]
         out = np.zeros((n, 3), np.float32)
-        args = (*self._hits, *self._materials)
-        if self.tracer.native is not None:
-            self.rays += _core.gather_light(
-                *args,
-                samples,
-                seed,
-                0,
-                self.offset,
-                **self._tri,
-                **self._grid,
-                scene=self.tracer.native,
-                out=out,
-                threads=self.threads,
-            )
-            return out.astype(np.float64)
-        self._two_pass(args, samples, seed, out)
+        self.rays += _core.gather_light(
+            *self._hits,
+            *self._materials,
+            samples,
+            seed,
+            0,
+            self.offset,
+            **self._tri,
+            **self._grid,
+            scene=self.tracer.native,
+            out=out,
+            threads=self.threads,
+        )
         return out.astype(np.float64)
-
-    def _two_pass(self, args: tuple, samples: int, seed: int, out: np.ndarray) -> None:
-        """The same pass through embreex: rays, first hits, then the shading."""
-        hits = self._hits
-        step = max(1, (1 << 21) // samples)
-        for a in range(0, len(self.vox), step):
-            b = min(len(self.vox), a + step)
-            part = tuple(h[a:b] for h in hits)
-            count = np.zeros(b - a, np.int64)
-            org = np.zeros(((b - a) * samples, 3), np.float32)
-            dirs = np.zeros_like(org)
-            # gather_rays hashes each record's stream from its index in the
-            # batch; offsetting the seed by the batch keeps the streams apart
-            r = _core.gather_rays(
-                *part, samples, seed, a, self.offset, count, org, dirs, threads=self.threads
-            )
-            prim = self.tracer.intersect(org[:r], dirs[:r])
-            self.rays += r
-            _core.gather_shade(
-                *part,
-                *self._materials,
-                samples,
-                **self._tri,
-                **self._grid,
-                ray_count=count,
-                ray_dir=dirs[:r],
-                prim=prim,
-                out=out[a:b],
-                threads=self.threads,
-            )
 
 
 def traced_irradiance(

@@ -10,7 +10,7 @@ import numpy as np
 
 from . import _validate
 
-__all__ = ["VoxelSet", "estimate_memory", "voxelize"]
+__all__ = ["DEFAULT_RESOLUTION", "VoxelSet", "estimate_memory", "voxelize"]
 
 
 @dataclass
@@ -364,14 +364,20 @@ def _voxel_set(res: dict, pitch: float, origin, resolution: int, scene, stats: d
     )
 
 
+#: Voxels along the scene's longest side when :func:`voxelize` is not told:
+#: on the Cornell box at 256x256 against a converged path-traced reference,
+#: past 64 the display's noise at its default tolerance, not the voxels,
+#: sets the picture's error (``docs/design.md`` §5).
+DEFAULT_RESOLUTION = 64
+
+
 def voxelize(
     scene,
-    resolution: int = 128,
+    resolution: int = DEFAULT_RESOLUTION,
     *,
-    max_memory: int | None = None,
     threads: int | None = None,
     progress: bool = False,
-    cut: bool = True,
+    max_memory: int | None = None,
 ) -> VoxelSet:
     """Convert the surfaces of a scene into oriented surface voxel records.
 
@@ -385,21 +391,18 @@ def voxelize(
     scene : Scene
         Scene to voxelize; left unchanged.
     resolution : int, optional
-        Voxels along the longest side of the scene's bounding box (>= 2).
-    max_memory : int or None, optional
-        Memory budget in bytes; None means half of the memory available now.
-        The peak memory is estimated from the triangles before anything is
-        allocated (see :func:`estimate_memory`).
+        Voxels along the longest side of the scene's bounding box (>= 2;
+        :data:`DEFAULT_RESOLUTION`, 64, the resolution :func:`voxgi.render`
+        voxelizes at).
     threads : int or None, optional
         Worker threads; None uses every hardware thread. The result does not
         depend on it.
     progress : bool, optional
         Show a tqdm progress bar.
-    cut : bool, optional
-        Cut each surface's pieces by the planes of the other surfaces in the
-        same voxel and keep the sides as separate records (docs/design.md §4),
-        so that a floor piece straddling a thin wall belongs to one room per
-        record. False only for comparisons.
+    max_memory : int or None, optional
+        Memory budget in bytes; None means half of the memory available now.
+        The peak memory is estimated from the triangles before anything is
+        allocated (see :func:`estimate_memory`).
 
     Returns
     -------
@@ -445,6 +448,16 @@ def voxelize(
     >>> vox.ijk.dtype, vox.area.dtype
     (dtype('int32'), dtype('float32'))
     """
+    return _voxelize(
+        scene, resolution, threads=threads, progress=progress, max_memory=max_memory, cut=True
+    )
+
+
+def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> VoxelSet:
+    """:func:`voxelize`; ``cut=False`` keeps each surface's pieces uncut by the
+    planes of the other surfaces in their voxel (``docs/design.md`` §4), for
+    comparisons only: a floor piece straddling a thin wall then belongs to
+    both rooms."""
     t_start = time.perf_counter()
     resolution, max_memory, nthreads = _check_arguments(
         scene, resolution, max_memory, threads, progress, cut

@@ -10,28 +10,26 @@ from ..lights import LUMINANCE
 __all__ = ["FILTERED_BUDGET", "RAY_BUDGETS", "SPREAD_EVEN", "light_spread", "ray_budget"]
 
 #: (VPLs per frame, gather rays per pixel and frame) of :func:`ray_budget`
-#: for concentrated light and for light spread evenly. Both gather counts are
-#: squares, so the rays are stratified in both angles (3 x 3 and 5 x 5
-#: cells): 9 such rays leave 0.80 times the noise of 8 stratified in one angle
-#: in the Cornell box (``docs/design.md`` §6).
+#: for concentrated light and for light spread evenly. Concentrated light is
+#: found by VPLs drawn by power, even light by cosine gather rays, whose MIS
+#: weight then barely depends on where they land. Both gather counts are
+#: squares, so the rays are stratified in both angles (3 x 3 and 5 x 5 cells),
+#: where any other count is stratified in one (``docs/design.md`` §6).
 RAY_BUDGETS = ((16, 9), (8, 25))
 
 #: The budget for concentrated light where the indirect light is filtered
 #: (:attr:`RenderTuning.indirect_filter`): the filter takes most of the
 #: indirect light's noise, and what is left, the direct light's, needs fewer
-#: rays. Over nine scenes (spread 0.025-0.57, 256x256, two seeds), the time
-#: to the default tolerance was 0.58-0.87 of that with :data:`RAY_BUDGETS`'
-#: first budget, the filter on in both, but 1.47 times in a sky-lit atrium
-#: (``docs/design.md`` §6).
+#: rays; where the stopping rule's floor of frames ends a render, cheaper
+#: frames are what saves time (``docs/design.md`` §6; the measurements in
+#: ``docs/performance.md``).
 FILTERED_BUDGET = (8, 4)
 
-#: :func:`light_spread` from which the light counts as spread evenly. Cost of
-#: a unit of error of the second budget against the first (``docs/design.md``
-#: §6): 1.3-3.7 times on the Cornell box, ``shadow``, ``geometric`` (spread
-#: 0.025-0.07), rooms lit through a window or by a sun (0.18-0.29), a box lit
-#: by a point light (0.42) and a sphere lit by an emitting cap (0.57); about 1
-#: in a sky-lit atrium (0.55); 0.7 for objects under a uniform sky (0.95) and
-#: 0.16-0.21 in a furnace (1).
+#: :func:`light_spread` from which the light counts as spread evenly. The
+#: spread alone does not rank the two budgets between about 0.4 and 0.6, so
+#: the threshold sits above that range and below a uniform sky (about 0.95)
+#: and a furnace (1), where the gather rays' budget wins clearly
+#: (``docs/design.md`` §6).
 SPREAD_EVEN = 0.8
 
 

@@ -10,8 +10,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..scene import Camera, Scene
+from .aovs import AOVMean
 from .budget import _reflects_light, light_spread, ray_budget
-from .estimate import _Mean
+from .estimate import _MIN_BATCHES, _Mean
 from .executor import FrameExecutor, FrameShaderSpec
 from .pixel_filter import _FILTER_REACH
 from .settings import RenderTuning, _check_executor, _check_render, _check_solution, _RenderSettings
@@ -39,9 +40,9 @@ class RenderResult:
         phases: ``setup``; ``primary`` (camera rays and their hits);
         ``shadow`` (the VPLs' light: shadow rays and the shading of the VPLs
         they find); ``gather`` (gather rays and the shading of their hits);
-        ``shade`` only where the VPLs are shaded apart from their shadow rays
-        (the embreex path, ``docs/design.md`` §6); ``filter`` where the
-        indirect light is filtered; ``total`` and ``display``
+        ``lights`` where the scene has lights or an environment (their
+        shadow rays and samples); ``filter`` where the indirect light is
+        filtered; ``total`` and ``display``
         (the same), plus ``voxelize`` and ``solve`` when :func:`voxgi.render`
         ran them. The error estimate: ``est_rel_mse`` (the image's relMSE,
         what ``tol`` bounds), ``est_max_rel_err`` and ``est_tail_rel_err``
@@ -51,6 +52,25 @@ class RenderResult:
         surfaces), ``docs/design.md`` §6.
     solution : Solution or None
         The voxel solution displayed (computed here when none was given).
+    albedo : (H, W, 3) float32 or None
+        Diffuse albedo of the surfaces each pixel's camera rays met, averaged
+        over the frames' camera samples with the image's pixel filter (so an
+        edge pixel holds the coverage-weighted mean of its surfaces; 0 where
+        a ray met nothing). None when the frames came without their AOVs.
+    normal : (H, W, 3) float32 or None
+        Shading normal (world space, facing the camera) of those hits,
+        averaged the same way and not renormalised (shorter than 1 at an
+        edge between surfaces; 0 where nothing was met).
+    depth : (H, W) float32 or None
+        Distance of the hits along the camera's view axis, averaged over the
+        samples that met a surface (scene units; inf where none did).
+    object_id : (H, W) int32 or None
+        Index in ``scene.objects`` of the object the first frame's camera ray
+        met in each pixel (-1: nothing, or a one-sided back); not averaged.
+    undenoised : (H, W, 3) float32 or None
+        With ``RenderTuning(denoise=True)``: the image before denoising,
+        whose error ``stderr`` and ``stats["est_rel_mse"]`` estimate; ``image``
+        is then OIDN's output. None otherwise.
     """
 
     image: np.ndarray
@@ -58,6 +78,29 @@ class RenderResult:
     stderr: np.ndarray | None = None
     stats: dict = field(default_factory=dict)
     solution: object = None
+    albedo: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    depth: np.ndarray | None = None
+    object_id: np.ndarray | None = None
+    undenoised: np.ndarray | None = None
+
+    def exr_layers(self) -> dict:
+        """The AOVs as EXR channels for :func:`voxgi.io.write_exr`'s
+        ``layers``: ``albedo.R/G/B``, ``normal.X/Y/Z``, ``depth.Z`` and
+        ``object_id`` (as float32, exact for any object count under 2^24),
+        and ``undenoised.R/G/B`` when the image was denoised."""
+        out = {}
+        if self.undenoised is not None:
+            out.update({f"undenoised.{c}": self.undenoised[..., i] for i, c in enumerate("RGB")})
+        for name, chans in (("albedo", "RGB"), ("normal", "XYZ")):
+            a = getattr(self, name)
+            if a is not None:
+                out.update({f"{name}.{c}": a[..., i] for i, c in enumerate(chans)})
+        if self.depth is not None:
+            out["depth.Z"] = self.depth
+        if self.object_id is not None:
+            out["object_id"] = self.object_id.astype(np.float32)
+        return out
 
 
 def _with_budget(opt: _RenderSettings, sol) -> _RenderSettings:
@@ -105,11 +148,11 @@ def _skipped(spec: FrameShaderSpec) -> list[str]:
     return skipped
 
 
-def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Mean, bool]:
+def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Mean, AOVMean, bool]:
     """Frames 0, 1, ... from ``source`` into the running mean until the
     stopping rule or ``max_frames``; Ctrl-C stops after the current frame.
-    Returns the mean and whether it was interrupted."""
-    from tqdm.auto import tqdm
+    Returns the mean, the AOVs' mean and whether it was interrupted."""
+    from .. import _progress
 
     cam = opt.cam
     reach = _FILTER_REACH[cam.pixel_filter]
@@ -119,31 +162,24 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
         opt.threads,
         (cam.height, cam.width, reach) if reach else None,
     )
+    aovs = AOVMean()
     interrupted = False
-    # With a tolerance the bar follows the error, not the frame cap that is
-    # rarely reached: the share of the way, in log scale, from the first
-    # estimate to tol (or the share of the frames, whichever is further).
-    bar = tqdm(
-        total=100,
-        disable=not progress,
-        desc="display",
-        unit="%",
-        leave=False,
-        bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}{postfix}",
-    )
-    first = None
+    # The bar counts frames against the frames the render is predicted to
+    # need (the stopping rule's floor, then relMSE ∝ 1/frames), not against
+    # the frame cap that is rarely reached.
+    floor = max(opt.min_frames, _MIN_BATCHES)
+    need = _progress.frames_needed(0, math.nan, opt.tol, floor, opt.max_frames)
+    bar = _progress.bar("display", need, enabled=progress, unit="frame")
     try:
         for f in range(opt.max_frames):
             x = source.frame(f, opt.seed).astype(np.float64)
-            acc.add(x, getattr(source, "surface", None))
-            share = (f + 1) / opt.max_frames
+            surface = getattr(source, "surface", None)
+            acc.add(x, surface)
+            aovs.add(getattr(source, "aovs", None), None if surface is None else surface[0])
             # the estimate is read only once the rule may stop on it
             est = acc.est if opt.tol > 0 and acc.ready(opt) else math.nan
-            if np.isfinite(est) and est > 0:
-                first = est if first is None else first
-                if first > opt.tol:
-                    share = max(share, math.log(first / est) / math.log(first / opt.tol))
-            bar.update(int(100 * min(share, 1.0)) - bar.n)
+            bar.total = _progress.frames_needed(f + 1, est, opt.tol, floor, opt.max_frames)
+            bar.update(1)
             known = f", est relMSE {est:.2e}" if np.isfinite(est) else ""
             bar.set_postfix_str(f"frame {f + 1}{known}")
             if acc.done(opt):
@@ -153,7 +189,7 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
     finally:
         bar.close()
         source.close()
-    return acc, interrupted
+    return acc, aovs, interrupted
 
 
 def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) -> dict:
@@ -183,6 +219,7 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
         "eps": spec.eps,
         "skipped": skipped,
         "interrupted": interrupted,
+        "denoised": bool(opt.denoise and acc.frames > 0),
         "threads": opt.threads,
     }
 
@@ -230,7 +267,7 @@ def render(
     seed : int
         Seeds the VPL, sub-pixel and lens sequences.
     progress, threads
-        A tqdm progress bar; worker threads (None: all cores).
+        A progress bar on a terminal or in a notebook; worker threads (None: all cores).
     executor : FrameExecutor or None
         Where the frames are computed (None: here); the image is the local one.
     camera : Camera, optional
@@ -260,18 +297,26 @@ def render(
     source = executor.frames(spec, opt.max_frames, threads=opt.threads)
     seconds = {"setup": time.perf_counter() - t0}
     skipped = _skipped(spec)
-    tracer = getattr(source, "tracer", None)
-    if tracer is not None and tracer.why_not_native is not None:
-        skipped.append(
-            f"compiled ray tracing: {tracer.why_not_native}; the rays go through embreex's "
-            "Python calls in batches (the same image, slower)"
-        )
-    acc, interrupted = _progressive_mean(source, opt, progress)
+    acc, aovs, interrupted = _progressive_mean(source, opt, progress)
     image = acc.mean.reshape(opt.cam.height, opt.cam.width, 3).astype(np.float32)
+    aov = aovs.result(opt.cam.height, opt.cam.width)
     seconds.update(source.seconds)
+    undenoised = None
+    if opt.denoise and acc.frames > 0:
+        from ..denoise import denoise
+
+        t0 = time.perf_counter()
+        undenoised, image = image, denoise(image, aov["albedo"], aov["normal"])
+        seconds["denoise"] = time.perf_counter() - t0
     seconds["total"] = time.perf_counter() - t_start
     seconds["display"] = seconds["total"]
     stats = _render_stats(spec, source, acc, opt, skipped, interrupted, seconds)
     return RenderResult(
-        image=image, frames=acc.frames, stderr=acc.stderr(image.shape), stats=stats, solution=sol
+        image=image,
+        frames=acc.frames,
+        stderr=acc.stderr(image.shape),
+        stats=stats,
+        solution=sol,
+        undenoised=undenoised,
+        **aov,
     )

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from .. import _core
 from .._qmc import sobol
 from ..scene import Camera
 
@@ -59,6 +60,9 @@ def frame_samples(frame: int, seed: int = 0) -> tuple[tuple[float, float], tuple
 def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
     """Primary rays of every pixel, row-major from the top-left pixel.
 
+    The rays the display traces (:func:`voxgi._core.camera_rays`, the
+    arithmetic of its camera kernel), in world coordinates.
+
     Parameters
     ----------
     cam : Camera
@@ -75,21 +79,16 @@ def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.nda
         lens points through one pixel meet on the plane in focus.
     """
     right, up, fwd = cam.frame()
-    eye = np.asarray(cam.eye, dtype=np.float64)
-    th = math.tan(math.radians(cam.fov) / 2.0)
-    aspect = cam.width / cam.height
-    sx = (2.0 * (np.arange(cam.width) + offset[0]) / cam.width - 1.0) * th * aspect
-    sy = (1.0 - 2.0 * (np.arange(cam.height) + offset[1]) / cam.height) * th
-    d = (
-        fwd[None, None, :]
-        + sx[None, :, None] * right[None, None, :]
-        + sy[:, None, None] * up[None, None, :]
-    ).reshape(-1, 3)
-    if cam.aperture > 0.0:
-        lo = eye + cam.aperture * (lens[0] * right + lens[1] * up)
-        d = eye + cam.focus * d - lo  # d·fwd = 1, so eye + focus·d lies on the focal plane
-        org = np.broadcast_to(lo, d.shape)
-    else:
-        org = np.broadcast_to(eye, d.shape)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    return np.ascontiguousarray(org), d
+    return _core.camera_rays(
+        np.asarray(cam.eye, dtype=np.float64),
+        np.asarray(right, dtype=np.float64),
+        np.asarray(up, dtype=np.float64),
+        np.asarray(fwd, dtype=np.float64),
+        math.tan(math.radians(cam.fov) / 2.0),
+        cam.width,
+        cam.height,
+        float(cam.aperture),
+        float(cam.focus),
+        (float(offset[0]), float(offset[1])),
+        (float(lens[0]), float(lens[1])),
+    )

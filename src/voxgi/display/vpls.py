@@ -10,7 +10,7 @@ import numpy as np
 from .. import _validate
 from ..lights import LUMINANCE
 
-__all__ = ["VPLSampler"]
+__all__ = ["VPLSampler", "place_vpls"]
 
 
 def _morton(ijk: np.ndarray) -> np.ndarray:
@@ -173,3 +173,86 @@ class VPLSampler:
             "weight": np.ascontiguousarray((w[:, None] * self.B[idx] / math.pi).astype(np.float32)),
             "area": np.ascontiguousarray(self.area32[idx]),
         }
+
+
+#: Candidate points per VPL and frame; each lands on the record's surface
+#: with probability about 1/3 for a flat record (its polygon against the
+#: square of side √3 pitch the candidates are drawn from).
+_PLACE_TRIES = 12
+
+
+def place_vpls(
+    sampler: VPLSampler,
+    tracer,
+    index: np.ndarray,
+    centroid: np.ndarray,
+    f: int,
+    seed: int,
+    eps: float,
+) -> np.ndarray:
+    """(K, 3) points drawn uniformly on each VPL's record surface (centred frame).
+
+    A VPL fixed at its record's centroid makes the image converge to the
+    lighting of a finite set of point lights: each casts a sharp shadow of
+    every thin occluder, and the shadows line up into streaks. A point
+    drawn anew each frame on the record's own surface converges to the
+    area integral of the piecewise-constant radiosity instead
+    (``docs/design.md`` §6). Candidates are drawn in a square of the
+    record's tangent plane around the voxel, projected onto the scene's
+    triangles along the normal, and kept when the hit is the record's own
+    object, facing within 60° of its normal (the voxelization's clustering),
+    inside its voxel, and in sight of the centroid (a record cut at a thin
+    wall keeps to its own side). A record none of whose candidates lands
+    keeps its centroid. ``tracer`` is the scene's (:class:`voxgi.rays.Tracer`
+    with ``obj``, ``ng`` per triangle), ``eps`` the shadow-ray offset.
+    """
+    tr, T = tracer, _PLACE_TRIES
+    vox, K = sampler.vox, len(index)
+    rng = np.random.default_rng([seed, int(f), 0x5EA])
+    h = float(vox.pitch)
+    n = sampler.normal[index].astype(np.float64)
+    lo = np.asarray(vox.origin, np.float64) + np.asarray(vox.ijk, np.float64)[index] * h
+    lo -= tr.centre
+    mid = lo + 0.5 * h
+    # The voxel centre projected onto the record's plane: the polygon lies
+    # within √3/2 pitch of it.
+    mid -= np.einsum("ij,ij->i", mid - centroid, n)[:, None] * n
+    a = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(n, a)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(n, t1)
+    uv = (rng.random((T, K, 2)) - 0.5) * (math.sqrt(3.0) * h)
+    cand = mid + uv[..., :1] * t1 + uv[..., 1:] * t2 + h * n  # (T, K, 3)
+    org = cand.reshape(-1, 3)
+    dirs = np.broadcast_to(-n, (T, K, 3)).reshape(-1, 3)
+    prim = tr.intersect(org.astype(np.float32), dirs.astype(np.float32))
+    ok = prim >= 0
+    tri = np.where(ok, prim, 0)
+    ng = tr.ng[tri]
+    dn = np.einsum("ij,ij->i", dirs, ng)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.einsum("ij,ij->i", tr.tris[tri, 0] - org, ng) / dn
+    q = org + np.where(np.isfinite(t), t, 0.0)[:, None] * dirs
+    obj = np.broadcast_to(np.asarray(vox.object_id)[index], (T, K)).reshape(-1)
+    slack = 1e-6 * h
+    inside = np.all((q >= np.repeat(lo[None], T, 0).reshape(-1, 3) - slack), axis=1) & np.all(
+        (q <= np.repeat(lo[None], T, 0).reshape(-1, 3) + h + slack), axis=1
+    )
+    ok &= (tr.obj[tri] == obj) & (np.abs(dn) > 0.5) & inside
+    # In sight of the centroid, both lifted by the shadow-ray offset.
+    c = np.broadcast_to(centroid, (T, K, 3)).reshape(-1, 3) + eps * -dirs
+    seg = q + eps * -dirs - c
+    dist = np.linalg.norm(seg, axis=1)
+    check = np.flatnonzero(ok & (dist > eps))
+    if len(check):
+        d = seg[check] / dist[check, None]
+        blocked = tr.occluded(
+            c[check].astype(np.float32), d.astype(np.float32), dist[check].astype(np.float32)
+        )
+        ok[check[blocked != 0]] = False
+    ok = ok.reshape(T, K)
+    first = np.argmax(ok, axis=0)
+    found = ok[first, np.arange(K)]
+    out = centroid.copy()
+    out[found] = q.reshape(T, K, 3)[first[found], np.flatnonzero(found)]
+    return out

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 from . import toml
 from ._common import MeshData, SceneData, SceneWarning
+from ._limits import Limits, RefusedError
+from ._paths import FileAccess
 from .gltf import load_gltf
 from .mitsuba_translate import load_mitsuba
 from .obj import load_obj
@@ -28,7 +30,10 @@ from .spectra import spectrum_to_rgb
 
 __all__ = [
     "LOADERS",
+    "FileAccess",
+    "Limits",
     "MeshData",
+    "RefusedError",
     "SceneData",
     "SceneWarning",
     "load_gltf",

@@ -3,43 +3,20 @@ perspective camera."""
 
 from __future__ import annotations
 
-import json
+import io
 import math
-import struct
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
 from ._common import MeshData, Notes, SceneData, clamp_albedo
+from ._limits import RefusedError
+from ._paths import FileAccess
+from .gltf_document import check_document, read_document
 from .textures import image_mean
 
 __all__ = ["load_gltf"]
-
-
-def _gltf_json(path: Path) -> tuple[dict, bytes | None]:
-    """The glTF JSON document (and a GLB's binary chunk)."""
-    buf = path.read_bytes()
-    binary = None
-    if buf[:4] == b"glTF":
-        if len(buf) < 20:
-            raise ValueError(f"scene file {path}: truncated GLB header")
-        n, kind = struct.unpack_from("<I4s", buf, 12)
-        if kind != b"JSON":
-            raise ValueError(f"scene file {path}: GLB's first chunk is not JSON")
-        text = buf[20 : 20 + n]
-        rest = buf[20 + n :]
-        if len(rest) >= 8 and rest[4:8] == b"BIN\0":
-            binary = rest[8 : 8 + struct.unpack_from("<I", rest, 0)[0]]
-    else:
-        text = buf
-    try:
-        doc = json.loads(text.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"scene file {path}: malformed glTF JSON: {exc}") from None
-    if not isinstance(doc, dict) or "asset" not in doc:
-        raise ValueError(f"scene file {path}: not a glTF 2.0 document (no 'asset')")
-    return doc, binary
 
 
 def _gltf_node_matrix(node: dict, where: str) -> np.ndarray:
@@ -64,22 +41,14 @@ def _gltf_camera(doc: dict, path: Path) -> dict | None:
     for i, node in enumerate(nodes):
         if "camera" not in node:
             continue
-        try:
-            cam = doc["cameras"][node["camera"]]
-        except (KeyError, IndexError, TypeError):
-            raise ValueError(
-                f"scene file {path}: nodes[{i}]: camera {node['camera']!r} not in 'cameras'"
-            ) from None
+        cam = doc["cameras"][node["camera"]]  # (indices checked by check_document)
         if cam.get("type") != "perspective":
             continue
         persp = cam.get("perspective", {})
-        where = f"scene file {path}: cameras[{node['camera']}]"
-        yfov = persp.get("yfov")
-        if not isinstance(yfov, (int, float)) or not 0 < yfov < math.pi:
-            raise ValueError(f"{where}: yfov {yfov!r} must be in (0, pi) radians")
+        yfov = persp["yfov"]
         m, j = np.eye(4), i
         while j is not None:
-            m = _gltf_node_matrix(nodes[j], f"scene file {path}: nodes[{j}]") @ m
+            m = _gltf_node_matrix(nodes[j], f"scene file {path}: /nodes/{j}") @ m
             j = parents.get(j)
         aspect = float(persp.get("aspectRatio", 1.0))
         height = 512
@@ -95,45 +64,6 @@ def _gltf_camera(doc: dict, path: Path) -> dict | None:
             "height": height,
         }
     return None
-
-
-def _check_gltf_references(doc: dict, path: Path) -> None:
-    """ValueError naming the element when a mesh or buffer points nowhere."""
-
-    def table(key):
-        t = doc.get(key, [])
-        if not isinstance(t, list):
-            raise ValueError(f"scene file {path}: '{key}' must be an array")
-        return t
-
-    accessors, views, buffers = table("accessors"), table("bufferViews"), table("buffers")
-
-    def need(index, items, key, where):
-        if not isinstance(index, int) or not 0 <= index < len(items):
-            raise ValueError(
-                f"scene file {path}: {where}: {key} {index!r} not in '{key}s' "
-                f"({len(items)} of them)"
-            )
-
-    for m, mesh in enumerate(table("meshes")):
-        for k, prim in enumerate(mesh.get("primitives", [])):
-            where = f"meshes[{m}].primitives[{k}]"
-            for name, index in prim.get("attributes", {}).items():
-                need(index, accessors, "accessor", f"{where}.attributes.{name}")
-            if "indices" in prim:
-                need(prim["indices"], accessors, "accessor", f"{where}.indices")
-    for a, acc in enumerate(accessors):
-        if "bufferView" in acc:
-            need(acc["bufferView"], views, "bufferView", f"accessors[{a}]")
-    for v, view in enumerate(views):
-        need(view.get("buffer"), buffers, "buffer", f"bufferViews[{v}]")
-    for b, buf in enumerate(buffers):
-        uri = buf.get("uri")
-        if isinstance(uri, str) and not uri.startswith("data:"):
-            if not (path.parent / uri).exists():
-                raise ValueError(
-                    f"scene file {path}: buffers[{b}]: file not found: {path.parent / uri}"
-                )
 
 
 def _gltf_material(m: dict | None, tm, where: str, path: Path, notes: Notes):
@@ -188,7 +118,7 @@ def _gltf_material(m: dict | None, tm, where: str, path: Path, notes: Notes):
     return base, emission, two_sided
 
 
-def load_gltf(path) -> SceneData:
+def load_gltf(path, *, search_paths=(), allow_outside=False, limits=None) -> SceneData:
     """Read a glTF 2.0 scene (``.gltf`` or ``.glb``): one mesh per primitive.
 
     The albedo is ``baseColorFactor`` (times the mean linear colour of
@@ -197,23 +127,37 @@ def load_gltf(path) -> SceneData:
     surface; node transforms are applied; the first perspective camera
     (``yfov``, ``aspectRatio``, 512 pixels high) becomes the camera.
 
+    Parameters
+    ----------
+    path : str or Path
+    search_paths, allow_outside, limits
+        As :meth:`voxgi.Scene.load` (docs/scene-files.md).
+
     Raises
     ------
     FileNotFoundError, ValueError
-        As :func:`load_mitsuba`, naming the file and the glTF element.
+        As :func:`load_mitsuba`, naming the file and the glTF element by its
+        JSON pointer (``/materials/0/extensions``).
     """
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"scene file not found: {path}")
-    doc, _ = _gltf_json(path)
-    _check_gltf_references(doc, path)
+    access = FileAccess(path, search_paths, allow_outside, limits)
+    doc, buf, binary = read_document(path, access)
+    check_document(doc, path, access, binary)
     notes = Notes(path)
     by_name: dict[str, list] = {}
     for k, m in enumerate(doc.get("materials", [])):
         by_name.setdefault(m.get("name", f"material{k}"), []).append(m)
     try:
-        loaded = trimesh.load(path, force="scene", process=False)
+        loaded = trimesh.load(
+            io.BytesIO(buf),
+            file_type=path.suffix.lower()[1:],
+            resolver=access.resolver(path.parent, "file named by a glTF"),
+            force="scene",
+            process=False,
+        )
         geoms = loaded.dump()
+    except RefusedError:
+        raise
     except Exception as exc:
         raise ValueError(f"scene file {path}: malformed glTF: {exc}") from None
     data = SceneData(camera=_gltf_camera(doc, path))

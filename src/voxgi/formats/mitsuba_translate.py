@@ -3,6 +3,7 @@ lights, shapes to meshes, the sensor to a camera (docs/design.md §12)."""
 
 from __future__ import annotations
 
+import io
 import math
 import re
 import warnings
@@ -11,10 +12,12 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from .. import _validate
 from ._common import MeshData, Notes, SceneData, clamp_albedo
+from ._paths import FileAccess
 from .mitsuba_xml import PLUGIN_TAGS, Node, Plugin, XmlReader, parse_xml
 from .serialized import read_serialized
-from .textures import image_mean
+from .textures import texture_file_mean
 
 __all__ = ["load_mitsuba"]
 
@@ -35,16 +38,13 @@ def _colour(v, p: Plugin, key: str, notes: Notes) -> np.ndarray:
         return v.astype(np.float64)
     if isinstance(v, Plugin) and v.tag == "texture":
         if v.type == "bitmap" and "filename" in v.props:
-            img_path = Path(str(v.props["filename"]))  # resolved by the reader
+            img_path = Path(v.props["filename"])
             try:
-                from PIL import Image  # (a scikit-image dependency)
-
-                with Image.open(img_path) as im:
-                    mean = image_mean(im, raw=bool(v.props.get("raw", False)))
-                notes.approx(f"{v.label()}: bitmap {img_path.name} reduced to its mean colour")
-                return mean
+                mean = texture_file_mean(img_path, v.access, raw=bool(v.props.get("raw", False)))
             except (OSError, ValueError) as exc:
                 raise ValueError(f"{v.where()}: cannot read bitmap {img_path}: {exc}") from None
+            notes.approx(f"{v.label()}: bitmap {img_path.name} reduced to its mean colour")
+            return mean
         if v.type == "checkerboard":
             c0 = _colour(v.props.get("color0", 0.4), v, "color0", notes)
             c1 = _colour(v.props.get("color1", 0.2), v, "color1", notes)
@@ -149,7 +149,8 @@ def _scene_emitter(p: Plugin, data: SceneData, notes: Notes) -> None:
         else:
             if "filename" not in p.props:
                 raise ValueError(f"{p.where()}: missing property 'filename'")
-            image = Path(str(p.props["filename"]))  # resolved by the reader
+            # (absolute: the TOML rule would read a relative path from the scene's folder)
+            image = Path(p.props["filename"]).absolute()
             data.environment = {
                 "image": str(image),
                 "scale": float(p.props.get("scale", 1.0)),
@@ -194,27 +195,25 @@ def _shape_mesh(p: Plugin) -> tuple[np.ndarray, np.ndarray, str | None]:
     else:
         if "filename" not in p.props:
             raise ValueError(f"{p.where()}: missing property 'filename'")
-        mesh_path = Path(str(p.props["filename"]))  # resolved by the reader
-        if not mesh_path.exists():
-            raise ValueError(f"{p.where()}: mesh file not found: {mesh_path}")
+        mesh_path = Path(p.props["filename"])
+        try:
+            data = p.access.read_bytes(mesh_path, "mesh file")
+        except FileNotFoundError:
+            raise ValueError(f"{p.where()}: mesh file not found: {mesh_path}") from None
+        except ValueError as exc:
+            raise ValueError(f"{p.where()}: {exc}") from None
         if p.type == "serialized":
-            v, f = read_serialized(mesh_path, int(p.props.get("shape_index", 0)))
-        else:
             try:
-                with warnings.catch_warnings():
-                    # trimesh's numpy warnings on a mesh's texture coordinates
-                    # (an all-NaN median) say nothing about the geometry read
-                    warnings.simplefilter("ignore", RuntimeWarning)
-                    mesh = trimesh.load(
-                        mesh_path,
-                        file_type=p.type,
-                        force="mesh",
-                        process=False,
-                        maintain_order=True,
-                    )
-                v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
-            except Exception as exc:
-                raise ValueError(f"{p.where()}: cannot load mesh {mesh_path}: {exc}") from None
+                v, f = read_serialized(
+                    mesh_path,
+                    int(p.props.get("shape_index", 0)),
+                    data=data,
+                    limits=p.access.limits,
+                )
+            except ValueError as exc:
+                raise ValueError(f"{p.where()}: {exc}") from None
+        else:
+            v, f = _mesh_file(data, mesh_path, p)
         if len(f) == 0:
             raise ValueError(f"{p.where()}: mesh {mesh_path} has no triangles")
         m = p.props.get("to_world", np.eye(4))
@@ -231,14 +230,24 @@ def _shape_mesh(p: Plugin) -> tuple[np.ndarray, np.ndarray, str | None]:
     return v, np.ascontiguousarray(f), source
 
 
-def _has_area(v: np.ndarray, f: np.ndarray) -> bool:
-    """Whether any face has an area, by :class:`~voxgi.Scene`'s rule for
-    degenerate faces (twice the area against the longest edge squared)."""
-    t = v[f]
-    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    dbl_area = np.linalg.norm(np.cross(e1, e2), axis=1)
-    edge2 = np.max([np.einsum("ij,ij->i", e, e) for e in (e1, e2, e2 - e1)], axis=0)
-    return bool(np.any(dbl_area > 1e-12 * edge2))
+def _mesh_file(data: bytes, mesh_path: Path, p: Plugin) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, faces) of an ``obj`` or ``ply`` shape's file, read from ``data``
+    (an OBJ's material library is not read: the shape's BSDF replaces it)."""
+    try:
+        with warnings.catch_warnings():
+            # trimesh's numpy warnings on a mesh's texture coordinates
+            # (an all-NaN median) say nothing about the geometry read
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mesh = trimesh.load(
+                io.BytesIO(data),
+                file_type=p.type,
+                force="mesh",
+                process=False,
+                maintain_order=True,
+            )
+        return np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    except Exception as exc:
+        raise ValueError(f"{p.where()}: cannot load mesh {mesh_path}: {exc}") from None
 
 
 def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
@@ -260,7 +269,7 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
         albedo, two_sided = np.full(3, 0.0 if emitters else 0.5), False
     v, f, source = _shape_mesh(p)
     name = p.id or (Path(source).stem if source else f"{p.type}{index}")
-    if not _has_area(v, f):
+    if not _validate.nondegenerate(v, f).any():
         # Mitsuba loads such a mesh and it draws nothing; so does voxgi
         notes.drop(f"{p.label()} {name!r}: every face has zero area")
         return []
@@ -359,7 +368,7 @@ def _sensor(p: Plugin, notes: Notes) -> dict | None:
     return cam
 
 
-def load_mitsuba(path) -> SceneData:
+def load_mitsuba(path, *, search_paths=(), allow_outside=False, limits=None) -> SceneData:
     """Read a Mitsuba 3 XML scene.
 
     Parameters
@@ -367,6 +376,9 @@ def load_mitsuba(path) -> SceneData:
     path : str or Path
         The ``.xml`` file; mesh, include and texture files are relative to
         the file that names them.
+    search_paths, allow_outside, limits
+        Where the scene's files may lie and how much may be read, as
+        :meth:`voxgi.Scene.load` (docs/scene-files.md).
 
     Returns
     -------
@@ -378,7 +390,8 @@ def load_mitsuba(path) -> SceneData:
         If ``path`` does not exist.
     ValueError
         Malformed XML, unknown elements or ids, bad values, missing mesh
-        files: the message names the file, line and element.
+        files, a file outside the allowed folders, a limit exceeded: the
+        message names the file, line and element.
 
     Warns
     -----
@@ -387,8 +400,9 @@ def load_mitsuba(path) -> SceneData:
         left out (emitters other than ``area``, other shapes and sensors).
     """
     path = Path(path)
-    reader = XmlReader(path)
-    root = parse_xml(path)
+    access = FileAccess(path, search_paths, allow_outside, limits)
+    reader = XmlReader(path, access)
+    root = parse_xml(path, access)
     try:
         return _read_mitsuba(reader, path, root)
     except RecursionError:
@@ -411,15 +425,15 @@ def _read_mitsuba(reader: XmlReader, path: Path, root: Node) -> SceneData:
             reader.pending.pop(ident, None)
             p = reader.plugin(file, node)
         if p.tag == "shape":
-            data.meshes += _shape(p, len(data.meshes), reader.notes)
+            data.meshes += _located(p, _shape, len(data.meshes), reader.notes)
         elif p.tag == "sensor":
             if data.camera is None:
-                data.camera = _sensor(p, reader.notes)
+                data.camera = _located(p, _sensor, reader.notes)
             else:
                 reader.notes.drop(f"{p.label()} (only the first sensor is used)")
         elif p.tag == "emitter":
             if p.type != "area":  # (an area emitter is attached to shapes by reference)
-                _scene_emitter(p, data, reader.notes)
+                _located(p, _scene_emitter, data, reader.notes)
         elif p.tag == "integrator":
             # voxgi is its own integrator and computes every bounce
             depth = p.props.get("max_depth", -1)
@@ -433,3 +447,16 @@ def _read_mitsuba(reader: XmlReader, path: Path, root: Node) -> SceneData:
         raise ValueError(f"{path}: no shape voxgi can read")
     reader.notes.emit()
     return data
+
+
+def _located(p: Plugin, translate, *args):
+    """``translate(p, *args)``, its errors naming the file, line and element of ``p``
+    (a value of the wrong kind, such as a string where a number belongs, is
+    found only here)."""
+    try:
+        return translate(p, *args)
+    except (TypeError, ValueError) as exc:
+        msg = str(exc)
+        if msg.startswith(str(p.file)):
+            raise ValueError(msg) from None
+        raise ValueError(f"{p.where()}: {msg}") from None

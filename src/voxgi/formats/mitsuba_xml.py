@@ -3,6 +3,7 @@ includes, references, values and transforms (docs/design.md §12)."""
 
 from __future__ import annotations
 
+import io
 import math
 import re
 from dataclasses import dataclass, field
@@ -13,6 +14,7 @@ import numpy as np
 import trimesh
 
 from ._common import Notes
+from ._paths import FileAccess
 from .spectra import CIE_MAX, CIE_MIN, spectrum_to_rgb
 
 
@@ -24,25 +26,44 @@ class Node:
     children: list = field(default_factory=list)
 
 
-def parse_xml(path: Path) -> Node:
-    """A tree of :class:`Node` with line numbers (ElementTree has none)."""
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"scene file not found: {path}") from None
-    except OSError as exc:
-        raise ValueError(f"scene file {path}: cannot be read ({exc})") from None
+#: Deepest nesting of elements in one XML file (Mitsuba scenes nest a few levels).
+MAX_XML_DEPTH = 256
+
+
+def parse_xml(path: Path, access: FileAccess) -> Node:
+    """A tree of :class:`Node` with line numbers (ElementTree has none).
+
+    The file is read through ``access`` (its path policy and size limit);
+    its elements count towards the scene's ``Limits.elements``; entity
+    declarations (which Mitsuba never writes, and which can expand a few
+    bytes into gigabytes) and nesting deeper than :data:`MAX_XML_DEPTH` are
+    refused.
+    """
+    data = access.read_bytes(path, "scene file")
     parser = expat.ParserCreate()
     stack: list[Node] = []
     root: list[Node] = []
 
     def start(tag, attrs):
-        node = Node(tag, dict(attrs), parser.CurrentLineNumber)
+        line = parser.CurrentLineNumber
+        access.count("elements", 1, f"{path}: line {line}: <{tag}>")
+        if len(stack) >= MAX_XML_DEPTH:
+            raise ValueError(
+                f"{path}: line {line}: <{tag}>: elements nested more than {MAX_XML_DEPTH} deep"
+            )
+        node = Node(tag, dict(attrs), line)
         (stack[-1].children if stack else root).append(node)
         stack.append(node)
 
+    def entity(name, *_):
+        raise ValueError(
+            f"{path}: line {parser.CurrentLineNumber}: <!ENTITY {name}>: entity declarations "
+            "are not part of Mitsuba XML"
+        )
+
     parser.StartElementHandler = start
     parser.EndElementHandler = lambda tag: stack.pop()
+    parser.EntityDeclHandler = entity
     try:
         parser.Parse(data, True)
     except expat.ExpatError as exc:
@@ -146,6 +167,8 @@ class Plugin:
     file: Path
     props: dict = field(default_factory=dict)
     children: list = field(default_factory=list)
+    #: how the scene's files are read (path policy and limits)
+    access: FileAccess | None = field(default=None, repr=False)
 
     def where(self) -> str:
         ident = f' id="{self.id}"' if self.id else ""
@@ -166,8 +189,9 @@ class Plugin:
 class XmlReader:
     """Mitsuba 3 XML to plugins: defaults, ``$var``, includes, refs, values."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, access: FileAccess):
         self.path = path
+        self.access = access
         self.defaults: dict[str, str] = {}
         self.ids: dict[str, Plugin] = {}
         self.notes = Notes(path)
@@ -175,10 +199,16 @@ class XmlReader:
         self.pending: dict[str, tuple[Path, Node]] = {}  # top-level ids not read yet
 
     def resolve(self, file: Path, name: str) -> Path:
-        """A file named in ``file``: beside it, the scene or a ``<path>`` folder."""
+        """A file named in ``file``: beside it, the scene or a ``<path>`` folder.
+
+        Only the places the path policy allows are looked at; when none
+        holds the file, the path beside ``file`` (which reading then refuses
+        or reports missing).
+        """
         for folder in [file.parent, self.path.parent, *self.search]:
-            if (folder / name).exists():
-                return folder / name
+            candidate = folder / name
+            if self.access.allowed(candidate) and candidate.exists():
+                return candidate
         return file.parent / name
 
     def fail(self, file: Path, node: Node, msg: str):
@@ -205,6 +235,17 @@ class XmlReader:
             self.fail(file, node, f"missing attribute {key!r}")
         return v
 
+    def number(self, file: Path, node: Node, key: str, default: str) -> float:
+        """The number in attribute ``key`` (``default`` when absent)."""
+        text = self.attr(file, node, key, default)
+        try:
+            v = float(text)
+        except ValueError:
+            self.fail(file, node, f"{key}={text!r} is not a number")
+        if not math.isfinite(v):
+            self.fail(file, node, f"{key}={text!r} is not finite")
+        return v
+
     def numbers(self, file: Path, node: Node, text: str, what: str) -> np.ndarray:
         try:
             out = np.array([float(s) for s in re.split(r"[,\s]+", text.strip()) if s], np.float64)
@@ -223,14 +264,29 @@ class XmlReader:
                 name = self.need(file, node, "name")
                 self.defaults.setdefault(name, self.need(file, node, "value"))
             elif node.tag == "path":
-                self.search.append(file.parent / self.need(file, node, "value"))
+                folder = file.parent / self.need(file, node, "value")
+                try:
+                    self.search.append(self.access.check(folder, "folder"))
+                except ValueError as exc:
+                    self.fail(file, node, str(exc))
             elif node.tag == "include":
                 if depth > 8:
                     self.fail(file, node, "includes nested more than 8 deep")
+                self.access.count("includes", 1, f"{file}: line {node.line}: <include>")
                 sub = self.resolve(file, self.need(file, node, "filename"))
-                if not sub.exists():
+                try:
+                    self.access.check(sub, "included file")
+                except ValueError as exc:
+                    self.fail(file, node, str(exc))
+                try:
+                    tree = parse_xml(sub, self.access)
+                except FileNotFoundError:
                     self.fail(file, node, f"included file not found: {sub}")
-                out += self.scene_children(sub, parse_xml(sub), depth + 1)
+                except ValueError as exc:
+                    if str(exc).startswith((str(sub), f"scene file {sub}")):
+                        raise
+                    self.fail(file, node, str(exc))
+                out += self.scene_children(sub, tree, depth + 1)
             else:
                 out.append((file, node))
         return out
@@ -244,6 +300,7 @@ class XmlReader:
         if known is not None and kind not in known:
             self.fail(file, node, f"unknown {node.tag} plugin {kind!r}")
         p = Plugin(node.tag, kind, self.attr(file, node, "id"), node.line, file)
+        p.access = self.access
         emitter = emitter or node.tag == "emitter"
         for child in node.children:
             name = self.attr(file, child, "name")
@@ -272,7 +329,11 @@ class XmlReader:
                     self.fail(file, child, "missing attribute 'name'")
                 p.props[name] = self.value(file, child, emitter)
                 if name == "filename" and child.tag == "string":
-                    p.props[name] = str(self.resolve(file, p.props[name]))
+                    named = self.resolve(file, p.props[name])
+                    try:
+                        p.props[name] = str(self.access.check(named, "file"))
+                    except ValueError as exc:
+                        self.fail(file, child, str(exc))
             else:
                 self.fail(file, child, f"unknown element <{child.tag}> inside <{node.tag}>")
         if p.id is not None:
@@ -285,9 +346,7 @@ class XmlReader:
             if "value" in node.attrs:
                 v = self.numbers(file, node, self.attr(file, node, "value"), "value")
             else:
-                v = np.array(
-                    [float(self.attr(file, node, k, "0")) for k in ("x", "y", "z")], np.float64
-                )
+                v = np.array([self.number(file, node, k, "0") for k in ("x", "y", "z")])
             if v.shape != (3,):
                 self.fail(file, node, f"expected 3 coordinates, got {v.tolist()}")
             return v
@@ -297,7 +356,10 @@ class XmlReader:
         if tag == "spectrum" and text is None and "filename" in node.attrs:
             spd = self.resolve(file, self.attr(file, node, "filename"))
             try:
-                pairs = np.loadtxt(spd, comments="#", ndmin=2)
+                text = self.access.read_text(spd, "spectrum file")
+                pairs = np.loadtxt(io.StringIO(text), comments="#", ndmin=2)
+                if pairs.shape[1] != 2:
+                    raise ValueError(f"expected 2 columns, got {pairs.shape[1]}")
             except (OSError, ValueError) as exc:
                 self.fail(file, node, f"cannot read spectrum file {spd}: {exc}")
             return spectrum_to_rgb(pairs[:, 0], pairs[:, 1], emitter=emitter)
@@ -355,7 +417,7 @@ class XmlReader:
         """A ``<transform>``: each element applied after (left of) the ones before."""
         m = np.eye(4)
         for op in node.children:
-            a = lambda k, d="0", op=op: float(self.attr(file, op, k, d))  # noqa: E731
+            a = lambda k, d="0", op=op: self.number(file, op, k, d)  # noqa: E731
             try:
                 if op.tag == "translate":
                     if "value" in op.attrs:

@@ -9,16 +9,17 @@ import numpy as np
 import trimesh
 
 from ._common import MeshData, Notes, SceneData, clamp_albedo
+from ._paths import FileAccess
 from .textures import texture_mean
 
 __all__ = ["load_obj"]
 
 
-def _parse_mtl(path: Path, notes: Notes) -> dict[str, dict]:
-    """``{material: {"Kd": (3,), "Ke": (3,), "map_Kd": Path}}`` of an MTL file."""
+def _parse_mtl(path: Path, text: str) -> dict[str, dict]:
+    """``{material: {"Kd": (3,), "Ke": (3,), "map_Kd": Path}}`` of an MTL file's text."""
     mats: dict[str, dict] = {}
     cur = None
-    for k, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+    for k, line in enumerate(text.splitlines(), 1):
         parts = line.split("#", 1)[0].split()
         if not parts:
             continue
@@ -75,7 +76,47 @@ def _absolute_obj_indices(text: str) -> str:
     return re.sub(r"^(f[ \t]+)([^\n]*)", line, text, flags=re.MULTILINE)
 
 
-def load_obj(path) -> SceneData:
+class _Libraries(trimesh.resolvers.Resolver):
+    """What trimesh may read beside an OBJ: the material libraries voxgi read
+    already (through the path policy), and nothing else (textures are
+    reduced by voxgi itself)."""
+
+    def __init__(self, texts: dict[str, str]):
+        self.texts = texts
+
+    def get(self, name):
+        return self.texts[str(name)].encode("utf-8")
+
+    def keys(self):  # pragma: no cover - trimesh asks only for named files
+        return iter(self.texts)
+
+    def write(self, name, data):  # pragma: no cover - voxgi only reads scenes
+        raise ValueError("a scene reader does not write files")
+
+    def namespaced(self, namespace):  # pragma: no cover
+        return self
+
+
+def _read_libraries(path: Path, text: str, access: FileAccess, notes: Notes):
+    """The ``mtllib`` files an OBJ names: ``(materials, {name: text})``."""
+    mats: dict[str, dict] = {}
+    texts: dict[str, str] = {}
+    for k, line in enumerate(text.splitlines(), 1):
+        if not line.startswith("mtllib"):
+            continue
+        for name in line.split()[1:]:
+            try:
+                texts[name] = access.read_text(path.parent / name, "material library")
+            except FileNotFoundError:
+                notes.approx(f"material library {name} not found: grey 0.5")
+                continue
+            except ValueError as exc:
+                raise ValueError(f"{path}: line {k}: mtllib {name}: {exc}") from None
+            mats.update(_parse_mtl(path.parent / name, texts[name]))
+    return mats, texts
+
+
+def load_obj(path, *, search_paths=(), allow_outside=False, limits=None) -> SceneData:
     """Read an OBJ file and its MTL materials: one mesh per material.
 
     ``Kd`` is the albedo (default 0.8 when the MTL gives none), ``Ke`` the
@@ -83,33 +124,30 @@ def load_obj(path) -> SceneData:
     linear colour. A missing MTL file or material gives grey 0.5. All
     surfaces are one-sided (OBJ has no flag for it).
 
+    Parameters
+    ----------
+    path : str or Path
+    search_paths, allow_outside, limits
+        As :meth:`voxgi.Scene.load` (docs/scene-files.md).
+
     Raises
     ------
     FileNotFoundError, ValueError
         As :func:`load_mitsuba`, naming the OBJ or MTL file.
     """
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"scene file not found: {path}")
+    access = FileAccess(path, search_paths, allow_outside, limits)
     notes = Notes(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        text = access.read_bytes(path, "scene file").decode("utf-8")
+    except UnicodeDecodeError as exc:
         raise ValueError(f"scene file {path}: cannot be read as OBJ text ({exc})") from None
-    mats: dict[str, dict] = {}
-    for line in text.splitlines():
-        if line.startswith("mtllib"):
-            for name in line.split()[1:]:
-                mtl = path.parent / name
-                if mtl.exists():
-                    mats.update(_parse_mtl(mtl, notes))
-                else:
-                    notes.approx(f"material library {name} not found: grey 0.5")
+    mats, texts = _read_libraries(path, text, access, notes)
     try:
         loaded = trimesh.load(
             trimesh.util.wrap_as_stream(_absolute_obj_indices(text)),
             file_type="obj",
-            resolver=trimesh.resolvers.FilePathResolver(path),
+            resolver=_Libraries(texts),
             process=False,
             group_material=True,
             maintain_order=True,
@@ -135,7 +173,7 @@ def load_obj(path) -> SceneData:
             albedo = m.get("Kd", np.full(3, 0.8))
             emission = m.get("Ke", np.zeros(3))
             if "map_Kd" in m:
-                albedo = albedo * texture_mean(m["map_Kd"], path, notes, f"material {mat!r}")
+                albedo = albedo * texture_mean(m["map_Kd"], access, notes, f"material {mat!r}")
         albedo = clamp_albedo(albedo, f"material {mat!r}", notes)
         data.meshes.append(
             MeshData(

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import _progress
 from .linesystem import Gatherer
 from .problem import Problem
 
@@ -144,6 +145,7 @@ class _Iteration:
         """Iterate until the stopping rule, the iteration limit, a stall or a
         non-finite iterate; return the last finite state."""
         s = self.s
+        first = None  # the stopping quantity after the first iteration
         while s.it < self.p.limit:
             R_new, Hg, d, res, h_inc, use_later = self.step()
             if not (np.all(np.isfinite(R_new)) and np.isfinite(res)):
@@ -152,9 +154,11 @@ class _Iteration:
             s.R, s.Hg, s.dk = R_new, Hg, (self.p.rho * h_inc if self.corrections else d)
             s.it += 1
             s.residuals.append(res)
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(residual=f"{res:.2e}")
+            if bar is not None:  # the way to tol on a log scale: the quantity falls geometrically
+                q = res * self.lam_bound / (1 - self.lam_bound)
+                first = q if first is None else first
+                bar.update(round(100 * _progress.log_share(first, q, self.p.opt.tol)) - bar.n)
+                bar.set_postfix_str(f"iteration {s.it}, residual {res:.2e}")
             if self.converged(res):
                 break
             if self.at_floor(res):
@@ -221,9 +225,7 @@ def iterate(p: Problem, gather: Gatherer, Hd: np.ndarray, progress: bool) -> Sta
         p.stats["skipped"]["gathering"] = "all albedos are zero"
     bar = None
     if progress and limit > 0:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=p.opt.max_bounces, desc="gather", unit="it", leave=False)
+        bar = _progress.bar("gather", 100, bar_format=_progress.PERCENT)
     it = _Iteration(p, gather, Hd)
     try:
         s = it.run(bar)

@@ -8,7 +8,7 @@ from .. import _core, _validate
 from ..directions import direction_set
 from ..voxels import VoxelSet, available_memory
 from .linesystem import pair_table_bytes
-from .tuning import Settings, SolveTuning, settings
+from .tuning import Settings, SolveTuning, gathering_radius, settings
 
 __all__ = ["check_memory", "shoots_direct_light", "solve_memory"]
 
@@ -54,9 +54,9 @@ def shoots_direct_light(vox: VoxelSet, opt: Settings) -> bool:
 
 def solve_memory(
     vox: VoxelSet,
-    directions: int = 22,
-    threads: int | None = None,
     *,
+    radius: int | None = None,
+    threads: int | None = None,
     tuning: SolveTuning | None = None,
 ) -> dict:
     """Bytes a local :func:`solve` of ``vox`` needs, by part, before it allocates.
@@ -64,8 +64,13 @@ def solve_memory(
     Parameters
     ----------
     vox : VoxelSet
-    directions, threads, tuning
-        As for :func:`solve`.
+        Records from :func:`voxgi.voxelize`.
+    radius : int or None
+        Gathering radius, as for :func:`voxgi.solve` (None: the tuning's choice).
+    threads : int or None
+        Threads (None: all hardware threads); each holds its own walk state.
+    tuning : SolveTuning or None
+        As for :func:`voxgi.solve` (None: the defaults).
 
     Returns
     -------
@@ -77,11 +82,11 @@ def solve_memory(
 
     >>> import voxgi
     >>> vox = voxgi.voxelize(voxgi.scenes.furnace_box(), resolution=8, progress=False)
-    >>> est = solve_memory(vox, directions=4, threads=1)
+    >>> est = solve_memory(vox, radius=4, threads=1)
     >>> est["total"] == sum(v for k, v in est.items() if k != "total")
     True
     """
-    opt = settings(directions, None, 1.0, threads, tuning)
+    opt = settings(gathering_radius(radius, tuning, vox), None, 1.0, threads, tuning)
     ijk = _validate.as_c_array(vox.ijk, np.int32, (-1, 3), "vox.ijk")
     n = len(ijk)
     extent = ijk.max(axis=0).astype(np.int64) - ijk.min(axis=0) if n else np.zeros(3, np.int64)
@@ -114,14 +119,14 @@ def solve_memory(
 
 def check_memory(vox: VoxelSet, opt: Settings, tuning) -> dict:
     """Refuse a local solve whose estimate exceeds the memory available now."""
-    est = solve_memory(vox, opt.R, opt.threads, tuning=tuning)
+    est = solve_memory(vox, radius=opt.R, threads=opt.threads, tuning=tuning)
     avail = available_memory()
     if est["total"] > avail:
         parts = ", ".join(f"{k} {v / 2**30:.2f} GiB" for k, v in est.items() if k != "total")
         raise MemoryError(
-            f"solve: {len(vox):,} records at directions={opt.R} on {opt.threads} threads need "
+            f"solve: {len(vox):,} records at radius {opt.R} on {opt.threads} threads need "
             f"about {est['total'] / 2**30:.2f} GiB ({parts}), over the "
-            f"{avail / 2**30:.2f} GiB available; use fewer threads or directions, a coarser "
+            f"{avail / 2**30:.2f} GiB available; use fewer threads, a smaller radius, a coarser "
             "resolution, or SolveTuning(pair_cache=False)"
         )
     return est

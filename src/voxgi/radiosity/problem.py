@@ -223,6 +223,6 @@ def gatherer(p: Problem) -> Gatherer:
     limit, la = p.limit, opt.later_after
     extra = 1 if opt.diagnostics else 0
     passes = {id(p.gds): (min(limit, la) if p.lds is not None else limit) + extra}
-    if p.lds is not None:  # (the same object as gds when later_directions == directions)
+    if p.lds is not None:  # (the same object as gds when later_radius == radius)
         passes[id(p.lds)] = passes.get(id(p.lds), 0) + max(0, limit - la)
     return Gatherer(p.sysm, opt.threads, p.twins.stand_in, budget, passes)

@@ -16,7 +16,7 @@ from .memory import check_memory
 from .problem import Problem, build_problem, gatherer, normalise, open_backend, zero_solution
 from .records import check_vox
 from .traced_passes import traced_bounces
-from .tuning import Settings, SolveTuning, settings
+from .tuning import Settings, SolveTuning, gathering_radius, settings
 
 __all__ = ["solve"]
 
@@ -61,41 +61,52 @@ def _statistics(p: Problem, gather: Gatherer, s: State, shoot_rays: int) -> None
 
 def solve(
     vox: VoxelSet,
-    directions: int = 22,
+    *,
+    radius: int | None = None,
+    tol: float | None = None,
     max_bounces: int | None = None,
-    tol: float = 1e-4,
     threads: int | None = None,
     executor: LineExecutor | None = None,
-    *,
     progress: bool = True,
     tuning: SolveTuning | None = None,
 ) -> Solution:
     """Solve the discrete radiosity equation on the records of ``vox``.
 
-    Shooting from the emitter records first (direct light, radius
-    ``tuning.shoot_directions``), then Jacobi gathering of the reflected
-    light (radius ``directions``) with geometric-tail extrapolation, until
-    the estimated remaining error falls under ``tol`` (``docs/design.md`` §5).
+    Direct light first (by default shadow rays to the exact emitters; the
+    paper's shooting with :meth:`SolveTuning.paper`), then Jacobi gathering
+    of the reflected light along the discrete lines with geometric-tail
+    extrapolation until the estimated remaining error falls under ``tol``,
+    then, by default, traced passes against the exact triangles
+    (``docs/design.md`` §5). :func:`voxgi.solve` is this function with a
+    ``client=`` for a Dask cluster.
 
     Parameters
     ----------
     vox : VoxelSet
         Records from :func:`voxgi.voxelize`; left unchanged.
-    directions : int
-        Radius R >= 1 of the gathering direction sphere (22: 5982 directions).
-    max_bounces : int or None
-        At most this many gathering iterations (None: until converged; 0: direct light).
-    tol : float
+    radius : int or None
+        Radius R >= 1 of the gathering direction set (R 4: 198 directions,
+        R 22: 5982). None: ``tuning.radius``, else 4 where traced passes
+        finish the reflected light and 8 where the lines alone carry it
+        (:func:`voxgi.radiosity.tuning.gathering_radius`).
+    tol : float or None
         Bound on the estimated remaining relative error ``r λ / (1 − λ)``, ``r``
-        the area-weighted residual (``residuals``), ``λ`` the largest albedo.
+        the area-weighted residual (``residuals``), ``λ`` the largest albedo,
+        for the lines and then for the traced passes. None: ``tuning.tol``
+        (1e-3; the paper's 1e-4).
+    max_bounces : int or None
+        At most this many gathering iterations along the lines, and then no
+        traced passes (None: until converged; 0: direct light only).
     threads : int or None
         Threads (None: all hardware threads). Results do not depend on it.
     executor : LineExecutor or None
-        Where the passes run (None: here; ``voxgi.solve`` also takes a Client).
+        Where the passes run (None: here, after checking the memory estimate
+        of :func:`solve_memory`).
     progress : bool
-        Show a tqdm progress bar over iterations.
+        Show a tqdm progress bar over the iterations.
     tuning : SolveTuning or None
-        Expert settings (:class:`SolveTuning`).
+        What the solve computes and how (None: ``SolveTuning()``, the
+        accurate pipeline; :meth:`SolveTuning.paper`: the paper's method).
 
     Returns
     -------
@@ -119,7 +130,8 @@ def solve(
     """
     t_start = time.perf_counter()
     a = check_vox(vox)
-    opt = settings(directions, max_bounces, tol, threads, tuning)
+    R = gathering_radius(radius, tuning, vox, max_bounces)
+    opt = settings(R, max_bounces, tol, threads, tuning)
     executor = _check_executor(executor, vox, opt, tuning)
     p = build_problem(vox, a, opt)
     if p.stats["emitters"] == 0 and not p.lights:

@@ -19,6 +19,18 @@ __all__ = ["traced_bounces"]
 _TRACED_PASSES = 32
 
 
+def _why_not_traced(p: Problem) -> str | None:
+    """Why the lines alone carry the reflected light though traced passes were
+    asked for (None: the passes run)."""
+    if getattr(p.vox, "scene", None) is None:
+        return "the records carry no scene (vox.scene is None)"
+    if p.opt.max_bounces is not None:
+        return f"max_bounces={p.opt.max_bounces} fixes the bounces the lines gather"
+    if p.limit == 0:
+        return "all albedos are zero"
+    return None
+
+
 def traced_bounces(p: Problem, Hd: np.ndarray, R: np.ndarray) -> np.ndarray:
     """The reflected radiosity after passes of rays against the exact
     triangles, started from the lines' answer ``R`` (``docs/design.md`` §5).
@@ -32,13 +44,7 @@ def traced_bounces(p: Problem, Hd: np.ndarray, R: np.ndarray) -> np.ndarray:
     opt = p.opt
     if opt.indirect_light != "traced":
         return R
-    why = None
-    if getattr(p.vox, "scene", None) is None:
-        why = "the records carry no scene (vox.scene is None)"
-    elif opt.max_bounces is not None:
-        why = f"max_bounces={opt.max_bounces} fixes the bounces the lines gather"
-    elif p.limit == 0:
-        why = "all albedos are zero"
+    why = _why_not_traced(p)
     if why is not None:
         p.stats["skipped"]["traced_bounces"] = why + ": the lines alone carried the reflected light"
         return R

@@ -1,33 +1,165 @@
-"""The settings of a solve: :class:`SolveTuning` and their validation."""
+"""The settings of a solve: :class:`SolveTuning`, the paper's method, and their validation.
+
+:class:`SolveTuning` holds what a researcher chooses: how the direct and the
+reflected light reach the records and with how many samples, the radii, the
+tolerance and the pair cache's budget. Its defaults are the accurate
+pipeline that :func:`voxgi.render` uses; :meth:`SolveTuning.paper` is the
+method of Piwowar & Malgouyres. The switches that only experiments turn
+(the facing margin, the search history, coarser later bounces, the
+iteration bound, which objects count as closed, the diagnostic passes) are
+fields of :class:`_StudyTuning`, a private subclass for the benchmarks.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .. import _validate
 
-__all__ = ["Settings", "SolveTuning", "settings"]
+__all__ = [
+    "LINES_RADIUS",
+    "TRACED_RADIUS",
+    "Settings",
+    "SolveTuning",
+    "gathering_radius",
+    "settings",
+]
+
+#: Gathering radius when traced passes finish the reflected light: they carry
+#: it against the exact triangles, and the lines only give them a start, which
+#: a coarse direction set gives as well as a fine one for less
+#: (``docs/design.md`` §5).
+TRACED_RADIUS = 4
+#: Gathering radius when the lines alone carry the reflected light.
+LINES_RADIUS = 8
 
 
 @dataclass(frozen=True)
 class SolveTuning:
-    """Expert settings of :func:`solve`, for studies and benchmarks.
+    """What a solve computes and how: the choices of :func:`voxgi.solve`.
+
+    The defaults are the accurate pipeline, the one :func:`voxgi.render`
+    solves with: exact direct light by shadow rays, the reflected light
+    along the discrete lines and then finished by traced passes, radius 4,
+    tolerance 1e-3. :meth:`paper` is the paper's method.
 
     Attributes
     ----------
-    shoot_directions : int
-        Radius of the shooting direction sphere (35: 15194 directions).
-    later_directions : int or None
+    radius : int or None
+        Radius R >= 1 of the gathering direction set (R 4: 198 directions,
+        R 8: 762, R 22: 5982); ``voxgi.solve(radius=...)`` overrides it.
+        None: :data:`TRACED_RADIUS` (4) where traced passes finish the
+        reflected light, else :data:`LINES_RADIUS` (8).
+    tol : float
+        Bound on the estimated remaining relative error of the gathering
+        (and of the traced passes); ``voxgi.solve(tol=...)`` overrides it.
+    direct_light : {"exact", "shoot"}
+        How the records get their direct light (``docs/design.md`` §5):
+        ``"exact"`` traces shadow rays from every record to points on the
+        emitting triangles (:func:`voxgi.direct.direct_irradiance`; cost
+        records x samples; needs ``vox.scene``, else the solve shoots and
+        ``stats["skipped"]`` says why); ``"shoot"`` marches discrete rays
+        from every emitter record (the paper's method; cost emitter records
+        x directions x path length; where it would give the same answer for
+        more, one gathering pass over the emitters stands in, and
+        ``stats["skipped"]`` says so). Point, spot and directional lights
+        and environments are always lit exactly.
+    direct_samples : int
+        Emitter points per record for exact direct light (records whose
+        estimate stays noisy get more).
+    shoot_radius : int
+        Radius of the shooting's direction set (35: 15194 directions).
+    indirect_light : {"traced", "lines"}
+        How the reflected light travels between records (``docs/design.md``
+        §5): ``"lines"`` along the discrete lines only (the paper's method);
+        ``"traced"`` then, once the lines have converged, in passes of rays
+        against the exact triangles (:mod:`voxgi.traced`) until their update
+        is under ``tol``, so that gaps and occluders thinner than a voxel and
+        thin walls meeting other surfaces act as they are. Needs
+        ``vox.scene`` and ``max_bounces=None``; otherwise ``stats["skipped"]``
+        says why the lines alone carried it.
+    traced_samples : int
+        Rays per record in the first traced pass (1 to 4096; a square number
+        is stratified in both angles); the later passes, which carry only
+        the previous pass's change, take a quarter (at least 16).
+    pair_cache : bool or None
+        Record the pairs of the first gathering pass over a direction set and
+        replay them in later passes over it (3 bytes per record and family;
+        :func:`voxgi.radiosity.pair_table_bytes`). None: when they fit in
+        ``max_cache_bytes``; True: the same with no default budget; False:
+        walk every pass (least memory).
+    max_cache_bytes : int or None
+        Budget for the recorded pairs; None: a quarter of the memory available
+        when the solve starts (``pair_cache=None``), no limit (True).
+
+    >>> SolveTuning().direct_light, SolveTuning.paper().radius
+    ('exact', 22)
+    """
+
+    radius: int | None = None
+    tol: float = 1e-3
+    direct_light: str = "exact"
+    direct_samples: int = 16
+    shoot_radius: int = 35
+    indirect_light: str = "traced"
+    traced_samples: int = 64
+    pair_cache: bool | None = None
+    max_cache_bytes: int | None = None
+
+    @staticmethod
+    def paper(**changes) -> SolveTuning:
+        """The method of Piwowar & Malgouyres (2008), for the paper's tables and studies.
+
+        Direct light shot along the discrete lines (radius 35), the
+        reflected light gathered along them alone (radius 22) to a tolerance
+        of 1e-4, and the diagnostic passes behind ``stats["back_fraction"]``
+        and the energy balance of every record. Slower than the defaults
+        and blind to occluders thinner than a voxel (``docs/design.md`` §5).
+
+        Parameters
+        ----------
+        **changes
+            Fields to change, e.g. ``shoot_radius=8``; studies may also set
+            the experiment switches of the benchmarks' private tuning
+            (``later_radius``, ``epsilon``, ``history``, ``closed``, ...).
+
+        Returns
+        -------
+        SolveTuning
+            For ``voxgi.solve(vox, tuning=SolveTuning.paper())``.
+
+        >>> SolveTuning.paper(shoot_radius=8).shoot_radius
+        8
+        """
+        paper = _StudyTuning(
+            radius=22,
+            tol=1e-4,
+            direct_light="shoot",
+            direct_samples=64,
+            indirect_light="lines",
+            diagnostics=True,
+        )
+        return replace(paper, **changes)
+
+
+@dataclass(frozen=True)
+class _StudyTuning(SolveTuning):
+    """:class:`SolveTuning` with the switches that only experiments turn
+    (the benchmarks' and tests'; ``tuning=`` takes it as a SolveTuning).
+
+    Attributes
+    ----------
+    later_radius : int or None
         Radius for the bounces after the first ``later_after`` ones (later
         bounces are smooth; Piwowar & Malgouyres 2009). The solver then
         propagates each bounce's increment and ends with the geometric-tail
         term once the ratio of successive bounces is steady. None: every
-        bounce with ``directions``.
+        bounce with ``radius``.
     later_after : int
-        Bounces gathered with ``directions`` before ``later_directions``.
+        Bounces gathered with ``radius`` before ``later_radius``.
     epsilon : float
         Facing-rule margin in voxels (``docs/design.md`` §4).
     history : int
@@ -41,60 +173,23 @@ class SolveTuning:
         radiosity instead of black (``docs/design.md`` §5). None: the objects
         :func:`voxgi.voxelize` found watertight (``vox.stats["closed_objects"]``).
     diagnostics : bool
-        Run the extra gathering pass behind ``stats["back_fraction"]``.
-    pair_cache : bool or None
-        Record the pairs of the first gathering pass over a direction set and
-        replay them in later passes over it (3 bytes per record and family;
-        :func:`pair_table_bytes`). None: when they fit in ``max_cache_bytes``;
-        True: the same with no default budget; False: walk every pass.
-    max_cache_bytes : int or None
-        Budget for the recorded pairs; None: a quarter of the memory available
-        when the solve starts (``pair_cache=None``), no limit (True).
-    direct_light : {"shoot", "exact"}
-        How the records get their direct light (``docs/design.md`` §5):
-        ``"shoot"`` marches discrete rays from every emitter record (the
-        paper's method; cost emitter records x directions x path length;
-        where it would give the same answer for more, one gathering pass
-        over the emitters stands in, and ``stats["skipped"]`` says so);
-        ``"exact"`` traces shadow rays from every record to points on the
-        emitting triangles (:func:`voxgi.direct.direct_irradiance`; cost
-        records x samples; needs ``vox.scene``, else the solve shoots and
-        ``stats["skipped"]`` says why).
-    direct_samples : int
-        Emitter points per record for ``direct_light="exact"`` (records whose
-        estimate stays noisy get more).
-    indirect_light : {"lines", "traced"}
-        How the reflected light travels between records (``docs/design.md``
-        §5): ``"lines"`` along the discrete lines only (the paper's method);
-        ``"traced"`` then, once the lines have converged, in passes of rays
-        against the exact triangles (:mod:`voxgi.traced`) until their update
-        is under ``tol``, so that gaps and occluders thinner than a voxel and
-        thin walls meeting other surfaces act as they are. Needs
-        ``vox.scene`` and ``max_bounces=None``; otherwise ``stats["skipped"]``
-        says why the lines alone carried it.
-    traced_samples : int
-        Rays per record in the first traced pass (1 to 4096; a square number
-        is stratified in both angles); the later passes, which carry only
-        the previous pass's change, take a quarter (at least 16).
+        Run the extra gathering pass behind ``stats["back_fraction"]`` and
+        light the black records too, for the energy balance.
 
-    >>> SolveTuning(shoot_directions=8).later_after
+    >>> _StudyTuning(later_radius=8).later_after
     2
     """
 
-    shoot_directions: int = 35
-    later_directions: int | None = None
+    later_radius: int | None = None
     later_after: int = 2
     epsilon: float = 0.02
     history: int = 16
     max_iterations: int = 10000
     closed: bool | Sequence[int] | None = None
-    diagnostics: bool = True
-    pair_cache: bool | None = None
-    max_cache_bytes: int | None = None
-    direct_light: str = "shoot"
-    direct_samples: int = 64
-    indirect_light: str = "lines"
-    traced_samples: int = 64
+    diagnostics: bool = False
+
+
+_NO_STUDY = _StudyTuning()
 
 
 @dataclass(frozen=True)
@@ -115,17 +210,42 @@ class Settings:
     diagnostics: bool
     pair_cache: bool | None
     cache_cap: int | None
-    direct_light: str = "shoot"
-    direct_samples: int = 64
-    indirect_light: str = "lines"
+    direct_light: str = "exact"
+    direct_samples: int = 16
+    indirect_light: str = "traced"
     traced_samples: int = 64
 
 
-def settings(directions, max_bounces, tol, threads, tuning) -> Settings:
-    """Check the arguments and the tuning; raise TypeError/ValueError naming the bad one."""
+def _checked_tuning(tuning) -> SolveTuning:
     t = SolveTuning() if tuning is None else tuning
     if not isinstance(t, SolveTuning):
         raise TypeError(f"tuning: expected voxgi.SolveTuning or None, got {type(t).__name__}")
+    return t
+
+
+def gathering_radius(radius, tuning, vox, max_bounces=None) -> int:
+    """The gathering radius of a solve: ``radius``, else the tuning's, else
+    :data:`TRACED_RADIUS` where traced passes finish the reflected light
+    (``indirect_light="traced"``, the records carry their scene, and
+    ``max_bounces`` is None), else :data:`LINES_RADIUS`."""
+    t = _checked_tuning(tuning)
+    if radius is None:
+        radius = t.radius
+    if radius is None:
+        traced = (
+            t.indirect_light == "traced"
+            and getattr(vox, "scene", None) is not None
+            and max_bounces is None
+        )
+        radius = TRACED_RADIUS if traced else LINES_RADIUS
+    return _validate.integer(radius, "radius", low=1, high=256)
+
+
+def settings(radius, max_bounces, tol, threads, tuning) -> Settings:
+    """Check the arguments and the tuning (``tol`` None: the tuning's);
+    raise TypeError/ValueError naming the bad one."""
+    t = _checked_tuning(tuning)
+    s = t if isinstance(t, _StudyTuning) else _NO_STUDY
     if t.pair_cache is not None and not isinstance(t.pair_cache, (bool, np.bool_)):
         raise TypeError(f"pair_cache: expected True, False or None, got {t.pair_cache!r}")
     if t.direct_light not in ("shoot", "exact"):
@@ -133,20 +253,18 @@ def settings(directions, max_bounces, tol, threads, tuning) -> Settings:
     if t.indirect_light not in ("lines", "traced"):
         raise ValueError(f"indirect_light: expected 'lines' or 'traced', got {t.indirect_light!r}")
     return Settings(
-        R=_validate.integer(directions, "directions", low=1, high=256),
-        Rs=_validate.integer(t.shoot_directions, "shoot_directions", low=1, high=256),
-        Rl=_validate.integer(
-            t.later_directions, "later_directions", low=1, high=256, allow_none=True
-        ),
-        later_after=_validate.integer(t.later_after, "later_after", low=1),
+        R=_validate.integer(radius, "radius", low=1, high=256),
+        Rs=_validate.integer(t.shoot_radius, "shoot_radius", low=1, high=256),
+        Rl=_validate.integer(s.later_radius, "later_radius", low=1, high=256, allow_none=True),
+        later_after=_validate.integer(s.later_after, "later_after", low=1),
         max_bounces=_validate.integer(max_bounces, "max_bounces", low=0, allow_none=True),
-        max_iterations=_validate.integer(t.max_iterations, "max_iterations", low=1),
-        tol=_validate.real(tol, "tol", low=0.0, low_open=True),
+        max_iterations=_validate.integer(s.max_iterations, "max_iterations", low=1),
+        tol=_validate.real(t.tol if tol is None else tol, "tol", low=0.0, low_open=True),
         threads=_validate.threads(threads),
-        epsilon=_validate.real(t.epsilon, "epsilon", low=0.0),
-        history=_validate.integer(t.history, "history", low=1, high=32),
-        closed=t.closed,
-        diagnostics=bool(t.diagnostics),
+        epsilon=_validate.real(s.epsilon, "epsilon", low=0.0),
+        history=_validate.integer(s.history, "history", low=1, high=32),
+        closed=s.closed,
+        diagnostics=bool(s.diagnostics),
         pair_cache=t.pair_cache,
         cache_cap=_validate.integer(t.max_cache_bytes, "max_cache_bytes", low=0, allow_none=True),
         direct_light=t.direct_light,

@@ -1,0 +1,90 @@
+"""The pixel AOVs: albedo, shading normal, depth and object of each pixel's
+first hits, from the camera hits the frames trace anyway (no extra rays),
+averaged over the frames' camera samples with the image's pixel filter
+(``docs/design.md`` §6)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["AOV_CHANNELS", "AOVMean", "frame_aovs"]
+
+#: Columns of :func:`frame_aovs`: albedo RGB, shading normal XYZ, view depth
+#: times the hit indicator, and the hit indicator (the share of the pixel's
+#: filtered samples that met a surface).
+AOV_CHANNELS = (
+    *("albedo.R", "albedo.G", "albedo.B"),
+    *("normal.X", "normal.Y", "normal.Z"),
+    *("zhit", "hit"),
+)
+
+
+def frame_aovs(hits: dict, albedo: np.ndarray, eye: np.ndarray, forward: np.ndarray) -> np.ndarray:
+    """One frame's AOV samples, a row per pixel (:data:`AOV_CHANNELS`).
+
+    Parameters
+    ----------
+    hits : dict
+        The frame's camera hits (``_FrameShader.camera_hits``): ``pos``
+        (P, 3), ``normal`` (P, 3) facing the viewer, ``material`` (P,)
+        (-1: nothing, or a one-sided back, which shows black).
+    albedo : (objects, 3) float32
+        Each object's diffuse albedo.
+    eye, forward : (3,) float
+        The camera's centre, in the hits' frame, and its unit view axis.
+
+    Returns
+    -------
+    (P, 8) float32
+        A pixel that met nothing has albedo, normal and depth 0 and hit 0.
+    """
+    mat = hits["material"]
+    hit = mat >= 0
+    out = np.empty((len(mat), len(AOV_CHANNELS)), np.float32)
+    # one zero row past the objects' for index -1 (nothing met)
+    table = np.zeros((len(albedo) + 1, 3), np.float32)
+    table[:-1] = albedo
+    out[:, 0:3] = table[mat]
+    np.multiply(hits["normal"], hit[:, None], out=out[:, 3:6])
+    with np.errstate(invalid="ignore", over="ignore"):  # a miss's point is never read
+        depth = (hits["pos"] - np.asarray(eye)) @ np.asarray(forward)
+    out[:, 6] = np.where(hit, depth, 0.0)
+    out[:, 7] = hit
+    return out
+
+
+class AOVMean:
+    """The running mean of the frames' AOV samples, and the first frame's objects."""
+
+    def __init__(self) -> None:
+        self.sum: np.ndarray | None = None
+        self.frames = 0
+        self.object_id: np.ndarray | None = None
+
+    def add(self, aovs: np.ndarray | None, objects: np.ndarray | None) -> None:
+        """Add a frame's (P, 8) AOV samples; keep the first frame's objects."""
+        if aovs is None:
+            return
+        if self.sum is None:
+            self.sum = np.zeros(aovs.shape, np.float64)
+            self.object_id = None if objects is None else np.asarray(objects, np.int32).copy()
+        self.sum += aovs
+        self.frames += 1
+
+    def result(self, height: int, width: int) -> dict:
+        """``albedo`` and ``normal`` (H, W, 3), ``depth`` and ``object_id``
+        (H, W) of :class:`RenderResult`; all None without any frame's AOVs."""
+        keys = ("albedo", "normal", "depth", "object_id")
+        if self.sum is None or self.frames == 0:
+            return dict.fromkeys(keys)
+        m = (self.sum / self.frames).reshape(height, width, -1)
+        hit = m[..., 7]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            depth = np.where(hit > 0, m[..., 6] / hit, np.inf)
+        obj = None if self.object_id is None else self.object_id.reshape(height, width)
+        return {
+            "albedo": m[..., 0:3].astype(np.float32),
+            "normal": m[..., 3:6].astype(np.float32),
+            "depth": depth.astype(np.float32),
+            "object_id": obj,
+        }

@@ -1,0 +1,109 @@
+"""Writing voxgi's TOML scene files (:meth:`voxgi.Scene.save`)."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from ..camera import Camera
+from ..io import atomic_path
+from ..lights import DirectionalLight, Environment, PointLight, SpotLight
+
+__all__ = ["save_toml"]
+
+#: The ``[[light]]`` types and the class of each.
+LIGHT_TYPES = {"point": PointLight, "spot": SpotLight, "directional": DirectionalLight}
+
+
+def save_toml(scene, path: Path) -> Path:
+    """Write ``scene`` as a TOML file with one OBJ file per object beside it
+    (:meth:`voxgi.Scene.save`)."""
+    import tomli_w  # (writes any name as valid TOML: control characters escaped)
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    doc: dict = {}
+    if scene.camera is not None:
+        doc["camera"] = _camera_to_dict(scene.camera)
+    objects = []
+    for i, o in enumerate(scene.objects):
+        fname = f"{path.stem}_{i:03d}.obj"
+        with atomic_path(path.parent / fname) as tmp:
+            tmp.write_text(_obj_text(o.vertices, o.faces))
+        objects.append(_object_to_dict(o, fname))
+    if objects:
+        doc["object"] = objects
+    if scene.lights:
+        doc["light"] = [_light_to_dict(light) for light in scene.lights]
+    if scene.environment is not None:
+        doc["environment"] = _environment_to_dict(scene.environment, path)
+    text = tomli_w.dumps(doc)
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return path
+
+
+def _camera_to_dict(c: Camera) -> dict:
+    out: dict = {f: [float(x) for x in getattr(c, f)] for f in ("eye", "target", "up")}
+    out.update(fov=float(c.fov), aperture=float(c.aperture), width=c.width, height=c.height)
+    if c.focus_distance is not None:
+        out["focus_distance"] = float(c.focus_distance)
+    if c.pixel_filter != "box":
+        out["pixel_filter"] = c.pixel_filter
+    return out
+
+
+def _object_to_dict(o, fname: str) -> dict:
+    entry = {
+        "name": o.name,
+        "mesh": fname,
+        "albedo": [float(x) for x in o.material.albedo],
+        "emission": [float(x) for x in o.material.emission],
+        "two_sided": bool(o.two_sided),
+    }
+    spec = o.material.specular
+    if spec is not None:
+        entry["specular"] = {
+            "rs": [float(x) for x in spec.rs],
+            "nu": float(spec.nu),
+            "nv": float(spec.nv),
+        }
+    return entry
+
+
+def _obj_text(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """OBJ text of a mesh, every float with 17 significant digits.
+
+    ``%.17g`` reads back as the same float64 at any magnitude (a fixed
+    number of decimals would not, below 0.1).
+    """
+    buf = io.StringIO()
+    np.savetxt(buf, vertices, fmt="v %.17g %.17g %.17g")
+    np.savetxt(buf, faces + 1, fmt="f %d %d %d")
+    return buf.getvalue()
+
+
+def _light_to_dict(light) -> dict:
+    kind = next(k for k, c in LIGHT_TYPES.items() if isinstance(light, c))
+    out: dict = {"type": kind}
+    for name in light.__dataclass_fields__:
+        v = getattr(light, name)
+        out[name] = [float(x) for x in v] if isinstance(v, tuple) else float(v)
+    return out
+
+
+def _environment_to_dict(env: Environment, path: Path) -> dict:
+    """An ``[environment]`` table; an image is written as an EXR beside the scene file."""
+    out: dict = {}
+    if env.constant is not None and env.image.shape[:2] == (1, 1):
+        out["radiance"] = [float(x) for x in env.image[0, 0]]
+    else:
+        from ..io import write_exr
+
+        fname = f"{path.stem}_environment.exr"
+        write_exr(path.parent / fname, env.image.astype(np.float32))
+        out["image"] = fname
+    if not np.array_equal(env.to_world, np.eye(3)):
+        out["to_world"] = [[float(x) for x in row] for row in env.to_world]
+    return out
