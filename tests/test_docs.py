@@ -109,7 +109,7 @@ def _documented_parameters(doc: str) -> set[str]:
     return names
 
 
-@pytest.mark.parametrize("module", ["voxgi.scenes", "voxgi.metrics"])
+@pytest.mark.parametrize("module", ["voxgi", "voxgi.scenes", "voxgi.metrics"])
 def test_public_functions_document_every_parameter(module):
     # help() on a public function explains each of its arguments (numpydoc).
     import importlib
@@ -125,3 +125,19 @@ def test_public_functions_document_every_parameter(module):
             for p in inspect.signature(fn).parameters.values()
         }
         assert params <= _documented_parameters(inspect.getdoc(fn) or ""), (name, params)
+
+
+@pytest.mark.parametrize("name", ["voxelize", "solve", "render"])
+def test_readme_api_rows_are_the_signatures(name):
+    # The README's API table writes each stage's signature out in full.
+    import inspect
+
+    import voxgi
+
+    parts, starred = [], False
+    for p in inspect.signature(getattr(voxgi, name)).parameters.values():
+        if p.kind is p.KEYWORD_ONLY and not starred:
+            parts.append("*")
+            starred = True
+        parts.append(p.name if p.default is p.empty else f"{p.name}={p.default!r}")
+    assert f"`voxgi.{name}({', '.join(parts)})`" in _readme()

@@ -386,7 +386,7 @@ class DistributedLineSystem(_Farm):
     records : voxgi.radiosity.LineRecords
         What the workers build their LineSystem from (:func:`voxgi.radiosity.line_records`).
     progress : bool
-        A tqdm bar over each call's tasks.
+        A progress bar over each call's tasks (on a terminal or in a notebook).
 
     Raises
     ------

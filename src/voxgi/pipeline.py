@@ -64,7 +64,7 @@ def solve(
     threads : int or None
         Threads (None: all hardware threads). Results do not depend on it.
     progress : bool
-        Show a tqdm progress bar over the iterations.
+        Show a progress bar over the iterations (on a terminal or in a notebook).
     client : dask.distributed.Client, executor or None
         Where the passes run: None here; a Dask client or any
         :class:`voxgi.radiosity.LineExecutor` (``pip install "voxgi[dask]"``;
@@ -148,7 +148,8 @@ def render(
     threads : int or None
         Threads (None: all hardware threads).
     progress : bool
-        Show tqdm progress bars (the solve's and the frames').
+        Show progress bars, the solve's and the frames' (on a terminal or in a
+        notebook).
     client : dask.distributed.Client, executor or None
         Where the solve's passes and the frames run (None: here;
         :mod:`voxgi.distributed`). The picture is the local one.

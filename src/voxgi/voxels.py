@@ -398,7 +398,7 @@ def voxelize(
         Worker threads; None uses every hardware thread. The result does not
         depend on it.
     progress : bool, optional
-        Show a tqdm progress bar.
+        Show a progress bar (on a terminal or in a notebook).
     max_memory : int or None, optional
         Memory budget in bytes; None means half of the memory available now.
         The peak memory is estimated from the triangles before anything is

@@ -178,7 +178,11 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
             aovs.add(getattr(source, "aovs", None), None if surface is None else surface[0])
             # the estimate is read only once the rule may stop on it
             est = acc.est if opt.tol > 0 and acc.ready(opt) else math.nan
-            bar.total = _progress.frames_needed(f + 1, est, opt.tol, floor, opt.max_frames)
+            worst = est
+            if np.isfinite(est):  # the per-pixel bound's error falls as 1/sqrt(frames)
+                bound = opt.pixel_factor * math.sqrt(opt.tol)
+                worst = max(est, opt.tol * (acc.tail / bound) ** 2)
+            bar.total = _progress.frames_needed(f + 1, worst, opt.tol, floor, opt.max_frames)
             bar.update(1)
             known = f", est relMSE {est:.2e}" if np.isfinite(est) else ""
             bar.set_postfix_str(f"frame {f + 1}{known}")

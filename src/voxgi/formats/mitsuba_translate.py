@@ -124,7 +124,7 @@ def _scene_emitter(p: Plugin, data: SceneData, notes: Notes) -> None:
         )
     elif p.type == "spot":
         # Mitsuba's spot shines along its local +z from its local origin.
-        cutoff = float(p.props.get("cutoff_angle", 20.0))
+        cutoff = p.number("cutoff_angle", 20.0)
         data.lights.append(
             {
                 "type": "spot",
@@ -132,7 +132,7 @@ def _scene_emitter(p: Plugin, data: SceneData, notes: Notes) -> None:
                 "direction": unit(m[:3, 2]),
                 "intensity": colour("intensity"),
                 "cutoff_angle": cutoff,
-                "beam_width": float(p.props.get("beam_width", 0.75 * cutoff)),
+                "beam_width": p.number("beam_width", 0.75 * cutoff),
             }
         )
     elif p.type == "directional":
@@ -153,7 +153,7 @@ def _scene_emitter(p: Plugin, data: SceneData, notes: Notes) -> None:
             image = Path(p.props["filename"]).absolute()
             data.environment = {
                 "image": str(image),
-                "scale": float(p.props.get("scale", 1.0)),
+                "scale": p.number("scale", 1.0),
                 "to_world": m.tolist(),
             }
     else:
@@ -182,7 +182,7 @@ def _canonical_shape(p: Plugin) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     # sphere: the unit sphere placed by center and radius, then to_world
     s = trimesh.creation.icosphere(subdivisions=4)
     center = p.props.get("center", np.zeros(3))
-    radius = float(p.props.get("radius", 1.0))
+    radius = p.number("radius", 1.0)
     place = trimesh.transformations.translation_matrix(center) @ np.diag([radius] * 3 + [1.0])
     return np.asarray(s.vertices), np.asarray(s.faces), to_world @ place
 
@@ -206,7 +206,7 @@ def _shape_mesh(p: Plugin) -> tuple[np.ndarray, np.ndarray, str | None]:
             try:
                 v, f = read_serialized(
                     mesh_path,
-                    int(p.props.get("shape_index", 0)),
+                    p.number("shape_index", 0, int),
                     data=data,
                     limits=p.access.limits,
                 )
@@ -312,17 +312,14 @@ def _sensor(p: Plugin, notes: Notes) -> dict | None:
         notes.drop(f"{p.label()} (no camera)")
         return None
     films = p.nested("film")
-    width = int(films[0].props.get("width", 768)) if films else 768
-    height = int(films[0].props.get("height", 576)) if films else 576
+    width = films[0].number("width", 768, int) if films else 768
+    height = films[0].number("height", 576, int) if films else 576
     if width < 1 or height < 1:
         raise ValueError(f"{p.where()}: film size {width}x{height} must be positive")
     filters = films[0].nested("rfilter") if films else []
     rfilter = filters[0].type if filters else "gaussian"  # Mitsuba's default
     pixel_filter = "box"
-    if (
-        rfilter == "gaussian"
-        and float(filters[0].props.get("stddev", 0.5) if filters else 0.5) == 0.5
-    ):
+    if rfilter == "gaussian" and (filters[0].number("stddev", 0.5) if filters else 0.5) == 0.5:
         pixel_filter = "gaussian"
     elif rfilter != "box":
         notes.approx(f"film rfilter {rfilter!r} (voxgi's pixels are box-filtered)")
@@ -332,7 +329,7 @@ def _sensor(p: Plugin, notes: Notes) -> dict | None:
             f"{p.where()}: fov_axis={axis!r}; expected x, y, smaller, larger or diagonal"
         )
     if "fov" in p.props:
-        fov = float(p.props["fov"])
+        fov = p.number("fov")
     else:
         fl = str(p.props.get("focal_length", "50mm"))
         m = re.fullmatch(r"\s*([0-9.eE+-]+)\s*(mm)?\s*", fl)
@@ -343,7 +340,7 @@ def _sensor(p: Plugin, notes: Notes) -> dict | None:
     if not 0 < fov < 180:
         raise ValueError(f"{p.where()}: fov={fov} must be in (0, 180) degrees")
     for k in ("principal_point_offset_x", "principal_point_offset_y"):
-        if float(p.props.get(k, 0.0)) != 0.0:
+        if p.number(k, 0.0) != 0.0:
             notes.drop(f"{p.label()}: {k}")
     m4 = p.props.get("to_world", np.eye(4))
     lin = m4[:3, :3]
@@ -362,9 +359,9 @@ def _sensor(p: Plugin, notes: Notes) -> dict | None:
         "pixel_filter": pixel_filter,
     }
     if p.type == "thinlens":
-        cam["aperture"] = float(p.props.get("aperture_radius", 0.0))
+        cam["aperture"] = p.number("aperture_radius", 0.0)
         if "focus_distance" in p.props:
-            cam["focus_distance"] = float(p.props["focus_distance"])
+            cam["focus_distance"] = p.number("focus_distance")
     return cam
 
 

@@ -170,6 +170,21 @@ class Plugin:
     #: how the scene's files are read (path policy and limits)
     access: FileAccess | None = field(default=None, repr=False)
 
+    def number(self, key: str, default=None, kind=float):
+        """Property ``key`` (``default`` when absent) as a finite ``kind``; a
+        ValueError naming the element when it is not one (a ``<string>``
+        where a number belongs, say)."""
+        v = self.props.get(key, default)
+        try:
+            if isinstance(v, (bool, np.ndarray, Plugin)):
+                raise TypeError
+            out = kind(v)
+            if not math.isfinite(out):
+                raise ValueError
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError(f"{self.where()}: property {key!r} = {v!r} is not a number") from None
+        return out
+
     def where(self) -> str:
         ident = f' id="{self.id}"' if self.id else ""
         return f'{self.file}: line {self.line}: <{self.tag} type="{self.type}"{ident}>'
@@ -465,7 +480,10 @@ class XmlReader:
                     raise
                 self.fail(file, op, str(exc))
             m = step @ m
-        if not np.all(np.isfinite(m)) or abs(np.linalg.det(m[:3, :3])) < 1e-300:
+        # singular relative to its own scale (a scene in any unit has transforms)
+        lin = m[:3, :3] / max(float(np.abs(m[:3, :3]).max()), 1e-300)
+        det, norms = abs(np.linalg.det(lin)), np.prod(np.linalg.norm(lin, axis=0))
+        if not np.all(np.isfinite(m)) or not det > 1e-12 * norms:
             self.fail(file, node, "transform is singular or not finite")
         return m
 

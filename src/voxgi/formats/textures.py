@@ -126,3 +126,26 @@ def texture_mean(img_path: Path, access: FileAccess, notes: Notes, what: str) ->
         return np.ones(3)
     notes.approx(f"{what}: texture {img_path.name} reduced to its mean colour")
     return mean
+
+
+def check_image_size(path: Path, access: FileAccess) -> None:
+    """Refuse an image file (an environment map) whose header declares more pixels
+    than ``Limits.texture_pixels``, before a reader decodes it."""
+    if path.suffix.lower() == ".exr":
+        import OpenEXR
+
+        try:
+            with OpenEXR.File(str(path), header_only=True) as f:
+                lo, hi = f.header()["dataWindow"]
+        except (RuntimeError, KeyError, ValueError):
+            return  # not an EXR: the reader names what is wrong
+        w, h = int(hi[0]) - int(lo[0]) + 1, int(hi[1]) - int(lo[1]) + 1
+    else:
+        try:
+            im = open_image(access.read_bytes(path, "image"), f"image {path}", access.limits)
+        except RefusedError:
+            raise
+        except ValueError:
+            return  # a format Pillow does not read (.hdr): its reader checks it
+        w, h = im.size
+    access.limits.check("texture_pixels", max(w, 0) * max(h, 0), f"image {path} ({w}x{h})")

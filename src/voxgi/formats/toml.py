@@ -28,6 +28,7 @@ from ..materials import AshikhminShirley, Material
 from ._common import SceneWarning
 from ._limits import RefusedError
 from ._paths import FileAccess
+from .textures import check_image_size
 from .toml_write import LIGHT_TYPES, save_toml
 
 if sys.version_info >= (3, 11):
@@ -275,6 +276,7 @@ def _environment(env, source: str, base_dir: Path, access: FileAccess | None = N
         try:
             access = access or FileAccess(Path(base_dir) / "scene.toml")
             access.check_file(radiance, "environment image")
+            check_image_size(radiance, access)
         except (FileNotFoundError, ValueError) as exc:
             raise _Located(f"{where}: {exc}", table, "image") from None
     kw = {"to_world": env.get("to_world"), "scale": env.get("scale", 1.0)}

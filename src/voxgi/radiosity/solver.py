@@ -103,7 +103,7 @@ def solve(
         Where the passes run (None: here, after checking the memory estimate
         of :func:`solve_memory`).
     progress : bool
-        Show a tqdm progress bar over the iterations.
+        Show a progress bar over the iterations (on a terminal or in a notebook).
     tuning : SolveTuning or None
         What the solve computes and how (None: ``SolveTuning()``, the
         accurate pipeline; :meth:`SolveTuning.paper`: the paper's method).
