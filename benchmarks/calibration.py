@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
         "size": args.size,
         "ref_frames": args.ref_frames,
         "tol": 1e-3,
-        "pixel_factor": voxgi.RenderTuning().pixel_factor,
+        "pixel_factor": voxgi.display.PIXEL_FACTOR,
         "commit": git_commit(),
         "cores": os.cpu_count(),
         "seeds": args.seeds,

@@ -77,13 +77,12 @@ def _run(scene, sol, frames: int, vpls: int, gather: int) -> tuple[np.ndarray, f
     voxgi.display.render(
         scene,
         sol,
-        vpls,
         max_frames=frames,
         tol=0.0,
         seed=5,
         progress=False,
         executor=rec,
-        tuning=voxgi.RenderTuning(gather=gather, indirect_filter=0),
+        tuning=voxgi.RenderTuning(vpls_per_frame=vpls, gather=gather, indirect_filter=0),
     )
     return np.array(rec.kept), (time.perf_counter() - t0) / frames
 

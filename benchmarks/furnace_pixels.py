@@ -60,11 +60,10 @@ def measure(rho: float, budgets: list[str]) -> list[dict]:
                 out = voxgi.display.render(
                     scene,
                     sol,
-                    vpls,
                     seed=seed,
                     progress=False,
                     camera=cam,
-                    tuning=voxgi.RenderTuning(gather=gather),
+                    tuning=voxgi.RenderTuning(vpls_per_frame=vpls, gather=gather),
                 )
                 secs = time.perf_counter() - t0
                 err = np.abs(out.image / exact - 1.0).max(axis=2)

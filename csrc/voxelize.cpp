@@ -307,6 +307,7 @@ struct Cluster {
     int32_t obj;
     int32_t count;
     double seed[3];
+    double seed_c[3];  // the first piece's centroid: a point of its plane
     double sum_an[3];
     double sum_n[3];
     double sum_ac[3];
@@ -527,6 +528,17 @@ int clip_pieces(const Context& ctx, const int64_t cell[3], const Pair* pairs, in
     return n_pieces;
 }
 
+// Whether piece pc meets the plane of cluster cl's first piece: has vertices
+// on both sides of it or on it, within kMeetsPlane voxel units.
+constexpr double kMeetsPlane = 1e-3;
+bool meets_plane(const Piece& pc, const Cluster& cl, const std::vector<double>& verts) {
+    const PolyView poly{reinterpret_cast<const double (*)[3]>(verts.data() + 3 * size_t(pc.v_off)),
+                        pc.v_n};
+    double mn, mx;
+    signed_range(poly, cl.seed, dot3(cl.seed, cl.seed_c), mn, mx);
+    return mn <= kMeetsPlane && mx >= -kMeetsPlane;
+}
+
 // Clusters: per object (ascending), greedy by orientation in triangle order;
 // then the pieces of each cluster, in the order they joined it (S.cl_start,
 // S.cl_items).
@@ -551,8 +563,12 @@ void cluster_pieces(const Context& ctx, int n_pieces, Scratch& S, ChunkStats& cs
         for (size_t q = obj_first; q < clusters.size(); ++q) {
             const double dd = dot3(pc.tn, clusters[q].seed);
             // Two-sided surfaces have no preferred side: a flipped winding
-            // joins the cluster with its normal turned around.
-            if (dd >= P.cos_cluster || (ts && -dd >= P.cos_cluster)) {
+            // that meets the cluster's plane joins it with its normal turned
+            // around. One wholly in front of or behind that plane is another
+            // face (the far face of a two-sided slab thinner than a voxel),
+            // whose two sides must stay records of their own.
+            if (dd >= P.cos_cluster ||
+                (ts && -dd >= P.cos_cluster && meets_plane(pc, clusters[q], S.verts))) {
                 found = int(q);
                 if (dd < 0)
                     for (int d = 0; d < 3; ++d) pc.n[d] = -pc.tn[d];
@@ -563,6 +579,7 @@ void cluster_pieces(const Context& ctx, int n_pieces, Scratch& S, ChunkStats& cs
             Cluster c{};
             c.obj = pc.obj;
             std::memcpy(c.seed, pc.tn, sizeof(c.seed));
+            std::memcpy(c.seed_c, pc.c, sizeof(c.seed_c));
             clusters.push_back(c);
             found = int(clusters.size() - 1);
         }

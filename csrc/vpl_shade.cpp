@@ -259,43 +259,102 @@ inline int64_t grid_key(const RecordGrid& g, int64_t i, int64_t j, int64_t k) {
     return (i * g.dims[1] + j) * g.dims[2] + k;
 }
 
+// The records of voxel (i, j, k): [q0, q1) in the grid's order (empty outside it).
+inline void cell_records(const RecordGrid& g, int64_t i, int64_t j, int64_t k, int64_t& q0,
+                         int64_t& q1) {
+    q0 = q1 = 0;
+    const int64_t key = grid_key(g, i, j, k);
+    if (key < 0) return;
+    if (g.cell_start) {
+        q0 = g.cell_start[key], q1 = g.cell_start[key + 1];
+    } else {
+        q0 = std::lower_bound(g.sorted_key, g.sorted_key + g.count, key) - g.sorted_key;
+        q1 = std::upper_bound(g.sorted_key + q0, g.sorted_key + g.count, key) - g.sorted_key;
+    }
+}
+
+// How far record r stands apart from the hit point y (on a surface seen from
+// the side of normal n) by the records [q0, q1) of a voxel: 2 when
+// - it lies behind the hit's own sheet: some record o whose plane holds y,
+//   facing n's side, has r's centroid strictly behind it (the other face of
+//   a slab thinner than a voxel, or that face's black back);
+// - or across another surface: some record o of another object, or of an
+//   orientation more than 60° away (another cluster of the voxelization),
+//   has y strictly on one side of its plane and r's centroid not on that
+//   side. Those are the planes junction cutting split r's surface by, so
+//   this keeps a hit on one side of a thin wall from reading the record on
+//   the other;
+// 1 when it is apart only by the signs of y's distances within rounding of
+// such a plane (the best guess there); 0 otherwise.
+int separation(const RecordGrid& g, const double y[3], const float n[3], const PackedRecord& r,
+               int64_t q0, int64_t q1) {
+    int level = 0;
+    for (int64_t q = q0; q < q1; ++q) {
+        const PackedRecord& o = g.rec[q];
+        if (&o == &r) continue;
+        // o's plane is as good as its float centroid: a few units in the
+        // last place of its coordinates.
+        const double tol =
+            1e-6 * g.pitch + 3e-7 * std::max({std::fabs(o.centroid[0]), std::fabs(o.centroid[1]),
+                                              std::fabs(o.centroid[2])});
+        double sy = 0.0, sr = 0.0, behind = 0.0;
+        for (int a = 0; a < 3; ++a) {
+            const double rc = double(r.centroid[a]) - o.centroid[a];
+            sy += (y[a] - o.centroid[a]) * o.normal[a];
+            sr += rc * o.normal[a];
+            behind += rc * n[a];
+        }
+        if (std::fabs(sy) <= tol && dot3(o.normal, n) > 0.5f) {
+            if (behind < -tol) return 2;
+            continue;
+        }
+        if (o.object == r.object && dot3(o.normal, r.normal) > 0.5f) continue;  // r's own sheet
+        // A centroid on that plane (a sliver cut off at a junction) is on
+        // neither side: it does not stand for a point off the plane.
+        if ((sy > tol && sr < tol) || (sy < -tol && sr > -tol)) return 2;
+        if ((sy > 0.0 && sr < 0.0) || (sy < 0.0 && sr > 0.0)) level = 1;
+    }
+    return level;
+}
+
 // Position in the grid's order of the record that stands for the surface
 // point y, in voxel c, on object `obj` seen from the side of normal n, or
-// -1; the neighbouring voxels are searched when c has none of this surface.
+// -1. Only records whose normal faces n's side qualify, and of those the
+// ones no other surface of y's voxel (or of their own) separates from y;
+// among them the nearest centroid, strongly preferring the same object and
+// orientation. The neighbouring voxels are searched only when c has no such
+// record of this surface.
 int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3], int32_t obj,
                        const int64_t c[3]) {
     const double p2 = g.pitch * g.pitch;
-    int64_t best = -1;
+    int64_t best = -1, h0, h1;
+    int best_apart = 0;
     double best_score = 0.0, best_penalty = 0.0;
-    auto scan = [&](int64_t i, int64_t j, int64_t k) {
-        const int64_t key = grid_key(g, i, j, k);
-        if (key < 0) return;
+    cell_records(g, c[0], c[1], c[2], h0, h1);
+    auto scan = [&](int64_t i, int64_t j, int64_t k, bool own) {
         int64_t q0, q1;
-        if (g.cell_start) {
-            q0 = g.cell_start[key], q1 = g.cell_start[key + 1];
-        } else {
-            q0 = std::lower_bound(g.sorted_key, g.sorted_key + g.count, key) - g.sorted_key;
-            q1 = std::upper_bound(g.sorted_key + q0, g.sorted_key + g.count, key) - g.sorted_key;
-        }
+        cell_records(g, i, j, k, q0, q1);
         for (int64_t q = q0; q < q1; ++q) {
             const PackedRecord& r = g.rec[q];
+            const float facing = dot3(r.normal, n);
+            if (!(facing > 0.f)) continue;  // the other side of a sheet, or of a fold
             const double dx = y[0] - r.centroid[0], dy = y[1] - r.centroid[1],
                          dz = y[2] - r.centroid[2];
-            // Nearest centroid, strongly preferring the same side and object.
-            const double penalty = 4.0 * (1.0 - dot3(r.normal, n)) + (r.object != obj ? 4.0 : 0.0);
+            const double penalty = 4.0 * (1.0 - facing) + (r.object != obj ? 4.0 : 0.0);
             const double score = dx * dx + dy * dy + dz * dz + p2 * penalty;
-            if (best < 0 || score < best_score)
-                best = q, best_score = score, best_penalty = penalty;
+            if (best >= 0 && best_apart == 0 && score >= best_score) continue;
+            int apart = separation(g, y, n, r, h0, h1);
+            if (!own && apart < 2) apart = std::max(apart, separation(g, y, n, r, q0, q1));
+            if (best < 0 || apart < best_apart || (apart == best_apart && score < best_score))
+                best = q, best_score = score, best_penalty = penalty, best_apart = apart;
         }
     };
-    // The record of this surface (same object and side) in the hit's own
-    // voxel stands for the hit point; only without one look at the neighbours.
-    scan(c[0], c[1], c[2]);
-    if (best >= 0 && best_penalty < 0.5) return best;
+    scan(c[0], c[1], c[2], true);
+    if (best >= 0 && best_penalty < 0.5 && best_apart == 0) return best;
     for (int di = -1; di <= 1; ++di)
         for (int dj = -1; dj <= 1; ++dj)
             for (int dk = -1; dk <= 1; ++dk)
-                if (di || dj || dk) scan(c[0] + di, c[1] + dj, c[2] + dk);
+                if (di || dj || dk) scan(c[0] + di, c[1] + dj, c[2] + dk, false);
     return best;
 }
 
@@ -311,14 +370,51 @@ struct GatherHit {
     bool escaped;  // met nothing: sees the environment
 };
 
-// The hit of pixel p's gather ray along df (unit up to float rounding) that
-// first meets triangle t (-1: none). key -2 when it brings no light: a miss,
-// a direction below the surface, a black back.
+// The point of triangle (a, b, c) nearest to p (Ericson, Real-Time Collision
+// Detection, 5.1.5), into q.
+void nearest_on_triangle(const double p[3], const double a[3], const double b[3], const double c[3],
+                         double q[3]) {
+    double ab[3], ac[3], ap[3], bp[3], cp[3];
+    for (int i = 0; i < 3; ++i)
+        ab[i] = b[i] - a[i], ac[i] = c[i] - a[i], ap[i] = p[i] - a[i], bp[i] = p[i] - b[i],
+        cp[i] = p[i] - c[i];
+    auto dot = [](const double* u, const double* v) {
+        return u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+    };
+    auto put = [&](const double* o, double s, const double* e, double t, const double* f) {
+        for (int i = 0; i < 3; ++i) q[i] = o[i] + s * e[i] + t * (f ? f[i] : 0.0);
+    };
+    const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+    if (d1 <= 0.0 && d2 <= 0.0) return put(a, 0.0, ab, 0.0, nullptr);
+    const double d3 = dot(ab, bp), d4 = dot(ac, bp);
+    if (d3 >= 0.0 && d4 <= d3) return put(b, 0.0, ab, 0.0, nullptr);
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return put(a, d1 / (d1 - d3), ab, 0.0, nullptr);
+    const double d5 = dot(ab, cp), d6 = dot(ac, cp);
+    if (d6 >= 0.0 && d5 <= d6) return put(c, 0.0, ab, 0.0, nullptr);
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return put(a, 0.0, ab, d2 / (d2 - d6), ac);
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0) {
+        const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        for (int i = 0; i < 3; ++i) q[i] = b[i] + w * (c[i] - b[i]);
+        return;
+    }
+    const double den = 1.0 / (va + vb + vc);
+    put(a, vb * den, ab, vc * den, ac);
+}
+
+// The hit of pixel p's gather ray from ro along df (unit up to float
+// rounding) that first meets triangle t (-1: none). key -2 when it brings
+// no light: a miss, a direction below the surface, a black back.
 void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordGrid& grid,
-                int64_t p, const float df[3], int32_t t, GatherHit& h) {
+                int64_t p, const float* ro, const float df[3], int32_t t, GatherHit& h) {
     h.key = -2;
     h.escaped = t < 0;
-    const double* x = hits.pos + 3 * p;
+    // The hit point on the ray as traced: the same direction from the
+    // pixel's own point meets the plane up to the offset away, which near a
+    // surface meeting the triangle can be on that surface's far side.
+    const double o[3] = {ro[0], ro[1], ro[2]};
     const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
     if (h.escaped)
         for (int a = 0; a < 3; ++a) h.wi[a] = df[a];
@@ -340,8 +436,12 @@ void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordG
     const double dn = (d[0] * nt[0] + d[1] * nt[1] + d[2] * nt[2]) / dl;
     if (dn == 0.0) return;
     const double tt =
-        ((v0[0] - x[0]) * nt[0] + (v0[1] - x[1]) * nt[1] + (v0[2] - x[2]) * nt[2]) / dn;
-    for (int a = 0; a < 3; ++a) h.y[a] = x[a] + tt * h.wi[a];
+        ((v0[0] - o[0]) * nt[0] + (v0[1] - o[1]) * nt[1] + (v0[2] - o[2]) * nt[2]) / dn;
+    // Kept on the triangle: in float the ray can meet it a little beyond its
+    // edge, where another surface may meet it.
+    double on_plane[3];
+    for (int a = 0; a < 3; ++a) on_plane[a] = o[a] + tt * h.wi[a];
+    nearest_on_triangle(on_plane, v0, v1, v2, h.y);
     const bool front = dn < 0.0;
     h.obj = tris.object[t];
     if (!front && !tris.two_sided[h.obj]) return;  // black back of a one-sided surface
@@ -439,7 +539,7 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                 gather_pixel_rays(
                     hits, n_gather, base, eps, p, [&](int k, const float* ro, const float* rd) {
                         const int32_t t = scene.intersect(ro, rd, nullptr, nullptr, nullptr);
-                        gather_hit(hits, tris, grid, p, rd, t, h[k]);
+                        gather_hit(hits, tris, grid, p, ro, rd, t, h[k]);
                         if (h[k].key >= 0 && grid.cell_start)
                             __builtin_prefetch(grid.cell_start + h[k].key);
                     });

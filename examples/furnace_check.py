@@ -15,8 +15,8 @@ inside, renders it, and compares both with the known answer:
   defaults the render stops once the estimated relMSE is under 1e-3 and 999
   pixels in 1000 have an estimated relative error under 10·sqrt(1e-3) =
   0.32: the worst pixel, near the box's corners, keeps one to a few
-  percent. ``RenderTuning(pixel_factor=0.22, pixel_share=0)`` bounds every
-  pixel's estimate by 0.7%, at the price of more frames. Both are printed,
+  percent. ``tol=1e-4`` lowers both bounds (the per-pixel one to
+  10·sqrt(1e-4) = 0.1), at the price of more frames. Both are printed,
   each worst pixel beside its estimate. The furnace's light is spread
   evenly, so the display takes 8 VPLs and 25 gather rays a frame
   (``voxgi.display.ray_budget``).
@@ -34,7 +34,6 @@ import numpy as np
 import voxgi
 
 LE = 1.0
-STRICT = voxgi.RenderTuning(pixel_factor=0.22, pixel_share=0.0)
 for rho in (0.5, 0.9):
     exact = LE / (1.0 - rho)
     print(f"rho = {rho}: every point should have radiance Le / (1 - rho) = {exact:.4f}")
@@ -49,8 +48,8 @@ for rho in (0.5, 0.9):
         f"on average; error {np.abs(rec_err).mean():.2%} mean, {np.abs(rec_err).max():.2%} max; "
         f"lost fraction {sol.stats['lost_fraction']:.1e}"
     )
-    for label, tuning in (("defaults", None), ("every pixel's estimate under 0.7%", STRICT)):
-        out = voxgi.render(scene, sol, progress=False, tuning=tuning)
+    for label, tol in (("defaults", None), ("tol 1e-4", 1e-4)):
+        out = voxgi.render(scene, sol, progress=False, tol=tol)
         pix_err = np.abs(out.image / exact - 1.0)
         print(
             f"  rendered ({label}) {out.frames} frames: image mean {out.image.mean():.4f} "

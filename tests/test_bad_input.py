@@ -16,6 +16,7 @@ from conftest import paper
 
 import voxgi
 from voxgi import _core
+from voxgi.display.settings import _Experiment
 
 NAN, INF = float("nan"), float("inf")
 
@@ -398,8 +399,8 @@ def test_render_bad_args(small):
     with pytest.raises(TypeError, match="camera"):
         voxgi.render(s, sol, camera=(0, 0, 1), progress=False)
     for kw, exc, word in [
-        ({"vpls_per_frame": 0}, ValueError, "vpls_per_frame"),
-        ({"vpls_per_frame": 1.5}, TypeError, "vpls_per_frame"),
+        ({"tuning": voxgi.RenderTuning(vpls_per_frame=0)}, ValueError, "vpls_per_frame"),
+        ({"tuning": voxgi.RenderTuning(vpls_per_frame=1.5)}, TypeError, "vpls_per_frame"),
         ({"max_frames": 0}, ValueError, "max_frames"),
         ({"tol": -1.0}, ValueError, "tol"),
         ({"tol": NAN}, ValueError, "tol"),
@@ -407,15 +408,12 @@ def test_render_bad_args(small):
         ({"seed": "x"}, TypeError, "seed"),
         ({"threads": -1}, ValueError, "threads"),
         ({"tuning": {"gather": 4}}, TypeError, "tuning"),
-        ({"tuning": voxgi.RenderTuning(min_frames=1)}, ValueError, "min_frames"),
         ({"tuning": voxgi.RenderTuning(emitter_share=2.0)}, ValueError, "emitter_share"),
-        ({"tuning": voxgi.RenderTuning(vpl_pdf="uniform")}, ValueError, "pdf"),
+        ({"tuning": _Experiment(vpl_pdf="uniform")}, ValueError, "pdf"),
         ({"client": 42}, TypeError, "client"),
     ]:
-        # (the VPLs a frame are the display's choice, not voxgi.render's)
-        render = voxgi.display.render if "vpls_per_frame" in kw else voxgi.render
         with pytest.raises(exc, match=word):
-            render(s, sol, progress=False, **kw)
+            voxgi.render(s, sol, progress=False, **kw)
     with pytest.raises(TypeError, match="executor"):
         voxgi.display.render(s, sol, progress=False, executor=object())
 

@@ -239,9 +239,7 @@ def test_killed_worker_is_survived(cornell_small, local_solution, client):
 
 def test_render_equals_local(cornell_small, local_solution, client):
     scene, _ = cornell_small
-    kw = dict(
-        max_frames=12, tol=2e-3, tuning=voxgi.RenderTuning(min_frames=2), seed=3, progress=False
-    )
+    kw = dict(max_frames=12, tol=2e-3, seed=3, progress=False)
     ref = voxgi.render(scene, local_solution, threads=1, **kw)
     out = voxgi.render(scene, local_solution, client=client, **kw)
     # the same frames (same VPLs, offsets and gather seeds), accumulated in

@@ -141,3 +141,11 @@ def test_readme_api_rows_are_the_signatures(name):
             starred = True
         parts.append(p.name if p.default is p.empty else f"{p.name}={p.default!r}")
     assert f"`voxgi.{name}({', '.join(parts)})`" in _readme()
+
+
+def test_ci_runs_the_readme_test_command():
+    # CI runs exactly what the README tells a newcomer to run, in a fresh venv.
+    blocks = re.findall(r"```bash\n(.*?)```", _readme(), flags=re.DOTALL)
+    ci = (ROOT / ".ci" / "run").read_text().splitlines()
+    assert blocks[1].strip() in ci
+    assert any(line.startswith("python3 -m venv") for line in ci)

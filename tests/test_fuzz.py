@@ -222,7 +222,12 @@ def test_fuzz_api_arguments(solved):
                     k = a if not isinstance(a, int) or a < 64 else 4
                     f = b if not isinstance(b, int) or b < 4 else 2
                     out = voxgi.display.render(
-                        s, sol, vpls_per_frame=k, max_frames=f, seed=c, progress=False
+                        s,
+                        sol,
+                        max_frames=f,
+                        seed=c,
+                        progress=False,
+                        tuning=voxgi.RenderTuning(vpls_per_frame=k),
                     )
                     assert np.all(np.isfinite(out.image))
                 else:

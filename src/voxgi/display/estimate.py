@@ -15,11 +15,12 @@ __all__ = ["PIXEL_FACTOR", "PIXEL_SHARE"]
 #: relMSE's epsilon (voxgi.metrics.rel_mse), used by the stopping rule too.
 _REL_EPS = 0.01
 
-#: Default :attr:`RenderTuning.pixel_factor` (``docs/design.md`` §6).
+#: The stopping rule's per-pixel bound: a pixel's estimated relative error
+#: may reach this many times ``sqrt(tol)`` (``docs/design.md`` §6).
 PIXEL_FACTOR = 10.0
-#: Default :attr:`RenderTuning.pixel_share`: a single pixel (a sliver of a
-#: bright light at a pixel's edge, a rare spike) cannot hold a large image
-#: back, a region of them can.
+#: The share of pixels that may exceed that bound: a single pixel (a sliver
+#: of a bright light at a pixel's edge, a rare spike) cannot hold a large
+#: image back, a region of them can.
 PIXEL_SHARE = 1e-3
 
 
@@ -198,7 +199,7 @@ class _Mean:
     @classmethod
     def empty(cls, pixels: int, share: float = PIXEL_SHARE, threads: int = 0, reach=None) -> _Mean:
         """No frames yet for ``pixels`` pixels; ``share`` as
-        :attr:`RenderTuning.pixel_share`; ``threads`` for the error's kernel;
+        :data:`PIXEL_SHARE`; ``threads`` for the error's kernel;
         ``reach`` as :attr:`reach`."""
         return cls(
             np.zeros((pixels, 3)),
@@ -309,20 +310,18 @@ class _Mean:
         self._flagged = int(np.count_nonzero(flagged))
 
     def done(self, opt) -> bool:
-        """At least ``min_frames`` frames and :data:`_MIN_BATCHES` batches, the
-        estimated relMSE at or under ``tol`` and at most a share
-        ``pixel_share`` of the pixels with a relative error over
-        ``pixel_factor · sqrt(tol)``."""
+        """:data:`_MIN_BATCHES` batches, the estimated relMSE at or under
+        ``opt.tol`` and at most a share ``pixel_share`` of the pixels with a
+        relative error over ``opt.pixel_factor · sqrt(opt.tol)``."""
         return (
-            self.ready(opt)
+            self.ready()
             and self.est <= opt.tol
             and self.tail <= opt.pixel_factor * math.sqrt(opt.tol)
         )
 
-    def ready(self, opt) -> bool:
-        """Whether the stopping rule may apply: ``min_frames`` frames and
-        :data:`_MIN_BATCHES` batches."""
-        return self.frames >= opt.min_frames and self.count >= _MIN_BATCHES
+    def ready(self) -> bool:
+        """Whether the stopping rule may apply: :data:`_MIN_BATCHES` batches."""
+        return self.count >= _MIN_BATCHES
 
     def stderr(self, shape) -> np.ndarray | None:
         """Per-pixel standard error (None before two batches)."""

@@ -167,7 +167,7 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
     # The bar counts frames against the frames the render is predicted to
     # need (the stopping rule's floor, then relMSE ∝ 1/frames), not against
     # the frame cap that is rarely reached.
-    floor = max(opt.min_frames, _MIN_BATCHES)
+    floor = _MIN_BATCHES
     need = _progress.frames_needed(0, math.nan, opt.tol, floor, opt.max_frames)
     bar = _progress.bar("display", need, enabled=progress, unit="frame")
     try:
@@ -177,7 +177,7 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
             acc.add(x, surface)
             aovs.add(getattr(source, "aovs", None), None if surface is None else surface[0])
             # the estimate is read only once the rule may stop on it
-            est = acc.est if opt.tol > 0 and acc.ready(opt) else math.nan
+            est = acc.est if opt.tol > 0 and acc.ready() else math.nan
             worst = est
             if np.isfinite(est):  # the per-pixel bound's error falls as 1/sqrt(frames)
                 bound = opt.pixel_factor * math.sqrt(opt.tol)
@@ -231,15 +231,14 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
 def render(
     scene,
     sol,
-    vpls_per_frame: int | None = None,
-    max_frames: int | None = None,
-    tol: float | None = None,
-    seed: int = 0,
-    progress: bool = True,
-    threads: int | None = None,
-    executor: FrameExecutor | None = None,
     *,
+    tol: float | None = None,
+    max_frames: int | None = None,
     camera: Camera | None = None,
+    seed: int = 0,
+    threads: int | None = None,
+    progress: bool = True,
+    executor: FrameExecutor | None = None,
     tuning: RenderTuning | None = None,
 ) -> RenderResult:
     r"""Render ``scene`` from its camera using the voxel solution ``sol``.
@@ -260,24 +259,24 @@ def render(
         With a camera (``scene.camera``, or ``camera=``).
     sol : Solution
         The voxel solution of ``scene`` (``voxgi.render`` also takes None).
-    vpls_per_frame : int or None
-        VPLs per frame and pixel (>= 1; None: from the light's spread,
-        :func:`ray_budget`).
-    max_frames : int or None
-        At most this many frames (default 256).
     tol : float or None
         Bound on the estimated relMSE of the remaining noise (default 1e-3; 0:
         run ``max_frames``).
-    seed : int
-        Seeds the VPL, sub-pixel and lens sequences.
-    progress, threads
-        A progress bar on a terminal or in a notebook; worker threads (None: all cores).
-    executor : FrameExecutor or None
-        Where the frames are computed (None: here); the image is the local one.
+    max_frames : int or None
+        At most this many frames (default 256).
     camera : Camera, optional
         Overrides ``scene.camera``.
+    seed : int
+        Seeds the VPL, sub-pixel and lens sequences.
+    threads : int or None
+        Worker threads (None: all cores); the image does not depend on it.
+    progress : bool
+        A progress bar on a terminal or in a notebook.
+    executor : FrameExecutor or None
+        Where the frames are computed (None: here); the image is the local one.
     tuning : RenderTuning or None
-        Expert settings (:class:`RenderTuning`).
+        The estimator's choices (:class:`RenderTuning`: VPLs and gather rays
+        per frame, the emitters' share, the indirect filter).
 
     Returns
     -------
@@ -292,7 +291,7 @@ def render(
         No camera, a solution of another scene, bad arguments, too large an image.
     """
     t_start = time.perf_counter()
-    opt = _check_render(scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads, tuning)
+    opt = _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning)
     executor = _check_executor(executor)
     _check_solution(scene, sol, opt.cam)
     opt = _with_budget(opt, sol)

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -20,32 +20,20 @@ __all__ = ["RenderTuning"]
 
 @dataclass(frozen=True)
 class RenderTuning:
-    """Expert settings of :func:`render`, for studies and benchmarks.
+    """What a study may choose about :func:`render`'s estimator.
 
     Attributes
     ----------
-    min_frames : int
-        Frames before the stopping rule is trusted (>= 2; the rule also
-        waits for 8 batches, ``docs/design.md`` §6).
+    vpls_per_frame : int or None
+        VPLs per frame and pixel (1 to 65536; None: from the light's spread,
+        :func:`ray_budget`).
+    gather : int or None
+        Cosine-distributed gather rays per pixel and frame, MIS-combined
+        with the VPLs (0 to 4096; 0: VPLs only, the paper's display; None:
+        from the light's spread, :func:`ray_budget`).
     emitter_share : float or None
         Share of each frame's VPLs taken from emitters; None splits by power
         (see :class:`VPLSampler`).
-    gather : int or None
-        Cosine-distributed gather rays per pixel and frame, MIS-combined
-        with the VPLs (0: VPLs only, the paper's display; None: from the
-        light's spread, see :func:`ray_budget`).
-    vpl_pdf : {"power", "area"}
-        VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
-        paper); see :class:`VPLSampler`.
-    vpl_on_surface : bool
-        Each frame places every VPL at a fresh point of its record's surface
-        (default); False keeps it at the record's centroid (the paper).
-    pixel_factor, pixel_share : float
-        The stopping rule's per-pixel bound: at most a share ``pixel_share``
-        (one in 1000) of the pixels with an estimated relative error
-        ``se / sqrt(L² + 0.01)`` over ``pixel_factor · sqrt(tol)`` (10;
-        ``inf``: the mean relMSE alone decides; ``pixel_share=0``: every
-        pixel).
     indirect_filter : int
         Each frame, the light of the records that do not emit (the indirect
         light) is averaged over the pixels within this many pixels that see
@@ -62,19 +50,43 @@ class RenderTuning:
         cannot be estimated from it, and on measured renders the denoised
         image's relMSE was never above the undenoised one's.
 
-    >>> RenderTuning(gather=0).min_frames
-    4
+    >>> RenderTuning(gather=0).indirect_filter
+    1
     """
 
-    min_frames: int = 4
-    emitter_share: float | None = None
+    vpls_per_frame: int | None = None
     gather: int | None = None
+    emitter_share: float | None = None
+    indirect_filter: int = 1
+    denoise: bool = False
+
+
+@dataclass(frozen=True)
+class _Experiment(RenderTuning):
+    """:class:`RenderTuning` with the switches of the benchmarks' experiments:
+    the paper's choices where the defaults depart from them, and the
+    stopping rule's per-pixel bound. Not part of the API.
+
+    Attributes
+    ----------
+    vpl_pdf : {"power", "area"}
+        VPLs drawn in proportion to power ``ΔA·B`` (default) or to area (the
+        paper); see :class:`VPLSampler`.
+    vpl_on_surface : bool
+        Each frame places every VPL at a fresh point of its record's surface
+        (default); False keeps it at the record's centroid (the paper).
+    pixel_factor, pixel_share : float
+        The stopping rule's per-pixel bound: at most a share ``pixel_share``
+        (one in 1000) of the pixels with an estimated relative error
+        ``se / sqrt(L² + 0.01)`` over ``pixel_factor · sqrt(tol)`` (10;
+        ``inf``: the mean relMSE alone decides; ``pixel_share=0``: every
+        pixel).
+    """
+
     vpl_pdf: str = "power"
     vpl_on_surface: bool = True
     pixel_factor: float = PIXEL_FACTOR
     pixel_share: float = PIXEL_SHARE
-    indirect_filter: int = 1
-    denoise: bool = False
 
 
 @dataclass(frozen=True)
@@ -86,7 +98,6 @@ class _RenderSettings:
     max_frames: int
     tol: float
     seed: int
-    min_frames: int
     pixel_factor: float
     pixel_share: float
     emitter_share: float | None
@@ -99,9 +110,7 @@ class _RenderSettings:
     denoise: bool = False
 
 
-def _check_render(
-    scene, sol, camera, vpls_per_frame, max_frames, tol, seed, threads, tuning
-) -> _RenderSettings:
+def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) -> _RenderSettings:
     """Image checks: scene, solution, camera and numbers; TypeError/ValueError naming them."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
@@ -116,17 +125,20 @@ def _check_render(
         raise ValueError("render: the scene has no camera (set scene.camera or pass camera=)")
     if not isinstance(cam, Camera):
         raise TypeError(f"camera: expected voxgi.Camera, got {type(cam).__name__}")
-    t = RenderTuning() if tuning is None else tuning
+    t = _Experiment() if tuning is None else tuning
     if not isinstance(t, RenderTuning):
         raise TypeError(f"tuning: expected voxgi.RenderTuning or None, got {type(t).__name__}")
+    if not isinstance(t, _Experiment):
+        t = _Experiment(**{f.name: getattr(t, f.name) for f in fields(RenderTuning)})
     tol = _validate.real(tol, "tol", low=0.0, allow_none=True)
     return _RenderSettings(
         cam=cam,
-        K=_validate.integer(vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16, allow_none=True),
+        K=_validate.integer(
+            t.vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16, allow_none=True
+        ),
         max_frames=_validate.integer(max_frames, "max_frames", low=1, allow_none=True) or 256,
         tol=1e-3 if tol is None else tol,
         seed=_validate.integer(seed, "seed"),
-        min_frames=_validate.integer(t.min_frames, "min_frames", low=2),
         pixel_factor=(
             math.inf
             if t.pixel_factor == math.inf
