@@ -35,7 +35,9 @@ for ``DRJIT_LIBLLVM_PATH``).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import time
 from pathlib import Path
 
@@ -77,15 +79,51 @@ def reference(
 
     Rendered in passes of ``pass_spp`` samples alternating between two
     halves; progress is saved after each pass under ``refs_dir``, so an
-    interrupted render resumes and a finished one is read back.
+    interrupted render resumes and a finished one is read back. One process
+    at a time renders a given reference; another asking for it waits.
     """
-    from voxgi.mitsuba import mitsuba_module, to_mitsuba
-
     cam = scene.camera
     fp = scene.fingerprint()
     base = refs_dir / f"{tag}_{cam.width}x{cam.height}_{fp}"
-    meta_path = base.with_suffix(".json")
-    arr_path = base.with_suffix(".npz")
+    refs_dir.mkdir(parents=True, exist_ok=True)
+    with _lock(base.with_suffix(".lock")):
+        sums, info = _render_passes(scene, tag, spp, base, pass_spp, verbose)
+    n = int(info["passes_done"])
+    half_a = (sums[0] / (n - n // 2)).astype(np.float32)
+    half_b = (sums[1] / (n // 2)).astype(np.float32)
+    noise = 0.25 * rel_mse(half_a, half_b)
+    info["noise_rel_mse_est"] = noise
+    return ((sums[0] + sums[1]) / n).astype(np.float32), noise, info
+
+
+@contextlib.contextmanager
+def _lock(path: Path):
+    """Hold ``path`` as a lock; a lock left by a process that died is taken over."""
+    while True:
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+            os.write(fd, str(os.getpid()).encode())
+            os.close(fd)
+            break
+        except FileExistsError:
+            try:
+                os.kill(int(path.read_text() or "0"), 0)
+            except (ProcessLookupError, ValueError, FileNotFoundError):
+                path.unlink(missing_ok=True)
+                continue
+            time.sleep(10)
+    try:
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+
+
+def _render_passes(scene, tag: str, spp: int, base: Path, pass_spp: int, verbose: bool):
+    """The two halves' sums and the record, rendering the passes still missing."""
+    from voxgi.mitsuba import mitsuba_module, to_mitsuba
+
+    cam = scene.camera
+    meta_path, arr_path = base.with_suffix(".json"), base.with_suffix(".npz")
     info = json.loads(meta_path.read_text()) if meta_path.exists() else {}
     passes = max(2, spp // pass_spp)
     if arr_path.exists():
@@ -94,35 +132,31 @@ def reference(
     else:
         sums = [np.zeros((cam.height, cam.width, 3)), np.zeros((cam.height, cam.width, 3))]
     done = int(info.get("passes_done", 0))
-    if done < passes:
-        mi = mitsuba_module()
-        sc = mi.load_dict(to_mitsuba(scene, spp=pass_spp))
-        t0 = time.perf_counter() - float(info.get("seconds", 0.0))
-        for p in range(done, passes):
-            img = mi.render(sc, spp=pass_spp, seed=10_000 + p)
-            sums[p % 2] += np.array(img, dtype=np.float64)[..., :3]
-            info.update(
-                tag=tag,
-                variant=mi.variant(),
-                mitsuba=mi.__version__,
-                pass_spp=pass_spp,
-                passes_done=p + 1,
-                spp=pass_spp * (p + 1),
-                seconds=time.perf_counter() - t0,
-                scene_fingerprint=fp,
-            )
-            refs_dir.mkdir(parents=True, exist_ok=True)
-            np.savez(str(arr_path) + ".part.npz", a=sums[0], b=sums[1])
-            Path(str(arr_path) + ".part.npz").replace(arr_path)
-            meta_path.write_text(json.dumps(info, indent=2))
-            if verbose and (p + 1) % 4 == 0:
-                print(f"  {tag}: {info['spp']} spp, {info['seconds']:.0f} s", flush=True)
-    n_a, n_b = (done_passes := int(info["passes_done"])) - done_passes // 2, done_passes // 2
-    half_a = (sums[0] / n_a).astype(np.float32)
-    half_b = (sums[1] / n_b).astype(np.float32)
-    noise = 0.25 * rel_mse(half_a, half_b)
-    info["noise_rel_mse_est"] = noise
-    return ((sums[0] + sums[1]) / done_passes).astype(np.float32), noise, info
+    if done >= passes:
+        return sums, info
+    mi = mitsuba_module()
+    sc = mi.load_dict(to_mitsuba(scene, spp=pass_spp))
+    t0 = time.perf_counter() - float(info.get("seconds", 0.0))
+    for p in range(done, passes):
+        img = mi.render(sc, spp=pass_spp, seed=10_000 + p)
+        sums[p % 2] += np.array(img, dtype=np.float64)[..., :3]
+        info.update(
+            tag=tag,
+            variant=mi.variant(),
+            mitsuba=mi.__version__,
+            pass_spp=pass_spp,
+            passes_done=p + 1,
+            spp=pass_spp * (p + 1),
+            seconds=time.perf_counter() - t0,
+            scene_fingerprint=scene.fingerprint(),
+        )
+        part = Path(str(arr_path) + ".part.npz")
+        np.savez(part, a=sums[0], b=sums[1])
+        part.replace(arr_path)
+        meta_path.write_text(json.dumps(info, indent=2))
+        if verbose and (p + 1) % 4 == 0:
+            print(f"  {tag}: {info['spp']} spp, {info['seconds']:.0f} s", flush=True)
+    return sums, info
 
 
 def original_render(folder: Path, width: int, spp: int) -> np.ndarray:

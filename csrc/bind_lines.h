@@ -10,7 +10,11 @@
 #include <vector>
 
 #include "bind_common.h"
+#include "gather.h"
 #include "linesystem.h"
+#include "pairtable.h"
+#include "reference.h"
+#include "shoot.h"
 
 namespace voxgi::py_helpers {
 

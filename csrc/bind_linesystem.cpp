@@ -1,5 +1,6 @@
 // pybind11 bindings of LineSystem (linesystem.h): the records prepared once,
-// normalisation, gathering (walked or replayed), shooting, line keys.
+// normalisation and line keys, and as its methods the passes over it:
+// gathering walked (gather.h) or replayed (pairtable.h), shooting (shoot.h).
 // Arrays are taken .noconvert() and C-contiguous; shapes are re-checked here
 // so bad input is a ValueError, never a crash.
 #include <memory>
@@ -58,7 +59,7 @@ py::tuple gather(const voxgi::LineSystem& s, I32 families, F64 weights, F32 valu
     int64_t lines;
     {
         py::gil_scoped_release release;
-        lines = s.gather(fams.data(), sel, ns, v, o, vp, opt, stop);
+        lines = voxgi::gather(s, fams.data(), sel, ns, v, o, vp, opt, stop);
     }
     return py::make_tuple(out.sums, out.vis_or_none(), lines);
 }
@@ -76,7 +77,7 @@ py::tuple gather_recorded(const voxgi::LineSystem& s, const voxgi::PairTable& ta
     auto stop = make_stop_check();
     {
         py::gil_scoped_release release;
-        s.gather_recorded(table, sel, ns, v, o, vp, threads, stop);
+        voxgi::gather_recorded(s, table, sel, ns, v, o, vp, threads, stop);
     }
     return py::make_tuple(out.sums, out.vis_or_none());
 }
@@ -114,7 +115,8 @@ py::tuple shoot(const voxgi::LineSystem& s, I32 emitters, I32 families, F64 weig
     voxgi::ShootCount count;
     {
         py::gil_scoped_release release;
-        count = s.shoot(e, ne, fams.data(), static_cast<int64_t>(fams.size()), v, h, u, opt, stop);
+        count = voxgi::shoot(s, e, ne, fams.data(), static_cast<int64_t>(fams.size()), v, h, u, opt,
+                             stop);
     }
     return py::make_tuple(hd, unfound, count.rays, count.steps);
 }
@@ -221,8 +223,8 @@ void bind_linesystem(py::module_& m) {
             [](const voxgi::LineSystem& s, I32 families, F64 weights, bool with_stand_in) {
                 auto fams = to_families(families, weights);
                 py::gil_scoped_release release;
-                return s.make_pair_table(fams.data(), static_cast<int64_t>(fams.size()),
-                                         with_stand_in);
+                return voxgi::make_pair_table(s, fams.data(), static_cast<int64_t>(fams.size()),
+                                              with_stand_in);
             },
             "families"_a.noconvert(), "weights"_a.noconvert(), "with_stand_in"_a = false,
             R"doc(An empty PairTable for these families (3 bytes per record and family,

@@ -28,7 +28,7 @@ py::tuple gather_sorted(const voxgi::LineSystem& s, I32 families, F64 weights, F
         voxgi::GatherOptions opt;
         opt.stand_in = sb;
         opt.threads = threads;
-        lines = s.gather_sorted(fams.data(), sel, ns, v, o, vp, transpose, opt, stop);
+        lines = voxgi::gather_sorted(s, fams.data(), sel, ns, v, o, vp, transpose, opt, stop);
     }
     return py::make_tuple(out.sums, out.vis_or_none(), lines);
 }
@@ -57,8 +57,8 @@ py::tuple shoot_sender_side(const voxgi::LineSystem& s, I32 emitters, I32 famili
         voxgi::ShootOptions opt;
         opt.stand_in = sb;
         opt.threads = threads;
-        count = s.shoot_sender_side(e, ne, fams.data(), static_cast<int64_t>(fams.size()), v, ss,
-                                    ra, h, u, opt, stop);
+        count = voxgi::shoot_sender_side(s, e, ne, fams.data(), static_cast<int64_t>(fams.size()),
+                                         v, ss, ra, h, u, opt, stop);
     }
     return py::make_tuple(hd, unfound, count.rays, count.steps);
 }

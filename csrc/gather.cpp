@@ -1,6 +1,8 @@
 // The gathering pass: one walk of the records in x_m order per family, a
 // per-line state table, and the pairing of every B record with the F
 // records it faces (docs/design.md §4).
+#include "gather.h"
+
 #include <algorithm>
 #include <cmath>
 #include <memory>
@@ -9,7 +11,6 @@
 #include <string>
 
 #include "lineorder.h"
-#include "linesystem.h"
 #include "util/simd.h"
 
 #if defined(__GNUC__)
@@ -487,10 +488,11 @@ struct TileWriter {
 
 }  // namespace
 
-void LineSystem::check_record(const Family* fams, const int64_t* sel, int64_t nsel,
-                              const GatherOptions& opt) const {
+// The table given to record into is the one for this pass.
+static void check_record(const LineSystem& ls, const Family* fams, const int64_t* sel, int64_t nsel,
+                         const GatherOptions& opt) {
     const PairTable& t = *opt.record;
-    if (t.n != n_) throw std::invalid_argument("pair table made for another line system");
+    if (t.n != ls.size()) throw std::invalid_argument("pair table made for another line system");
     if (t.with_stand_in != (opt.stand_in != nullptr))
         throw std::invalid_argument("pair table made with other stand-in flags");
     for (int64_t k = 0; k < nsel; ++k) {
@@ -502,40 +504,40 @@ void LineSystem::check_record(const Family* fams, const int64_t* sel, int64_t ns
     }
 }
 
-int64_t LineSystem::gather(const Family* fams, const int64_t* sel, int64_t nsel, const float* val,
-                           double* out, double* vis, const GatherOptions& opt,
-                           const StopCheck& stop) const {
+int64_t gather(const LineSystem& ls, const Family* fams, const int64_t* sel, int64_t nsel,
+               const float* val, double* out, double* vis, const GatherOptions& opt,
+               const StopCheck& stop) {
     PairTable* record = opt.record;
-    if (record) check_record(fams, sel, nsel, opt);
-    if (n_ >= int64_t(kAnswerer))
+    if (record) check_record(ls, fams, sel, nsel, opt);
+    if (ls.size() >= int64_t(kAnswerer))
         throw std::invalid_argument("too many records for the gathering (at most 2^30 - 2)");
-    const GatherPlan plan = plan_groups(fams, sel, nsel, lo_, hi_, record);
+    const GatherPlan plan = plan_groups(fams, sel, nsel, ls.lo(), ls.hi(), record);
     // values and stand-in flags in each needed axis order
     std::vector<float> valax[3];
     std::vector<uint8_t> sbax[3];
     for (const auto& fr : plan.frames) {
         const int m = fr.m;
         if (!valax[m].empty()) continue;
-        to_axis_order(m, val, valax[m]);
+        ls.to_axis_order(m, val, valax[m]);
         if (!opt.stand_in) continue;
-        sbax[m].resize(n_);
-        const int32_t* ord = ax_[m].order.data();
-        for (int64_t i = 0; i < n_; ++i) sbax[m][i] = opt.stand_in[ord[i]] ? 1 : 0;
+        sbax[m].resize(ls.size());
+        const int32_t* ord = ls.axis(m).order.data();
+        for (int64_t i = 0; i < ls.size(); ++i) sbax[m][i] = opt.stand_in[ord[i]] ? 1 : 0;
     }
-    WalkShared ws{eps_, hist_, vis != nullptr, opt.stand_in != nullptr, 1};
+    WalkShared ws{ls.epsilon(), ls.history(), vis != nullptr, opt.stand_in != nullptr, 1};
     for (const auto& fr : plan.frames) ws.max_keys = std::max<int64_t>(ws.max_keys, fr.nu * fr.nw);
 
     // the sums of each axis's groups, in that axis's order
     std::vector<double> tot[3], tvis[3];
-    SumsPool pool(n_, vis != nullptr);
+    SumsPool pool(ls.size(), vis != nullptr);
     InOrder<GroupSums> in_order;
     auto add_group = [&](GroupSums& s) {
         std::vector<double>&ta = tot[s.m], &tv = tvis[s.m];
-        if (ta.empty()) ta.assign(3 * n_, 0.0);
-        for (int64_t i = 0; i < 3 * n_; ++i) ta[i] += s.acc[i];
+        if (ta.empty()) ta.assign(3 * ls.size(), 0.0);
+        for (int64_t i = 0; i < 3 * ls.size(); ++i) ta[i] += s.acc[i];
         if (vis) {
-            if (tv.empty()) tv.assign(n_, 0.0);
-            for (int64_t i = 0; i < n_; ++i) tv[i] += s.vis[i];
+            if (tv.empty()) tv.assign(ls.size(), 0.0);
+            for (int64_t i = 0; i < ls.size(); ++i) tv[i] += s.vis[i];
         }
         pool.give(std::move(s));
     };
@@ -547,26 +549,28 @@ int64_t LineSystem::gather(const Family* fams, const int64_t* sel, int64_t nsel,
         GatherWork& w = work[t];
         const int m = plan.frames[plan.order[plan.start[g]]].m;
         if (w.rec_axis != m)
-            load_axis(w, ax_[m], m, n_, valax[m].data(), opt.stand_in ? sbax[m].data() : nullptr);
-        if (record && w.rbuf.empty()) w.rbuf.assign(static_cast<size_t>(PairTable::kTile) * n_, 0);
+            load_axis(w, ls.axis(m), m, ls.size(), valax[m].data(),
+                      opt.stand_in ? sbax[m].data() : nullptr);
+        if (record && w.rbuf.empty())
+            w.rbuf.assign(static_cast<size_t>(PairTable::kTile) * ls.size(), 0);
         TileWriter tw{record, m, w.rbuf.data(), -1, 0, {}};
         for (int64_t q = plan.start[g]; q < plan.start[g + 1]; ++q) {
             const int64_t k = plan.order[q];
             int32_t* rt = record ? tw.column(sel[k]) : nullptr;
-            lines[t] += walk_family(w, ax_[m], plan.frames[k], fams[sel[k]], ws, rt);
+            lines[t] += walk_family(w, ls.axis(m), plan.frames[k], fams[sel[k]], ws, rt);
         }
         if (record) tw.flush();
         GroupSums s = pool.take();
-        collect(w, m, n_, s);
+        collect(w, m, ls.size(), s);
         in_order.finish(g, std::move(s), add_group);
     });
     // into the global order, axis by axis
-    std::fill(out, out + 3 * n_, 0.0);
-    if (vis) std::fill(vis, vis + n_, 0.0);
+    std::fill(out, out + 3 * ls.size(), 0.0);
+    if (vis) std::fill(vis, vis + ls.size(), 0.0);
     for (int m = 0; m < 3; ++m) {
         if (tot[m].empty()) continue;
-        const int32_t* ord = ax_[m].order.data();
-        for (int64_t i = 0; i < n_; ++i) {
+        const int32_t* ord = ls.axis(m).order.data();
+        for (int64_t i = 0; i < ls.size(); ++i) {
             const int64_t r = ord[i];
             out[3 * r] += tot[m][3 * i];
             out[3 * r + 1] += tot[m][3 * i + 1];

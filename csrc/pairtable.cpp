@@ -43,13 +43,14 @@ void PairTable::write_tile(int m, int64_t tile, uint32_t lanes, int32_t* buf) {
     store_fence();
 }
 
-PairTable LineSystem::make_pair_table(const Family* fams, int64_t nf, bool with_stand_in) const {
-    if (n_ > PairTable::kMaxRecords)
-        throw std::invalid_argument("pair table: " + std::to_string(n_) + " records, at most " +
-                                    std::to_string(PairTable::kMaxRecords) +
+PairTable make_pair_table(const LineSystem& ls, const Family* fams, int64_t nf,
+                          bool with_stand_in) {
+    if (ls.size() > PairTable::kMaxRecords)
+        throw std::invalid_argument("pair table: " + std::to_string(ls.size()) +
+                                    " records, at most " + std::to_string(PairTable::kMaxRecords) +
                                     " fit its 3-byte entries");
     PairTable t;
-    t.n = n_;
+    t.n = ls.size();
     t.nfam = nf;
     t.with_stand_in = with_stand_in;
     t.slot.resize(nf);
@@ -59,7 +60,7 @@ PairTable LineSystem::make_pair_table(const Family* fams, int64_t nf, bool with_
     t.weight.resize(nf);
     t.filled.assign(nf, 0);
     for (int64_t f = 0; f < nf; ++f) {
-        LineFrame fr(fams[f].v, lo_, hi_);  // validates the vector
+        LineFrame fr(fams[f].v, ls.lo(), ls.hi());  // validates the vector
         t.fam_axis[f] = fr.m;
         t.slot[f] = static_cast<int32_t>(t.cols[fr.m]++);
         unit_direction(fams[f], &t.dir[3 * f]);
@@ -69,7 +70,7 @@ PairTable LineSystem::make_pair_table(const Family* fams, int64_t nf, bool with_
     for (int m = 0; m < 3; ++m) {
         const size_t tiles =
             (static_cast<size_t>(t.cols[m]) + PairTable::kTile - 1) / PairTable::kTile;
-        const size_t size = static_cast<size_t>(n_) * tiles * PairTable::kRow;
+        const size_t size = static_cast<size_t>(ls.size()) * tiles * PairTable::kRow;
         if (size == 0) continue;
         t.snd[m].allocate(size);
     }
@@ -149,24 +150,24 @@ void replay_tile(const uint8_t* blk, const AxisColumns& ac, size_t ti, const flo
 
 }  // namespace
 
-void LineSystem::gather_recorded(const PairTable& tab, const int64_t* sel, int64_t nsel,
-                                 const float* val, double* out, double* vis, int threads,
-                                 const StopCheck& stop) const {
-    if (tab.n != n_) throw std::invalid_argument("pair table made for another line system");
+void gather_recorded(const LineSystem& ls, const PairTable& tab, const int64_t* sel, int64_t nsel,
+                     const float* val, double* out, double* vis, int threads,
+                     const StopCheck& stop) {
+    if (tab.n != ls.size()) throw std::invalid_argument("pair table made for another line system");
     AxisColumns cols[3];
     select_columns(tab, sel, nsel, cols);
-    std::fill(out, out + 3 * n_, 0.0);
-    if (vis) std::fill(vis, vis + n_, 0.0);
+    std::fill(out, out + 3 * ls.size(), 0.0);
+    if (vis) std::fill(vis, vis + ls.size(), 0.0);
     threads = resolve_threads(threads);
-    std::vector<float> va(4 * n_);
+    std::vector<float> va(4 * ls.size());
     for (int m = 0; m < 3; ++m) {
         const AxisColumns& ac = cols[m];
         if (ac.size() == 0) continue;
         // values in this axis's order (the senders are axis-order positions),
         // 16 bytes a record: the value, then 1 (so that one pair of packed
         // multiply-adds also sums the weight)
-        const int32_t* ord = ax_[m].order.data();
-        for (int64_t i = 0; i < n_; ++i) {
+        const int32_t* ord = ls.axis(m).order.data();
+        for (int64_t i = 0; i < ls.size(); ++i) {
             const int64_t r = ord[i];
             va[4 * i] = val[3 * r];
             va[4 * i + 1] = val[3 * r + 1];
@@ -174,26 +175,27 @@ void LineSystem::gather_recorded(const PairTable& tab, const int64_t* sel, int64
             va[4 * i + 3] = 1.0f;
         }
         const uint8_t* base = tab.snd[m].data();
-        const float* nrm = ax_[m].nrm.data();
+        const float* nrm = ls.axis(m).nrm.data();
         // A chunk of records at a time, tile after tile: the table streams
         // (one 48-byte row per record and tile), and every record's sum is
         // added in column order by one task (no dependence on threads).
-        parallel_for((n_ + kReplayChunk - 1) / kReplayChunk, threads, stop, [&](int64_t task, int) {
-            const int64_t b = task * kReplayChunk, e = std::min(n_, b + kReplayChunk);
-            alignas(16) double acc[kReplayChunk][4];
-            for (int64_t p = b; p < e; ++p)
-                for (int c = 0; c < 4; ++c) acc[p - b][c] = 0.0;
-            for (size_t ti = 0; ti < ac.tile.size(); ++ti)
-                replay_tile(base + ac.tile[ti] * n_ * PairTable::kRow, ac, ti, nrm, va.data(), b, e,
-                            acc);
-            for (int64_t p = b; p < e; ++p) {
-                const int64_t r = ord[p];
-                out[3 * r] += acc[p - b][0];
-                out[3 * r + 1] += acc[p - b][1];
-                out[3 * r + 2] += acc[p - b][2];
-                if (vis) vis[r] += acc[p - b][3];
-            }
-        });
+        parallel_for(
+            (ls.size() + kReplayChunk - 1) / kReplayChunk, threads, stop, [&](int64_t task, int) {
+                const int64_t b = task * kReplayChunk, e = std::min(ls.size(), b + kReplayChunk);
+                alignas(16) double acc[kReplayChunk][4];
+                for (int64_t p = b; p < e; ++p)
+                    for (int c = 0; c < 4; ++c) acc[p - b][c] = 0.0;
+                for (size_t ti = 0; ti < ac.tile.size(); ++ti)
+                    replay_tile(base + ac.tile[ti] * ls.size() * PairTable::kRow, ac, ti, nrm,
+                                va.data(), b, e, acc);
+                for (int64_t p = b; p < e; ++p) {
+                    const int64_t r = ord[p];
+                    out[3 * r] += acc[p - b][0];
+                    out[3 * r + 1] += acc[p - b][1];
+                    out[3 * r + 2] += acc[p - b][2];
+                    if (vis) vis[r] += acc[p - b][3];
+                }
+            });
     }
 }
 

@@ -1,12 +1,14 @@
 // The pairs one gathering pass over a direction set found, kept so that the
 // later iterations of a solve replay them instead of walking the lines again
-// (visibility does not change between iterations; docs/design.md §4).
+// (visibility does not change between iterations; docs/design.md §4), and
+// the replay. Implemented in pairtable.cpp.
 #pragma once
 
 #include <cstdint>
 #include <cstring>
 #include <vector>
 
+#include "linesystem.h"
 #include "util/memory.h"
 
 namespace voxgi {
@@ -15,8 +17,7 @@ namespace voxgi {
 // in axis-m order the axis-m position + 1 of the record each of those
 // families pairs it with (0: none), 3 bytes per record and family
 // (little-endian), in tiles of 16 families (a 48-byte row per record and
-// tile). Filled by LineSystem::gather (GatherOptions::record), read by
-// LineSystem::gather_recorded.
+// tile). Filled by gather (GatherOptions::record), read by gather_recorded.
 struct PairTable {
     static constexpr int kTile = 16;             // columns per tile
     static constexpr int kEntry = 3;             // bytes per entry
@@ -48,5 +49,17 @@ struct PairTable {
     // clear the buffer as it is read.
     void write_tile(int m, int64_t tile, uint32_t lanes, int32_t* buf);
 };
+
+// An empty table for the pairs of these families over the records of s
+// (zero pages: memory is used as the pairs are written).
+PairTable make_pair_table(const LineSystem& ls, const Family* fams, int64_t nf, bool with_stand_in);
+
+// The gathering pass over the recorded families `sel` (every one of them
+// recorded), from the table instead of the lines: the same pairs, the same
+// weights, the sums added per record in family order (results equal
+// gather's to float rounding, and do not depend on `threads`).
+void gather_recorded(const LineSystem& ls, const PairTable& table, const int64_t* sel, int64_t nsel,
+                     const float* val, double* out, double* vis, int threads,
+                     const StopCheck& stop);
 
 }  // namespace voxgi

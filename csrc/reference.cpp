@@ -1,12 +1,13 @@
 // Reference and adjoint variants for the tests: the gathering by sorting
 // each family's records by line key, with its transpose, and the shooting
 // with the deposit on the sender side (docs/design.md §4, §5).
+#include "reference.h"
+
 #include <algorithm>
 #include <stdexcept>
 #include <vector>
 
 #include "lineorder.h"
-#include "linesystem.h"
 #include "shootmarch.h"
 
 namespace voxgi {
@@ -120,65 +121,58 @@ void walk_line(const SortedLine& L, const int32_t* line, int64_t j0, int64_t j1,
 
 }  // namespace
 
-int64_t LineSystem::gather_sorted(const Family* fams, const int64_t* sel, int64_t nsel,
-                                  const float* val, double* out, double* vis, bool transpose,
-                                  const GatherOptions& opt, const StopCheck& stop) const {
+int64_t gather_sorted(const LineSystem& ls, const Family* fams, const int64_t* sel, int64_t nsel,
+                      const float* val, double* out, double* vis, bool transpose,
+                      const GatherOptions& opt, const StopCheck& stop) {
     if (opt.record) throw std::invalid_argument("the sorted walk does not record pairs");
     const uint8_t* stand_in = opt.stand_in;
     std::vector<float> valax[3];
     std::vector<uint8_t> sbax[3];
     for (int m = 0; m < 3; ++m) {
-        to_axis_order(m, val, valax[m]);
+        ls.to_axis_order(m, val, valax[m]);
         if (!stand_in) continue;
-        sbax[m].resize(n_);
-        for (int64_t i = 0; i < n_; ++i) sbax[m][i] = stand_in[ax_[m].order[i]] ? 1 : 0;
+        sbax[m].resize(ls.size());
+        for (int64_t i = 0; i < ls.size(); ++i) sbax[m][i] = stand_in[ls.axis(m).order[i]] ? 1 : 0;
     }
-    std::fill(out, out + 3 * n_, 0.0);
-    if (vis) std::fill(vis, vis + n_, 0.0);
+    std::fill(out, out + 3 * ls.size(), 0.0);
+    if (vis) std::fill(vis, vis + ls.size(), 0.0);
     const int threads = static_cast<int>(
         std::max<int64_t>(1, std::min<int64_t>(resolve_threads(opt.threads), nsel)));
     std::vector<int64_t> lines(threads, 0);
     InOrder<FamilySums> in_order;
     auto add_family = [&](FamilySums& s) {
-        const int32_t* ord = ax_[s.m].order.data();
-        for (int64_t i = 0; i < n_; ++i) {
+        const int32_t* ord = ls.axis(s.m).order.data();
+        for (int64_t i = 0; i < ls.size(); ++i) {
             for (int c = 0; c < 3; ++c) out[3 * int64_t(ord[i]) + c] += s.acc[3 * i + c];
             if (vis) vis[ord[i]] += s.vis[i];
         }
     };
     parallel_for(nsel, threads, stop, [&](int64_t k, int t) {
         const Family& F = fams[sel[k]];
-        const LineFrame fr(F.v, lo_, hi_);
-        const Axis& ax = ax_[fr.m];
+        const LineFrame fr(F.v, ls.lo(), ls.hi());
+        const LineSystem::Axis& ax = ls.axis(fr.m);
         FamilySums sums;
         sums.m = fr.m;
-        sums.acc.assign(3 * n_, 0.0);
-        if (vis) sums.vis.assign(n_, 0.0);
+        sums.acc.assign(3 * ls.size(), 0.0);
+        if (vis) sums.vis.assign(ls.size(), 0.0);
         float dh[3];
         unit_direction(F, dh);
         // keys in the axis order (x_m ascending), then a stable counting
         // sort: each line's records come out ordered along +v
         const int64_t nkeys = fr.nu * fr.nw;
-        std::vector<uint32_t> key(n_), cnt(nkeys + 1, 0);
-        std::vector<int32_t> line(n_);
-        for (int64_t i = 0; i < n_; ++i) {
+        std::vector<uint32_t> key(ls.size()), cnt(nkeys + 1, 0);
+        std::vector<int32_t> line(ls.size());
+        for (int64_t i = 0; i < ls.size(); ++i) {
             key[i] = fr.key(ax.X[i] - fr.lo[fr.m], fr.yprime(ax.Y[i]), fr.zprime(ax.Z[i]));
             ++cnt[key[i] + 1];
         }
         for (int64_t q = 0; q < nkeys; ++q) cnt[q + 1] += cnt[q];
         // cnt[q] = start of line q; the scatter advances it to the line's end
-        for (int64_t i = 0; i < n_; ++i) line[cnt[key[i]]++] = static_cast<int32_t>(i);
-        const SortedLine L{ax,
-                           ax.pn.data(),
-                           valax[fr.m].data(),
-                           stand_in ? sbax[fr.m].data() : nullptr,
-                           dh,
-                           F.weight,
-                           eps_,
-                           hist_,
-                           transpose,
-                           sums,
-                           vis != nullptr};
+        for (int64_t i = 0; i < ls.size(); ++i) line[cnt[key[i]]++] = static_cast<int32_t>(i);
+        const SortedLine L{
+            ax,        ax.pn.data(), valax[fr.m].data(), stand_in ? sbax[fr.m].data() : nullptr,
+            dh,        F.weight,     ls.epsilon(),       ls.history(),
+            transpose, sums,         vis != nullptr};
         std::vector<Hit> group;
         int64_t start = 0;
         for (int64_t q = 0; q < nkeys; ++q) {
@@ -219,15 +213,15 @@ struct SenderSide {
 
 }  // namespace
 
-ShootCount LineSystem::shoot_sender_side(const int32_t* emit, int64_t ne, const Family* fams,
-                                         int64_t nf, const float* val, const double* send_scale,
-                                         const double* recv_area, double* hd, double* unfound,
-                                         const ShootOptions& opt, const StopCheck& stop) const {
+ShootCount shoot_sender_side(const LineSystem& ls, const int32_t* emit, int64_t ne,
+                             const Family* fams, int64_t nf, const float* val,
+                             const double* send_scale, const double* recv_area, double* hd,
+                             double* unfound, const ShootOptions& opt, const StopCheck& stop) {
     if (opt.coverage || opt.object)
         throw std::invalid_argument(
             "coverage and silhouettes: only with the receiver-side deposit");
-    return march(emit, ne, fams, nf, val, hd, unfound, opt, SenderSide{send_scale, recv_area},
-                 stop);
+    return shoot_march(ls, emit, ne, fams, nf, val, hd, unfound, opt,
+                       SenderSide{send_scale, recv_area}, stop);
 }
 
 }  // namespace voxgi

@@ -1,6 +1,7 @@
 // Direct light: integer discrete rays from the emitters, deposited on the
 // receivers (docs/design.md §5).
-#include "linesystem.h"
+#include "shoot.h"
+
 #include "shootmarch.h"
 
 namespace voxgi {
@@ -24,13 +25,13 @@ struct ReceiverSide {
 
 }  // namespace
 
-ShootCount LineSystem::shoot(const int32_t* emit, int64_t ne, const Family* fams, int64_t nf,
-                             const float* val, double* hd, double* unfound, const ShootOptions& opt,
-                             const StopCheck& stop) const {
+ShootCount shoot(const LineSystem& ls, const int32_t* emit, int64_t ne, const Family* fams,
+                 int64_t nf, const float* val, double* hd, double* unfound, const ShootOptions& opt,
+                 const StopCheck& stop) {
     if ((opt.object == nullptr) != (opt.sil_area == nullptr) ||
         (opt.object == nullptr) != (opt.back == nullptr))
         throw std::invalid_argument("object, sil_area and back go together");
-    return march(emit, ne, fams, nf, val, hd, unfound, opt, ReceiverSide(), stop);
+    return shoot_march(ls, emit, ne, fams, nf, val, hd, unfound, opt, ReceiverSide(), stop);
 }
 
 }  // namespace voxgi

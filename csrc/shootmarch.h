@@ -1,6 +1,6 @@
 // The shooting's march along one discrete ray, shared by the receiver-side
 // deposit (shoot.cpp) and the sender-side one (reference.cpp). Internal to
-// those two files.
+// those two files; it reads the line system's records and voxel index.
 #pragma once
 
 #include <algorithm>
@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "lineorder.h"
-#include "linesystem.h"
+#include "shoot.h"
 #include "util/simd.h"
 
 namespace voxgi {
@@ -77,16 +77,16 @@ class ShootMarch {
         frames_.reserve(nf);
         dhat_.resize(3 * nf);
         for (int64_t f = 0; f < nf; ++f) {
-            frames_.emplace_back(fams[f].v, s.lo_, s.hi_);
+            frames_.emplace_back(fams[f].v, s.lo(), s.hi());
             unit_direction(fams[f], &dhat_[3 * f]);
         }
-        const LineSystem::Axis& a0 = s.ax_[0];
-        pos0_.resize(s.n_);
-        for (int64_t i = 0; i < s.n_; ++i) pos0_[a0.order[i]] = static_cast<int32_t>(i);
-        P_ = s.point_;
-        N_ = s.normal_;
-        eps_ = s.eps_;
-        K_ = s.hist_;
+        const LineSystem::Axis& a0 = s.axis(0);
+        pos0_.resize(s.size());
+        for (int64_t i = 0; i < s.size(); ++i) pos0_[a0.order[i]] = static_cast<int32_t>(i);
+        P_ = s.point();
+        N_ = s.normal();
+        eps_ = s.epsilon();
+        K_ = s.history();
     }
 
     int64_t families() const { return nf_; }
@@ -118,7 +118,6 @@ class ShootMarch {
                 std::vector<RayHit>& recv) const;
 
    private:
-    friend class LineSystem;
     const LineSystem& s_;
     const Family* fams_;
     int64_t nf_;
@@ -160,7 +159,7 @@ inline bool ShootMarch::same_plane(int32_t q, int32_t p) const {
 
 inline int64_t ShootMarch::run(const LineFrame& fr, Ray& r, std::vector<Hit>& group,
                                std::vector<RayHit>& recv) const {
-    const LineSystem::Axis& a0 = s_.ax_[0];
+    const LineSystem::Axis& a0 = s_.axis(0);
     const int32_t pe = pos0_[r.e];
     const int32_t eijk[3] = {a0.X[pe], a0.Y[pe], a0.Z[pe]};
     // the line through e's voxel: u, w fixed; y', z' follow from x'
@@ -177,7 +176,7 @@ inline int64_t ShootMarch::run(const LineFrame& fr, Ray& r, std::vector<Hit>& gr
     // no division in the loop.
     int64_t numy = fr.B * (fr.XmA - X0) + h, numz = fr.C * (fr.XmA - X0) + h;
     int64_t qy = numy / fr.A, ry = numy % fr.A, qz = numz / fr.A, rz = numz % fr.A;
-    const uint64_t* occ = s_.occ_.data();
+    const uint64_t* occ = s_.occupancy();
     int64_t nsteps = 0;
     bool first = true;
     for (int64_t X = X0; X >= 0 && X <= Xr && !r.stopped; first = false) {
@@ -216,7 +215,7 @@ inline int64_t ShootMarch::run(const LineFrame& fr, Ray& r, std::vector<Hit>& gr
         const int64_t lin = s_.linear(c3[0], c3[1], c3[2]);
         if (!((occ[lin >> 6] >> (lin & 63)) & 1)) continue;
         const uint64_t below = occ[lin >> 6] & ((uint64_t(1) << (lin & 63)) - 1);
-        visit(s_.occ_rank_[lin >> 6] + __builtin_popcountll(below), first, r, group, recv);
+        visit(s_.occupancy_rank()[lin >> 6] + __builtin_popcountll(below), first, r, group, recv);
     }
     return nsteps;
 }
@@ -224,8 +223,9 @@ inline int64_t ShootMarch::run(const LineFrame& fr, Ray& r, std::vector<Hit>& gr
 // The records of one occupied voxel in their order along the ray.
 inline void ShootMarch::visit(int64_t slot, bool first, Ray& r, std::vector<Hit>& group,
                               std::vector<RayHit>& recv) const {
-    const LineSystem::Axis& a0 = s_.ax_[0];
-    const int32_t b = s_.vstart_[slot], en = s_.vstart_[slot + 1];
+    const LineSystem::Axis& a0 = s_.axis(0);
+    const int32_t* vstart = s_.voxel_start();
+    const int32_t b = vstart[slot], en = vstart[slot + 1];
     group.clear();
     for (int32_t i = b; i < en; ++i) {
         const int32_t q = a0.order[i];
@@ -400,18 +400,19 @@ inline void ShootMarch::join_band(int32_t p, float c, Ray& r, const std::vector<
 // delivered nothing after all). Tasks of kChunk emitters; their deposits are
 // added to hd in task order, so hd does not depend on the threads.
 template <class DepositFn>
-ShootCount LineSystem::march(const int32_t* emit, int64_t ne, const Family* fams, int64_t nf,
-                             const float* val, double* hd, double* unfound, const ShootOptions& opt,
-                             const DepositFn& deposit, const StopCheck& stop) const {
+ShootCount shoot_march(const LineSystem& ls, const int32_t* emit, int64_t ne, const Family* fams,
+                       int64_t nf, const float* val, double* hd, double* unfound,
+                       const ShootOptions& opt, const DepositFn& deposit, const StopCheck& stop) {
     for (int64_t k = 0; k < ne; ++k)
-        if (emit[k] < 0 || emit[k] >= n_) throw std::invalid_argument("emitter index out of range");
-    const ShootMarch sm(*this, fams, nf, opt, DepositFn::kKeepShadowed);
+        if (emit[k] < 0 || emit[k] >= ls.size())
+            throw std::invalid_argument("emitter index out of range");
+    const ShootMarch sm(ls, fams, nf, opt, DepositFn::kKeepShadowed);
     constexpr int64_t kChunk = 4;
     const int64_t tasks = (ne + kChunk - 1) / kChunk;
     const int threads = static_cast<int>(
         std::max<int64_t>(1, std::min<int64_t>(resolve_threads(opt.threads), tasks)));
     std::vector<int64_t> rays(threads, 0), steps(threads, 0);
-    std::fill(hd, hd + 3 * n_, 0.0);
+    std::fill(hd, hd + 3 * ls.size(), 0.0);
     InOrder<std::vector<Deposit>> in_order;
     auto add = [&](std::vector<Deposit>& d) {
         for (const Deposit& x : d) {

@@ -124,3 +124,30 @@ def test_the_denoiser_lowers_mitsubas_error_at_few_samples():
     # 3.2e-3 at 32x32); a quarter is far from either
     assert denoised["rel_mse"] < 0.25 * plain["rel_mse"]
     assert denoised["ssim"] > plain["ssim"]
+
+
+def test_a_two_sided_lamp_reaches_mitsuba_as_one_mesh(tmp_path):
+    # A file's two-sided emitter loads as a one-sided emitter and its
+    # reflecting back, coplanar; exported as two meshes, Embree would pick
+    # either at each ray and the lamp would show the back's black through it.
+    pytest.importorskip("mitsuba")
+    from voxgi.mitsuba import mitsuba_module, render_mitsuba, to_mitsuba
+
+    mitsuba_module()  # a variant set, which to_mitsuba needs
+    (tmp_path / "lamp.xml").write_text(
+        '<scene version="3.0.0">'
+        '<sensor type="perspective"><float name="fov" value="20"/>'
+        '<transform name="to_world"><lookat origin="0, 0, 3" target="0, 0, 0" up="0, 1, 0"/>'
+        '</transform><film type="hdrfilm"><integer name="width" value="16"/>'
+        '<integer name="height" value="16"/><rfilter type="box"/></film></sensor>'
+        '<shape type="rectangle"><bsdf type="twosided"><bsdf type="diffuse"/></bsdf>'
+        '<emitter type="area"><rgb name="radiance" value="2, 3, 4"/></emitter></shape>'
+        "</scene>"
+    )
+    scene = voxgi.Scene.load(tmp_path / "lamp.xml")
+    assert [o.name for o in scene.objects] == ["rectangle0", "rectangle0_back"]
+    meshes = [k for k in to_mitsuba(scene) if k.startswith("obj")]
+    assert len(meshes) == 1
+    # seen head-on, every pixel is the lamp's radiance: nothing else is lit
+    img = render_mitsuba(scene, 4)
+    np.testing.assert_allclose(img, np.broadcast_to([2, 3, 4], img.shape), rtol=1e-5)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
 
-from . import _core, formats, io, metrics, scenes
+from . import _core, denoise, formats, io, metrics, scenes
 from .camera import Camera
 from .display import RenderResult, RenderTuning
 from .formats import SceneWarning
@@ -51,6 +51,7 @@ __all__ = [
     "SpotLight",
     "VoxelSet",
     "__version__",
+    "denoise",
     "formats",
     "io",
     "metrics",

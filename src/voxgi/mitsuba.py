@@ -154,8 +154,17 @@ def to_mitsuba(
         "integrator": {"type": "path", "max_depth": int(max_depth)},
         "sensor": _sensor(mi, scene, cam, spp, sampler, seed),
     }
-    for i, o in enumerate(scene.objects):
-        d.update(_shape(mi, i, o))
+    objects = scene.objects
+    skip = set()
+    for i, o in enumerate(objects):
+        if i in skip:
+            continue
+        back = objects[i + 1] if i + 1 < len(objects) else None
+        if back is not None and _is_back_of(back, o):
+            d.update(_emitter_with_back(mi, i, o, back))
+            skip.add(i + 1)
+        else:
+            d.update(_shape(mi, i, o))
     for i, light in enumerate(scene.lights):
         d[f"light{i:03d}"] = _light(mi, light)
     if scene.environment is not None:
@@ -252,6 +261,36 @@ def _shape(mi, i: int, o) -> dict:
             mi, key + "_back", o.vertices, o.faces[:, ::-1], mi.load_dict(bsdf), back
         )
     return out
+
+
+def _is_back_of(back, front) -> bool:
+    """Whether ``back`` is the reflecting back of the one-sided emitter
+    ``front``: the same triangles, reversed, emitting nothing (how a file's
+    two-sided emitter is loaded, as Mitsuba's area emitter lights its front
+    only)."""
+    return (
+        front.material.is_emitter
+        and not back.material.is_emitter
+        and not front.two_sided
+        and not back.two_sided
+        and np.array_equal(front.vertices, back.vertices)
+        and np.array_equal(front.faces[:, ::-1], back.faces)
+    )
+
+
+def _emitter_with_back(mi, i: int, front, back) -> dict:
+    """One Mitsuba mesh for an emitter and its reflecting back: a ``twosided``
+    BSDF with the two albedos and the area emitter on the front. Two coplanar
+    meshes instead would each take a share of the rays that meet them
+    (Embree picks either), which turns the lamp into a grid of dark pixels."""
+    bsdf = {
+        "type": "twosided",
+        "front": {"type": "diffuse", "reflectance": _rgb(front.material.albedo)},
+        "back": {"type": "diffuse", "reflectance": _rgb(back.material.albedo)},
+    }
+    key = f"obj{i:03d}_{front.name}".replace(" ", "_")
+    emitter = mi.load_dict({"type": "area", "radiance": _rgb(front.material.emission)})
+    return {key: _mesh(mi, key, front.vertices, front.faces, mi.load_dict(bsdf), emitter)}
 
 
 def render_mitsuba(

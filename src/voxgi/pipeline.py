@@ -49,7 +49,7 @@ def solve(
     vox : VoxelSet
         Records from :func:`voxgi.voxelize`; left unchanged.
     radius : int or None
-        Radius R >= 1 of the gathering direction set (R 4: 198 directions,
+        Radius R >= 1 of the gathering direction set (R 4: 210 directions,
         R 8: 762, R 22: 5982). None: ``tuning.radius``, else 4 where traced
         passes finish the reflected light and 8 where the lines alone carry
         it (the records carry no scene, ``indirect_light="lines"``, or

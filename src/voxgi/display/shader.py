@@ -84,7 +84,12 @@ class _FrameShader:
     """Everything a frame needs that does not change between frames."""
 
     #: Pixels take their VPLs from one of INTERLEAVE² sets per frame, by the
-    #: pixel's row and column modulo INTERLEAVE (interleaved sampling).
+    #: pixel's row and column modulo INTERLEAVE (interleaved sampling). With
+    #: the indirect filter, which averages the sets of neighbouring pixels,
+    #: the pattern is fixed; without it each INTERLEAVE x INTERLEAVE block of
+    #: pixels takes the sets in its own random order each frame, so that
+    #: pixels INTERLEAVE apart do not share their VPLs' error: the same
+    #: relMSE, and an error image without a period (``docs/design.md`` §6).
     INTERLEAVE = 4
 
     def __init__(
@@ -103,6 +108,7 @@ class _FrameShader:
         # the filter needs the two kinds of light apart; without any light of
         # non-emitting records there is nothing to filter
         self.indirect_filter = int(indirect_filter) if sampler.counts[1] > 0 else 0
+        self._shuffle_groups = int(indirect_filter) == 0
         self.eps, self.threads = float(eps), int(threads)
         self.gather = int(gather) if sampler.mis else 0
         self.seed = int(seed)
@@ -321,6 +327,10 @@ class _FrameShader:
         h = self.camera_hits(offset, lens)
         self.seconds["primary"] += time.perf_counter() - t0
         self.surface = frame_surface(h)
+        if self._shuffle_groups:
+            rng = np.random.default_rng([self.seed, self._frame, 0x6B0])
+            self._groups = self._pixel_groups(self.cam, self.INTERLEAVE, rng)
+            self.__dict__.pop("_pixel_set", None)  # the cached view of the groups
         self.aovs = frame_aovs(
             h, self.mat_albedo, np.asarray(self.cam.eye) - self.tracer.centre, self.cam.frame()[2]
         )
@@ -347,11 +357,16 @@ class _FrameShader:
         return img
 
     @staticmethod
-    def _pixel_groups(cam: Camera, n: int) -> tuple[np.ndarray, np.ndarray]:
+    def _pixel_groups(cam: Camera, n: int, rng=None) -> tuple[np.ndarray, np.ndarray]:
         """The row-major pixel indices sorted by interleaving group, and where
-        each group starts in them (one more entry, the end)."""
+        each group starts in them (one more entry, the end). With ``rng``,
+        each n x n block of pixels takes the n² groups in its own order."""
         rows, cols = np.divmod(np.arange(cam.height * cam.width), cam.width)
         key = (rows % n) * n + cols % n
+        if rng is not None:
+            bw, bh = -(-cam.width // n), -(-cam.height // n)
+            order = rng.permuted(np.tile(np.arange(n * n), (bw * bh, 1)), axis=1)
+            key = order[(rows // n) * bw + cols // n, key]
         perm = np.argsort(key, kind="stable")
         cuts = np.searchsorted(key[perm], np.arange(n * n + 1))
         keep = np.concatenate([[True], np.diff(cuts) > 0])  # groups an image too small lacks

@@ -85,7 +85,7 @@ def solve(
     vox : VoxelSet
         Records from :func:`voxgi.voxelize`; left unchanged.
     radius : int or None
-        Radius R >= 1 of the gathering direction set (R 4: 198 directions,
+        Radius R >= 1 of the gathering direction set (R 4: 210 directions,
         R 22: 5982). None: ``tuning.radius``, else 4 where traced passes
         finish the reflected light and 8 where the lines alone carry it
         (:func:`voxgi.radiosity.tuning.gathering_radius`).

@@ -49,7 +49,7 @@ class SolveTuning:
     Attributes
     ----------
     radius : int or None
-        Radius R >= 1 of the gathering direction set (R 4: 198 directions,
+        Radius R >= 1 of the gathering direction set (R 4: 210 directions,
         R 8: 762, R 22: 5982); ``voxgi.solve(radius=...)`` overrides it.
         None: :data:`TRACED_RADIUS` (4) where traced passes finish the
         reflected light, else :data:`LINES_RADIUS` (8).
