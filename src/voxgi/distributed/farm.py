@@ -1,0 +1,111 @@
+"""Tasks farmed out to a client's workers and their results collected in order."""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+import time
+
+import numpy as np
+
+from .client import _workers, check_client
+
+
+class _Farm:
+    """What both backends share: the client, the workers, ordered collection."""
+
+    def __init__(self, client, progress: bool, desc: str):
+        self.client = check_client(client)
+        self.workers = sorted(_workers(client))
+        self.progress = bool(progress)
+        self.desc = desc
+        self.stats = {
+            "workers": len(self.workers),
+            "tasks": 0,
+            "bytes_scattered": 0,
+            "bytes_sent": 0,
+            "bytes_received": 0,
+            "seconds_waiting": 0.0,
+        }
+
+    def _check_memory(self, need: int, what: str) -> None:
+        """Refuse before any work when a worker's memory_limit is under ``need``.
+
+        A worker stops taking tasks once its memory passes the ``pause``
+        fraction of its limit (Dask's ``distributed.worker.memory.pause``,
+        0.8 by default): that share of the limit is what counts.
+        """
+        import dask
+
+        pause = dask.config.get("distributed.worker.memory.pause", 0.8)
+        frac = float(pause) if isinstance(pause, (int, float)) and 0 < pause <= 1 else 1.0
+        info = _workers(self.client)
+        for addr in self.workers:
+            limit = int(info[addr].get("memory_limit") or 0)  # 0: no limit set
+            if 0 < limit * frac < need:
+                raise MemoryError(
+                    f"client: worker {addr} has memory_limit {limit / 2**20:.1f} MiB (it pauses "
+                    f"at {frac:.0%} of it), but {what} needs about {need / 2**20:.1f} MiB on every "
+                    "worker; give the workers more memory (memory_limit=...) or use a coarser "
+                    "resolution"
+                )
+        self.stats["bytes_per_worker_estimate"] = int(need)
+
+    def _map(self, fn, chunks, *common, key_prefix: str):
+        """Run ``fn(*common, *chunk)`` for every chunk, one worker each (loosely:
+        another may take over if it dies); return the results in chunk order."""
+        from distributed import as_completed
+
+        futs = []
+        for i, chunk in enumerate(chunks):
+            w = self.workers[i % len(self.workers)]
+            futs.append(
+                self.client.submit(
+                    fn,
+                    *common,
+                    *chunk,
+                    workers=[w],
+                    allow_other_workers=True,
+                    pure=False,
+                    key=f"{key_prefix}-{i}-{_uid()}",
+                )
+            )
+        self.stats["tasks"] += len(futs)
+        out = [None] * len(futs)
+        where = {f.key: i for i, f in enumerate(futs)}
+        bar = None
+        if self.progress and len(futs) > 1:
+            from .. import _progress
+
+            bar = _progress.bar(self.desc, len(futs), unit="task")
+        t = time.perf_counter()
+        try:
+            for fut in as_completed(futs):
+                out[where[fut.key]] = fut.result()
+                if bar is not None:
+                    bar.update(1)
+        finally:
+            if bar is not None:
+                bar.close()
+            self.stats["seconds_waiting"] += time.perf_counter() - t
+        return out
+
+
+_UID = [0]
+_UID_LOCK = threading.Lock()
+
+
+def _uid() -> str:
+    with _UID_LOCK:
+        _UID[0] += 1
+        return f"{_UID[0]:x}-{time.monotonic_ns():x}"
+
+
+def _token(*arrays) -> str:
+    """A hash of the records: the key of a worker's cached LineSystem."""
+    h = hashlib.blake2b(digest_size=16)
+    for a in arrays:
+        h.update(str(a.shape).encode())
+        h.update(str(a.dtype).encode())
+        h.update(np.ascontiguousarray(a).view(np.uint8).data)
+    return h.hexdigest()
