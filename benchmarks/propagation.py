@@ -18,6 +18,13 @@ Sections (all by default):
 - ``thin_walls`` the same walls in the furnace, rho 0.8, R 8, shot direct
   light, res 32, 64, 128: radiance error of the lines alone and with traced
   bounces (64 and 256 rays a record in the first pass), and seconds.
+- ``thin_sheets`` a closed box split off the voxel grid (at 0.4137 of the box,
+  turned 3° and 2°) by a zero-thickness two-sided sheet, a one-sided slab
+  0.01 thick or the same slab two-sided, res 32, 37, 48, 64: with a lamp in
+  one room, the dark room's mean radiance over the lit room's (``voxgi.solve``
+  defaults and the lines alone; 0 is right); as a uniform furnace (rho 0.8,
+  a small box in the lit room), every record's error against Le / (1 - rho)
+  with the defaults and with 256 direct samples and tol 1e-4.
 - ``cap``        emitting-cap sphere: mean / max error vs resolution (32, 64,
   128) and R (8, 16, 22); rho = 0.5.
 - ``cornell``    energy balance on the Cornell box vs resolution (32, 64, 128).
@@ -304,6 +311,102 @@ def thin_walls(args) -> None:
     _write(
         "thin_walls" if full else "thin_walls_res" + "_".join(map(str, ress)), rows, rho=rho, R=R
     )
+
+
+_SPLIT_AT, _SLAB = 0.4137, 0.01
+
+
+def _split_normal() -> np.ndarray:
+    a, b = np.radians(3.0), np.radians(2.0)
+    return np.array([np.cos(a) * np.cos(b), np.sin(b), np.sin(a) * np.cos(b)])
+
+
+def _split_box(wall: str, furnace: bool):
+    """The unit box split by ``wall`` ("sheet", "slab", "two-sided slab")
+    off the grid; a lamp under the lit room's ceiling (albedo 0.7), or as a
+    furnace (emission 1, albedo 0.8, a small box in the lit room)."""
+    import trimesh
+
+    rho, le = (0.8, 1.0) if furnace else (0.7, 0.0)
+    s = voxgi.scenes.furnace_box(albedo=rho, emission=le)
+    mat = voxgi.Material(albedo=rho, emission=le)
+    n = _split_normal()
+
+    def plane(offset, toward):
+        d = -0.5 + _SPLIT_AT + offset
+        yz = ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))
+        c = np.array([((d - n[1] * y - n[2] * z) / n[0], y, z) for y, z in yz])
+        f = [[0, 1, 2], [0, 2, 3]]
+        if np.dot(np.cross(c[1] - c[0], c[2] - c[0]), toward) < 0:
+            f = [[0, 2, 1], [0, 3, 2]]
+        return trimesh.Trimesh(c, f, process=False)
+
+    if wall == "sheet":
+        s.add(plane(0.0, n), mat, name="wall", two_sided=True)
+    else:
+        faces = trimesh.util.concatenate([plane(-_SLAB / 2, -n), plane(_SLAB / 2, n)])
+        s.add(faces, mat, name="wall", two_sided=wall == "two-sided slab")
+    if furnace:
+        small = trimesh.creation.box(extents=[0.15, 0.15, 0.15])
+        small.apply_translation([0.2, -0.3, 0.1])
+        s.add(small, mat, name="small_box")
+    else:
+        c = np.array([(0.1, 0.45, -0.15), (0.4, 0.45, -0.15), (0.4, 0.45, 0.15), (0.1, 0.45, 0.15)])
+        s.add(
+            trimesh.Trimesh(c, [[0, 1, 2], [0, 2, 3]], process=False),
+            voxgi.Material(albedo=0.0, emission=10.0),
+            name="lamp",
+        )
+    return s
+
+
+def _split_rooms(vox, wall: str):
+    """(dark, lit): records with area in front of the wall's two sides (by a
+    point a thousandth of a voxel in front of the centroid), a slab's inside
+    in neither."""
+    half = 0.0 if wall == "sheet" else _SLAB / 2
+    p = np.asarray(vox.centroid, np.float64) + 1e-3 * vox.pitch * vox.normal
+    s = p @ _split_normal() - (-0.5 + _SPLIT_AT)
+    live = np.asarray(vox.area) > 0
+    return live & (s < -half), live & (s > half)
+
+
+def thin_sheets(args) -> None:
+    """No light through a wall thinner than a voxel, off the grid."""
+    ress = args.res or ([32] if args.quick else [32, 37, 48, 64])
+    rows = []
+    for wall in ("sheet", "slab", "two-sided slab"):
+        for res in ress:
+            row = {"wall": wall, "res": res}
+            vox = voxgi.voxelize(_split_box(wall, False), resolution=res, progress=False)
+            dark, lit = _split_rooms(vox, wall)
+            w = np.asarray(vox.area, np.float64)
+            for name, tuning in (
+                ("defaults", None),
+                ("lines", SolveTuning(indirect_light="lines")),
+            ):
+                L = voxgi.solve(vox, progress=False, tuning=tuning).radiance.mean(axis=1) * w
+                row[f"dark/lit {name}"] = float(
+                    (L[dark].sum() / w[dark].sum()) / (L[lit].sum() / w[lit].sum())
+                )
+            vox = voxgi.voxelize(_split_box(wall, True), resolution=res, progress=False)
+            dark, lit = _split_rooms(vox, wall)
+            front = (dark | lit) & ~vox.back
+            for name, tol, tuning in (
+                ("defaults", None, None),
+                ("ds256", 1e-4, SolveTuning(direct_samples=256)),
+            ):
+                sol = voxgi.solve(vox, tol=tol, progress=False, tuning=tuning)
+                err = sol.radiance[front, 0] * (1 - 0.8) - 1
+                row[f"furnace {name} mean"] = float(err.mean())
+                row[f"furnace {name} max"] = float(np.abs(err).max())
+                row[f"furnace {name} >2%"] = int((np.abs(err) > 0.02).sum())
+            row["records"] = int(front.sum())
+            rows.append(row)
+            print(rows[-1], flush=True)
+    _table(rows, list(rows[0]))
+    full = ress == [32, 37, 48, 64]
+    _write("thin_sheets" if full else "thin_sheets_res" + "_".join(map(str, ress)), rows)
 
 
 def _err_vs(sol, ref, vox) -> np.ndarray:
@@ -775,6 +878,7 @@ SECTIONS = {
     "furnace": furnace,
     "junctions": junctions,
     "thin_walls": thin_walls,
+    "thin_sheets": thin_sheets,
     "cap": cap,
     "cornell": cornell,
     "energy": energy,
@@ -800,7 +904,7 @@ def main() -> None:
         "--res",
         type=int,
         nargs="+",
-        help="cap, energy, junctions, thin_walls: resolutions; furnace: the first one",
+        help="cap, energy, junctions, thin_walls, thin_sheets: resolutions; furnace: the first one",
     )
     ap.add_argument(
         "--radii",
