@@ -265,9 +265,9 @@ inline void cell_records(const RecordGrid& g, int64_t i, int64_t j, int64_t k, i
 
 // How far record r stands apart from the hit point y (on a surface seen from
 // the side of normal n) by the records [q0, q1) of a voxel: 2 when
-// - it lies behind the hit's own sheet: some record o whose plane holds y,
-//   facing n's side, has r's centroid strictly behind it (the other face of
-//   a slab thinner than a voxel, or that face's black back);
+// - it lies off the hit's own sheet: some record o whose plane holds y,
+//   facing n's side, has r's centroid strictly in front of or behind it
+//   (the other face of a slab thinner than a voxel, or its black back);
 // - or across another surface: some record o of another object, or of an
 //   orientation more than 60° away (another cluster of the voxelization),
 //   has y strictly on one side of its plane and r's centroid not on that
@@ -295,10 +295,14 @@ int separation(const RecordGrid& g, const double y[3], const float n[3], const P
             behind += rc * n[a];
         }
         if (std::fabs(sy) <= tol && dot3(o.normal, n) > 0.5f) {
-            if (behind < -tol) return 2;
+            if (std::fabs(behind) > tol) return 2;
             continue;
         }
-        if (o.object == r.object && dot3(o.normal, r.normal) > 0.5f) continue;  // r's own sheet
+        const float along = dot3(o.normal, r.normal);
+        // r's own sheet: its orientation, or its other side through r's
+        // centroid (a curved sheet's y lies off that plane on either side).
+        if (o.object == r.object && (along > 0.5f || (along < -0.5f && std::fabs(sr) <= tol)))
+            continue;
         // A centroid on that plane (a sliver cut off at a junction) is on
         // neither side: it does not stand for a point off the plane.
         if ((sy > tol && sr < tol) || (sy < -tol && sr > -tol)) return 2;
