@@ -244,7 +244,41 @@ def compare(
         Mitsuba (or, with ``denoise``, OIDN) is not installed
         (``pip install 'voxgi[bench]'``).
     """
-    from .mitsuba import mitsuba_module, to_mitsuba, with_aovs
+    from .mitsuba import to_mitsuba
+
+    spp, counts, cam, mi = _checked(scene, spp, sweep_spp, width, height, variant, denoise)
+    out, t_voxgi = _render_voxgi(scene, cam, resolution, seed, threads, progress)
+    plain = mi.load_dict(to_mitsuba(scene, spp=1, camera=cam))
+    ref, ref_noise, ref_seconds = _reference(mi, plain, spp, reference, out.image.shape)
+    mask = _non_emitter_mask(scene, cam)
+    rows = [_voxgi_row(out, t_voxgi, ref, ref_noise, mask)]
+    goal = min(rows[0]["rel_mse_net"], *TARGETS)
+    sweeps = _sweeps(mi, plain, scene, cam, counts, denoise, goal, ref, ref_noise, mask, rows)
+    rows.append(_reference_row(spp if reference is None else None, ref_seconds, ref_noise))
+    result = _comparison(rows, out.image, ref, ref_noise, sweeps, t_voxgi)
+    if out_dir is not None:
+        result.files = _write(result, Path(out_dir), out, plot, scene, cam, seed, threads)
+    return result
+
+
+def _comparison(rows, img, ref, ref_noise: float, sweeps: dict, t_voxgi: float) -> Comparison:
+    """The :class:`Comparison` of the rows and sweeps, with each method's time to each target."""
+    targets = {"voxgi": rows[0]["rel_mse_net"], **{t: t for t in TARGETS}}
+    time_to = {m: {k: _seconds_to(e, sw) for k, e in targets.items()} for m, sw in sweeps.items()}
+    # voxgi's defaults as they stand: their time where they meet a target
+    # (an upper bound: fewer frames might do), None where they do not
+    time_to["voxgi"] = {t: (t_voxgi if rows[0]["rel_mse_net"] <= t else None) for t in TARGETS}
+    return Comparison(
+        rows, img, ref, sweeps["mitsuba"], sweeps.get("mitsuba+oidn", []), time_to, ref_noise
+    )
+
+
+def _checked(scene, spp, sweep_spp, width, height, variant, denoise):
+    """:func:`compare`'s arguments checked and Mitsuba (and OIDN) found.
+
+    Returns (spp, sweep counts, the camera at the asked size, the Mitsuba module).
+    """
+    from .mitsuba import mitsuba_module
 
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
@@ -261,8 +295,11 @@ def compare(
     mi = mitsuba_module(variant)
     if denoise:
         _require_oidn()  # before the renders, not after them
+    return spp, counts, cam, mi
 
-    # voxgi with its defaults: voxelize + solve + display
+
+def _render_voxgi(scene, cam, resolution, seed, threads, progress):
+    """voxgi with its defaults (voxelize + solve + display): (RenderResult, seconds)."""
     t0 = time.perf_counter()
     sol, seconds = None, {}
     if resolution is not None:
@@ -272,28 +309,38 @@ def compare(
         seconds["solve"] = time.perf_counter() - t0 - seconds["voxelize"]
     out = pipeline_render(scene, sol, camera=cam, seed=seed, threads=threads, progress=progress)
     out.stats["seconds"].update(seconds)
-    t_voxgi = time.perf_counter() - t0
-    img = out.image
+    return out, time.perf_counter() - t0
 
-    plain = mi.load_dict(to_mitsuba(scene, spp=1, camera=cam))
+
+def _reference(mi, plain, spp: int, reference, shape) -> tuple[np.ndarray, float, float | None]:
+    """Mitsuba's reference as two halves, or the one given: (image, noise, seconds or None)."""
     if reference is None:
         half_a, ta = _mitsuba(mi, plain, spp // 2, 1001)
         half_b, tb = _mitsuba(mi, plain, spp - spp // 2, 2002)
-        ref = 0.5 * (half_a + half_b)
-        ref_noise = 0.25 * rel_mse(half_a, half_b)
-        ref_seconds = ta + tb
-    else:
-        ref, ref_noise = np.asarray(reference[0], np.float32), float(reference[1])
-        ref_seconds = None
-        if ref.shape != img.shape:
-            raise ValueError(f"reference: shape {ref.shape}, the camera's image is {img.shape}")
-    mask = _non_emitter_mask(scene, cam)
-    rows = [_row("voxgi", None, t_voxgi, img, ref, ref_noise, mask)]
-    rows[0]["frames"] = out.frames
+        return 0.5 * (half_a + half_b), 0.25 * rel_mse(half_a, half_b), ta + tb
+    ref, ref_noise = np.asarray(reference[0], np.float32), float(reference[1])
+    if ref.shape != shape:
+        raise ValueError(f"reference: shape {ref.shape}, the camera's image is {shape}")
+    return ref, ref_noise, None
+
+
+def _voxgi_row(out, t_voxgi: float, ref, ref_noise: float, mask) -> dict:
+    """voxgi's row: its errors, frames and the seconds of each phase."""
+    row = _row("voxgi", None, t_voxgi, out.image, ref, ref_noise, mask)
+    row["frames"] = out.frames
     secs = out.stats["seconds"]
     vs = float(secs.get("voxelize", 0.0)), float(secs.get("solve", 0.0))
-    rows[0]["phases"] = {"voxelize": vs[0], "solve": vs[1], "display": t_voxgi - sum(vs)}
-    goal = min(rows[0]["rel_mse_net"], *TARGETS)
+    row["phases"] = {"voxelize": vs[0], "solve": vs[1], "display": t_voxgi - sum(vs)}
+    return row
+
+
+def _sweeps(mi, plain, scene, cam, counts, denoise, goal, ref, ref_noise, mask, rows) -> dict:
+    """Mitsuba's plain and (with ``denoise``) denoised sweeps, each stopping at ``goal``.
+
+    Appends each render's row to ``rows``; returns ``{method: [(spp, seconds,
+    rel_mse_net), ...]}``.
+    """
+    from .mitsuba import to_mitsuba, with_aovs
 
     sweeps = {"mitsuba": []}
     _mitsuba(mi, plain, 1, 7)  # warm-up: the JIT's first kernels
@@ -317,29 +364,21 @@ def compare(
             sweeps["mitsuba+oidn"].append((n, t, rows[-1]["rel_mse_net"]))
             if rows[-1]["rel_mse_net"] <= goal:
                 break
-    rows.append(
-        {
-            "method": "reference",
-            "spp": spp if reference is None else None,
-            "seconds": float("nan") if ref_seconds is None else ref_seconds,
-            "rel_mse": ref_noise,
-            "rel_mse_net": 0.0,
-            "ssim": 1.0,
-            "flip": 0.0,
-            "brightness": [1.0, 1.0, 1.0],
-        }
-    )
-    targets = {"voxgi": rows[0]["rel_mse_net"], **{t: t for t in TARGETS}}
-    time_to = {m: {k: _seconds_to(e, sw) for k, e in targets.items()} for m, sw in sweeps.items()}
-    # voxgi's defaults as they stand: their time where they meet a target
-    # (an upper bound: fewer frames might do), None where they do not
-    time_to["voxgi"] = {t: (t_voxgi if rows[0]["rel_mse_net"] <= t else None) for t in TARGETS}
-    result = Comparison(
-        rows, img, ref, sweeps["mitsuba"], sweeps.get("mitsuba+oidn", []), time_to, ref_noise
-    )
-    if out_dir is not None:
-        result.files = _write(result, Path(out_dir), out, plot, scene, cam, seed, threads)
-    return result
+    return sweeps
+
+
+def _reference_row(spp, ref_seconds, ref_noise: float) -> dict:
+    """The reference's row: its own noise as its relMSE."""
+    return {
+        "method": "reference",
+        "spp": spp,
+        "seconds": float("nan") if ref_seconds is None else ref_seconds,
+        "rel_mse": ref_noise,
+        "rel_mse_net": 0.0,
+        "ssim": 1.0,
+        "flip": 0.0,
+        "brightness": [1.0, 1.0, 1.0],
+    }
 
 
 def _require_oidn() -> None:
