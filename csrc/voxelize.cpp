@@ -10,198 +10,22 @@
 //  3. per voxel (threads over chunks of voxels): clip each triangle exactly to
 //     the cube, cluster the pieces by object and orientation, cut them by the
 //     other surfaces' planes, and write the records.
+//
+// Phases 1 and 2 and the checks live here; phase 3 in voxelize_records.cpp.
 #include "voxelize.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstring>
-#include <deque>
-#include <limits>
 #include <stdexcept>
 #include <string>
+
+#include "voxelize_internal.h"
 
 namespace voxgi {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-// A convex polygon: a triangle (3) clipped by 6 planes has at most 9
-// vertices; each cutting plane adds at most one more.
-constexpr int kMaxV = 9 + kMaxCuts + 2;
-struct Poly {
-    int n = 0;
-    bool overflow = false;
-    double v[kMaxV][3];
-    Poly() {}  // user-provided: no zeroing of v (hot path)
-    void push(const double* p) {
-        if (n == kMaxV) {
-            overflow = true;
-            return;
-        }
-        v[n][0] = p[0];
-        v[n][1] = p[1];
-        v[n][2] = p[2];
-        ++n;
-    }
-};
-
-// A read-only view of polygon vertices (a Poly, or a run of a vertex pool).
-struct PolyView {
-    const double (*v)[3];
-    int n;
-};
-inline PolyView view(const Poly& P) { return PolyView{P.v, P.n}; }
-
-inline double dot3(const double* a, const double* b) {
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-inline void cross3(const double* a, const double* b, double* o) {
-    o[0] = a[1] * b[2] - a[2] * b[1];
-    o[1] = a[2] * b[0] - a[0] * b[2];
-    o[2] = a[0] * b[1] - a[1] * b[0];
-}
-
-// Keep the part of `in` where sgn * (v[axis] - c) >= 0 (closed half-space).
-// New vertices get v[axis] = c exactly, so neighbouring voxels' pieces share
-// their boundary bit for bit.
-void clip_axis(const Poly& in, Poly& out, int axis, double c, double sgn) {
-    out.n = 0;
-    out.overflow = in.overflow;
-    const int n = in.n;
-    for (int p = 0; p < n; ++p) {
-        const double* a = in.v[p];
-        const double* b = in.v[p + 1 == n ? 0 : p + 1];
-        const double da = sgn * (a[axis] - c), db = sgn * (b[axis] - c);
-        if (da >= 0) out.push(a);
-        if ((da >= 0) != (db >= 0)) {
-            const double t = da / (da - db);
-            double q[3] = {a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]),
-                           a[2] + t * (b[2] - a[2])};
-            q[axis] = c;
-            out.push(q);
-        }
-    }
-}
-
-// Keep the part of `in` where sgn * (n·v - off) >= 0.
-void clip_plane(const PolyView& in, Poly& out, const double* nrm, double off, double sgn) {
-    out.n = 0;
-    out.overflow = false;
-    const int n = in.n;
-    for (int p = 0; p < n; ++p) {
-        const double* a = in.v[p];
-        const double* b = in.v[p + 1 == n ? 0 : p + 1];
-        const double da = sgn * (dot3(nrm, a) - off), db = sgn * (dot3(nrm, b) - off);
-        if (da >= 0) out.push(a);
-        if ((da >= 0) != (db >= 0)) {
-            const double t = da / (da - db);
-            const double q[3] = {a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]),
-                                 a[2] + t * (b[2] - a[2])};
-            out.push(q);
-        }
-    }
-}
-
-// Area (along the unit normal n of the polygon's plane) and area-weighted
-// centroid; the mean of the vertices when the area is zero.
-double area_centroid(const PolyView& P, const double* n, double* c) {
-    c[0] = c[1] = c[2] = 0;
-    if (P.n == 0) return 0;
-    double A = 0;
-    const double* v0 = P.v[0];
-    for (int i = 1; i + 1 < P.n; ++i) {
-        const double e1[3] = {P.v[i][0] - v0[0], P.v[i][1] - v0[1], P.v[i][2] - v0[2]};
-        const double e2[3] = {P.v[i + 1][0] - v0[0], P.v[i + 1][1] - v0[1], P.v[i + 1][2] - v0[2]};
-        double cr[3];
-        cross3(e1, e2, cr);
-        const double a = 0.5 * dot3(cr, n);
-        A += a;
-        for (int d = 0; d < 3; ++d) c[d] += a * (v0[d] + P.v[i][d] + P.v[i + 1][d]);
-    }
-    if (A > 0) {
-        for (int d = 0; d < 3; ++d) c[d] /= 3 * A;
-        return A;
-    }
-    // Zero (or round-off negative) area: a segment or a point.
-    c[0] = c[1] = c[2] = 0;
-    for (int i = 0; i < P.n; ++i)
-        for (int d = 0; d < 3; ++d) c[d] += P.v[i][d];
-    for (int d = 0; d < 3; ++d) c[d] /= P.n;
-    return 0;
-}
-
-// Closest point of the convex polygon P (plane normal n) to x; returns squared distance.
-double closest_on_poly(const PolyView& P, const double* n, const double* x, double* out) {
-    const double* v0 = P.v[0];
-    const double h = (x[0] - v0[0]) * n[0] + (x[1] - v0[1]) * n[1] + (x[2] - v0[2]) * n[2];
-    const double y[3] = {x[0] - h * n[0], x[1] - h * n[1], x[2] - h * n[2]};
-    if (P.n >= 3) {
-        bool pos = true, neg = true;
-        for (int i = 0; i < P.n; ++i) {
-            const double *a = P.v[i], *b = P.v[i + 1 == P.n ? 0 : i + 1];
-            const double e[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
-            const double w[3] = {y[0] - a[0], y[1] - a[1], y[2] - a[2]};
-            double cr[3];
-            cross3(e, w, cr);
-            const double s = dot3(cr, n);
-            if (s < 0) pos = false;
-            if (s > 0) neg = false;
-        }
-        if (pos || neg) {
-            std::memcpy(out, y, sizeof(y));
-            return h * h;
-        }
-    }
-    double best = std::numeric_limits<double>::infinity();
-    for (int i = 0; i < P.n; ++i) {
-        const double *a = P.v[i], *b = P.v[i + 1 == P.n ? 0 : i + 1];
-        const double e[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
-        const double ee = dot3(e, e);
-        double t = 0;
-        if (ee > 0) {
-            const double w[3] = {x[0] - a[0], x[1] - a[1], x[2] - a[2]};
-            t = std::min(1.0, std::max(0.0, dot3(w, e) / ee));
-        }
-        const double q[3] = {a[0] + t * e[0], a[1] + t * e[1], a[2] + t * e[2]};
-        const double d[3] = {x[0] - q[0], x[1] - q[1], x[2] - q[2]};
-        const double dd = dot3(d, d);
-        if (dd < best) {
-            best = dd;
-            std::memcpy(out, q, sizeof(q));
-        }
-    }
-    return best;
-}
-
-struct Pair {
-    uint64_t key;
-    uint32_t tri;
-};
-
-// Grid-space triangle and its unit normal; false when the normal is unusable.
-struct Tri {
-    double g[3][3];
-    double n[3];
-};
-bool load_tri(const double* tris, int64_t t, const VoxelizeParams& P, Tri& T) {
-    const double inv = 1.0 / P.pitch;
-    for (int v = 0; v < 3; ++v)
-        for (int d = 0; d < 3; ++d) T.g[v][d] = (tris[t * 9 + v * 3 + d] - P.origin[d]) * inv;
-    const double e1[3] = {T.g[1][0] - T.g[0][0], T.g[1][1] - T.g[0][1], T.g[1][2] - T.g[0][2]};
-    const double e2[3] = {T.g[2][0] - T.g[0][0], T.g[2][1] - T.g[0][1], T.g[2][2] - T.g[0][2]};
-    double cr[3];
-    cross3(e1, e2, cr);
-    const double len = std::sqrt(dot3(cr, cr));
-    // A normal needs a doubled area well above underflow: below 1e-200
-    // voxel faces the triangle carries no light at any useful resolution.
-    if (!(len > 1e-200) || !std::isfinite(len)) return false;
-    for (int d = 0; d < 3; ++d) T.n[d] = cr[d] / len;
-    return true;
-}
+using namespace voxelize_internal;
 
 inline int64_t ifloor(double x) { return static_cast<int64_t>(std::floor(x)); }
 inline int64_t iceil(double x) { return static_cast<int64_t>(std::ceil(x)); }
@@ -291,468 +115,8 @@ void radix_sort(std::vector<Pair>& v, uint64_t max_key, const StopCheck& stop) {
     }
 }
 
-// ---- phase 3: records of one voxel -----------------------------------------
-
-struct Piece {
-    int32_t obj;
-    int32_t cluster;
-    double tn[3];    // the triangle's unit normal (winding)
-    double n[3];     // normal aligned with its cluster (flipped for two-sided objects)
-    double area;     // voxel units²
-    double c[3];     // area-weighted centroid, or the touching point when area == 0
-    int v_off, v_n;  // its polygon: vertices [v_off, v_off + v_n) of Scratch::verts
-};
-
-struct Cluster {
-    int32_t obj;
-    int32_t count;
-    double seed[3];
-    double seed_c[3];  // the first piece's centroid: a point of its plane
-    double sum_an[3];
-    double sum_n[3];
-    double sum_ac[3];
-    double sum_a;
-};
-
-// A piece, or the part of a piece on one side of the cutting planes.
-struct PartRef {
-    PolyView poly;
-    int piece;
-    uint64_t sig;  // bit b set: on the positive side of the cluster's b-th cutting plane
-    double area;
-    double c[3];
-};
-
-struct Scratch {
-    std::vector<Piece> pieces;
-    std::vector<double> verts;  // piece polygons, 3 doubles per vertex
-    std::vector<Cluster> clusters;
-    std::vector<int> order, cl_start, cl_items, next;
-    std::vector<PartRef> parts, parts2;
-    std::deque<Poly> pool;  // polygons of cut parts (stable addresses)
-};
-
-struct ChunkStats {
-    int64_t cells = 0, records = 0, back = 0, two_sided = 0, touch = 0, clusters = 0,
-            cut_clusters = 0, cut_records = 0, cut_limit = 0, overflows = 0;
-};
-
-struct Context {
-    const double* tris;
-    const int32_t* tri_object;
-    const bool* two_sided;
-    const float* albedo;
-    const float* emission;
-    const VoxelizeParams* P;
-};
-
-// Exact piece of T in voxel `cell` (closed cube). A triangle lying exactly in
-// the plane of a voxel face gives its area to the voxel below that plane
-// only, so that no area is counted twice; the voxel above just touches it.
-// On the grid's lower boundary (index 0) there is no voxel below: keep it.
-void clip_exact(const Tri& T, const int64_t* cell, Poly& out, Poly& tmp) {
-    out.n = 0;
-    out.overflow = false;
-    for (int d = 0; d < 3; ++d)
-        if (cell[d] > 0 && T.g[0][d] == double(cell[d]) && T.g[1][d] == double(cell[d]) &&
-            T.g[2][d] == double(cell[d]))
-            return;
-    for (int v = 0; v < 3; ++v) out.push(T.g[v]);
-    for (int d = 0; d < 3; ++d) {
-        const double lo = double(cell[d]), hi = double(cell[d] + 1);
-        const double mn = std::min({T.g[0][d], T.g[1][d], T.g[2][d]});
-        const double mx = std::max({T.g[0][d], T.g[1][d], T.g[2][d]});
-        if (mn >= lo && mx <= hi) continue;  // inside this slab already: nothing to clip
-        clip_axis(out, tmp, d, lo, 1.0);
-        clip_axis(tmp, out, d, hi, -1.0);
-        if (out.n == 0) return;
-    }
-}
-void clip_grown(const Tri& T, const int64_t* cell, double eps, Poly& out, Poly& tmp) {
-    out.n = 0;
-    out.overflow = false;
-    for (int v = 0; v < 3; ++v) out.push(T.g[v]);
-    for (int d = 0; d < 3; ++d) {
-        clip_axis(out, tmp, d, double(cell[d]) - eps, 1.0);
-        clip_axis(tmp, out, d, double(cell[d] + 1) + eps, -1.0);
-        if (out.n == 0) return;
-    }
-}
-
-void clamp_to_cell(double* p, const int64_t* cell) {
-    for (int d = 0; d < 3; ++d)
-        p[d] = std::min(double(cell[d] + 1), std::max(double(cell[d]), p[d]));
-}
-
-void signed_range(const PolyView& P, const double* n, double off, double& mn, double& mx) {
-    mn = std::numeric_limits<double>::infinity();
-    mx = -mn;
-    for (int i = 0; i < P.n; ++i) {
-        const double d = dot3(n, P.v[i]) - off;
-        mn = std::min(mn, d);
-        mx = std::max(mx, d);
-    }
-}
-
-void emit_records(const Context& ctx, const int64_t* cell, const Cluster& cl,
-                  const std::vector<Piece>& pieces, const std::vector<PartRef>& parts, size_t begin,
-                  size_t end, std::vector<VoxelRecord>& out, ChunkStats& cs) {
-    const VoxelizeParams& P = *ctx.P;
-    double sa = 0, san[3] = {0, 0, 0}, sn[3] = {0, 0, 0}, sac[3] = {0, 0, 0};
-    int n_pos = 0;
-    for (size_t q = begin; q < end; ++q) {
-        const PartRef& pt = parts[q];
-        const Piece& pc = pieces[pt.piece];
-        sa += pt.area;
-        for (int d = 0; d < 3; ++d) {
-            san[d] += pt.area * pc.n[d];
-            sn[d] += pc.n[d];
-            sac[d] += pt.area * pt.c[d];
-        }
-        if (pt.area > 0) ++n_pos;
-    }
-    double nrm[3];
-    double len = std::sqrt(dot3(san, san));
-    if (sa > 0 && len > 0) {
-        for (int d = 0; d < 3; ++d) nrm[d] = san[d] / len;
-    } else {
-        len = std::sqrt(dot3(sn, sn));  // > 0: all normals lie within 60° of the seed
-        for (int d = 0; d < 3; ++d) nrm[d] = sn[d] / len;
-    }
-    double cen[3];
-    if (sa > 0) {
-        for (int d = 0; d < 3; ++d) cen[d] = sac[d] / sa;
-        if (n_pos > 1) {
-            // The mean of several pieces may lie off a curved or folded
-            // surface: snap it onto the nearest piece (the VPL must sit on it).
-            double best = std::numeric_limits<double>::infinity(), q[3],
-                   bq[3] = {cen[0], cen[1], cen[2]};
-            for (size_t k = begin; k < end; ++k) {
-                const PartRef& pt = parts[k];
-                if (!(pt.area > 0)) continue;
-                const double dd = closest_on_poly(pt.poly, pieces[pt.piece].tn, cen, q);
-                if (dd < best) {
-                    best = dd;
-                    std::memcpy(bq, q, sizeof(q));
-                }
-            }
-            std::memcpy(cen, bq, sizeof(bq));
-        }
-    } else {
-        // Touching only: the touching point nearest to their mean.
-        double m[3] = {0, 0, 0};
-        for (size_t k = begin; k < end; ++k)
-            for (int d = 0; d < 3; ++d) m[d] += parts[k].c[d] / double(end - begin);
-        double best = std::numeric_limits<double>::infinity();
-        for (size_t k = begin; k < end; ++k) {
-            const double dv[3] = {parts[k].c[0] - m[0], parts[k].c[1] - m[1], parts[k].c[2] - m[2]};
-            const double dd = dot3(dv, dv);
-            if (dd < best) {
-                best = dd;
-                std::memcpy(cen, parts[k].c, sizeof(cen));
-            }
-        }
-        ++cs.touch;
-    }
-    clamp_to_cell(cen, cell);
-    VoxelRecord r;
-    for (int d = 0; d < 3; ++d) {
-        r.ijk[d] = static_cast<int32_t>(cell[d]);
-        r.normal[d] = static_cast<float>(nrm[d]);
-        r.albedo[d] = ctx.albedo[cl.obj * 3 + d];
-        r.emission[d] = ctx.emission[cl.obj * 3 + d];
-        r.centroid[d] = P.origin[d] + cen[d] * P.pitch;
-    }
-    r.object = cl.obj;
-    r.area = static_cast<float>(sa * P.pitch * P.pitch);
-    r.back = 0;
-    r.side = 0;
-    out.push_back(r);
-    // The reverse side: live for a two-sided object, black (but opaque) otherwise.
-    for (int d = 0; d < 3; ++d) r.normal[d] = -r.normal[d];
-    r.side = 1;
-    if (ctx.two_sided[cl.obj]) {
-        ++cs.two_sided;
-    } else {
-        r.back = 1;
-        for (int d = 0; d < 3; ++d) r.albedo[d] = r.emission[d] = 0.0f;
-        ++cs.back;
-    }
-    out.push_back(r);
-    cs.records += 2;
-}
-
-// The piece of each triangle in the cell (clipped exactly; a triangle that
-// only touches the cell gets a point of itself), into S.pieces and S.verts.
-int clip_pieces(const Context& ctx, const int64_t cell[3], const Pair* pairs, int64_t np,
-                Scratch& S, ChunkStats& cs) {
-    const VoxelizeParams& P = *ctx.P;
-    auto& pieces = S.pieces;
-    if (pieces.size() < size_t(np)) pieces.resize(size_t(np));
-    int n_pieces = 0;
-    Poly tmp, work;
-    auto& verts = S.verts;
-    verts.clear();
-    for (int64_t q = 0; q < np; ++q) {
-        Tri T;
-        if (!load_tri(ctx.tris, pairs[q].tri, P, T)) continue;  // counted in phase 1
-        Piece& pc = pieces[n_pieces++];
-        pc.obj = ctx.tri_object[pairs[q].tri];
-        pc.cluster = -1;
-        std::memcpy(pc.tn, T.n, sizeof(T.n));
-        std::memcpy(pc.n, T.n, sizeof(T.n));
-        Poly& poly = work;
-        clip_exact(T, cell, poly, tmp);
-        pc.area = poly.n >= 3 ? area_centroid(view(poly), T.n, pc.c) : 0.0;
-        if (!(pc.area > 0)) {
-            // Touches the closed cube (within eps) without area inside it.
-            pc.area = 0;
-            if (poly.n == 0) clip_grown(T, cell, P.eps, poly, tmp);
-            if (poly.n == 0) clip_grown(T, cell, 4 * P.eps, poly, tmp);
-            if (poly.n == 0) {
-                poly.push(T.g[0]);  // cannot happen short of round-off trouble
-                poly.push(T.g[1]);
-                poly.push(T.g[2]);
-            }
-            // The vertex mean of the (grown) piece: a point of the triangle.
-            pc.c[0] = pc.c[1] = pc.c[2] = 0;
-            for (int i = 0; i < poly.n; ++i)
-                for (int d = 0; d < 3; ++d) pc.c[d] += poly.v[i][d] / poly.n;
-            clamp_to_cell(pc.c, cell);
-        }
-        if (poly.overflow) ++cs.overflows;
-        pc.v_off = int(verts.size() / 3);
-        pc.v_n = poly.n;
-        verts.insert(verts.end(), &poly.v[0][0], &poly.v[0][0] + 3 * poly.n);
-    }
-    return n_pieces;
-}
-
-// Whether piece pc meets the plane of cluster cl's first piece: has vertices
-// on both sides of it or on it, within kMeetsPlane voxel units.
-constexpr double kMeetsPlane = 1e-3;
-bool meets_plane(const Piece& pc, const Cluster& cl, const std::vector<double>& verts) {
-    const PolyView poly{reinterpret_cast<const double (*)[3]>(verts.data() + 3 * size_t(pc.v_off)),
-                        pc.v_n};
-    double mn, mx;
-    signed_range(poly, cl.seed, dot3(cl.seed, cl.seed_c), mn, mx);
-    return mn <= kMeetsPlane && mx >= -kMeetsPlane;
-}
-
-// Clusters: per object (ascending), greedy by orientation in triangle order;
-// then the pieces of each cluster, in the order they joined it (S.cl_start,
-// S.cl_items).
-void cluster_pieces(const Context& ctx, int n_pieces, Scratch& S, ChunkStats& cs) {
-    const VoxelizeParams& P = *ctx.P;
-    auto& pieces = S.pieces;
-    auto& order = S.order;
-    order.resize(size_t(n_pieces));
-    for (int q = 0; q < n_pieces; ++q) order[q] = q;
-    // Objects are usually in order already (triangles come object by object).
-    auto by_obj = [&](int x, int y) { return pieces[x].obj < pieces[y].obj; };
-    if (!std::is_sorted(order.begin(), order.end(), by_obj))
-        std::stable_sort(order.begin(), order.end(), by_obj);
-    auto& clusters = S.clusters;
-    clusters.clear();
-    size_t obj_first = 0;
-    for (int idx : order) {
-        Piece& pc = pieces[idx];
-        if (clusters.empty() || clusters.back().obj != pc.obj) obj_first = clusters.size();
-        const bool ts = ctx.two_sided[pc.obj];
-        int found = -1;
-        for (size_t q = obj_first; q < clusters.size(); ++q) {
-            const double dd = dot3(pc.tn, clusters[q].seed);
-            // Two-sided surfaces have no preferred side: a flipped winding
-            // that meets the cluster's plane joins it with its normal turned
-            // around. One wholly in front of or behind that plane is another
-            // face (the far face of a two-sided slab thinner than a voxel),
-            // whose two sides must stay records of their own.
-            if (dd >= P.cos_cluster ||
-                (ts && -dd >= P.cos_cluster && meets_plane(pc, clusters[q], S.verts))) {
-                found = int(q);
-                if (dd < 0)
-                    for (int d = 0; d < 3; ++d) pc.n[d] = -pc.tn[d];
-                break;
-            }
-        }
-        if (found < 0) {
-            Cluster c{};
-            c.obj = pc.obj;
-            std::memcpy(c.seed, pc.tn, sizeof(c.seed));
-            std::memcpy(c.seed_c, pc.c, sizeof(c.seed_c));
-            clusters.push_back(c);
-            found = int(clusters.size() - 1);
-        }
-        Cluster& c = clusters[found];
-        pc.cluster = found;
-        ++c.count;
-        c.sum_a += pc.area;
-        for (int d = 0; d < 3; ++d) {
-            c.sum_an[d] += pc.area * pc.n[d];
-            c.sum_n[d] += pc.n[d];
-            c.sum_ac[d] += pc.area * pc.c[d];
-        }
-    }
-    const size_t ncl = clusters.size();
-    cs.clusters += int64_t(ncl);
-    auto& cl_start = S.cl_start;
-    auto& cl_items = S.cl_items;
-    cl_start.assign(ncl + 1, 0);
-    for (size_t q = 0; q < ncl; ++q) cl_start[q + 1] = cl_start[q] + clusters[q].count;
-    cl_items.resize(size_t(n_pieces));
-    {
-        auto& next = S.next;
-        next.assign(cl_start.begin(), cl_start.end() - 1);
-        for (int idx : order) cl_items[size_t(next[size_t(pieces[idx].cluster)]++)] = idx;
-    }
-}
-
-// A cutting plane: through a cluster's area-weighted centroid, normal to its
-// area-weighted normal (ok: the cluster has area).
-struct Plane {
-    double n[3], off;
-    bool ok;
-};
-
-void cutting_planes(const std::vector<Cluster>& clusters, Plane planes[64]) {
-    const size_t ncl = clusters.size();
-    for (size_t q = 0; q < ncl && q < 64; ++q) {
-        const Cluster& c = clusters[q];
-        const double len = std::sqrt(dot3(c.sum_an, c.sum_an));
-        planes[q].ok = c.sum_a > 0 && len > 0;
-        if (!planes[q].ok) continue;
-        double ctr[3];
-        for (int d = 0; d < 3; ++d) {
-            planes[q].n[d] = c.sum_an[d] / len;
-            ctr[d] = c.sum_ac[d] / c.sum_a;
-        }
-        planes[q].off = dot3(planes[q].n, ctr);
-    }
-}
-
-// Cut the parts of cluster ci (S.parts) by the planes of the other clusters
-// that they straddle; each part's sig gets one bit per cut (its side).
-// Returns the cuts made.
-int cut_cluster(const Context& ctx, size_t ci, size_t ncl, const Plane* planes, Scratch& S,
-                ChunkStats& cs) {
-    const VoxelizeParams& P = *ctx.P;
-    const auto& pieces = S.pieces;
-    auto& parts = S.parts;
-    auto& parts2 = S.parts2;
-    auto& pool = S.pool;
-    int n_cuts = 0;
-    {
-        for (size_t sj = 0; sj < ncl && sj < 64; ++sj) {
-            if (sj == ci || !planes[sj].ok) continue;
-            const Plane& pl = planes[sj];
-            // A surface of the same orientation (as clustering judges it)
-            // is the same sheet continued, e.g. where two objects of one
-            // curved surface meet: nothing to separate.
-            if (ci < 64 && planes[ci].ok && dot3(pl.n, planes[ci].n) >= P.cos_cluster) continue;
-            bool straddles = false;
-            for (const PartRef& pt : parts) {
-                if (!(pt.area > 0)) continue;
-                double mn, mx;
-                signed_range(pt.poly, pl.n, pl.off, mn, mx);
-                if (mx > P.cut_delta && mn < -P.cut_delta) {
-                    straddles = true;
-                    break;
-                }
-            }
-            if (!straddles) continue;
-            if (n_cuts == kMaxCuts) {
-                ++cs.cut_limit;
-                continue;
-            }
-            const uint64_t bit = uint64_t(1) << n_cuts++;
-            parts2.clear();
-            for (const PartRef& pt : parts) {
-                double mn = 0, mx = 0;
-                if (pt.area > 0) signed_range(pt.poly, pl.n, pl.off, mn, mx);
-                if (pt.area > 0 && mx > P.cut_delta && mn < -P.cut_delta) {
-                    const double* tn = pieces[pt.piece].tn;
-                    for (int s = 0; s < 2; ++s) {
-                        pool.emplace_back();
-                        Poly& poly = pool.back();
-                        clip_plane(pt.poly, poly, pl.n, pl.off, s == 0 ? 1.0 : -1.0);
-                        if (poly.n == 0) continue;
-                        PartRef np_{
-                            view(poly), pt.piece, pt.sig | (s == 0 ? bit : 0), 0.0, {0, 0, 0}};
-                        np_.area = poly.n >= 3 ? area_centroid(view(poly), tn, np_.c) : 0.0;
-                        if (!(np_.area > 0)) {
-                            np_.area = 0;
-                            area_centroid(view(poly), tn, np_.c);
-                        }
-                        if (poly.overflow) ++cs.overflows;
-                        parts2.push_back(np_);
-                    }
-                } else {
-                    parts2.push_back(pt);
-                    if (dot3(pl.n, pt.c) - pl.off >= 0) parts2.back().sig |= bit;
-                }
-            }
-            parts.swap(parts2);
-        }
-    }
-    return n_cuts;
-}
-
-void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t np, Scratch& S,
-                  std::vector<VoxelRecord>& out, ChunkStats& cs) {
-    const VoxelizeParams& P = *ctx.P;
-    const uint64_t D1 = P.dims[1], D2 = P.dims[2];
-    const int64_t cell[3] = {int64_t(key / (D1 * D2)), int64_t((key / D2) % D1), int64_t(key % D2)};
-    const int n_pieces = clip_pieces(ctx, cell, pairs, np, S, cs);
-    if (n_pieces == 0) return;
-    ++cs.cells;
-    cluster_pieces(ctx, n_pieces, S, cs);
-    const auto& clusters = S.clusters;
-    const auto& pieces = S.pieces;
-    const size_t ncl = clusters.size();
-    Plane planes[64];
-    const bool do_cut = P.cut && ncl > 1;
-    if (do_cut) cutting_planes(clusters, planes);
-    auto& parts = S.parts;
-    S.pool.clear();
-    for (size_t ci = 0; ci < ncl; ++ci) {
-        const Cluster& cl = clusters[ci];
-        parts.clear();
-        for (int q = S.cl_start[ci]; q < S.cl_start[ci + 1]; ++q) {
-            const Piece& pc = pieces[S.cl_items[q]];
-            const PolyView pv{
-                reinterpret_cast<const double (*)[3]>(S.verts.data() + 3 * size_t(pc.v_off)),
-                pc.v_n};
-            parts.push_back(PartRef{pv, S.cl_items[q], 0, pc.area, {pc.c[0], pc.c[1], pc.c[2]}});
-        }
-        const int n_cuts = do_cut ? cut_cluster(ctx, ci, ncl, planes, S, cs) : 0;
-        if (n_cuts > 0)
-            std::stable_sort(parts.begin(), parts.end(),
-                             [](const PartRef& x, const PartRef& y) { return x.sig < y.sig; });
-        size_t b = 0, n_rec = 0;
-        while (b < parts.size()) {
-            size_t e = b + 1;
-            while (e < parts.size() && parts[e].sig == parts[b].sig) ++e;
-            emit_records(ctx, cell, cl, pieces, parts, b, e, out, cs);
-            ++n_rec;
-            b = e;
-        }
-        if (n_rec > 1) {
-            ++cs.cut_clusters;
-            cs.cut_records += int64_t(n_rec - 1);
-        }
-    }
-}
-
-}  // namespace
-
-std::vector<std::vector<VoxelRecord>> voxelize(const double* tris, int64_t n_tris,
-                                               const int32_t* tri_object, int32_t n_objects,
-                                               const bool* two_sided, const float* albedo,
-                                               const float* emission, const VoxelizeParams& P,
-                                               int threads, const StopCheck& stop,
-                                               VoxelizeStats& st, VoxelizeProgress* progress) {
-    st = VoxelizeStats{};
-    st.triangles = n_tris;
+// The parameters' and the triangle count's ranges (std::invalid_argument).
+void check_params(int64_t n_tris, const VoxelizeParams& P) {
     if (!(P.pitch > 0) || !std::isfinite(P.pitch))
         throw std::invalid_argument("voxelize: pitch must be finite and > 0");
     for (int d = 0; d < 3; ++d) {
@@ -767,15 +131,14 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double* tris, int64_t n_tri
         throw std::invalid_argument("voxelize: eps must be in [0, 0.01)");
     if (!(P.cos_cluster >= -1 && P.cos_cluster <= 1))
         throw std::invalid_argument("voxelize: cos_cluster must be in [-1, 1]");
-    threads = resolve_threads(threads);
-    auto set_phase = [&](int ph, int64_t total) {
-        if (!progress) return;
-        progress->phase = ph;
-        progress->done = 0;
-        progress->total = total;
-    };
+}
 
-    // ---- phase 1: (voxel, triangle) pairs ---------------------------------
+// Phase 1: the (voxel, triangle) pairs of every triangle, in triangle order;
+// checks each triangle's object and vertices.
+std::vector<Pair> triangle_pairs(const double* tris, int64_t n_tris, const int32_t* tri_object,
+                                 int32_t n_objects, const VoxelizeParams& P, int threads,
+                                 const StopCheck& stop, VoxelizeStats& st,
+                                 VoxelizeProgress* progress) {
     auto t0 = Clock::now();
     // Small chunks when there are few triangles: the calling thread polls
     // Ctrl-C only between chunks, and one large triangle at a high resolution
@@ -786,7 +149,7 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double* tris, int64_t n_tri
     const int64_t n_tchunks = (n_tris + tri_chunk - 1) / tri_chunk;
     std::vector<std::vector<Pair>> chunk_pairs(n_tchunks);
     std::vector<int64_t> chunk_skipped(n_tchunks, 0), chunk_overflow(n_tchunks, 0);
-    set_phase(1, n_tris);
+    set_phase(progress, 1, n_tris);
     parallel_for(n_tchunks, threads, stop, [&](int64_t ch, int) {
         const int64_t t_end = std::min(n_tris, (ch + 1) * tri_chunk);
         auto& out = chunk_pairs[ch];
@@ -834,59 +197,45 @@ std::vector<std::vector<VoxelRecord>> voxelize(const double* tris, int64_t n_tri
     }
     st.pairs = int64_t(n_pairs);
     st.seconds_pairs = seconds_since(t0);
+    return pairs;
+}
 
-    // ---- phase 2: sort by voxel key (stable: ties keep triangle order) ----
-    t0 = Clock::now();
-    set_phase(2, 1);
+// Phase 2: sort the pairs by voxel key (stable: ties keep triangle order);
+// returns where each voxel's pairs start, then the pair count.
+std::vector<int64_t> sort_pairs(std::vector<Pair>& pairs, const VoxelizeParams& P,
+                                const StopCheck& stop, VoxelizeStats& st,
+                                VoxelizeProgress* progress) {
+    const size_t n_pairs = pairs.size();
+    const auto t0 = Clock::now();
+    set_phase(progress, 2, 1);
     const uint64_t max_key = uint64_t(P.dims[0]) * uint64_t(P.dims[1]) * uint64_t(P.dims[2]);
     radix_sort(pairs, max_key, stop);
     st.peak_bytes = std::max<int64_t>(st.peak_bytes, int64_t(2 * n_pairs * sizeof(Pair)));
     std::vector<int64_t> starts;
     for (size_t q = 0; q < n_pairs; ++q)
         if (q == 0 || pairs[q].key != pairs[q - 1].key) starts.push_back(int64_t(q));
-    const int64_t n_cells = int64_t(starts.size());
     starts.push_back(int64_t(n_pairs));
     st.seconds_sort = seconds_since(t0);
+    return starts;
+}
 
-    // ---- phase 3: records per voxel ----------------------------------------
-    t0 = Clock::now();
-    const int64_t cell_chunk =
-        std::max<int64_t>(256, std::min<int64_t>(16384, n_cells / (int64_t(threads) * 16) + 1));
-    const int64_t n_cchunks = (n_cells + cell_chunk - 1) / cell_chunk;
-    std::vector<std::vector<VoxelRecord>> out(n_cchunks);
-    std::vector<ChunkStats> cstats(n_cchunks);
-    std::vector<Scratch> scratch(threads);
-    Context ctx{tris, tri_object, two_sided, albedo, emission, &P};
-    set_phase(3, n_cells);
-    parallel_for(n_cchunks, threads, stop, [&](int64_t ch, int th) {
-        const int64_t c_end = std::min(n_cells, (ch + 1) * cell_chunk);
-        auto& o = out[ch];
-        o.reserve(size_t(c_end - ch * cell_chunk) * 2 + 16);  // front + reverse per voxel, usually
-        for (int64_t c = ch * cell_chunk; c < c_end; ++c)
-            process_cell(ctx, pairs[starts[c]].key, pairs.data() + starts[c],
-                         starts[c + 1] - starts[c], scratch[th], o, cstats[ch]);
-        if (progress) progress->done += c_end - ch * cell_chunk;
-    });
-    size_t rec_bytes = 0;
-    for (int64_t ch = 0; ch < n_cchunks; ++ch) {
-        const ChunkStats& cs = cstats[ch];
-        st.cells += cs.cells;
-        st.records += cs.records;
-        st.back_records += cs.back;
-        st.two_sided_records += cs.two_sided;
-        st.touch_records += cs.touch;
-        st.clusters += cs.clusters;
-        st.cut_clusters += cs.cut_clusters;
-        st.cut_records += cs.cut_records;
-        st.cut_limit_hits += cs.cut_limit;
-        st.polygon_overflows += cs.overflows;
-        rec_bytes += out[ch].capacity() * sizeof(VoxelRecord);
-    }
-    st.peak_bytes = std::max<int64_t>(
-        st.peak_bytes,
-        int64_t(n_pairs * sizeof(Pair) + starts.size() * sizeof(int64_t) + rec_bytes));
-    st.seconds_records = seconds_since(t0);
-    return out;
+}  // namespace
+
+std::vector<std::vector<VoxelRecord>> voxelize(const double* tris, int64_t n_tris,
+                                               const int32_t* tri_object, int32_t n_objects,
+                                               const bool* two_sided, const float* albedo,
+                                               const float* emission, const VoxelizeParams& P,
+                                               int threads, const StopCheck& stop,
+                                               VoxelizeStats& st, VoxelizeProgress* progress) {
+    st = VoxelizeStats{};
+    st.triangles = n_tris;
+    check_params(n_tris, P);
+    threads = resolve_threads(threads);
+    std::vector<Pair> pairs =
+        triangle_pairs(tris, n_tris, tri_object, n_objects, P, threads, stop, st, progress);
+    const std::vector<int64_t> starts = sort_pairs(pairs, P, stop, st, progress);
+    return cell_records(tris, tri_object, two_sided, albedo, emission, P, pairs, starts, threads,
+                        stop, st, progress);
 }
 
 }  // namespace voxgi
