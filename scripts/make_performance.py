@@ -327,7 +327,8 @@ def later_bounces() -> list[str]:
         "## Coarser later bounces",
         "",
         f"Cornell box at resolution {d['res']}: gathering radius R for the first two "
-        "bounces and a later radius after them (`SolveTuning.paper(later_radius=...)`, `docs/design.md §5`), "
+        "bounces and a later radius after them "
+        "(`SolveTuning.paper(later_radius=...)`, `docs/design.md §5`), "
         "against R 22 throughout (tol 1e-6). 'same' is the plain fixed-point solve.",
         "",
         table(["R", "later R", "iterations", "gathering s", "mean error", "99th percentile"], rows),
