@@ -60,6 +60,7 @@ import voxgi
 from voxgi import SolveTuning
 from voxgi.directions import direction_set
 from voxgi.radiosity import line_records
+from voxgi.scenes.thin_walls import SPLIT_AT, SPLIT_SLAB, split_box, split_normal
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -313,60 +314,13 @@ def thin_walls(args) -> None:
     )
 
 
-_SPLIT_AT, _SLAB = 0.4137, 0.01
-
-
-def _split_normal() -> np.ndarray:
-    a, b = np.radians(3.0), np.radians(2.0)
-    return np.array([np.cos(a) * np.cos(b), np.sin(b), np.sin(a) * np.cos(b)])
-
-
-def _split_box(wall: str, furnace: bool):
-    """The unit box split by ``wall`` ("sheet", "slab", "two-sided slab")
-    off the grid; a lamp under the lit room's ceiling (albedo 0.7), or as a
-    furnace (emission 1, albedo 0.8, a small box in the lit room)."""
-    import trimesh
-
-    rho, le = (0.8, 1.0) if furnace else (0.7, 0.0)
-    s = voxgi.scenes.furnace_box(albedo=rho, emission=le)
-    mat = voxgi.Material(albedo=rho, emission=le)
-    n = _split_normal()
-
-    def plane(offset, toward):
-        d = -0.5 + _SPLIT_AT + offset
-        yz = ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))
-        c = np.array([((d - n[1] * y - n[2] * z) / n[0], y, z) for y, z in yz])
-        f = [[0, 1, 2], [0, 2, 3]]
-        if np.dot(np.cross(c[1] - c[0], c[2] - c[0]), toward) < 0:
-            f = [[0, 2, 1], [0, 3, 2]]
-        return trimesh.Trimesh(c, f, process=False)
-
-    if wall == "sheet":
-        s.add(plane(0.0, n), mat, name="wall", two_sided=True)
-    else:
-        faces = trimesh.util.concatenate([plane(-_SLAB / 2, -n), plane(_SLAB / 2, n)])
-        s.add(faces, mat, name="wall", two_sided=wall == "two-sided slab")
-    if furnace:
-        small = trimesh.creation.box(extents=[0.15, 0.15, 0.15])
-        small.apply_translation([0.2, -0.3, 0.1])
-        s.add(small, mat, name="small_box")
-    else:
-        c = np.array([(0.1, 0.45, -0.15), (0.4, 0.45, -0.15), (0.4, 0.45, 0.15), (0.1, 0.45, 0.15)])
-        s.add(
-            trimesh.Trimesh(c, [[0, 1, 2], [0, 2, 3]], process=False),
-            voxgi.Material(albedo=0.0, emission=10.0),
-            name="lamp",
-        )
-    return s
-
-
 def _split_rooms(vox, wall: str):
     """(dark, lit): records with area in front of the wall's two sides (by a
     point a thousandth of a voxel in front of the centroid), a slab's inside
     in neither."""
-    half = 0.0 if wall == "sheet" else _SLAB / 2
+    half = 0.0 if wall == "sheet" else SPLIT_SLAB / 2
     p = np.asarray(vox.centroid, np.float64) + 1e-3 * vox.pitch * vox.normal
-    s = p @ _split_normal() - (-0.5 + _SPLIT_AT)
+    s = p @ split_normal() - (-0.5 + SPLIT_AT)
     live = np.asarray(vox.area) > 0
     return live & (s < -half), live & (s > half)
 
@@ -378,7 +332,7 @@ def thin_sheets(args) -> None:
     for wall in ("sheet", "slab", "two-sided slab"):
         for res in ress:
             row = {"wall": wall, "res": res}
-            vox = voxgi.voxelize(_split_box(wall, False), resolution=res, progress=False)
+            vox = voxgi.voxelize(split_box(wall, False), resolution=res, progress=False)
             dark, lit = _split_rooms(vox, wall)
             w = np.asarray(vox.area, np.float64)
             for name, tuning in (
@@ -389,7 +343,7 @@ def thin_sheets(args) -> None:
                 row[f"dark/lit {name}"] = float(
                     (L[dark].sum() / w[dark].sum()) / (L[lit].sum() / w[lit].sum())
                 )
-            vox = voxgi.voxelize(_split_box(wall, True), resolution=res, progress=False)
+            vox = voxgi.voxelize(split_box(wall, True), resolution=res, progress=False)
             dark, lit = _split_rooms(vox, wall)
             front = (dark | lit) & ~vox.back
             for name, tol, tuning in (

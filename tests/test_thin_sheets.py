@@ -13,76 +13,22 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
 
 import voxgi
 from voxgi.direct import direct_irradiance
+from voxgi.scenes.thin_walls import SPLIT_AT, SPLIT_SLAB, split_box, split_normal
 from voxgi.traced import TracedGather
 
 RES = 32
-#: where the wall crosses the box's x axis, as a share of the box
-AT = 0.4137
-#: slab thickness: a third of a voxel at RES
-SLAB = 0.01
-
-
-def _wall_normal() -> np.ndarray:
-    a, b = np.radians(3.0), np.radians(2.0)
-    return np.array([np.cos(a) * np.cos(b), np.sin(b), np.sin(a) * np.cos(b)])
-
-
-def _wall_quad(offset: float, toward: np.ndarray) -> trimesh.Trimesh:
-    """The plane n·x = d + offset inside the box [-0.5, 0.5]³, wound toward ``toward``."""
-    n, d = _wall_normal(), -0.5 + AT + offset
-    corners = np.array(
-        [
-            ((d - n[1] * y - n[2] * z) / n[0], y, z)
-            for y, z in ((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))
-        ]
-    )
-    faces = [[0, 1, 2], [0, 2, 3]]
-    if np.dot(np.cross(corners[1] - corners[0], corners[2] - corners[0]), toward) < 0:
-        faces = [[0, 2, 1], [0, 3, 2]]
-    return trimesh.Trimesh(corners, faces, process=False)
-
-
-def split_box(wall: str, furnace: bool = False) -> voxgi.Scene:
-    """The unit box split by ``wall`` ("sheet": zero thickness, two-sided;
-    "slab": two one-sided faces SLAB apart; "two-sided slab": the same
-    faces two-sided). ``furnace``: every surface emits 1 with albedo 0.8
-    and a small box stands in the lit room; otherwise albedo 0.7 and a lamp
-    under the lit room's ceiling."""
-    rho, le = (0.8, 1.0) if furnace else (0.7, 0.0)
-    scene = voxgi.scenes.furnace_box(albedo=rho, emission=le)
-    mat = voxgi.Material(albedo=rho, emission=le)
-    n = _wall_normal()
-    if wall == "sheet":
-        scene.add(_wall_quad(0.0, n), mat, name="wall", two_sided=True)
-    else:
-        faces = trimesh.util.concatenate([_wall_quad(-SLAB / 2, -n), _wall_quad(SLAB / 2, n)])
-        scene.add(faces, mat, name="wall", two_sided=wall == "two-sided slab")
-    if furnace:
-        small = trimesh.creation.box(extents=[0.15, 0.15, 0.15])
-        small.apply_translation([0.2, -0.3, 0.1])
-        scene.add(small, mat, name="small_box")
-    else:
-        y = 0.45
-        lamp = np.array([(0.1, y, -0.15), (0.4, y, -0.15), (0.4, y, 0.15), (0.1, y, 0.15)])
-        scene.add(
-            trimesh.Trimesh(lamp, [[0, 1, 2], [0, 2, 3]], process=False),
-            voxgi.Material(albedo=0.0, emission=10.0),
-            name="lamp",
-        )
-    return scene
 
 
 def rooms(vox: voxgi.VoxelSet, wall: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(dark, lit, inside): the records with area in front of the wall's
     two sides, and those between a slab's faces, by a point a thousandth of
     a voxel in front of each record's centroid."""
-    half = 0.0 if wall == "sheet" else SLAB / 2
+    half = 0.0 if wall == "sheet" else SPLIT_SLAB / 2
     p = np.asarray(vox.centroid, np.float64) + 1e-3 * vox.pitch * vox.normal
-    s = p @ _wall_normal() - (-0.5 + AT)
+    s = p @ split_normal() - (-0.5 + SPLIT_AT)
     live = np.asarray(vox.area) > 0
     return live & (s < -half), live & (s > half), live & (np.abs(s) <= half)
 

@@ -11,6 +11,7 @@ from .furnaces import cap_sphere, furnace_box, furnace_sphere
 from .interiors import door_room, window_room
 from .lights import point_lit_box, sky_objects, sun_room
 from .paper import bunny_room, emission, geometric, labyrinth, load_bunny, shadow, sponza_atrium
+from .thin_walls import split_box
 
 __all__ = [
     "CORNELL_GREEN",
@@ -32,6 +33,7 @@ __all__ = [
     "point_lit_box",
     "shadow",
     "sky_objects",
+    "split_box",
     "sponza_atrium",
     "sun_room",
     "window_room",
@@ -54,6 +56,7 @@ _REGISTRY = {
     "sun-room": sun_room,
     "sky-objects": sky_objects,
     "door-room": door_room,
+    "split-box": split_box,
 }
 
 
