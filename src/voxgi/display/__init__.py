@@ -2,8 +2,8 @@
 
 The camera rays are traced with Embree; every record of the voxel solution is
 a potential virtual point light (VPL); each progressive frame shades every
-pixel with a few VPLs, drawn in proportion to power, one independent set for
-each of 16 interleaved pixel groups, and with one sub-pixel offset and one
+pixel with a few VPLs, drawn in proportion to power, from one of up to 256
+independent sets dealt to the pixels at random each frame, and with one sub-pixel offset and one
 lens sample shared by all pixels (Piwowar & Malgouyres, section 6;
 ``docs/design.md`` §6). Only this phase depends on the camera: a new view of
 a solved scene costs only the display.

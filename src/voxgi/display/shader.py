@@ -32,9 +32,19 @@ __all__ = ["frame_surface"]
 _VPL_KEYS = ("pos", "normal", "weight", "area", "pa")
 
 
-def _vpl_slice(vpls: dict, a: int, b: int | None) -> dict:
-    """VPLs ``a:b`` of one group's frame set (emitters first, then the rest)."""
-    return {k: v[a:b] for k, v in vpls.items()}
+def _vpl_part(vpls: dict, lo: int, hi: int | None) -> dict:
+    """VPLs ``lo:hi`` of every set of one frame's VPLs (:meth:`VPLSampler.frame`:
+    sets of equal size, each its emitters first, then the rest)."""
+    sets = len(vpls["start"]) - 1
+    out = {
+        k: np.ascontiguousarray(
+            v.reshape(sets, -1, *v.shape[1:])[:, lo:hi].reshape(-1, *v.shape[1:])
+        )
+        for k, v in vpls.items()
+        if k != "start"
+    }
+    out["start"] = np.arange(sets + 1, dtype=np.int64) * (len(out["index"]) // max(sets, 1))
+    return out
 
 
 class _Tracer(Tracer):
@@ -83,14 +93,18 @@ def frame_surface(hits: dict) -> tuple[np.ndarray, np.ndarray]:
 class _FrameShader:
     """Everything a frame needs that does not change between frames."""
 
-    #: Pixels take their VPLs from one of INTERLEAVE² sets per frame, by the
-    #: pixel's row and column modulo INTERLEAVE (interleaved sampling). With
-    #: the indirect filter, which averages the sets of neighbouring pixels,
-    #: the pattern is fixed; without it each INTERLEAVE x INTERLEAVE block of
-    #: pixels takes the sets in its own random order each frame, so that
-    #: pixels INTERLEAVE apart do not share their VPLs' error: the same
-    #: relMSE, and an error image without a period (``docs/design.md`` §6).
-    INTERLEAVE = 4
+    #: Most VPL sets per frame. Each frame every pixel takes its VPLs from
+    #: one of :meth:`vpl_sets` sets, drawn for it at random (each set lights
+    #: an equal share of the pixels, scattered over the image). A set's VPLs
+    #: light all of its pixels alike, too bright or too dark together, so the
+    #: error that a whole frame shares is a set's divided by the square root
+    #: of their number: with 256 sets it is a sixteenth of one set's, and two
+    #: neighbouring pixels share a set once in 256 frames, so that no pattern
+    #: ties their errors (``docs/design.md`` §6).
+    VPL_SETS = 256
+    #: Fewest pixels per set: a small image takes fewer sets, so that placing
+    #: the sets' VPLs costs little beside its pixels' rays.
+    SET_PIXELS = 16
 
     def __init__(
         self,
@@ -108,7 +122,6 @@ class _FrameShader:
         # the filter needs the two kinds of light apart; without any light of
         # non-emitting records there is nothing to filter
         self.indirect_filter = int(indirect_filter) if sampler.counts[1] > 0 else 0
-        self._shuffle_groups = int(indirect_filter) == 0
         self.eps, self.threads = float(eps), int(threads)
         self.gather = int(gather) if sampler.mis else 0
         self.seed = int(seed)
@@ -121,7 +134,7 @@ class _FrameShader:
             scene, tracer, self._materials(), self.eps, self.seed, n_env, self.threads
         )
         self.tile = 1 << 16
-        self._groups = self._pixel_groups(cam, self.INTERLEAVE)
+        self._groups = self._pixel_groups(cam, self.vpl_sets(cam))
         self.primary_rays = 0
         #: :func:`frame_surface` of the last frame
         self.surface: tuple[np.ndarray, np.ndarray] | None = None
@@ -205,13 +218,14 @@ class _FrameShader:
             np.ascontiguousarray(self.mat_emission, dtype=np.float32),
         )
 
-    def shade(self, h: dict, vpls: list | None) -> np.ndarray:
+    def shade(self, h: dict, vpls: dict | None) -> np.ndarray:
         """(P, 3) float32 radiance: emission seen + VPL estimate of the reflected
-        light, ``vpls[g]`` lighting the pixels of interleaving group g."""
+        light, the VPLs of set g (:meth:`VPLSampler.frame`) lighting the
+        pixels of set g."""
         P = len(h["material"])
         out = h["emission"].astype(np.float32, copy=True)
         # the gather rays run only with VPLs to combine with
-        has_vpls = vpls is not None and len(vpls[0]["index"]) > 0
+        has_vpls = vpls is not None and len(vpls["index"]) > 0
         if self.lights.any:
             t0 = time.perf_counter()
             gathering = self.gather if has_vpls else 0
@@ -229,12 +243,9 @@ class _FrameShader:
         nd = self.sampler.counts[0]
         parts = [(vpls, out)]
         if reflected is not None:
-            parts = [
-                ([_vpl_slice(v, 0, nd) for v in vpls], out),
-                ([_vpl_slice(v, nd, None) for v in vpls], reflected),
-            ]
+            parts = [(_vpl_part(vpls, 0, nd), out), (_vpl_part(vpls, nd, None), reflected)]
         for part, into in parts:
-            if len(part[0]["index"]) > 0:
+            if len(part["index"]) > 0:
                 into += self._vpl_light(h, part)
         if self.gather:
             for a in range(0, P, self.tile):
@@ -265,14 +276,13 @@ class _FrameShader:
         )
         self.seconds["filter"] = self.seconds.get("filter", 0.0) + time.perf_counter() - t0
 
-    def _vpl_light(self, h: dict, vpls: list) -> np.ndarray:
+    def _vpl_light(self, h: dict, vpls: dict) -> np.ndarray:
         """(P, 3) float32: the VPLs' light at the hits ``h``, each pixel lit by
-        its interleaving group's VPLs ``vpls[g]``, its shadow rays traced as
-        they are made."""
+        its VPL set's VPLs, its shadow rays traced as they are made."""
         t0 = time.perf_counter()
-        cat = [np.concatenate([v[k] for v in vpls]) for k in _VPL_KEYS]
-        start = np.cumsum([0] + [len(v["index"]) for v in vpls]).astype(np.int64)
-        sets = len(vpls) > 1
+        cat = [vpls[k] for k in _VPL_KEYS]
+        start = vpls["start"]
+        sets = len(start) > 2
         out, rays = _core.vpl_light(
             *(h[k] for k in _HIT_KEYS),
             *self._materials(),
@@ -290,9 +300,11 @@ class _FrameShader:
 
     @cached_property
     def _pixel_set(self) -> np.ndarray:
-        """(P,) int32 interleaving group of each pixel, in row-major order."""
+        """(P,) int32 VPL set of each pixel, in row-major order."""
         perm, cuts = self._groups
-        return np.repeat(np.arange(len(cuts) - 1, dtype=np.int32), np.diff(cuts))[np.argsort(perm)]
+        out = np.empty(len(perm), np.int32)
+        out[perm] = np.repeat(np.arange(len(cuts) - 1, dtype=np.int32), np.diff(cuts))
+        return out
 
     def _materials(self) -> tuple:
         return self.mat_albedo, self.mat_rs, self.mat_nu, self.mat_nv, self.mat_glossy
@@ -326,26 +338,22 @@ class _FrameShader:
         h = self.camera_hits(offset, lens)
         self.seconds["primary"] += time.perf_counter() - t0
         self.surface = frame_surface(h)
-        if self._shuffle_groups:
-            rng = np.random.default_rng([self.seed, self._frame, 0x6B0])
-            self._groups = self._pixel_groups(self.cam, self.INTERLEAVE, rng)
-            self.__dict__.pop("_pixel_set", None)  # the cached view of the groups
+        rng = np.random.default_rng([self.seed, self._frame, 0x6B0])
+        self._groups = self._pixel_groups(self.cam, self.vpl_sets(self.cam), rng)
+        self.__dict__.pop("_pixel_set", None)  # the cached view of the groups
         self.aovs = frame_aovs(
             h, self.mat_albedo, np.asarray(self.cam.eye) - self.tracer.centre, self.cam.frame()[2]
         )
         vpls = None
         if not self.sampler.empty:
-            vpls = [self.sampler.frame(f, g) for g in range(len(self._groups[1]) - 1)]
-            # into the tracer's scene-centred frame; every group's VPLs placed at once
-            pos = np.concatenate([v["pos"] for v in vpls]) - self.tracer.centre
+            vpls = self.sampler.frame(f, len(self._groups[1]) - 1)
+            # into the tracer's scene-centred frame; every set's VPLs placed at once
+            pos = vpls["pos"] - self.tracer.centre
             if self.sampler.on_surface:
-                index = np.concatenate([v["index"] for v in vpls])
-                pos = place_vpls(self.sampler, self.tracer, index, pos, f, self.seed, self.eps)
-            cuts = np.cumsum([0] + [len(v["index"]) for v in vpls])
-            vpls = [
-                {**v, "pos": np.ascontiguousarray(pos[a:b])}
-                for v, a, b in zip(vpls, cuts[:-1], cuts[1:], strict=True)
-            ]
+                pos = place_vpls(
+                    self.sampler, self.tracer, vpls["index"], pos, f, self.seed, self.eps
+                )
+            vpls["pos"] = np.ascontiguousarray(pos)
         img = self.shade(h, vpls)
         if self.cam.pixel_filter == "gaussian":
             # the AOVs through the same filter as the image, in the same pass
@@ -355,21 +363,23 @@ class _FrameShader:
             img, self.aovs = np.ascontiguousarray(both[:, :3]), both[:, 3:]
         return img
 
+    @classmethod
+    def vpl_sets(cls, cam: Camera) -> int:
+        """VPL sets per frame for this camera's image: :attr:`VPL_SETS`, or
+        one per :attr:`SET_PIXELS` pixels of a smaller image (at least 1)."""
+        return int(max(1, min(cls.VPL_SETS, cam.width * cam.height // cls.SET_PIXELS)))
+
     @staticmethod
     def _pixel_groups(cam: Camera, n: int, rng=None) -> tuple[np.ndarray, np.ndarray]:
-        """The row-major pixel indices sorted by interleaving group, and where
-        each group starts in them (one more entry, the end). With ``rng``,
-        each n x n block of pixels takes the n² groups in its own order."""
-        rows, cols = np.divmod(np.arange(cam.height * cam.width), cam.width)
-        key = (rows % n) * n + cols % n
-        if rng is not None:
-            bw, bh = -(-cam.width // n), -(-cam.height // n)
-            order = rng.permuted(np.tile(np.arange(n * n), (bw * bh, 1)), axis=1)
-            key = order[(rows // n) * bw + cols // n, key]
-        perm = np.argsort(key, kind="stable")
-        cuts = np.searchsorted(key[perm], np.arange(n * n + 1))
-        keep = np.concatenate([[True], np.diff(cuts) > 0])  # groups an image too small lacks
-        return perm, cuts[keep]
+        """The row-major pixel indices sorted by VPL set, and where each of
+        the ``n`` sets starts in them (one more entry, the end). With ``rng``
+        the pixels are dealt to the sets in a random order, each set an
+        equal share (to one pixel); without it in row-major order."""
+        P = cam.height * cam.width
+        perm = np.arange(P) if rng is None else rng.permutation(P)
+        n = max(1, min(int(n), P))
+        cuts = (np.arange(n + 1) * P) // n
+        return perm, cuts
 
     def close(self) -> None:
         """Release the tracer."""

@@ -144,34 +144,39 @@ class VPLSampler:
     def empty(self) -> bool:
         return sum(self.counts) == 0
 
-    def frame(self, f: int, group: int = 0) -> dict:
-        """The VPLs of frame ``f`` for the pixels of interleaving group
-        ``group``: the same for every view."""
-        rng = np.random.default_rng([self.seed, int(f), 0x1B1, *([int(group)] if group else [])])
+    def frame(self, f: int, sets: int = 1) -> dict:
+        """The VPLs of frame ``f`` in ``sets`` independent sets, set after set
+        (each its emitters' VPLs first, then the rest's), every set drawn
+        stratified along the tables; ``start`` (sets + 1,) says where each
+        set begins. They depend on the seed, the frame and ``sets`` only:
+        every view of that many sets sees the same."""
+        rng = np.random.default_rng([self.seed, int(f), 0x1B1, int(sets)])
         idx_all, w_all, pa_all = [], [], []
         for (idx, cum, _, dens), k in zip(self.sets, self.counts, strict=True):
             if k == 0:
                 continue
-            u = (np.arange(k) + rng.random(k)) / k * float(cum[-1])  # stratified along the table
+            # stratified along the table, each set with its own jitter
+            u = (np.arange(k) + rng.random((sets, k))) / k * float(cum[-1])
             pick = idx[np.minimum(np.searchsorted(cum, u, side="right"), len(idx) - 1)]
             idx_all.append(pick)
             if self.mis:
                 # An MIS VPL carries B/π; the kernel divides by n p(y) + the gather pdf.
-                w_all.append(np.ones(k))
+                w_all.append(np.ones((sets, k)))
                 pa_all.append(self.record_pa[pick])
             else:
                 # E ≈ (1/n) Σ (B/π) G V / p(y): the estimator weight times the radiance.
                 w_all.append(1.0 / (k * dens[pick]))
-                pa_all.append(np.zeros(k, np.float32))
-        idx = np.concatenate(idx_all)
-        w = np.concatenate(w_all)
+                pa_all.append(np.zeros((sets, k), np.float32))
+        idx = np.concatenate(idx_all, axis=1).reshape(-1)
+        w = np.concatenate(w_all, axis=1).reshape(-1)
         return {
-            "pa": np.ascontiguousarray(np.concatenate(pa_all), dtype=np.float32),
+            "pa": np.ascontiguousarray(np.concatenate(pa_all, axis=1).reshape(-1), np.float32),
             "index": idx,
             "pos": np.ascontiguousarray(self.pos[idx]),
             "normal": np.ascontiguousarray(self.normal[idx]),
             "weight": np.ascontiguousarray((w[:, None] * self.B[idx] / math.pi).astype(np.float32)),
             "area": np.ascontiguousarray(self.area32[idx]),
+            "start": np.arange(sets + 1, dtype=np.int64) * sum(self.counts),
         }
 
 
