@@ -6,7 +6,7 @@ which the estimate was not tuned on, ``--small-width`` pixels wide, when
 ``--scenes-dir`` holds it; ``shadow``, ``geometric`` and the furnace sphere at
 albedo 0.9 on request): one voxelize + solve with the defaults of
 ``voxgi.render(scene)``; a reference render of that same solution with
-``--ref-frames`` frames (``tol=0``, seed 1000; four times as many for the door
+``--ref-frames`` frames (``tol=0``, seed 1000; twice as many for the door
 room, whose light arrives through a gap and is the noisiest); then
 ``voxgi.render`` with its defaults at seeds 0 .. N-1. The estimate is of the
 display's noise only, so the reference is the long render of the same
@@ -51,7 +51,7 @@ OTHER = ("shadow", "geometric", "furnace_sphere")
 #: Extracted interiors (``scripts``' extraction of Bitterli's set), by folder.
 INTERIORS = ("staircase",)
 #: Reference frames over ``--ref-frames`` per scene.
-REF_SCALE = {"door_room": 4}
+REF_SCALE = {"door_room": 2}
 
 
 def make_scene(name: str, size: int, small_width: int, scenes_dir: Path) -> voxgi.Scene:

@@ -89,8 +89,10 @@ def test_denoised_render_keeps_the_undenoised_image_and_is_closer(small_cornell)
 
     scene, sol = small_cornell
     kw = {"tol": 0, "max_frames": 4, "seed": 2, "progress": False}
-    plain = voxgi.render(scene, sol, **kw)
+    # denoising turns the indirect filter off by default
+    plain = voxgi.render(scene, sol, tuning=voxgi.RenderTuning(indirect_filter=0), **kw)
     out = voxgi.render(scene, sol, tuning=voxgi.RenderTuning(denoise=True), **kw)
+    assert out.stats["indirect_filter"] == 0
     np.testing.assert_array_equal(out.undenoised, plain.image)
     np.testing.assert_array_equal(out.stderr, plain.stderr)
     assert out.stats["denoised"] is True
@@ -101,3 +103,42 @@ def test_denoised_render_keeps_the_undenoised_image_and_is_closer(small_cornell)
     assert metrics.rel_mse(out.image, ref) < metrics.rel_mse(plain.image, ref)
     layers = out.exr_layers()
     np.testing.assert_array_equal(layers["undenoised.G"], plain.image[..., 1])
+
+
+def test_denoised_estimate_of_a_linear_denoiser_is_the_mean_variance(monkeypatch):
+    # With the identity as the denoiser, the spread between the first h of n
+    # frames and all n is the mean's own: E|m_h - m_n|² = σ² (1/h - 1/n),
+    # so the estimate is DENOISED_FACTOR σ² / n / (L² + 0.01) for white
+    # frames of value L and deviation σ, whatever the split (12 frames: 6 in
+    # the first half of the batches; 24: 8 of 16 after the merge... all h/n).
+    import voxgi.denoise as dn
+    from voxgi.display import estimate
+
+    monkeypatch.setattr(dn, "denoise", lambda img, a=None, n=None: np.asarray(img, np.float32))
+    rng = np.random.default_rng(5)
+    h, w, L, sigma = 64, 64, 0.5, 0.2
+    for frames in (8, 13, 40):
+        acc = estimate._Mean.empty(h * w)
+        for _ in range(frames):
+            acc.add(L + sigma * rng.standard_normal((h * w, 3)))
+        est, image = estimate.denoised_estimate(acc, (h, w, 3), None, None)
+        want = estimate.DENOISED_FACTOR * sigma**2 / frames / (L * L + 0.01)
+        assert est == pytest.approx(want, rel=0.05), (frames, est / want)
+        np.testing.assert_allclose(image.reshape(-1, 3), acc.mean, rtol=1e-6)
+
+
+def test_denoised_render_stops_on_the_denoised_estimate(small_cornell):
+    pytest.importorskip("mitsuba_oidn")
+    import voxgi
+
+    scene, sol = small_cornell
+    tol = 2e-3
+    out = voxgi.render(
+        scene, sol, tol=tol, seed=3, progress=False, tuning=voxgi.RenderTuning(denoise=True)
+    )
+    s = out.stats
+    assert s["indirect_filter"] == 0
+    assert out.frames < 256
+    assert s["est_rel_mse_denoised"] <= tol
+    assert s["denoise_checks"] >= 1
+    assert s["seconds"]["denoise"] > 0

@@ -234,9 +234,9 @@ def _add_display_arguments(r: argparse.ArgumentParser) -> None:
         "--denoise",
         action="store_true",
         help="denoise the image with Intel Open Image Denoise guided by the render's "
-        "albedo and normal AOVs (needs pip install 'voxgi[denoise]'); --tol still bounds "
-        "the undenoised image's estimated error, and the EXR keeps that image in the "
-        "channels undenoised.R/G/B",
+        "albedo and normal AOVs (needs pip install 'voxgi[denoise]'), the indirect filter "
+        "off; --tol bounds the denoised image's estimated error, and the EXR keeps the "
+        "undenoised image in the channels undenoised.R/G/B",
     )
     r.add_argument(
         "--tonemap",

@@ -328,3 +328,50 @@ class _Mean:
         if self.se is None:
             return None
         return self.se.reshape(shape).astype(np.float32)
+
+
+#: The denoised image's relMSE over the spread between the denoised first
+#: half of the frames and the denoised whole: the spread sees only the
+#: denoiser's residual noise, not the detail it blurs away, which grows with
+#: the noise it is given; measured on the Cornell box and the door room at
+#: 256 x 256 (``docs/design.md`` §6).
+DENOISED_FACTOR = 2.0
+
+
+def denoised_estimate(acc: _Mean, shape, albedo, normal) -> tuple[float, np.ndarray]:
+    """The estimated relMSE of the denoised running mean, and that image.
+
+    With ``h`` of the ``n`` frames in the first half of the complete batches,
+    the denoised half ``D_h`` and the denoised whole ``D_n`` differ by the
+    denoiser's response to the noise of the frames the half lacks: where
+    the response is about linear, ``E|D_h - D_n|² = Var(D_n) (n - h) / h``
+    pixel by pixel, so ``Var(D_n)`` is that spread times ``h / (n - h)``.
+    The relMSE is its mean over ``L² + 0.01``, times
+    :data:`DENOISED_FACTOR` for what the denoiser blurs.
+
+    Parameters
+    ----------
+    acc : _Mean
+        At least two complete batches.
+    shape : (H, W, 3)
+    albedo, normal : (H, W, 3) float32 or None
+        The denoiser's guides.
+
+    Returns
+    -------
+    est : float
+    denoised : (H, W, 3) float32
+        The denoised running mean of all the frames.
+    """
+    from ..denoise import denoise
+
+    half = acc.count // 2
+    h, n = half * acc.size, acc.frames
+    full = acc.mean.reshape(shape).astype(np.float32)
+    d_n = denoise(full, albedo, normal)
+    if half == 0 or h >= n:
+        return math.inf, d_n
+    first = acc.batches[:half].mean(axis=0, dtype=np.float64).reshape(shape)
+    d_h = denoise(first.astype(np.float32), albedo, normal)
+    spread = (d_h.astype(np.float64) - d_n) ** 2 / (full.astype(np.float64) ** 2 + _REL_EPS)
+    return DENOISED_FACTOR * float(np.mean(spread)) * h / (n - h), d_n

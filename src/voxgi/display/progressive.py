@@ -12,7 +12,7 @@ import numpy as np
 from ..scene import Camera, Scene
 from .aovs import AOVMean
 from .budget import _reflects_light, light_spread, ray_budget
-from .estimate import _MIN_BATCHES, _Mean
+from .estimate import _MIN_BATCHES, _Mean, denoised_estimate
 from .executor import FrameExecutor, FrameShaderSpec
 from .pixel_filter import _FILTER_REACH
 from .settings import RenderTuning, _check_executor, _check_render, _check_solution, _RenderSettings
@@ -49,7 +49,10 @@ class RenderResult:
         (per-pixel relative errors), ``flagged_pixels`` (heavy-tailed pixels
         the guard does not believe) and ``edge_pixels`` (pixels whose camera
         rays met more than one surface; None when frames came without their
-        surfaces), ``docs/design.md`` §6.
+        surfaces), ``docs/design.md`` §6. With ``RenderTuning(denoise=True)``:
+        ``est_rel_mse_denoised``, the denoised image's estimated relMSE (what
+        ``tol`` then bounds), and ``denoise_checks``, the checks it took;
+        None otherwise.
     solution : Solution or None
         The voxel solution displayed (computed here when none was given).
     albedo : (H, W, 3) float32 or None
@@ -148,10 +151,51 @@ def _skipped(spec: FrameShaderSpec) -> list[str]:
     return skipped
 
 
-def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Mean, AOVMean, bool]:
+@dataclass
+class _DenoisedRule:
+    """The stopping rule of a denoised render: the estimated relMSE of the
+    denoised image (:func:`denoised_estimate`) at or under ``tol``, checked
+    once the undenoised rule's floor of batches is met and then where the
+    last check predicts it (relMSE ∝ 1/frames, a quarter beyond), since each
+    check costs two runs of the denoiser (``docs/design.md`` §6)."""
+
+    tol: float
+    shape: tuple
+    next: int = 0
+    est: float = math.nan
+    image: np.ndarray | None = None
+    frames: int = -1
+    #: seconds spent denoising (the checks and the image delivered)
+    seconds: float = 0.0
+    checks: int = 0
+
+    def check(self, acc: _Mean, aovs: AOVMean) -> None:
+        """Denoise the running mean and estimate its error."""
+        t0 = time.perf_counter()
+        a = aovs.result(*self.shape[:2])
+        self.est, self.image = denoised_estimate(acc, self.shape, a["albedo"], a["normal"])
+        self.frames = acc.frames
+        self.checks += 1
+        self.seconds += time.perf_counter() - t0
+
+    def done(self, acc: _Mean, aovs: AOVMean) -> bool:
+        if self.tol <= 0 or not acc.ready() or acc.frames < self.next:
+            return False
+        self.check(acc, aovs)
+        if self.est <= self.tol:
+            return True
+        want = 1.25 * acc.frames * self.est / self.tol if np.isfinite(self.est) else 0
+        self.next = int(max(min(want, 1 << 30), acc.frames + acc.size))
+        return False
+
+
+def _progressive_mean(
+    source, opt: _RenderSettings, progress: bool
+) -> tuple[_Mean, AOVMean, bool, _DenoisedRule | None]:
     """Frames 0, 1, ... from ``source`` into the running mean until the
     stopping rule or ``max_frames``; Ctrl-C stops after the current frame.
-    Returns the mean, the AOVs' mean and whether it was interrupted."""
+    Returns the mean, the AOVs' mean, whether it was interrupted and, for a
+    denoised render, its stopping rule (with its last check)."""
     from .. import _progress
 
     cam = opt.cam
@@ -163,6 +207,7 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
         (cam.height, cam.width, reach) if reach else None,
     )
     aovs = AOVMean()
+    rule = _DenoisedRule(opt.tol, (cam.height, cam.width, 3)) if opt.denoise else None
     interrupted = False
     # The bar counts frames against the frames the render is predicted to
     # need (the stopping rule's floor, then relMSE ∝ 1/frames), not against
@@ -176,27 +221,32 @@ def _progressive_mean(source, opt: _RenderSettings, progress: bool) -> tuple[_Me
             surface = getattr(source, "surface", None)
             acc.add(x, surface)
             aovs.add(getattr(source, "aovs", None), None if surface is None else surface[0])
-            # the estimate is read only once the rule may stop on it
-            est = acc.est if opt.tol > 0 and acc.ready() else math.nan
-            worst = est
-            if np.isfinite(est):  # the per-pixel bound's error falls as 1/sqrt(frames)
+            if rule is not None:
+                stop = rule.done(acc, aovs)
+                est = worst = rule.est
+            else:
+                # the estimate is read only once the rule may stop on it
+                stop = False
+                est = worst = acc.est if opt.tol > 0 and acc.ready() else math.nan
+            if rule is None and np.isfinite(est):
+                # the per-pixel bound's error falls as 1/sqrt(frames)
                 bound = opt.pixel_factor * math.sqrt(opt.tol)
                 worst = max(est, opt.tol * (acc.tail / bound) ** 2)
             bar.total = _progress.frames_needed(f + 1, worst, opt.tol, floor, opt.max_frames)
             bar.update(1)
             known = f", est relMSE {est:.2e}" if np.isfinite(est) else ""
             bar.set_postfix_str(f"frame {f + 1}{known}")
-            if acc.done(opt):
+            if stop or (rule is None and acc.done(opt)):
                 break
     except KeyboardInterrupt:
         interrupted = True
     finally:
         bar.close()
         source.close()
-    return acc, aovs, interrupted
+    return acc, aovs, interrupted, rule
 
 
-def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) -> dict:
+def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds, rule) -> dict:
     """Ray counts, VPLs, frames, the estimate and what was skipped."""
     return {
         "seconds": seconds,
@@ -224,6 +274,8 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds) 
         "skipped": skipped,
         "interrupted": interrupted,
         "denoised": bool(opt.denoise and acc.frames > 0),
+        "est_rel_mse_denoised": None if rule is None else rule.est,
+        "denoise_checks": None if rule is None else rule.checks,
         "threads": opt.threads,
     }
 
@@ -300,20 +352,19 @@ def render(
     source = executor.frames(spec, opt.max_frames, threads=opt.threads)
     seconds = {"setup": time.perf_counter() - t0}
     skipped = _skipped(spec)
-    acc, aovs, interrupted = _progressive_mean(source, opt, progress)
+    acc, aovs, interrupted, rule = _progressive_mean(source, opt, progress)
     image = acc.mean.reshape(opt.cam.height, opt.cam.width, 3).astype(np.float32)
     aov = aovs.result(opt.cam.height, opt.cam.width)
     seconds.update(source.seconds)
     undenoised = None
-    if opt.denoise and acc.frames > 0:
-        from ..denoise import denoise
-
-        t0 = time.perf_counter()
-        undenoised, image = image, denoise(image, aov["albedo"], aov["normal"])
-        seconds["denoise"] = time.perf_counter() - t0
+    if rule is not None and acc.frames > 0:
+        if rule.frames != acc.frames:  # the last frames came after the last check
+            rule.check(acc, aovs)
+        undenoised, image = image, rule.image
+        seconds["denoise"] = rule.seconds
     seconds["total"] = time.perf_counter() - t_start
     seconds["display"] = seconds["total"]
-    stats = _render_stats(spec, source, acc, opt, skipped, interrupted, seconds)
+    stats = _render_stats(spec, source, acc, opt, skipped, interrupted, seconds, rule)
     return RenderResult(
         image=image,
         frames=acc.frames,

@@ -34,30 +34,32 @@ class RenderTuning:
     emitter_share : float or None
         Share of each frame's VPLs taken from emitters; None splits by power
         (see :class:`VPLSampler`).
-    indirect_filter : int
+    indirect_filter : int or None
         Each frame, the light of the records that do not emit (the indirect
         light) is averaged over the pixels within this many pixels that see
         the same smooth surface: the same material, a normal within about
         25°, near the pixel's tangent plane (``docs/design.md`` §6). 0: off.
         The direct light, from the emitting records and the lights, is
-        never filtered.
+        never filtered. None (the default): 1, or 0 with ``denoise``, which
+        needs the per-pixel independent noise that the filter would spread
+        over neighbours.
     denoise : bool
         Denoise the finished image with Intel Open Image Denoise, guided by
         the render's own albedo and normal AOVs (:mod:`voxgi.denoise`; needs
-        ``pip install "voxgi[denoise]"``). The stopping rule still bounds
-        the estimated relMSE of the undenoised image, which the result keeps
-        (``undenoised``, with its ``stderr``): OIDN's gain on a given render
-        cannot be estimated from it, and on measured renders the denoised
-        image's relMSE was never above the undenoised one's.
+        ``pip install "voxgi[denoise]"``). The stopping rule then bounds the
+        estimated relMSE of the denoised image, the picture delivered
+        (``stats["est_rel_mse_denoised"]``, ``docs/design.md`` §6); the
+        result keeps the undenoised image (``undenoised``) with its
+        ``stderr`` and ``stats["est_rel_mse"]``.
 
-    >>> RenderTuning(gather=0).indirect_filter
-    1
+    >>> RenderTuning(gather=0).indirect_filter is None
+    True
     """
 
     vpls_per_frame: int | None = None
     gather: int | None = None
     emitter_share: float | None = None
-    indirect_filter: int = 1
+    indirect_filter: int | None = None
     denoise: bool = False
 
 
@@ -131,6 +133,10 @@ def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) ->
     if not isinstance(t, _Experiment):
         t = _Experiment(**{f.name: getattr(t, f.name) for f in fields(RenderTuning)})
     tol = _validate.real(tol, "tol", low=0.0, allow_none=True)
+    denoise = _check_denoise(t.denoise)
+    radius = _validate.integer(
+        t.indirect_filter, "indirect_filter", low=0, high=16, allow_none=True
+    )
     return _RenderSettings(
         cam=cam,
         K=_validate.integer(
@@ -152,8 +158,8 @@ def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) ->
         vpl_pdf=t.vpl_pdf,
         vpl_on_surface=bool(t.vpl_on_surface),
         threads=_validate.threads(threads),
-        indirect_filter=_validate.integer(t.indirect_filter, "indirect_filter", low=0, high=16),
-        denoise=_check_denoise(t.denoise),
+        indirect_filter=(0 if denoise else 1) if radius is None else radius,
+        denoise=denoise,
     )
 
 
