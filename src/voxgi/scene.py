@@ -261,8 +261,9 @@ class Scene:
         -------
         dict
             ``triangles`` (F, 3, 3) float64 corner positions, ``object`` (F,)
-            int32 index into :attr:`objects`, ``albedo``/``emission`` (O, 3)
-            float32 per object, ``two_sided`` (O,) bool per object.
+            int32 index into :attr:`objects`, ``albedo``/``emission``/
+            ``transmittance`` (O, 3) float32 per object, ``two_sided`` (O,)
+            bool per object.
 
         Raises
         ------
@@ -281,8 +282,14 @@ class Scene:
             "object": obj,
             "albedo": np.array([o.material.albedo for o in self.objects], np.float32),
             "emission": np.array([o.material.emission for o in self.objects], np.float32),
+            "transmittance": np.array([o.material.transmittance for o in self.objects], np.float32),
             "two_sided": np.array([o.two_sided for o in self.objects], bool),
         }
+
+    @property
+    def has_sheets(self) -> bool:
+        """Whether an object is a transmitting sheet (:attr:`Material.is_sheet`)."""
+        return any(o.material.is_sheet for o in self.objects)
 
     def fingerprint(self) -> str:
         """Hash of geometry, materials and lights: tells a solution which scene it belongs to.
@@ -294,6 +301,8 @@ class Scene:
             h.update(o.vertices.tobytes())
             h.update(o.faces.tobytes())
             h.update(repr((o.material.albedo, o.material.emission, o.two_sided)).encode())
+            if o.material.is_sheet:  # (an opaque scene keeps the hash it had)
+                h.update(repr(("sheet", o.material.transmittance)).encode())
         for light in self.lights:
             h.update(repr(light).encode())
         if self.environment is not None:
@@ -364,6 +373,10 @@ class Scene:
 
             [materials.white]
             albedo = [0.8, 0.8, 0.8]
+
+            [materials.glass]       # a transmitting sheet (Material.transmittance)
+            albedo = 0
+            transmittance = [0.85, 0.85, 0.85]
 
             [[object]]
             mesh = "floor.ply"      # relative to the TOML file; OBJ, PLY, STL, GLB
@@ -444,7 +457,10 @@ class Scene:
                 )
                 continue
             try:
-                mat = Material(albedo=m.albedo, emission=m.emission)
+                if m.transmittance is not None and np.max(m.transmittance) > 0:
+                    mat = Material(albedo=0.0, transmittance=m.transmittance)
+                else:
+                    mat = Material(albedo=m.albedo, emission=m.emission)
                 obj = scene.add(
                     trimesh.Trimesh(m.vertices, m.faces, process=False),
                     mat,

@@ -20,7 +20,9 @@ class MeshData:
 
     ``vertices`` (V, 3) float64, ``faces`` (F, 3) int64 (counter-clockwise
     around the front normal), ``albedo`` and ``emission`` (3,) float64 linear
-    RGB (emission is radiance), ``two_sided`` as :meth:`voxgi.Scene.add`.
+    RGB (emission is radiance), ``two_sided`` as :meth:`voxgi.Scene.add`;
+    a sheet's ``transmittance`` makes it a transmitting sheet (its albedo
+    and emission unused).
     """
 
     name: str
@@ -30,6 +32,9 @@ class MeshData:
     emission: np.ndarray
     two_sided: bool = False
     source: str | None = None
+    #: (3,) float64 straight-through transmittance of a sheet (glass,
+    #: ``docs/design.md`` §13), or None: opaque
+    transmittance: np.ndarray | None = None
 
 
 @dataclass
