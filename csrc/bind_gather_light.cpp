@@ -88,10 +88,12 @@ int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32
                         const std::optional<F64>& env_radiance,
                         const std::optional<F64>& env_to_world,
                         const std::optional<F64>& env_texel_pdf,
-                        const std::optional<F64>& env_row_solid_angle, double env_samples) {
+                        const std::optional<F64>& env_row_solid_angle, double env_samples,
+                        const std::optional<F32>& hit_albedo) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    set_hit_albedo(hits, hit_albedo);
     if (n_gather < 1 || n_gather > 4096) throw py::value_error("n_gather must be in [1, 4096]");
     if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
     voxgi::ShadeMIS mis = make_mis(n_gather);
@@ -128,6 +130,7 @@ void bind_gather_light(py::module_& m) {
           "env_radiance"_a.noconvert() = py::none(), "env_to_world"_a.noconvert() = py::none(),
           "env_texel_pdf"_a.noconvert() = py::none(),
           "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
+          "hit_albedo"_a.noconvert() = py::none(),
           R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit

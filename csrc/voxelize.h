@@ -18,6 +18,8 @@
 
 #include "util/parallel.h"
 
+#include "texture.h"
+
 namespace voxgi {
 
 // One output record (array-of-structs; the binding scatters it into numpy arrays).
@@ -42,6 +44,10 @@ struct VoxelizeParams {
     double eps = 1e-9;             // touching tolerance, voxel units
     double cut_delta = 1e-6;       // a plane cuts a piece only if it has vertices
                                    //   farther than this (voxel units) on both sides
+    // nullable: a record of a textured object takes its texture's mean over
+    // the record's own surface (its clipped pieces) as its albedo, times
+    // nothing else; the object's albedo otherwise
+    const SurfaceTextures* textures = nullptr;
 };
 
 struct VoxelizeStats {

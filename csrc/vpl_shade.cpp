@@ -74,7 +74,11 @@ inline void tangent_frame(const float n[3], float u[3], float v[3]) {
 
 void shade_brdf(const ShadeMaterials& mats, int32_t m, const float n[3], const float k1[3],
                 const float k2[3], float f[3]) {
-    const float* rd = mats.albedo + 3 * int64_t(m);
+    shade_brdf(mats, m, mats.albedo + 3 * int64_t(m), n, k1, k2, f);
+}
+
+void shade_brdf(const ShadeMaterials& mats, int32_t m, const float* rd, const float n[3],
+                const float k1[3], const float k2[3], float f[3]) {
     if (!mats.glossy || !mats.glossy[m]) {
         for (int c = 0; c < 3; ++c) f[c] = rd[c] * float(1.0 / kPi);
         return;
@@ -146,7 +150,7 @@ void vpl_pixel_rays(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
             g = cc / (r2 + double(vpls.area[k]) / kPi);
         }
         float f[3];
-        shade_brdf(mats, m, n, wi, wo, f);
+        shade_brdf(mats, m, hit_albedo(hits, mats, p, m), n, wi, wo, f);
         const float* wk = vpls.weight + 3 * k;
         float cr[3];
         bool any = false;
@@ -459,7 +463,9 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     const double denom = pa * r2 / cos_y + mis.n_gather * h.cos_x / kPi;
     if (!(denom > 0.0)) return;
     float f[3];
-    shade_brdf(mats, hits.material[p], hits.normal + 3 * p, h.wi, hits.wo + 3 * p, f);
+    const int32_t m = hits.material[p];
+    shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi,
+               hits.wo + 3 * p, f);
     const float* L = R.radiance;
     for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.cos_x / denom;
 }
@@ -479,7 +485,8 @@ void gather_escape_light(const ShadeHits& hits, const ShadeMaterials& mats, cons
     const double dens = env.n_samples * pdf + mis.n_gather * std::max(cos, 0.0) / kPi;
     const double inv = dens > 0.0 ? 1.0 / dens : 0.0;
     float f[3];
-    shade_brdf(mats, hits.material[p], n, h.wi, hits.wo + 3 * p, f);
+    const int32_t m = hits.material[p];
+    shade_brdf(mats, m, hit_albedo(hits, mats, p, m), n, h.wi, hits.wo + 3 * p, f);
     const double* L = env.radiance + 3 * texel;
     for (int ch = 0; ch < 3; ++ch) s[ch] += f[ch] * cos_x * float(L[ch] * inv);
 }
@@ -630,7 +637,7 @@ void light_accumulate(const ShadeHits& hits, const ShadeMaterials& mats, const i
             const float cos_x = dot3(n, wi);
             if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) continue;
             float f[3];
-            shade_brdf(mats, m, n, wi, wo, f);
+            shade_brdf(mats, m, hit_albedo(hits, mats, p, m), n, wi, wo, f);
             for (int ch = 0; ch < 3; ++ch) sum[ch] += f[ch] * cos_x * ray_weight[3 * r + ch];
         }
         for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += sum[ch];

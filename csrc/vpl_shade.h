@@ -34,7 +34,15 @@ struct ShadeHits {
     const float* wo = nullptr;      // (P, 3) unit direction from the hit point to the viewer
     const int32_t* material =
         nullptr;  // (P,) material index, or -1: not shaded (miss, black back side)
+    const float* albedo = nullptr;  // (P, 3) each hit's diffuse albedo (its texture's), or
+                                    // null: its material's
 };
+
+// The diffuse albedo of hit p (of material m): the hit's own, or its material's.
+inline const float* hit_albedo(const ShadeHits& hits, const ShadeMaterials& mats, int64_t p,
+                               int32_t m) {
+    return hits.albedo ? hits.albedo + 3 * p : mats.albedo + 3 * int64_t(m);
+}
 
 // VPLs of one frame (K lights).
 struct ShadeVPLs {
@@ -167,5 +175,8 @@ void primary_hit(const double o[3], const double d[3], int32_t t, const PrimaryS
 // k2 towards the viewer, n the normal; all unit vectors. Writes f (3,).
 void shade_brdf(const ShadeMaterials& mats, int32_t m, const float n[3], const float k1[3],
                 const float k2[3], float f[3]);
+// The same with the diffuse albedo rd (3,) in place of the material's (a texture's).
+void shade_brdf(const ShadeMaterials& mats, int32_t m, const float* rd, const float n[3],
+                const float k1[3], const float k2[3], float f[3]);
 
 }  // namespace voxgi

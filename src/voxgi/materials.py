@@ -1,10 +1,14 @@
-"""Surface materials: a Lambertian albedo and emission, an optional glossy layer."""
+"""Surface materials: a Lambertian albedo (or a texture of it) and emission, an
+optional glossy layer."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from . import _validate
+from .textures import Texture
 
 __all__ = ["AshikhminShirley", "Material"]
 
@@ -57,13 +61,27 @@ class Material:
         in Mitsuba 3 or pbrt; the emitted radiosity is ``pi * Le``.
     specular : AshikhminShirley or None
         Optional glossy layer, used by the display only.
+    texture : voxgi.Texture or None
+        A bitmap of the albedo, looked up by the mesh's UVs (``Scene.add``'s
+        ``uv``). With one, ``albedo`` is set to the texture's mean over the
+        whole image (kept below 1); the display reads the texture at every
+        hit and each voxel record its mean over the record's own surface.
     """
 
     albedo: tuple[float, float, float] = (0.8, 0.8, 0.8)
     emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
     specular: AshikhminShirley | None = None
+    texture: Texture | None = None
 
     def __post_init__(self):
+        if self.texture is not None:
+            if not isinstance(self.texture, Texture):
+                raise TypeError(
+                    "Material.texture: expected voxgi.Texture or None, got "
+                    f"{type(self.texture).__name__}"
+                )
+            below_one = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
+            object.__setattr__(self, "albedo", np.minimum(self.texture.mean(), below_one))
         # The kernels hold albedo and emission in float32: a value must stay
         # itself there (an albedo that rounds to 1 never converges).
         object.__setattr__(

@@ -113,6 +113,21 @@ def texture_file_mean(path: Path, access: FileAccess, raw: bool = False) -> np.n
         raise ValueError(f"texture {path}: cannot be decoded ({exc})") from None
 
 
+def decode_rgb(path: Path, access: FileAccess) -> np.ndarray:
+    """(H, W, 3) uint8 RGB codes of an image file read through ``access``, row 0
+    the image's top; its size checked against ``Limits.texture_pixels`` from
+    its header first. ValueError names the file."""
+    im = open_image(access.read_bytes(path, "texture"), f"texture {path}", access.limits)
+    try:
+        with im:
+            im.load()
+            if im.mode != "RGB":
+                im = im.convert("RGB")
+            return np.asarray(im, np.uint8).copy()
+    except (OSError, ValueError, SyntaxError) as exc:
+        raise ValueError(f"texture {path}: cannot be decoded ({exc})") from None
+
+
 def texture_mean(img_path: Path, access: FileAccess, notes: Notes, what: str) -> np.ndarray:
     """An OBJ material's texture factor: its mean colour, or 1 (with a note) when
     the file cannot be read; a file outside the policy or over a limit is an
