@@ -4,6 +4,7 @@
 #include <optional>
 
 #include "bind_shade.h"
+#include "bind_texture.h"
 
 namespace py = pybind11;
 using namespace pybind11::literals;
@@ -89,7 +90,10 @@ int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32
                         const std::optional<F64>& env_to_world,
                         const std::optional<F64>& env_texel_pdf,
                         const std::optional<F64>& env_row_solid_angle, double env_samples,
-                        const std::optional<F32>& hit_albedo) {
+                        const std::optional<F32>& hit_albedo,
+                        const std::optional<std::vector<U8>>& tex_texels,
+                        const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
+                        const std::optional<F32>& corner_uv) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
@@ -99,6 +103,9 @@ int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32
     voxgi::ShadeMIS mis = make_mis(n_gather);
     voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
     check_scene(scene, tris.count);
+    const auto tex = make_textures(tex_texels, tex_info, obj_texture, corner_uv, tris.count,
+                                   obj_two_sided.shape(0));
+    if (tex) tris.textures = &tex->surface;
     voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
                                        grid_lo, grid_origin, pitch);
     const std::optional<voxgi::EnvironmentMap> env = make_environment(
@@ -131,6 +138,8 @@ void bind_gather_light(py::module_& m) {
           "env_texel_pdf"_a.noconvert() = py::none(),
           "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
           "hit_albedo"_a.noconvert() = py::none(),
+          "tex_texels"_a = py::none(), "tex_info"_a.noconvert() = py::none(),
+          "obj_texture"_a.noconvert() = py::none(), "corner_uv"_a.noconvert() = py::none(),
           R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit
@@ -139,6 +148,9 @@ the VPLs; added into out (P, 3) float32. With the environment's tables
 (env_radiance (H, W, 3) float64, env_to_world (3, 3), env_texel_pdf (H*W,),
 env_row_solid_angle (H,) float64, as voxgi.Environment samples), a ray that
 meets nothing adds the environment's radiance MIS-weighted against
-env_samples environment samples per pixel. Returns the number of gather
-rays.)doc");
+env_samples environment samples per pixel. With hit_albedo (P, 3) float32
+each pixel's own diffuse albedo replaces its material's; with the textures
+(as camera_hits takes them) a ray that lands on a textured object takes the
+record's radiance times the texture there over the record's albedo (the
+packed row's albedo). Returns the number of gather rays.)doc");
 }

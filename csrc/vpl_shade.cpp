@@ -366,6 +366,8 @@ struct GatherHit {
     int64_t c[3];  // voxel of y
     int64_t key;   // its key on the grid (-1: outside), or -2: no light to look up
     bool escaped;  // met nothing: sees the environment
+    bool textured;  // tex holds the albedo of a texture at y
+    float tex[3];
 };
 
 // The point of triangle (a, b, c) nearest to p (Ericson, Real-Time Collision
@@ -409,6 +411,7 @@ void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordG
                 int64_t p, const float* ro, const float df[3], int32_t t, GatherHit& h) {
     h.key = -2;
     h.escaped = t < 0;
+    h.textured = false;
     // The hit point on the ray as traced: the same direction from the
     // pixel's own point meets the plane up to the offset away, which near a
     // surface meeting the triangle can be on that surface's far side.
@@ -444,6 +447,11 @@ void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordG
     h.obj = tris.object[t];
     if (!front && !tris.two_sided[h.obj]) return;  // black back of a one-sided surface
     for (int a = 0; a < 3; ++a) h.ns[a] = float(front ? nt[a] : -nt[a]);
+    if (tris.textures) {
+        double b1, b2;
+        barycentric(v0, v1, v2, h.y, b1, b2);
+        h.textured = surface_albedo(*tris.textures, t, h.obj, b1, b2, h.tex);
+    }
     cell_of(grid, h.y, h.c);
     h.key = grid_key(grid, h.c[0], h.c[1], h.c[2]);
 }
@@ -466,7 +474,10 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     const int32_t m = hits.material[p];
     shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi,
                hits.wo + 3 * p, f);
-    const float* L = R.radiance;
+    float L[3] = {R.radiance[0], R.radiance[1], R.radiance[2]};
+    if (h.textured)
+        for (int ch = 0; ch < 3; ++ch)
+            if (R.albedo[ch] > 0.f) L[ch] *= h.tex[ch] / R.albedo[ch];
     for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.cos_x / denom;
 }
 

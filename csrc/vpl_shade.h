@@ -11,6 +11,7 @@
 
 #include "environment.h"
 #include "ray_scene.h"
+#include "texture.h"
 #include "util/parallel.h"
 
 namespace voxgi {
@@ -76,7 +77,8 @@ struct PackedRecord {
     int32_t object;
     float pa;           // n_v p_a of the record (0: not a MIS VPL)
     float radiance[3];  // B / pi
-    float unused[5];
+    float albedo[3];    // the record's albedo (a texture's mean over its surface)
+    float unused[2];
 };
 static_assert(sizeof(PackedRecord) == 64, "one record, one 64-byte row");
 
@@ -100,6 +102,10 @@ struct ShadeTriangles {
     const double* v = nullptr;           // (F, 3, 3) corners
     const int32_t* object = nullptr;     // (F,)
     const uint8_t* two_sided = nullptr;  // (O,) per object
+    // nullable: where a gather ray lands on a textured (non-emitting) object,
+    // the record's light is taken times the texture there over the record's
+    // albedo (the texture's detail within the record)
+    const SurfaceTextures* textures = nullptr;
 };
 
 // Per (pixel, VPL) pair the unoccluded contribution f(wi, wo) W_k G_bounded

@@ -271,3 +271,43 @@ class _no_mean_warning:
     def __exit__(self, *exc):
         self._cm.__exit__(*exc)
         assert not any("mean colour" in str(w.message) for w in self._w)
+
+
+def _visual_quad(texels):
+    """A quad with trimesh's texture visual (its uv with v = 0 at the image's bottom)."""
+    from PIL import Image
+
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1]], float)
+    uv = np.array([[0.1, 0.2], [0.9, 0.2], [0.9, 0.7], [0.1, 0.7]])
+    mat = trimesh.visual.material.PBRMaterial(
+        name="paper", baseColorTexture=Image.fromarray(texels)
+    )
+    mesh = trimesh.Trimesh(v, [[0, 2, 1], [0, 3, 2]], process=False)
+    mesh.visual = trimesh.visual.TextureVisuals(uv=uv, material=mat)
+    return mesh, uv
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".glb"])
+def test_obj_map_kd_and_gltf_base_color_texture_load_as_textures(tmp_path, suffix):
+    from PIL import Image
+
+    texels = _random_texture(4, 4, seed=9).texels
+    mesh, uv = _visual_quad(texels)
+    if suffix == ".obj":
+        Image.fromarray(texels).save(tmp_path / "paper.png")
+        (tmp_path / "s.mtl").write_text("newmtl paper\nKd 1 1 1\nmap_Kd paper.png\n")
+        lines = ["mtllib s.mtl", "usemtl paper"]
+        lines += [f"v {a} {b} {c}" for a, b, c in mesh.vertices]
+        lines += [f"vt {a} {b}" for a, b in uv]
+        lines += ["f 1/1 3/3 2/2", "f 1/1 4/4 3/3"]
+        (tmp_path / "s.obj").write_text("\n".join(lines) + "\n")
+    else:
+        mesh.export(tmp_path / "s.glb")
+    with _no_mean_warning():
+        sc = voxgi.Scene.load(tmp_path / f"s{suffix}")
+    o = sc.objects[0]
+    assert o.material.texture is not None
+    np.testing.assert_array_equal(o.material.texture.texels, texels)
+    # the same visual gives the same UVs from either format: v = 0 the image's top
+    order = [int(np.argmin(np.linalg.norm(o.vertices - p, axis=1))) for p in mesh.vertices]
+    np.testing.assert_allclose(o.uv[order], np.c_[uv[:, 0], 1 - uv[:, 1]], atol=1e-6)

@@ -196,6 +196,20 @@ class _FrameShader:
         return {**hits, "emission": le, "albedo": albedo}
 
     @cached_property
+    def _gather_textures(self) -> dict:
+        """The textures' arguments of :func:`_core.gather_light`: a gather ray
+        that lands on a textured object sees the texture's detail there (not
+        on an emitter, whose record's light holds its emission)."""
+        if not self._textures:
+            return {}
+        keys = ("tex_texels", "tex_info", "obj_texture", "corner_uv")
+        out = {k: self._textures[k] for k in keys}
+        out["obj_texture"] = np.where(
+            self.mat_emission.max(axis=1) > 0, -1, out["obj_texture"]
+        ).astype(np.int32)
+        return out
+
+    @cached_property
     def _textures(self) -> dict:
         """The textures' arguments of :func:`_core.camera_hits` (none without
         a textured object): each hit's albedo is then the texture's there."""
@@ -342,6 +356,7 @@ class _FrameShader:
             threads=self.threads,
             **self._env,
             hit_albedo=None if h.get("albedo") is None else h["albedo"][a:b],
+            **self._gather_textures,
         )
         self.seconds["gather"] += time.perf_counter() - t0
 
