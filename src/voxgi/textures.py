@@ -78,9 +78,7 @@ class Texture:
     def __post_init__(self):
         t = np.asarray(self.texels)
         if t.dtype != np.uint8 or t.ndim != 3 or t.shape[2] != 3 or 0 in t.shape:
-            raise ValueError(
-                f"Texture.texels: expected (H, W, 3) uint8, got {t.dtype} {t.shape}"
-            )
+            raise ValueError(f"Texture.texels: expected (H, W, 3) uint8, got {t.dtype} {t.shape}")
         t = np.ascontiguousarray(t)
         t.setflags(write=False)
         object.__setattr__(self, "texels", t)
@@ -201,9 +199,7 @@ def surface_tables(scene) -> dict | None:
                 textures.append(t)
             obj_texture[i] = index[id(t)]
         uv = o.uv if o.uv is not None and t is not None else None
-        corner.append(
-            np.zeros((len(o.faces), 3, 2), np.float32) if uv is None else uv[o.faces]
-        )
+        corner.append(np.zeros((len(o.faces), 3, 2), np.float32) if uv is None else uv[o.faces])
     return {
         "tex_texels": [t.texels for t in textures],
         "tex_info": np.stack([t.info_row() for t in textures]),

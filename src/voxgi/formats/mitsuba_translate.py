@@ -65,8 +65,6 @@ def _bitmap_texture(v, notes: Notes):
     """The voxgi.Texture of a ``bitmap`` texture plugin (its filter, wrap mode
     and to_uv, or Mitsuba 0.5's uoffset/voffset/uscale/vscale), or None for
     anything else."""
-    from ..textures import Texture
-
     if not (isinstance(v, Plugin) and v.tag == "texture" and v.type == "bitmap"):
         return None
     if "filename" not in v.props:

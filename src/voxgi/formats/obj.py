@@ -203,9 +203,7 @@ def load_obj(path, *, search_paths=(), allow_outside=False, limits=None) -> Scen
             if "map_Kd" in m:
                 texture, uv = _map_kd(m, g, access, notes, f"material {mat!r}")
                 if texture is None:
-                    albedo = albedo * texture_mean(
-                        m["map_Kd"], access, notes, f"material {mat!r}"
-                    )
+                    albedo = albedo * texture_mean(m["map_Kd"], access, notes, f"material {mat!r}")
                 else:
                     albedo = texture.mean()
         albedo = clamp_albedo(albedo, f"material {mat!r}", notes)

@@ -12,7 +12,6 @@ keeps no positions).
 from __future__ import annotations
 
 import dataclasses
-
 import io
 import math
 import re
