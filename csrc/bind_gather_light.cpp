@@ -80,20 +80,17 @@ voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_cell_start
     return grid;
 }
 
-int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
-                        F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
-                        int n_gather, uint64_t seed, int64_t frame, double eps, F64 tri_v,
-                        I32 tri_object, U8 obj_two_sided, I64 rec_sorted_key, I32 rec_cell_start,
-                        F32 rec_packed, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch,
-                        const voxgi::RayScene& scene, F32Out out, int threads,
-                        const std::optional<F64>& env_radiance,
-                        const std::optional<F64>& env_to_world,
-                        const std::optional<F64>& env_texel_pdf,
-                        const std::optional<F64>& env_row_solid_angle, double env_samples,
-                        const std::optional<F32>& hit_albedo,
-                        const std::optional<std::vector<U8>>& tex_texels,
-                        const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
-                        const std::optional<F32>& corner_uv) {
+int64_t gather_light_py(
+    F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, F32 mat_albedo,
+    F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, int n_gather, uint64_t seed, int64_t frame,
+    double eps, F64 tri_v, I32 tri_object, U8 obj_two_sided, I64 rec_sorted_key, I32 rec_cell_start,
+    F32 rec_packed, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch,
+    const voxgi::RayScene& scene, F32Out out, int threads, const std::optional<F64>& env_radiance,
+    const std::optional<F64>& env_to_world, const std::optional<F64>& env_texel_pdf,
+    const std::optional<F64>& env_row_solid_angle, double env_samples,
+    const std::optional<F32>& hit_albedo, const std::optional<std::vector<U8>>& tex_texels,
+    const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
+    const std::optional<F32>& corner_uv) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
@@ -137,9 +134,9 @@ void bind_gather_light(py::module_& m) {
           "env_radiance"_a.noconvert() = py::none(), "env_to_world"_a.noconvert() = py::none(),
           "env_texel_pdf"_a.noconvert() = py::none(),
           "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
-          "hit_albedo"_a.noconvert() = py::none(),
-          "tex_texels"_a = py::none(), "tex_info"_a.noconvert() = py::none(),
-          "obj_texture"_a.noconvert() = py::none(), "corner_uv"_a.noconvert() = py::none(),
+          "hit_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
+          "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
+          "corner_uv"_a.noconvert() = py::none(),
           R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit

@@ -29,8 +29,8 @@ struct TextureArgs {
 inline std::optional<TextureArgs> make_textures(const std::optional<std::vector<U8>>& tex_texels,
                                                 const std::optional<F64>& tex_info,
                                                 const std::optional<I32>& obj_texture,
-                                                const std::optional<F32>& corner_uv,
-                                                py::ssize_t F, py::ssize_t O) {
+                                                const std::optional<F32>& corner_uv, py::ssize_t F,
+                                                py::ssize_t O) {
     const int given = int(tex_texels.has_value()) + int(tex_info.has_value()) +
                       int(obj_texture.has_value()) + int(corner_uv.has_value());
     if (given == 0) return std::nullopt;
@@ -54,7 +54,8 @@ inline std::optional<TextureArgs> make_textures(const std::optional<std::vector<
         for (py::ssize_t c = 0; c < kTextureInfo; ++c)
             if (!std::isfinite(row[c]))
                 throw py::value_error("tex_info[" + std::to_string(k) + "] must be finite");
-        if (row[0] != 0.0 && row[0] != 1.0) throw py::value_error("tex_info: filter must be 0 or 1");
+        if (row[0] != 0.0 && row[0] != 1.0)
+            throw py::value_error("tex_info: filter must be 0 or 1");
         if (row[1] != 0.0 && row[1] != 1.0 && row[1] != 2.0)
             throw py::value_error("tex_info: wrap must be 0, 1 or 2");
         voxgi::Texture t;

@@ -18,8 +18,7 @@ using B8 = py::array_t<bool, py::array::c_style>;
 py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_sided,
                      const F32& albedo, const F32& emission, const F64& origin, double pitch,
                      const I32& dims, double cos_cluster, bool cut, double eps, int threads,
-                     const py::object& progress,
-                     const std::optional<std::vector<U8>>& tex_texels,
+                     const py::object& progress, const std::optional<std::vector<U8>>& tex_texels,
                      const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
                      const std::optional<F32>& corner_uv) {
     if (triangles.ndim() != 3 || triangles.shape(1) != 3 || triangles.shape(2) != 3)

@@ -204,7 +204,8 @@ int64, pixel p sees only the VPLs of set pixel_set[p].)doc");
           "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(),
           "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(),
           "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(), "ray_weight"_a.noconvert(),
-          "occluded"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0, "hit_albedo"_a.noconvert() = py::none(),
+          "occluded"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0,
+          "hit_albedo"_a.noconvert() = py::none(),
           R"doc(Light along known directions (delta lights, environment samples, escaped
 gather rays): adds f(wi, wo) max(0, n.wi) weight into out (P, 3) for each ray
 (pixel-major, ray_count (P,) int64) not occluded (uint8 (R,), or empty: none).)doc");

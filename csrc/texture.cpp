@@ -47,7 +47,8 @@ void lookup(const Texture& t, double u, double v, const float* lin, float out[3]
         return t.texels + 3 * (wrap_index(y, H, t.wrap) * W + wrap_index(x, W, t.wrap));
     };
     if (t.filter == Texture::kNearest) {
-        const uint8_t* p = texel(int64_t(std::floor(u * double(W))), int64_t(std::floor(v * double(H))));
+        const uint8_t* p =
+            texel(int64_t(std::floor(u * double(W))), int64_t(std::floor(v * double(H))));
         for (int c = 0; c < 3; ++c) out[c] = lin[p[c]] * t.factor[c];
         return;
     }

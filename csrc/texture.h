@@ -24,7 +24,7 @@ struct Texture {
 // The textures of a scene's surfaces: which object reads which texture, and
 // the UVs of every triangle's corners.
 struct SurfaceTextures {
-    const Texture* textures = nullptr;     // (T,)
+    const Texture* textures = nullptr;  // (T,)
     int64_t count = 0;
     const int32_t* object_texture = nullptr;  // (O,) texture of each object, -1: none
     const float* corner_uv = nullptr;         // (F, 3, 2) UVs of each triangle's corners

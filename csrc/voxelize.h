@@ -16,9 +16,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "util/parallel.h"
-
 #include "texture.h"
+#include "util/parallel.h"
 
 namespace voxgi {
 

@@ -52,7 +52,7 @@ inline float pow5(float x) {
 }
 
 // Tangent frame (u, v) around n: u from n x (0,1,0), or n x (1,0,0) when n is
-// near +-y (docs/design.md §6; meshes carry no UVs in voxgi).
+// near +-y (docs/design.md §6; not from a mesh's UVs, which only textures read).
 inline void tangent_frame(const float n[3], float u[3], float v[3]) {
     if (std::fabs(n[1]) < 0.99f) {  // n x (0, 1, 0)
         u[0] = -n[2];
@@ -358,14 +358,14 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
 
 // Where a gather ray of pixel p landed, before its record is looked up.
 struct GatherHit {
-    double y[3];   // on the hit triangle's plane, in double
-    float ns[3];   // the hit surface's normal on the side the ray came from
-    float wi[3];   // unit direction; for a ray that met nothing, its direction as traced
-    float cos_x;   // at the pixel
-    int32_t obj;   // hit object
-    int64_t c[3];  // voxel of y
-    int64_t key;   // its key on the grid (-1: outside), or -2: no light to look up
-    bool escaped;  // met nothing: sees the environment
+    double y[3];    // on the hit triangle's plane, in double
+    float ns[3];    // the hit surface's normal on the side the ray came from
+    float wi[3];    // unit direction; for a ray that met nothing, its direction as traced
+    float cos_x;    // at the pixel
+    int32_t obj;    // hit object
+    int64_t c[3];   // voxel of y
+    int64_t key;    // its key on the grid (-1: outside), or -2: no light to look up
+    bool escaped;   // met nothing: sees the environment
     bool textured;  // tex holds the albedo of a texture at y
     float tex[3];
 };
@@ -472,8 +472,8 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     if (!(denom > 0.0)) return;
     float f[3];
     const int32_t m = hits.material[p];
-    shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi,
-               hits.wo + 3 * p, f);
+    shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi, hits.wo + 3 * p,
+               f);
     float L[3] = {R.radiance[0], R.radiance[1], R.radiance[2]};
     if (h.textured)
         for (int ch = 0; ch < 3; ++ch)

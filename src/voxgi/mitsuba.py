@@ -248,9 +248,7 @@ def _bitmap(mi, tex) -> dict:
     """Mitsuba's ``bitmap`` of a voxgi Texture: the same filter, wrap mode and
     to_uv, and its texels as voxgi decodes them (linear float32, times the
     factor), so that both renderers filter the same values."""
-    from .textures import _LINEAR
-
-    lin = _LINEAR[tex.raw][tex.texels] * np.asarray(tex.factor, np.float32)
+    lin = tex.linear_texels()
     m = np.eye(4)
     m[:2, :2], m[:2, 3] = tex.to_uv[:2, :2], tex.to_uv[:2, 2]
     return {

@@ -106,10 +106,23 @@ class Texture:
 
     def mean(self) -> np.ndarray:
         """(3,) float64 mean linear albedo over the whole image, times the factor."""
-        counts = np.stack(
-            [np.bincount(self.texels[..., c].ravel(), minlength=256) for c in range(3)]
-        )
-        return counts @ _LINEAR[self.raw].astype(np.float64) / counts[0].sum() * self.factor
+        cached = self.__dict__.get("_mean")
+        if cached is None:
+            # a strip of rows at a time: bincount takes its input as int64
+            counts = np.zeros((3, 256), np.int64)
+            rows = max(1, (1 << 20) // self.width)
+            for y in range(0, self.height, rows):
+                strip = self.texels[y : y + rows].reshape(-1, 3)
+                for c in range(3):
+                    counts[c] += np.bincount(strip[:, c], minlength=256)
+            cached = counts @ _LINEAR[self.raw].astype(np.float64) / counts[0].sum()
+            object.__setattr__(self, "_mean", cached)
+        return cached * self.factor
+
+    def linear_texels(self) -> np.ndarray:
+        """(H, W, 3) float32 linear texels times the factor (a float copy: for
+        an export, not kept)."""
+        return _LINEAR[self.raw][self.texels] * np.asarray(self.factor, np.float32)
 
     def eval(self, uv) -> np.ndarray:
         """The filtered albedo at UVs ``uv`` (N, 2): (N, 3) float64 (a reference

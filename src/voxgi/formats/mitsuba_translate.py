@@ -38,6 +38,8 @@ def _colour(v, p: Plugin, key: str, notes: Notes) -> np.ndarray:
         return v.astype(np.float64)
     if isinstance(v, Plugin) and v.tag == "texture":
         if v.type == "bitmap" and "filename" in v.props:
+            if getattr(notes, "textured", False):
+                return _bitmap_texture(v, notes).mean()  # (decoded once, for the texture)
             img_path = Path(v.props["filename"])
             try:
                 mean = texture_file_mean(img_path, v.access, raw=bool(v.props.get("raw", False)))

@@ -121,9 +121,15 @@ def decode_rgb(path: Path, access: FileAccess) -> np.ndarray:
     try:
         with im:
             im.load()
+            w, h = im.size
+            if im.mode in ("L", "LA", "I;16"):
+                grey = im.convert("L") if im.mode != "L" else im
+                lum = np.frombuffer(grey.tobytes(), np.uint8).reshape(h, w)
+                return np.repeat(lum[:, :, None], 3, axis=2)
             if im.mode != "RGB":
                 im = im.convert("RGB")
-            return np.asarray(im, np.uint8).copy()
+            # one copy of the pixels beside Pillow's (np.asarray would make two)
+            return np.frombuffer(im.tobytes(), np.uint8).reshape(h, w, 3)
     except (OSError, ValueError, SyntaxError) as exc:
         raise ValueError(f"texture {path}: cannot be decoded ({exc})") from None
 
