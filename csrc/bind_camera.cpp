@@ -144,13 +144,18 @@ py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const 
     float *pn = normal.mutable_data(), *pg = ng.mutable_data(), *pw = wo.mutable_data(),
           *pl = le.mutable_data();
     int32_t* pm = material.mutable_data();
+    // what the sheets before each hit let through: only a scene with sheets has it
+    F32 through({scene.has_sheets() ? P : py::ssize_t(0), py::ssize_t(3)});
+    float* pt = scene.has_sheets() ? through.mutable_data() : nullptr;
     auto stop = make_stop_check();
     {
         py::gil_scoped_release release;
         voxgi::camera_hits(cam, off, ln, scene, sc, ppos, pn, pg, pw, pm, pl, prim.mutable_data(),
-                           threads, stop, tex ? &tex->surface : nullptr, oa, pa);
+                           pt, threads, stop, tex ? &tex->surface : nullptr, oa, pa);
     }
-    return py::make_tuple(pos, normal, ng, wo, material, le, prim, albedo);
+    return py::make_tuple(pos, normal, ng, wo, material, le, prim,
+                          scene.has_sheets() ? py::object(through) : py::object(py::none()),
+                          albedo);
 }
 
 }  // namespace
@@ -178,11 +183,12 @@ first hit in scene (a RayScene built from tri_v) and the hit: the exact point
 on the hit triangle's plane pos (P, 3) float64, normal, ng and wo (the
 unit direction back to the eye) (P, 3) float32, the shading and geometric
 normals turned to the viewer, material (P,) int32 (-1: a miss or a one-sided
-back), its emission (P, 3) float32, the hit triangle (P,) int32 (-1: none)
-and, with obj_albedo (O, 3) float32, each hit's albedo (P, 3) float32 (else
-None): its object's, or its texture's at the hit point where the textures
-(tex_texels, a list of (H, W, 3) uint8; tex_info (T, 12) float64: filter,
-wrap, raw, to_uv, factor; obj_texture (O,) int32, -1: none; corner_uv
-(F, 3, 2) float32) give the object one. P = width * height, row-major from
-the top-left pixel.)doc");
+back), its emission (P, 3) float32, the hit triangle (P,) int32 (-1: none),
+P = width * height, row-major from the top-left pixel, where the scene has
+sheets the product of their transmittances before the hit (P, 3) float32
+(None otherwise) and, with obj_albedo (O, 3) float32, each hit's albedo
+(P, 3) float32 (else None): its object's, or its texture's at the hit point
+where the textures (tex_texels, a list of (H, W, 3) uint8; tex_info (T, 12)
+float64: filter, wrap, raw, to_uv, factor; obj_texture (O,) int32, -1: none;
+corner_uv (F, 3, 2) float32) give the object one.)doc");
 }

@@ -52,14 +52,15 @@ static void primary_albedo(const PrimaryScene& triangles, const SurfaceTextures*
 void camera_hits(const PixelCamera& cam, const double offset[2], const double lens[2],
                  const RayScene& scene, const PrimaryScene& triangles, double* pos, float* normal,
                  float* ng, float* wo, int32_t* material, float* emission, int32_t* prim,
-                 int threads, const StopCheck& stop, const SurfaceTextures* textures,
-                 const float* obj_albedo, float* albedo) {
+                 float* through, int threads, const StopCheck& stop,
+                 const SurfaceTextures* textures, const float* obj_albedo, float* albedo) {
     auto one_pixel = [&](int64_t p) {
         double o[3], d[3];
         camera_ray(cam, offset, lens, p, o, d);
         const float of[3] = {float(o[0]), float(o[1]), float(o[2])};
         const float df[3] = {float(d[0]), float(d[1]), float(d[2])};
-        const int32_t t = scene.intersect(of, df, nullptr, nullptr, nullptr);
+        const int32_t t =
+            scene.intersect(of, df, nullptr, nullptr, nullptr, through ? through + 3 * p : nullptr);
         prim[p] = t;
         primary_hit(o, d, t, triangles, pos + 3 * p, normal + 3 * p, ng + 3 * p, material + p,
                     emission + 3 * p);

@@ -86,14 +86,16 @@ void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
 }
 
 // What sample `ray` of record r brings, light and hemisphere sample together:
-// the light sample's contribution unless its ray was blocked, and the
-// power-heuristic share of emitter k, which its hemisphere ray met first at
-// barycentrics u, v (-1: no emitter first).
+// the light sample's contribution times what passes its ray (0: blocked, the
+// sheets' transmittance), and the power-heuristic share of emitter k, which
+// its hemisphere ray met first at barycentrics u, v (-1: no emitter first),
+// times what passes that ray.
 inline void sample_pair(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
-                        const float* contribution, bool light_blocked, const float* hemi_direction,
-                        int32_t k, float hu, float hv, double pair[3]) {
+                        const float* contribution, const float* light_through,
+                        const float* hemi_direction, int32_t k, float hu, float hv,
+                        const float* hemi_through, double pair[3]) {
     const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
-    for (int i = 0; i < 3; ++i) pair[i] = light_blocked ? 0.0 : double(contribution[i]);
+    for (int i = 0; i < 3; ++i) pair[i] = double(contribution[i]) * double(light_through[i]);
     if (k < 0) return;
     // the hit point from its barycentrics, in double
     const double* c = em.corners + 9 * k;
@@ -107,7 +109,7 @@ inline void sample_pair(const EmitterTriangles& em, const DirectLightQuery& q, i
         // power heuristic, solid-angle measure
         const double pl = em.density[k] * r2 / cos_y, ph = cos_x / kPi;
         const double weight = cos_x * ph / (pl * pl + ph * ph);
-        for (int i = 0; i < 3; ++i) pair[i] += weight * em.radiance[3 * k + i];
+        for (int i = 0; i < 3; ++i) pair[i] += weight * em.radiance[3 * k + i] * hemi_through[i];
     }
 }
 
@@ -139,10 +141,11 @@ void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
             double sum[3] = {0.0, 0.0, 0.0}, sq = 0.0;
             for (int64_t s = 0; s < q.samples; ++s) {
                 float lo[3], ld[3], ll, con[3], ho[3], hd[3], hu, hv, te;
+                float light_through[3] = {0.f, 0.f, 0.f}, hemi_through[3] = {1.f, 1.f, 1.f};
                 sample_rays(em, q, r, s, lo, ld, &ll, con, ho, hd);
                 // light rays that cannot contribute have length 0 (and no
                 // contribution) and are not traced
-                const bool blocked = ll > 0.f && scene.occluded(lo, ld, ll);
+                if (ll > 0.f) scene.occluded(lo, ld, ll, light_through);
                 // The hemisphere ray brings light only where an emitter is
                 // the first thing it meets. With the emitters' own scene: its
                 // nearest emitter, unless the whole scene blocks the way
@@ -151,13 +154,14 @@ void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
                 int32_t k = -1;
                 if (emitter_scene) {
                     k = emitter_scene->intersect(ho, hd, &hu, &hv, &te);
-                    if (k >= 0 && scene.occluded(ho, hd, te - float(q.offset))) k = -1;
+                    if (k >= 0 && scene.occluded(ho, hd, te - float(q.offset), hemi_through))
+                        k = -1;
                 } else {
-                    const int32_t t = scene.intersect(ho, hd, &hu, &hv, nullptr);
+                    const int32_t t = scene.intersect(ho, hd, &hu, &hv, nullptr, hemi_through);
                     k = (t >= 0 && t < nt) ? emitter_of[t] : -1;
                 }
                 double pair[3];
-                sample_pair(em, q, r, con, blocked, hd, k, hu, hv, pair);
+                sample_pair(em, q, r, con, light_through, hd, k, hu, hv, hemi_through, pair);
                 double lum = 0.0;
                 for (int i = 0; i < 3; ++i) sum[i] += pair[i], lum += kLuminance[i] * pair[i];
                 sq += lum * lum;

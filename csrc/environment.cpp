@@ -107,12 +107,14 @@ void environment_light(const ShadeHits& hits, const ShadeMaterials& mats, const 
                 const double dens = env.n_samples * pdf + n_gather * std::max(cos, 0.0) / kPi;
                 if (!(dens > 0.0) || !(L[0] > 0.0 || L[1] > 0.0 || L[2] > 0.0)) continue;
                 ++traced;
-                if (scene.occluded(ro, wf, std::numeric_limits<float>::infinity())) continue;
+                float T[3];
+                if (scene.occluded(ro, wf, std::numeric_limits<float>::infinity(), T)) continue;
                 const float cos_x = dot3(nf, wf);
                 if (cos_x <= 0.f) continue;
                 float f[3];
                 shade_brdf(mats, m, hit_albedo(hits, mats, p, m), nf, wf, wo, f);
-                for (int ch = 0; ch < 3; ++ch) sum[ch] += f[ch] * cos_x * float(L[ch] / dens);
+                for (int ch = 0; ch < 3; ++ch)
+                    sum[ch] += f[ch] * cos_x * float(L[ch] / dens) * T[ch];
             }
             for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += sum[ch];
         }

@@ -148,10 +148,25 @@ std::string version_string(int64_t v) {
            std::to_string(v % 100);
 }
 
-RayScene::RayScene(const std::string& library, const float* tris, int64_t n_tris)
+RayScene::RayScene(const std::string& library, const float* tris, int64_t n_tris,
+                   const float* transmittance)
     : api_(load_embree(library)), n_tris_(n_tris) {
     if (n_tris < 0 || n_tris >= static_cast<int64_t>(kInvalidId) / 3)
         throw std::invalid_argument("RayScene: triangle count out of range");
+    // Sheets go in a scene of their own: the opaque rays stay Embree's own
+    // queries, and a scene without sheets traces exactly as before.
+    std::vector<uint32_t> sheets;
+    if (transmittance) {
+        for (int64_t i = 0; i < n_tris; ++i) {
+            const float* T = transmittance + 3 * i;
+            if (T[0] > 0.f || T[1] > 0.f || T[2] > 0.f) {
+                sheets.push_back(uint32_t(i));
+            } else {
+                opaque_index_.push_back(uint32_t(i));
+            }
+        }
+        if (sheets.empty()) opaque_index_.clear();
+    }
     device_ = api_->new_device(nullptr);
     if (device_ == nullptr) throw std::runtime_error("Embree could not create a device");
     // The ray and hit layouts above are Embree 4's; another major version
@@ -162,50 +177,116 @@ RayScene::RayScene(const std::string& library, const float* tris, int64_t n_tris
         throw std::runtime_error(library + " is Embree " + version_string(version_) +
                                  ", not the Embree 4 whose ray layout voxgi uses");
     }
-    scene_ = api_->new_scene(device_);
-    api_->set_scene_flags(scene_, kSceneFlagRobust);
-    if (n_tris > 0) {
-        void* geom = api_->new_geometry(device_, kGeometryTriangle);
-        auto* v = static_cast<float*>(api_->set_new_geometry_buffer(
-            geom, kBufferVertex, 0, kFormatFloat3, 3 * sizeof(float), 3 * n_tris));
-        auto* idx = static_cast<unsigned*>(api_->set_new_geometry_buffer(
-            geom, kBufferIndex, 0, kFormatUint3, 3 * sizeof(unsigned), n_tris));
-        if (v == nullptr || idx == nullptr) {
-            api_->release_geometry(geom);
-            api_->release_scene(scene_);
-            api_->release_device(device_);
-            throw std::runtime_error("Embree could not allocate " + std::to_string(n_tris) +
-                                     " triangles");
+    try {
+        scene_ = build(tris, sheets.empty() ? nullptr : &opaque_index_);
+        if (!sheets.empty()) {
+            sheet_scene_ = build(tris, &sheets);
+            sheet_transmittance_.resize(3 * sheets.size());
+            for (size_t k = 0; k < sheets.size(); ++k)
+                for (int c = 0; c < 3; ++c)
+                    sheet_transmittance_[3 * k + c] =
+                        std::clamp(transmittance[3 * int64_t(sheets[k]) + c], 0.f, 1.f);
         }
-        std::memcpy(v, tris, sizeof(float) * 9 * n_tris);
-        for (int64_t i = 0; i < 3 * n_tris; ++i) idx[i] = static_cast<unsigned>(i);
-        api_->commit_geometry(geom);
-        api_->attach_geometry(scene_, geom);
-        api_->release_geometry(geom);
-    }
-    api_->commit_scene(scene_);
-    if (int err = api_->get_device_error(device_); err != 0) {
-        api_->release_scene(scene_);
+    } catch (...) {
+        if (scene_) api_->release_scene(scene_);
         api_->release_device(device_);
-        throw std::runtime_error("Embree failed to build the scene (error " + std::to_string(err) +
-                                 ")");
+        throw;
     }
 }
 
+// An Embree scene of the triangles `pick` lists (null: all of them).
+void* RayScene::build(const float* tris, const std::vector<uint32_t>* pick) const {
+    const int64_t n = pick ? int64_t(pick->size()) : n_tris_;
+    void* scene = api_->new_scene(device_);
+    api_->set_scene_flags(scene, kSceneFlagRobust);
+    if (n > 0) {
+        void* geom = api_->new_geometry(device_, kGeometryTriangle);
+        auto* v = static_cast<float*>(api_->set_new_geometry_buffer(
+            geom, kBufferVertex, 0, kFormatFloat3, 3 * sizeof(float), 3 * n));
+        auto* idx = static_cast<unsigned*>(api_->set_new_geometry_buffer(
+            geom, kBufferIndex, 0, kFormatUint3, 3 * sizeof(unsigned), n));
+        if (v == nullptr || idx == nullptr) {
+            api_->release_geometry(geom);
+            api_->release_scene(scene);
+            throw std::runtime_error("Embree could not allocate " + std::to_string(n) +
+                                     " triangles");
+        }
+        if (pick) {
+            for (int64_t k = 0; k < n; ++k)
+                std::memcpy(v + 9 * k, tris + 9 * int64_t((*pick)[k]), sizeof(float) * 9);
+        } else {
+            std::memcpy(v, tris, sizeof(float) * 9 * n);
+        }
+        for (int64_t i = 0; i < 3 * n; ++i) idx[i] = static_cast<unsigned>(i);
+        api_->commit_geometry(geom);
+        api_->attach_geometry(scene, geom);
+        api_->release_geometry(geom);
+    }
+    api_->commit_scene(scene);
+    if (int err = api_->get_device_error(device_); err != 0) {
+        api_->release_scene(scene);
+        throw std::runtime_error("Embree failed to build the scene (error " + std::to_string(err) +
+                                 ")");
+    }
+    return scene;
+}
+
 RayScene::~RayScene() {
+    if (sheet_scene_) api_->release_scene(sheet_scene_);
     if (scene_) api_->release_scene(scene_);
     if (device_) api_->release_device(device_);
 }
 
-bool RayScene::occluded(const float org[3], const float dir[3], float tfar) const {
+namespace {
+
+// Sheets met along one ray, at most: a ray through more (a stack of panes)
+// keeps the product of these.
+constexpr int kMaxSheets = 64;
+
+}  // namespace
+
+void RayScene::cross_sheets(const float org[3], const float dir[3], float tfar,
+                            float* through) const {
+    // The sheets one after another, each search starting just past the last
+    // hit: Embree reports the nearest hit beyond tnear, so each sheet counts
+    // once, and two triangles meeting at an edge the ray passes count once.
+    float tnear = 0.0f;
+    for (int k = 0; k < kMaxSheets; ++k) {
+        RayHit rh;
+        rh.ray = make_ray(org, dir, tfar);
+        rh.ray.tnear = tnear;
+        rh.hit.geom_id = kInvalidId;
+        rh.hit.prim_id = kInvalidId;
+        rh.hit.inst_id[0] = kInvalidId;
+        api_->intersect1(sheet_scene_, &rh, nullptr);
+        if (rh.hit.geom_id == kInvalidId) return;
+        const float* T = sheet_transmittance_.data() + 3 * size_t(rh.hit.prim_id);
+        for (int c = 0; c < 3; ++c) through[c] *= T[c];
+        if (!(through[0] > 0.f || through[1] > 0.f || through[2] > 0.f)) return;
+        const float t = rh.ray.tfar;
+        tnear = t + std::max(1e-6f * t, 1e-7f);
+        if (!(tnear < tfar)) return;
+    }
+}
+
+bool RayScene::occluded(const float org[3], const float dir[3], float tfar, float* through) const {
+    if (through) through[0] = through[1] = through[2] = 1.0f;
     if (!(tfar > 0.0f)) return false;  // an empty segment (or NaN) meets nothing
     Ray r = make_ray(org, dir, tfar);
     api_->occluded1(scene_, &r, nullptr);
-    return r.tfar < 0.0f;  // -inf when something was found
+    if (r.tfar < 0.0f) {  // -inf when something was found
+        if (through) through[0] = through[1] = through[2] = 0.0f;
+        return true;
+    }
+    if (!sheet_scene_) return false;
+    float T[3] = {1.0f, 1.0f, 1.0f};
+    cross_sheets(org, dir, tfar, T);
+    if (through) std::memcpy(through, T, sizeof T);
+    return !(T[0] > 0.f || T[1] > 0.f || T[2] > 0.f);
 }
 
-int32_t RayScene::intersect(const float org[3], const float dir[3], float* u, float* v,
-                            float* t) const {
+int32_t RayScene::intersect(const float org[3], const float dir[3], float* u, float* v, float* t,
+                            float* through) const {
     RayHit rh;
     rh.ray = make_ray(org, dir, std::numeric_limits<float>::infinity());
     rh.hit.geom_id = kInvalidId;
@@ -216,27 +297,36 @@ int32_t RayScene::intersect(const float org[3], const float dir[3], float* u, fl
     if (u) *u = hit ? rh.hit.u : 0.0f;
     if (v) *v = hit ? rh.hit.v : 0.0f;
     if (t) *t = hit ? rh.ray.tfar : std::numeric_limits<float>::infinity();
-    return hit ? static_cast<int32_t>(rh.hit.prim_id) : -1;
+    if (through) {
+        through[0] = through[1] = through[2] = 1.0f;
+        if (sheet_scene_) cross_sheets(org, dir, rh.ray.tfar, through);
+    }
+    if (!hit) return -1;
+    const uint32_t prim = opaque_index_.empty() ? rh.hit.prim_id : opaque_index_[rh.hit.prim_id];
+    return static_cast<int32_t>(prim);
 }
 
 void RayScene::occluded(const float* org, const float* dir, const float* tfar, int64_t n,
-                        uint8_t* out, int threads, const StopCheck& stop) const {
+                        uint8_t* out, float* through, int threads, const StopCheck& stop) const {
     const int64_t tasks = (n + kBatch - 1) / kBatch;
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
         const int64_t end = std::min(n, (task + 1) * kBatch);
         for (int64_t i = task * kBatch; i < end; ++i)
-            out[i] = occluded(org + 3 * i, dir + 3 * i, tfar[i]) ? 1 : 0;
+            out[i] =
+                occluded(org + 3 * i, dir + 3 * i, tfar[i], through ? through + 3 * i : nullptr)
+                    ? 1
+                    : 0;
     });
 }
 
 void RayScene::intersect(const float* org, const float* dir, int64_t n, int32_t* prim, float* u,
-                         float* v, int threads, const StopCheck& stop) const {
+                         float* v, float* through, int threads, const StopCheck& stop) const {
     const int64_t tasks = (n + kBatch - 1) / kBatch;
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
         const int64_t end = std::min(n, (task + 1) * kBatch);
         for (int64_t i = task * kBatch; i < end; ++i)
             prim[i] = intersect(org + 3 * i, dir + 3 * i, u ? u + i : nullptr, v ? v + i : nullptr,
-                                nullptr);
+                                nullptr, through ? through + 3 * i : nullptr);
     });
 }
 

@@ -191,8 +191,9 @@ void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPL
         vpl_pixel_rays(hits, mats, mine, mis, eps, p,
                        [&](const float* ro, const float* rd, float len, const float* cr) {
                            ++n;
-                           if (scene.occluded(ro, rd, len)) return;
-                           for (int ch = 0; ch < 3; ++ch) s[ch] += cr[ch];
+                           float T[3];
+                           if (scene.occluded(ro, rd, len, T)) return;
+                           for (int ch = 0; ch < 3; ++ch) s[ch] += cr[ch] * T[ch];
                        });
         for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] = float(s[ch]);
         return n;
@@ -358,15 +359,16 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
 
 // Where a gather ray of pixel p landed, before its record is looked up.
 struct GatherHit {
-    double y[3];    // on the hit triangle's plane, in double
-    float ns[3];    // the hit surface's normal on the side the ray came from
-    float wi[3];    // unit direction; for a ray that met nothing, its direction as traced
-    float cos_x;    // at the pixel
-    int32_t obj;    // hit object
-    int64_t c[3];   // voxel of y
-    int64_t key;    // its key on the grid (-1: outside), or -2: no light to look up
-    bool escaped;   // met nothing: sees the environment
-    bool textured;  // tex holds the albedo of a texture at y
+    double y[3];       // on the hit triangle's plane, in double
+    float ns[3];       // the hit surface's normal on the side the ray came from
+    float wi[3];       // unit direction; for a ray that met nothing, its direction as traced
+    float cos_x;       // at the pixel
+    int32_t obj;       // hit object
+    int64_t c[3];      // voxel of y
+    int64_t key;       // its key on the grid (-1: outside), or -2: no light to look up
+    bool escaped;      // met nothing: sees the environment
+    float through[3];  // what the sheets before the hit let through
+    bool textured;     // tex holds the albedo of a texture at y
     float tex[3];
 };
 
@@ -456,7 +458,8 @@ void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordG
     h.key = grid_key(grid, h.c[0], h.c[1], h.c[2]);
 }
 
-// The MIS-weighted light of pixel p's gather ray h from record rec (-1: none) into s.
+// The MIS-weighted light of pixel p's gather ray h from record rec (-1: none)
+// into s, through the sheets before the hit.
 void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                       const RecordGrid& grid, int64_t p, const GatherHit& h, int64_t rec,
                       double s[3]) {
@@ -478,7 +481,7 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     if (h.textured)
         for (int ch = 0; ch < 3; ++ch)
             if (R.albedo[ch] > 0.f) L[ch] *= h.tex[ch] / R.albedo[ch];
-    for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.cos_x / denom;
+    for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.through[ch] * h.cos_x / denom;
 }
 
 // The environment's light along pixel p's escaped gather ray h, MIS-weighted
@@ -499,7 +502,7 @@ void gather_escape_light(const ShadeHits& hits, const ShadeMaterials& mats, cons
     const int32_t m = hits.material[p];
     shade_brdf(mats, m, hit_albedo(hits, mats, p, m), n, h.wi, hits.wo + 3 * p, f);
     const double* L = env.radiance + 3 * texel;
-    for (int ch = 0; ch < 3; ++ch) s[ch] += f[ch] * cos_x * float(L[ch] * inv);
+    for (int ch = 0; ch < 3; ++ch) s[ch] += f[ch] * cos_x * float(L[ch] * inv) * h.through[ch];
 }
 
 }  // namespace
@@ -535,8 +538,10 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                 GatherHit* h = slot(p);
                 gather_pixel_rays(
                     hits, n_gather, base, eps, p, [&](int k, const float* ro, const float* rd) {
-                        const int32_t t = scene.intersect(ro, rd, nullptr, nullptr, nullptr);
+                        float T[3];
+                        const int32_t t = scene.intersect(ro, rd, nullptr, nullptr, nullptr, T);
                         gather_hit(hits, tris, grid, p, ro, rd, t, h[k]);
+                        for (int ch = 0; ch < 3; ++ch) h[k].through[ch] = T[ch];
                         if (h[k].key >= 0 && grid.cell_start)
                             __builtin_prefetch(grid.cell_start + h[k].key);
                     });

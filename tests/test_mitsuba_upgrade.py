@@ -165,8 +165,23 @@ def test_glass_is_listed_plainly_in_the_warning(tmp_path):
     scene, warned = _load(_write(tmp_path, SENSOR + body))
     (line,) = [w for w in warned if "approximated" in w]
     assert "glass bsdf 'dielectric' (id 'WindowGlass')" in line
-    assert "no light passes it" in line
-    assert scene.objects[0].two_sided
+    assert "each crossing of its surface a transmitting sheet" in line
+    (pane,) = scene.objects
+    assert pane.material.is_sheet
+    assert pane.two_sided
+    # one interface of index 1.5 (intIOR 1.5 over extIOR 1), hemispherical mean
+    np.testing.assert_allclose(pane.material.transmittance, 0.908222, atol=1e-6)
+
+
+def test_thin_glass_is_a_slab_and_both_kinds_are_listed(tmp_path):
+    thin = FLOOR.replace('<bsdf type="roughplastic">', '<bsdf type="thindielectric" id="Pane">')
+    thick = FLOOR.replace('<bsdf type="roughplastic">', '<bsdf type="dielectric" id="Lens">')
+    thick = thick.replace('z="-5"', 'z="-6"')
+    scene, warned = _load(_write(tmp_path, SENSOR + thin + thick))
+    (line,) = [w for w in warned if "approximated" in w]
+    assert "glass bsdf 'thindielectric' (id 'Pane'): a transmitting sheet, 0.845" in line
+    assert "glass bsdf 'dielectric' (id 'Lens'): each crossing" in line
+    np.testing.assert_allclose(scene.objects[0].material.transmittance, 0.844556, atol=1e-6)
 
 
 def test_a_mesh_of_zero_area_is_left_out_and_listed(tmp_path):

@@ -23,7 +23,7 @@ from .camera import Camera
 from .display import RenderResult, RenderTuning
 from .formats import SceneWarning
 from .lights import DirectionalLight, Environment, PointLight, SpotLight
-from .materials import AshikhminShirley, Material
+from .materials import AshikhminShirley, Material, glass_transmittance
 from .pipeline import render, solve
 from .radiosity import Solution, SolveTuning
 from .scene import Scene, SceneObject
@@ -55,6 +55,7 @@ __all__ = [
     "__version__",
     "denoise",
     "formats",
+    "glass_transmittance",
     "io",
     "metrics",
     "render",

@@ -133,23 +133,30 @@ class RayScene:
     """
     Embree 4 scene of a triangle soup, queried from C++ threads (GIL released).
     """
-    def __init__(self, library: str, tris: typing.Annotated[numpy.typing.ArrayLike, numpy.float32]) -> None:
+    def __init__(self, library: str, tris: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], transmittance: typing.Annotated[numpy.typing.ArrayLike, numpy.float32] | None = None) -> None:
         """
-        Build the scene from (F, 3, 3) float32 corners with the Embree at `library`.
+        Build the scene from (F, 3, 3) float32 corners with the Embree at `library`; `transmittance` (F, 3) float32 or None: a triangle with a channel above 0 is a sheet that rays cross, scaled by it.
         """
-    def intersect(self, org: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], dirs: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], uv: bool = False, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+    def intersect(self, org: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], dirs: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], uv: bool = False, threads: typing.SupportsInt | typing.SupportsIndex = 0, through: bool = False) -> tuple:
         """
-        First triangle each ray meets (int32, -1: none) and, with uv, its float32 barycentrics u, v (empty arrays otherwise).
+        First opaque triangle each ray meets (int32, -1: none) and, with uv, its float32 barycentrics u, v (empty arrays otherwise); with through, a fourth array (R, 3) float32: the product of the sheets' transmittances before it.
         """
     def occluded(self, org: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], dirs: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], length: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> numpy.typing.NDArray[numpy.uint8]:
         """
-        (R,) uint8: 1 where a triangle lies on [org, org + length * dirs).
+        (R,) uint8: 1 where no light passes [org, org + length * dirs) (an opaque triangle lies on it, or its sheets pass nothing).
+        """
+    def transmittance(self, org: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], dirs: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], length: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        (R, 3) float32: the light that passes [org, org + length * dirs): 0 where an opaque triangle lies on it, else the product of its sheets' transmittances.
         """
     @property
     def embree_version(self) -> str:
         """
         The Embree library's version, "major.minor.patch".
         """
+    @property
+    def has_sheets(self) -> bool:
+        ...
     @property
     def triangle_count(self) -> int:
         ...
@@ -168,13 +175,14 @@ def camera_hits(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.ND
     on the hit triangle's plane pos (P, 3) float64, normal, ng and wo (the
     unit direction back to the eye) (P, 3) float32, the shading and geometric
     normals turned to the viewer, material (P,) int32 (-1: a miss or a one-sided
-    back), its emission (P, 3) float32, the hit triangle (P,) int32 (-1: none)
-    and, with obj_albedo (O, 3) float32, each hit's albedo (P, 3) float32 (else
-    None): its object's, or its texture's at the hit point where the textures
-    (tex_texels, a list of (H, W, 3) uint8; tex_info (T, 12) float64: filter,
-    wrap, raw, to_uv, factor; obj_texture (O,) int32, -1: none; corner_uv
-    (F, 3, 2) float32) give the object one. P = width * height, row-major from
-    the top-left pixel.
+    back), its emission (P, 3) float32, the hit triangle (P,) int32 (-1: none),
+    P = width * height, row-major from the top-left pixel, where the scene has
+    sheets the product of their transmittances before the hit (P, 3) float32
+    (None otherwise) and, with obj_albedo (O, 3) float32, each hit's albedo
+    (P, 3) float32 (else None): its object's, or its texture's at the hit point
+    where the textures (tex_texels, a list of (H, W, 3) uint8; tex_info (T, 12)
+    float64: filter, wrap, raw, to_uv, factor; obj_texture (O,) int32, -1: none;
+    corner_uv (F, 3, 2) float32) give the object one.
     """
 def camera_rays(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.NDArray[numpy.float64], up: numpy.typing.NDArray[numpy.float64], forward: numpy.typing.NDArray[numpy.float64], tan_half_fov: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, aperture: typing.SupportsFloat | typing.SupportsIndex, focus: typing.SupportsFloat | typing.SupportsIndex, offset: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], lens: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
     """

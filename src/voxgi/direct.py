@@ -442,11 +442,12 @@ def light_irradiance(
     return out, stats
 
 
-def _free(tracer: Tracer, org: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
-    """(R,) bool: nothing on the segments (scene-centred origins)."""
+def _through(tracer: Tracer, org: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """(R, 3): the light that passes the segments (scene-centred origins): 0
+    where something opaque lies on them, else the sheets' transmittance."""
     if len(org) == 0:
-        return np.zeros(0, bool)
-    return tracer.occluded(org, dirs, length) == 0
+        return np.zeros((0, 3))
+    return tracer.transmittance(org, dirs, length).astype(np.float64)
 
 
 def _light_batch(scene, tracer, x, nrm, samples, rng, offset) -> tuple[np.ndarray, int]:
@@ -461,8 +462,8 @@ def _light_batch(scene, tracer, x, nrm, samples, rng, offset) -> tuple[np.ndarra
         cos = np.einsum("ij,ij->i", w, nrm)
         live = np.flatnonzero((cos > 0) & np.any(eperp > 0, axis=1))
         length = np.where(np.isfinite(dist[live]), np.maximum(dist[live] - 2 * offset, 0.0), np.inf)
-        free = live[_free(tracer, org[live], w[live], length)]
-        e[free] += eperp[free] * cos[free, None]
+        through = _through(tracer, org[live], w[live], length)
+        e[live] += eperp[live] * cos[live, None] * through
         rays += len(live)
     env = scene.environment
     if env is None:
@@ -475,15 +476,15 @@ def _light_batch(scene, tracer, x, nrm, samples, rng, offset) -> tuple[np.ndarra
     oo = np.repeat(org, s, axis=0)
     cos_e = np.einsum("ij,ij->i", we, nn)
     live = np.flatnonzero((cos_e > 0) & (pe > 0))
-    free = live[_free(tracer, oo[live], we[live], np.full(len(live), np.inf))]
+    through = _through(tracer, oo[live], we[live], np.full(len(live), np.inf))
     rays += len(live)
-    pc = cos_e[free] / np.pi
-    wgt = pe[free] / (pe[free] ** 2 + pc**2)
+    pc = cos_e[live] / np.pi
+    wgt = pe[live] / (pe[live] ** 2 + pc**2)
     contrib = np.zeros((r * s, 3))
-    contrib[free] = env.eval(we[free]) * (cos_e[free] * wgt)[:, None]
+    contrib[live] = env.eval(we[live]) * (cos_e[live] * wgt)[:, None] * through
     wc = _cosine_dirs(nn, rng.random((r * s, 2)))
-    hit = tracer.intersect(
-        np.ascontiguousarray(oo, np.float32), np.ascontiguousarray(wc, np.float32)
+    hit, hit_through = tracer.intersect(
+        np.ascontiguousarray(oo, np.float32), np.ascontiguousarray(wc, np.float32), through=True
     )
     rays += len(wc)
     esc = np.flatnonzero(hit == -1)
@@ -492,7 +493,7 @@ def _light_batch(scene, tracer, x, nrm, samples, rng, offset) -> tuple[np.ndarra
     pe = env.pdf(wc[esc])
     with np.errstate(divide="ignore", invalid="ignore"):
         wgt = np.where(pc > 0, pc / (pe**2 + pc**2), 0.0)
-    contrib[esc] += env.eval(wc[esc]) * (cos_c * wgt)[:, None]
+    contrib[esc] += env.eval(wc[esc]) * (cos_c * wgt)[:, None] * hit_through[esc]
     e += contrib.reshape(r, s, 3).mean(axis=1)
     return e, rays
 

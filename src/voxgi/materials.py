@@ -1,8 +1,9 @@
-"""Surface materials: a Lambertian albedo (or a texture of it) and emission, an
-optional glossy layer."""
+"""Surface materials: a Lambertian albedo (or a texture of it) and emission,
+an optional glossy layer, or a transmitting sheet (glass)."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,7 +11,7 @@ import numpy as np
 from . import _validate
 from .textures import Texture
 
-__all__ = ["AshikhminShirley", "Material"]
+__all__ = ["AshikhminShirley", "Material", "glass_transmittance"]
 
 
 @dataclass(frozen=True)
@@ -66,11 +67,26 @@ class Material:
         ``uv``). With one, ``albedo`` is set to the texture's mean over the
         whole image (kept below 1); the display reads the texture at every
         hit and each voxel record its mean over the record's own surface.
+    transmittance : float or (3,) float
+        Per RGB channel in [0, 1]: a material with a channel above 0 is a
+        transmitting sheet (glass, ``docs/design.md`` §13). Light crosses it
+        straight, without refraction, scaled by ``transmittance``; the rest
+        is absorbed. A sheet neither reflects nor emits (``albedo`` and
+        ``emission`` 0, no ``specular``) and is not voxelized; every ray
+        (shadow, gather, camera) passes it. See :func:`glass_transmittance`.
+
+    Examples
+    --------
+    >>> import voxgi
+    >>> pane = voxgi.Material(albedo=0.0, transmittance=voxgi.glass_transmittance(1.5))
+    >>> pane.is_sheet, round(pane.transmittance[0], 3)
+    (True, 0.845)
     """
 
     albedo: tuple[float, float, float] = (0.8, 0.8, 0.8)
     emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
     specular: AshikhminShirley | None = None
+    transmittance: tuple[float, float, float] = (0.0, 0.0, 0.0)
     texture: Texture | None = None
 
     def __post_init__(self):
@@ -99,7 +115,71 @@ class Material:
                 "Material.specular: expected voxgi.AshikhminShirley or None, got "
                 f"{type(self.specular).__name__}"
             )
+        object.__setattr__(
+            self,
+            "transmittance",
+            _validate.rgb(self.transmittance, "Material.transmittance", high=1.0, float32=True),
+        )
+        if self.is_sheet and (
+            max(self.albedo) > 0.0 or self.is_emitter or self.specular is not None
+        ):
+            raise ValueError(
+                f"Material: a transmitting sheet (transmittance {self.transmittance}) neither "
+                f"reflects nor emits: got albedo {self.albedo}, emission {self.emission}"
+                + (", a specular layer" if self.specular is not None else "")
+                + " (give albedo=0)"
+            )
 
     @property
     def is_emitter(self) -> bool:
         return max(self.emission) > 0.0
+
+    @property
+    def is_sheet(self) -> bool:
+        """Whether light passes the surface (a channel of ``transmittance`` above 0)."""
+        return max(self.transmittance) > 0.0
+
+
+@functools.cache
+def _hemispherical_transmittance(ior: float, thin: bool) -> float:
+    # Gauss-Legendre in cos θ over [0, 1]: the integrand is smooth there
+    x, w = np.polynomial.legendre.leggauss(256)
+    c, w = 0.5 * (x + 1.0), 0.5 * w
+    s2 = (1.0 - c * c) / (ior * ior)
+    ct = np.sqrt(np.maximum(0.0, 1.0 - s2))
+    rs = (c - ior * ct) / (c + ior * ct)
+    rp = (ior * c - ct) / (ior * c + ct)
+    r = 0.5 * (rs * rs + rp * rp)  # unpolarised Fresnel reflectance
+    if thin:
+        r = 2.0 * r / (1.0 + r)  # both faces, every inner reflection summed
+    return float(np.sum(w * 2.0 * c * (1.0 - r)))
+
+
+def glass_transmittance(ior: float = 1.5, *, thin: bool = True) -> float:
+    """Straight-through transmittance of glass under uniform (diffuse) light.
+
+    The fraction of the flux of a uniform radiance field that crosses the
+    glass: the Fresnel transmittance averaged over the hemisphere with
+    weight ``2 cos θ``. ``thin``: a slab (both faces, with all its inner
+    reflections, as Mitsuba's ``thindielectric``: ``1 - 2R/(1+R)`` at each
+    angle); otherwise one interface (``1 - R``), which a closed solid crosses
+    twice (``docs/design.md`` §13). At ``ior`` 1.5: 0.845 thin, 0.908 one
+    interface (at normal incidence 0.923 and 0.96).
+
+    Parameters
+    ----------
+    ior : float
+        Relative index of refraction (inside over outside), in [1, 10]; 1
+        passes everything.
+    thin : bool
+        A thin slab (True) or a single interface (False).
+
+    Returns
+    -------
+    float
+        In (0, 1].
+    """
+    ior = _validate.real(ior, "glass_transmittance: ior", low=1.0, high=10.0)
+    if ior == 1.0:
+        return 1.0
+    return _hemispherical_transmittance(float(ior), bool(thin))

@@ -17,6 +17,11 @@ The translation keeps voxgi's conventions:
   side only (a two-sided emitter gets a second, reversed copy);
 - glossy materials are exported as their diffuse part only (Mitsuba has no
   Ashikhmin–Shirley BSDF): the comparison is meant for diffuse scenes;
+- a transmitting sheet (glass, ``docs/design.md`` §13) as ``thindielectric``
+  with equal inner and outer indices and ``specular_transmittance`` T: no
+  Fresnel reflection, a path crosses it straight scaled by T per channel,
+  as voxgi's rays do (``mask`` would do it with probability, and with one
+  opacity for all channels: their mean);
 - the camera as ``perspective`` (or ``thinlens`` with an aperture), vertical
   field of view, ``look_at`` (Mitsuba's image x axis is ``forward x up``,
   as voxgi's);
@@ -269,7 +274,14 @@ def _shape(mi, i: int, o) -> dict:
     if m.texture is not None:
         bsdf["reflectance"] = _bitmap(mi, m.texture)
         uv = o.uv
-    if o.two_sided:
+    if m.is_sheet:
+        bsdf = {
+            "type": "thindielectric",
+            "int_ior": 1.0,
+            "ext_ior": 1.0,
+            "specular_transmittance": _rgb(m.transmittance),
+        }
+    elif o.two_sided:
         bsdf = {"type": "twosided", "bsdf": bsdf}
     bsdf_obj = mi.load_dict(bsdf)
     key = f"obj{i:03d}_{o.name}".replace(" ", "_")

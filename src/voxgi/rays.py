@@ -11,8 +11,10 @@ be opened, or is not Embree 4, :class:`Tracer` raises an :class:`ImportError`
 that says which file and why.
 
 One convention for occlusion everywhere: a query answers (R,) uint8, 1 where
-something lies on the segment, 0 where it is free, as the compiled kernels
-take it.
+no light passes the segment, 0 where some does, as the compiled kernels take
+it. Transmitting sheets (glass, ``docs/design.md`` §13) are in a scene of
+their own: no query stops at one; :meth:`Tracer.transmittance` and
+``through`` give the product of the transmittances of the sheets crossed.
 """
 
 from __future__ import annotations
@@ -71,8 +73,10 @@ def embree_library() -> str:
     return "libembree4.dylib" if sys.platform == "darwin" else "libembree4.so.4"
 
 
-def ray_scene(tris: np.ndarray) -> _core.RayScene:
-    """The compiled Embree scene of triangles ``tris`` (F, 3, 3) float32.
+def ray_scene(tris: np.ndarray, transmittance: np.ndarray | None = None) -> _core.RayScene:
+    """The compiled Embree scene of triangles ``tris`` (F, 3, 3) float32;
+    ``transmittance`` (F, 3) float32 or None: the triangles with a channel
+    above 0 are sheets that rays cross.
 
     Raises
     ------
@@ -82,7 +86,7 @@ def ray_scene(tris: np.ndarray) -> _core.RayScene:
     """
     lib = embree_library()
     try:
-        return _core.RayScene(lib, tris)
+        return _core.RayScene(lib, tris, transmittance)
     except RuntimeError as e:
         try:
             from importlib.metadata import version
@@ -139,7 +143,20 @@ class Tracer:
         self.centre = scene.bounds.mean(axis=0)
         self.tris = np.concatenate([o.vertices[o.faces] for o in scene.objects]) - self.centre
         self.threads = max(1, int(threads))
-        self.native = ray_scene(np.ascontiguousarray(self.tris, dtype=np.float32))
+        through = None
+        if scene.has_sheets:
+            through = np.concatenate(
+                [
+                    np.broadcast_to(np.float32(o.material.transmittance), (len(o.faces), 3))
+                    for o in scene.objects
+                ]
+            )
+        self.native = ray_scene(np.ascontiguousarray(self.tris, dtype=np.float32), through)
+
+    @property
+    def has_sheets(self) -> bool:
+        """Whether the scene has transmitting sheets."""
+        return bool(self.native.has_sheets)
 
     def close(self) -> None:
         """Nothing to release: the compiled scene goes with the tracer."""
@@ -154,9 +171,26 @@ class Tracer:
         """(R,) uint8: 1 where something lies on the segment [org, org + length * dirs), else 0."""
         return self.native.occluded(_f32(org), _f32(dirs), _f32(length), self.threads)
 
-    def intersect(self, org: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-        """(R,) int32 index of the first triangle each ray meets, -1 for a miss."""
-        return self.native.intersect(_f32(org), _f32(dirs), False, self.threads)[0]
+    def transmittance(self, org: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
+        """(R, 3) float32: the light that passes [org, org + length * dirs): 0
+        where an opaque triangle lies on it, else the product of the
+        transmittances of the sheets on it (1 without)."""
+        if not self.has_sheets:
+            free = self.occluded(org, dirs, length) == 0
+            return np.repeat(free.astype(np.float32)[:, None], 3, axis=1)
+        return self.native.transmittance(_f32(org), _f32(dirs), _f32(length), self.threads)
+
+    def intersect(self, org: np.ndarray, dirs: np.ndarray, *, through: bool = False):
+        """(R,) int32 index of the first opaque triangle each ray meets, -1 for
+        a miss; with ``through``, also (R, 3) float32: the product of the
+        transmittances of the sheets before it."""
+        if not through:
+            return self.native.intersect(_f32(org), _f32(dirs), False, self.threads)[0]
+        if not self.has_sheets:
+            prim = self.native.intersect(_f32(org), _f32(dirs), False, self.threads)[0]
+            return prim, np.ones((len(prim), 3), np.float32)
+        prim, _, _, T = self.native.intersect(_f32(org), _f32(dirs), False, self.threads, True)
+        return prim, T
 
     def first_hit(self, org: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, ...]:
         """(R,) int32 first triangle (-1: none) and float32 barycentrics u, v there."""

@@ -294,8 +294,9 @@ class Scene:
         -------
         dict
             ``triangles`` (F, 3, 3) float64 corner positions, ``object`` (F,)
-            int32 index into :attr:`objects`, ``albedo``/``emission`` (O, 3)
-            float32 per object, ``two_sided`` (O,) bool per object.
+            int32 index into :attr:`objects`, ``albedo``/``emission``/
+            ``transmittance`` (O, 3) float32 per object, ``two_sided`` (O,)
+            bool per object.
 
         Raises
         ------
@@ -314,8 +315,14 @@ class Scene:
             "object": obj,
             "albedo": np.array([o.material.albedo for o in self.objects], np.float32),
             "emission": np.array([o.material.emission for o in self.objects], np.float32),
+            "transmittance": np.array([o.material.transmittance for o in self.objects], np.float32),
             "two_sided": np.array([o.two_sided for o in self.objects], bool),
         }
+
+    @property
+    def has_sheets(self) -> bool:
+        """Whether an object is a transmitting sheet (:attr:`Material.is_sheet`)."""
+        return any(o.material.is_sheet for o in self.objects)
 
     def fingerprint(self) -> str:
         """Hash of geometry, materials and lights: tells a solution which scene it belongs to.
@@ -330,6 +337,8 @@ class Scene:
             if o.material.texture is not None:
                 h.update(o.material.texture.digest().encode())
                 h.update(o.uv.tobytes())
+            if o.material.is_sheet:  # (an opaque scene keeps the hash it had)
+                h.update(repr(("sheet", o.material.transmittance)).encode())
         for light in self.lights:
             h.update(repr(light).encode())
         if self.environment is not None:
@@ -400,6 +409,10 @@ class Scene:
 
             [materials.white]
             albedo = [0.8, 0.8, 0.8]
+
+            [materials.glass]       # a transmitting sheet (Material.transmittance)
+            albedo = 0
+            transmittance = [0.85, 0.85, 0.85]
 
             [[object]]
             mesh = "floor.ply"      # relative to the TOML file; OBJ, PLY, STL, GLB
@@ -480,8 +493,11 @@ class Scene:
                 )
                 continue
             try:
-                tex = m.texture if m.uv is not None else None
-                mat = Material(albedo=m.albedo, emission=m.emission, texture=tex)
+                if m.transmittance is not None and np.max(m.transmittance) > 0:
+                    mat = Material(albedo=0.0, transmittance=m.transmittance)
+                else:
+                    tex = m.texture if m.uv is not None else None
+                    mat = Material(albedo=m.albedo, emission=m.emission, texture=tex)
                 obj = scene.add(
                     trimesh.Trimesh(m.vertices, m.faces, process=False),
                     mat,

@@ -337,7 +337,9 @@ def _voxelize_stats(
         "cut": bool(cut),
         # Objects whose mesh is closed (watertight, consistently wound): their
         # inside can never be seen, which voxgi.solve uses (closed=None).
-        "closed_objects": [i for i, o in enumerate(scene.objects) if _is_closed(o)],
+        "closed_objects": [
+            i for i, o in enumerate(scene.objects) if not o.material.is_sheet and _is_closed(o)
+        ],
         "seconds": seconds,
         "phase_seconds": {
             "pairs": st["seconds_pairs"],
@@ -467,8 +469,16 @@ def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> Voxel
         scene, resolution, max_memory, threads, progress, cut
     )
     tri = scene.triangles()
+    # The grid spans the whole scene; the sheets (glass) have no records
+    # (docs/design.md §13): light crosses them on the rays, not on the lines.
+    pitch, origin, dims = _grid(tri["triangles"], resolution)
+    sheet = np.array([o.material.is_sheet for o in scene.objects])
+    if sheet.any():
+        keep = ~sheet[tri["object"]]
+        if not keep.any():
+            raise ValueError("voxelize: every object is a transmitting sheet; nothing to voxelize")
+        tri = {**tri, "triangles": tri["triangles"][keep], "object": tri["object"][keep]}
     triangles = tri["triangles"]
-    pitch, origin, dims = _grid(triangles, resolution)
     est = _check_memory(triangles, pitch, resolution, max_memory)
     res = _run_kernel(
         tri,

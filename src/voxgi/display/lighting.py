@@ -125,7 +125,11 @@ class _SceneLights:
         cos_g = np.einsum("ij,ij->i", w_all, ng[at])
         live = (cos_g > 0) & np.any(wt_all > 0, axis=1)
         occ = np.ones(len(w_all), np.uint8)
-        if np.any(live):
+        if np.any(live) and self.tracer.has_sheets:
+            through = self.tracer.transmittance(org[at][live], w_all[live], len_all[live])
+            wt_all[live] *= through
+            occ[live] = ~np.any(through > 0, axis=1)
+        elif np.any(live):
             occ[live] = self.tracer.occluded(org[at][live], w_all[live], len_all[live])
         self.rays += int(np.count_nonzero(live))
         count = np.bincount(p_all, minlength=b - a).astype(np.int64)

@@ -167,10 +167,11 @@ class _FrameShader:
         traced and hit in one kernel: points in float64 on the hit
         triangle's plane, normals facing the viewer, material index (-1:
         miss or a one-sided back), the emission seen (the environment's
-        radiance for a ray that leaves the scene)."""
+        radiance for a ray that leaves the scene), and ``through``: what the
+        sheets before the hit let through (None in a scene without)."""
         tr, cam = self.tracer, self.cam
         right, up, fwd = cam.frame()
-        pos, n_out, ng_out, wo, mat, le, prim, albedo = _core.camera_hits(
+        pos, n_out, ng_out, wo, mat, le, prim, through, albedo = _core.camera_hits(
             np.asarray(cam.eye, dtype=np.float64) - tr.centre,
             right,
             up,
@@ -192,8 +193,9 @@ class _FrameShader:
             miss = np.flatnonzero(prim < 0)
             le[miss] = self.env.eval(-wo[miss].astype(np.float64))
         hits = {"pos": pos, "normal": n_out, "ng": ng_out, "wo": wo, "material": mat}
-        # each hit's albedo only where a texture makes it differ from its object's
-        return {**hits, "emission": le, "albedo": albedo}
+        # what the sheets (glass) before each hit let through, None without any
+        # and each hit's albedo only where a texture makes it differ from its object's
+        return {**hits, "emission": le, "through": through, "albedo": albedo}
 
     @cached_property
     def _gather_textures(self) -> dict:
@@ -394,6 +396,8 @@ class _FrameShader:
                 for v, a, b in zip(vpls, cuts[:-1], cuts[1:], strict=True)
             ]
         img = self.shade(h, vpls)
+        if h["through"] is not None:
+            img *= h["through"]  # the pixel sees its hit through the sheets
         if self.cam.pixel_filter == "gaussian":
             # the AOVs through the same filter as the image, in the same pass
             both = gaussian_pixel_filter(

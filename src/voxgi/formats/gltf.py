@@ -222,8 +222,8 @@ def load_gltf(path, *, search_paths=(), allow_outside=False, limits=None) -> Sce
                 emission,
                 two_sided,
                 str(path),
-                texture,
-                uv,
+                texture=texture,
+                uv=uv,
             )
         )
     if not data.meshes:

@@ -26,6 +26,17 @@ __all__ = ["load_mitsuba"]
 _WRAPPER_BSDFS = {"twosided", "mask", "bumpmap", "normalmap"}
 #: BSDFs that scatter on both sides by themselves.
 _TWO_SIDED_BSDFS = {"dielectric", "thindielectric", "roughdielectric"}
+#: Glass: a shape with one of these is a transmitting sheet (docs/design.md §13).
+_GLASS_BSDFS = _TWO_SIDED_BSDFS
+#: Mitsuba 3's named indices of refraction (its ior.h table).
+_NAMED_IOR = {
+    "vacuum": 1.0, "helium": 1.00004, "hydrogen": 1.00013, "air": 1.00028,
+    "carbon dioxide": 1.00045, "water": 1.333, "acetone": 1.36, "ethanol": 1.361,
+    "carbon tetrachloride": 1.461, "glycerol": 1.4729, "benzene": 1.501,
+    "silicone oil": 1.52045, "bromine": 1.661, "water ice": 1.31, "fused quartz": 1.458,
+    "pyrex": 1.47, "acrylic glass": 1.49, "polypropylene": 1.49, "bk7": 1.5046,
+    "sodium chloride": 1.544, "amber": 1.55, "pet": 1.575, "diamond": 2.419,
+}  # fmt: skip
 #: Properties whose colour approximates another BSDF's diffuse albedo.
 _ALBEDO_KEYS = ("reflectance", "diffuse_reflectance", "base_color")
 
@@ -146,14 +157,59 @@ def _bsdf(p: Plugin, notes: Notes) -> tuple[np.ndarray, bool]:
         notes.approx(f"{p.label()}: the blend of its BSDFs' albedos")
         return (1 - w) * a0 + w * a1, s0 and s1
     if p.type in _TWO_SIDED_BSDFS:
+        # (a shape's own glass BSDF is a sheet, _sheet; this is glass inside another BSDF)
         notes.approx(
-            f"glass {p.label()}: an opaque diffuse surface of albedo 0.5 (no light passes it)"
+            f"glass {p.label()} inside another BSDF: an opaque diffuse surface of albedo 0.5"
         )
         return np.full(3, 0.5), True
     key = next((k for k in _ALBEDO_KEYS if k in p.props), None)
     albedo = np.full(3, 0.5) if key is None else _colour(p.props[key], p, key, notes)
     notes.approx(f"{p.label()}: diffuse with albedo {'0.5' if key is None else key}")
     return albedo, p.type in _TWO_SIDED_BSDFS
+
+
+def _ior(p: Plugin, key: str, default: float) -> float:
+    """Index of refraction ``key`` of a dielectric: a number or one of Mitsuba's names."""
+    v = p.props.get(key, default)
+    if isinstance(v, str):
+        if v.strip().lower() not in _NAMED_IOR:
+            raise ValueError(
+                f"{p.where()}: {key} {v!r} is neither a number nor one of Mitsuba's named "
+                f"indices ({', '.join(sorted(_NAMED_IOR))})"
+            )
+        return _NAMED_IOR[v.strip().lower()]
+    n = p.number(key, default)
+    if not 1.0 <= n <= 10.0:
+        raise ValueError(f"{p.where()}: {key} {n} is outside [1, 10]")
+    return n
+
+
+def _sheet(p: Plugin, notes: Notes) -> np.ndarray | None:
+    """The straight-through transmittance of a glass BSDF (``dielectric``,
+    ``roughdielectric``, ``thindielectric``, or one in ``twosided``), None
+    for any other (docs/design.md §13)."""
+    while p.type == "twosided" and p.nested("bsdf"):
+        p = p.nested("bsdf")[0]
+    if p.type not in _GLASS_BSDFS:
+        return None
+    from ..materials import glass_transmittance
+
+    n = _ior(p, "int_ior", 1.5046) / _ior(p, "ext_ior", 1.000277)
+    thin = p.type == "thindielectric"
+    t = glass_transmittance(max(n, 1.0 / n), thin=thin)
+    tint = _colour(p.props.get("specular_transmittance", 1.0), p, "specular_transmittance", notes)
+    if thin:
+        notes.approx(
+            f"glass {p.label()}: a transmitting sheet, {t:.3f} of the light straight through "
+            "(a thin slab's Fresnel transmittance, mean over the hemisphere), no reflection"
+        )
+    else:
+        notes.approx(
+            f"glass {p.label()}: each crossing of its surface a transmitting sheet, {t:.3f} "
+            "of the light straight through (one interface's Fresnel transmittance, mean over "
+            "the hemisphere; a closed pane passes its square), no refraction, no reflection"
+        )
+    return np.clip(t * np.asarray(tint, np.float64), 0.0, 1.0)
 
 
 def _emission(p: Plugin, notes: Notes) -> np.ndarray:
@@ -339,14 +395,19 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
     for e in emitters:
         emission = emission + _emission(e, notes)
     v, f, source, uv = _shape_mesh(p)
-    texture = _bsdf_texture(bsdfs[0], notes) if bsdfs and not emitters else None
+    through = _sheet(bsdfs[0], notes) if bsdfs else None
+    texture = None
+    if bsdfs and through is None and not emitters:
+        texture = _bsdf_texture(bsdfs[0], notes)
     if texture is not None and uv is None:
         notes.approx(
             f"{p.label()}: bitmap {Path(texture.path).name} reduced to its mean colour "
             "(the mesh has no UVs)"
         )
         texture = None
-    if bsdfs:
+    if through is not None:
+        albedo, two_sided = np.zeros(3), True
+    elif bsdfs:
         notes.textured = texture is not None
         try:
             albedo, two_sided = _bsdf(bsdfs[0], notes)
@@ -360,6 +421,10 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
         # Mitsuba loads such a mesh and it draws nothing; so does voxgi
         notes.drop(f"{p.label()} {name!r}: every face has zero area")
         return []
+    if through is not None and np.max(through) > 0:
+        if max(emission) > 0:
+            notes.drop(f"{p.label()} {name!r}: the emission of a glass shape")
+        return [MeshData(name, v, f, np.zeros(3), np.zeros(3), True, source, transmittance=through)]
     albedo = clamp_albedo(albedo, p.label(), notes)
     if max(emission) > 0 and two_sided:
         # Mitsuba's area emitter lights the front side only, whatever the
@@ -376,7 +441,7 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
                 source,
             ),
         ]
-    return [MeshData(name, v, f, albedo, emission, two_sided, source, texture, uv)]
+    return [MeshData(name, v, f, albedo, emission, two_sided, source, texture=texture, uv=uv)]
 
 
 def _fov_y(fov: float, axis: str, width: int, height: int) -> float:

@@ -218,8 +218,8 @@ def load_obj(path, *, search_paths=(), allow_outside=False, limits=None) -> Scen
                 emission,
                 False,
                 str(path),
-                texture,
-                uv,
+                texture=texture,
+                uv=uv,
             )
         )
     if not data.meshes:

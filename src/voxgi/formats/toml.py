@@ -200,7 +200,7 @@ def _key_lines(text: str) -> dict:
 # -- tables -----------------------------------------------------------------
 
 #: Keys of an ``[[object]]`` table that give its material inline.
-_OBJECT_MATERIAL_KEYS = {"albedo", "emission", "specular"}
+_OBJECT_MATERIAL_KEYS = {"albedo", "emission", "specular", "transmittance"}
 #: Every key an ``[[object]]`` table may have.
 _OBJECT_KEYS = {
     "mesh",
@@ -316,10 +316,10 @@ def _materials_from_dict(mats, source: str) -> dict[str, Material]:
 def _material_from_dict(m, where: str, table: tuple) -> Material:
     if not isinstance(m, dict):
         raise _Located(f"{where}: material must be a table", table)
-    bad = set(m) - {"albedo", "emission", "specular"}
+    bad = set(m) - {"albedo", "emission", "specular", "transmittance"}
     if bad:
         raise _Located(f"{where}: unknown material key(s) {sorted(bad)}", table, sorted(bad)[0])
-    kw = {k: m[k] for k in ("albedo", "emission") if k in m}
+    kw = {k: m[k] for k in ("albedo", "emission", "transmittance") if k in m}
     spec = m.get("specular")
     if spec is not None:
         if not isinstance(spec, dict):

@@ -69,6 +69,8 @@ def _object_to_dict(o, fname: str) -> dict:
         "emission": [float(x) for x in o.material.emission],
         "two_sided": bool(o.two_sided),
     }
+    if o.material.is_sheet:
+        entry["transmittance"] = [float(x) for x in o.material.transmittance]
     spec = o.material.specular
     if spec is not None:
         entry["specular"] = {
