@@ -493,10 +493,11 @@ class Scene:
                 )
                 continue
             try:
+                tex = m.texture if m.uv is not None else None
                 if m.transmittance is not None and np.max(m.transmittance) > 0:
+                    tex = None
                     mat = Material(albedo=0.0, transmittance=m.transmittance)
                 else:
-                    tex = m.texture if m.uv is not None else None
                     mat = Material(albedo=m.albedo, emission=m.emission, texture=tex)
                 obj = scene.add(
                     trimesh.Trimesh(m.vertices, m.faces, process=False),
