@@ -96,7 +96,9 @@ def test_rectangle_lamp_matches_form_factor():
 def test_blocker_casts_umbra_and_penumbra():
     sc = _lamp_over_floor(blocker=True)
     vox = voxgi.voxelize(sc, resolution=32)
-    E, _ = direct_irradiance(sc, vox, samples=512, threads=1)
+    # 4096 samples: in the deep penumbra (a fifth of the lamp seen) 512 leave
+    # a standard error of 1.9%, about the tolerance (measured over 8 seeds)
+    E, _ = direct_irradiance(sc, vox, samples=4096, threads=1)
     floor = (vox.object_id == 0) & ~vox.back & (vox.area > 0)
     x, z = vox.centroid[:, 0], vox.centroid[:, 2]
     # A ray from floor point p to lamp point L (lamp x in [-0.2, 0.2] at height 1) crosses

@@ -31,7 +31,10 @@ from .voxels import VoxelSet
 
 __all__ = ["EmitterSampler", "check_scene_and_records", "direct_irradiance", "light_irradiance"]
 
-_ROUNDS = 3
+#: The pilot's samples per record: a quarter of ``samples``, at least this many.
+_PILOT_SAMPLES = 4
+#: At most this many times ``samples`` for one record.
+_MOST_SAMPLES = 32
 
 
 class EmitterSampler:
@@ -178,9 +181,10 @@ def direct_irradiance(
         Shadow-ray offset from both ends, scene units (None: 1e-4 of the
         scene's diagonal).
     rel_error : float, optional
-        Records whose estimated standard error exceeds this share of their
-        irradiance (those next to an emitter) get more samples, in up to
-        two more rounds.
+        Records whose standard error, by a pilot of a quarter of ``samples``
+        (at least 4), would exceed this share of their irradiance (those next
+        to an emitter) get more samples, up to 32 times ``samples``; the
+        pilot only chooses the counts, so the estimate stays unbiased.
     receivers : {"reflecting", "all"}, optional
         The records to light: those that reflect (albedo > 0), which is all
         the light transport needs, or every record with area (black ones
@@ -220,13 +224,16 @@ def direct_irradiance(
             offset = 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
         with _Rays(scene, vox, emit, float(offset), nthreads) as rays:
             rng = np.random.default_rng([seed, 1])
-            groups = [(lit, samples)]
-            for _ in range(_ROUNDS):
-                for todo, per in groups:
-                    stats["rays"] += rays.estimate(est, todo, per, rng, max_rays)
-                groups = _noisy(est, lit, rel_error, samples)
-                if not groups:
-                    break
+            # A pilot decides how many samples each record takes; the
+            # estimate is made of fresh samples alone, so that a record's
+            # count does not depend on them: refining records because their
+            # own first samples look noisy would keep the lucky ones and
+            # redraw the unlucky, a bias of +0.3% in a furnace.
+            pilot = _Estimate(len(vox))
+            per = max(_PILOT_SAMPLES, samples // 4)
+            stats["rays"] += rays.estimate(pilot, lit, per, rng, max_rays)
+            for todo, per in _sample_counts(pilot, lit, rel_error, samples):
+                stats["rays"] += rays.estimate(est, todo, per, rng, max_rays)
     stats["refined_records"] = int(np.count_nonzero(est.counts > samples))
     stats["max_samples"] = int(est.counts.max(initial=0))
     stats["seconds"] = time.perf_counter() - t0
@@ -335,26 +342,27 @@ class _Rays:
         return len(todo) * per
 
 
-def _noisy(
-    est: _Estimate, lit: np.ndarray, rel_error: float, samples: int
+def _sample_counts(
+    pilot: _Estimate, lit: np.ndarray, rel_error: float, samples: int
 ) -> list[tuple[np.ndarray, int]]:
-    """Records whose standard error exceeds ``rel_error`` of their estimate,
-    grouped by the samples each still needs.
+    """The records grouped by the samples each takes: enough for the standard
+    error the pilot's variance implies to be ``rel_error`` of its estimate,
+    at least ``samples``, at most :data:`_MOST_SAMPLES` times it.
 
-    The counts are rounded up to powers of two (at least ``samples``, at most
-    16 times it a round), so that records next to an emitter, where the 1/r²
-    term varies most, get the samples they need in a few batches and the rest
-    of the scene keeps ``samples``.
+    The counts are rounded up to powers of two, so that records next to an
+    emitter, where the 1/r² term varies most, get the samples they need in
+    a few batches and the rest of the scene keeps ``samples``.
     """
-    lum = est.irradiance[lit] @ LUMINANCE
-    var = np.maximum(est.mean_sq[lit] - lum * lum, 0.0) / est.counts[lit]
+    lum = pilot.irradiance[lit] @ LUMINANCE
+    counts = np.maximum(pilot.counts[lit], 1)
+    # the sample variance, with Bessel's correction (the pilot is small)
+    var = np.maximum(pilot.mean_sq[lit] - lum * lum, 0.0) * counts / np.maximum(counts - 1, 1)
     need = var / np.maximum((rel_error * lum) ** 2, np.finfo(np.float64).tiny)
-    bad = (lum > 0) & (need > 1.0)
-    if not np.any(bad):
-        return []
-    extra = np.clip((need[bad] - 1.0) * est.counts[lit][bad], samples, 16 * samples)
-    size = np.minimum(2 ** np.ceil(np.log2(extra)).astype(np.int64), 16 * samples)
-    return [(lit[bad][size == k], int(k)) for k in np.unique(size)]
+    need = np.where(lum > 0, need, 0.0)
+    size = np.clip(need, samples, _MOST_SAMPLES * samples)
+    size = np.minimum(2 ** np.ceil(np.log2(size)).astype(np.int64), _MOST_SAMPLES * samples)
+    size = np.maximum(size, samples)
+    return [(lit[size == k], int(k)) for k in np.unique(size)]
 
 
 def _batch(args: tuple, rays: _Rays) -> tuple[np.ndarray, np.ndarray]:

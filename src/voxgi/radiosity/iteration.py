@@ -85,6 +85,10 @@ class State:
     seconds: float = 0.0
     residuals: list = field(default_factory=list)
     stopped: str | None = None
+    # The last update before the first tail: from the nonnegative direct
+    # light, a nonnegative vector turning into the slowest-fading mode, whose
+    # ratio the traced passes measure (traced_passes._dominant_ratio).
+    mode: np.ndarray | None = None
 
 
 class _Iteration:
@@ -103,7 +107,7 @@ class _Iteration:
     def __init__(self, p: Problem, gather: Gatherer, Hd: np.ndarray):
         self.p, self.gather, self.Hd = p, gather, Hd
         R = p.rho * Hd
-        self.s = State(R=R, Hg=np.zeros((p.n, 3)), dk=R.copy())
+        self.s = State(R=R, Hg=np.zeros((p.n, 3)), dk=R.copy(), mode=R)
         self.corrections = p.lds is not None
         self.extrap = _Extrapolator(p.area)
         rmax = float(p.rho.max())
@@ -152,6 +156,8 @@ class _Iteration:
                 s.stopped = f"iteration {s.it + 1} was not finite"
                 break
             s.R, s.Hg, s.dk = R_new, Hg, (self.p.rho * h_inc if self.corrections else d)
+            if self.extrap.count == 0:
+                s.mode = s.dk
             s.it += 1
             s.residuals.append(res)
             if bar is not None:  # the way to tol on a log scale: the quantity falls geometrically

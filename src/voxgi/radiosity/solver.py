@@ -144,7 +144,7 @@ def solve(
         s = iterate(p, gather, Hd, progress)
         p.stats["energy"] = energy_balance(p, Hd, s, lost_fraction(p, gather, s.vis), shoot_escape)
         back_fraction(p, gather)
-        s.R = traced_bounces(p, Hd, s.R)
+        s.R = traced_bounces(p, Hd, s.R, s.mode)
     finally:
         if hasattr(p.sysm, "close"):
             p.sysm.close()

@@ -3,7 +3,6 @@ triangles (``docs/design.md`` §5)."""
 
 from __future__ import annotations
 
-import itertools
 import time
 import warnings
 
@@ -31,15 +30,71 @@ def _why_not_traced(p: Problem) -> str | None:
     return None
 
 
-def traced_bounces(p: Problem, Hd: np.ndarray, R: np.ndarray) -> np.ndarray:
+#: Rays per record of the pass that measures the mean albedo each record
+#: sees (:func:`_dominant_ratio`); its noise averages out over the records.
+_ALBEDO_SAMPLES = 4
+
+
+def _dominant_ratio(p: Problem, seen_albedo: np.ndarray, mode: np.ndarray | None) -> np.ndarray:
+    """Per channel, the ratio by which the slowest-fading part of the
+    changes shrinks a pass (``docs/design.md`` §5).
+
+    For a nonnegative ``v`` the power of ``ρ T v`` is exactly
+    ``Σ ΔA_j v_j g_j``, ``g_j = (T ρ)_j`` the mean albedo that record j's
+    rays land on (reciprocity, ``ΔA_i F_ij = ΔA_j F_ji``); so the ratio of
+    the lines' last positive update ``mode``, close to the slowest mode,
+    weighs ``g`` by where that mode lives. ``g`` itself comes from one pass of
+    rays; in a closed room of one albedo ρ every ray lands on ρ, and the
+    ratio is ρ exactly.
+    """
+    if mode is None:
+        mode = p.rho
+    w = p.area[:, None] * np.maximum(mode, 0.0)
+    den = w.sum(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = np.where(den > 0, (w * seen_albedo).sum(axis=0) / den, 0.0)
+    return lam
+
+
+def _tail(p: Problem, d: np.ndarray, lam: np.ndarray, mode: np.ndarray | None) -> np.ndarray:
+    """The rest of the series after the change ``d``: its power times
+    ``λ / (1 − λ)``, per channel, in the shape of the slowest mode, but
+    nowhere more than twice a record's own ``|d|`` times ``λ / (1 − λ)``.
+
+    What is left after a few passes is that mode (the parts that fade faster
+    are gone by then), so the tail takes its shape from the lines' last
+    positive update rather than from ``d``: a junction record whose own
+    correction is still fading fast, or the noise of the last pass, is not
+    multiplied by ``λ / (1 − λ)``. Where the lines' mode holds light that the
+    rays' changes do not (what the lines carried through a wall thinner
+    than a voxel), the record's own change bounds it.
+    """
+    area = p.area[:, None]
+    if mode is None:
+        return d * (lam / (1 - lam))
+    shape = np.maximum(mode, 0.0)
+    norm = (area * shape).sum(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(norm > 0, (area * d).sum(axis=0) / norm, 0.0)
+    smooth = scale * shape
+    bounded = np.sign(smooth) * np.minimum(np.abs(smooth), 2.0 * np.abs(d))
+    return np.where(norm > 0, bounded, d) * (lam / (1 - lam))
+
+
+def traced_bounces(
+    p: Problem, Hd: np.ndarray, R: np.ndarray, mode: np.ndarray | None = None
+) -> np.ndarray:
     """The reflected radiosity after passes of rays against the exact
     triangles, started from the lines' answer ``R`` (``docs/design.md`` §5).
 
-    The first pass gathers all of ``R``: ``R_1 = ρ (H_d + T R)``. Each later
+    The first pass gathers all of ``R``: ``R_1 = ρ (H_d + T R_0)``. Each later
     pass carries only the last change, ``d_{k+1} = ρ T d_k``, so its noise
-    shrinks with the change; once, after two passes at least, the remaining
-    error of the geometric series, ``r λ / (1 − λ)`` as for the lines, is
-    under ``tol``, its tail ``d λ / (1 − λ)`` is added.
+    shrinks with the change. The changes fade, after a few passes, by the
+    ratio λ of the slowest mode (per channel; :func:`_dominant_ratio`, from
+    the lines' last positive update ``mode``, or the larger measured ratio
+    of the changes, at most the largest albedo); once, after two passes at
+    least, the remaining error of the geometric series ``Σ_c r_c λ_c / (1 − λ_c)``
+    is under ``tol``, its tail ``d λ / (1 − λ)`` is added.
     """
     opt = p.opt
     if opt.indirect_light != "traced":
@@ -56,28 +111,32 @@ def traced_bounces(p: Problem, Hd: np.ndarray, R: np.ndarray) -> np.ndarray:
     lam_bound = float(min(max(float(p.rho.max()), 0.5), 1 - 1e-6))
     residuals = []
     with TracedGather(p.vox.scene, p.vox, threads=opt.threads) as trace:
+        seen_albedo = trace(np.asarray(p.rho, np.float64), _ALBEDO_SAMPLES, seed=0)
+        lam_mode = np.minimum(_dominant_ratio(p, seen_albedo, mode), lam_bound)
         R_new = p.rho * (Hd + trace(R, opt.traced_samples, seed=1))
         d = R_new - R
         R = R_new
         Btot = float(np.sum(area * np.abs(p.E + R)))
-        lam = lam_bound
+        lam = lam_mode
+        size = None
         while Btot > 0:
-            residuals.append(float(np.sum(area * np.abs(d))) / Btot)
-            if len(residuals) >= 2 and min(residuals[-3:-1]) > 0:
-                # the larger of the last two ratios: the first pass's noise
-                # shrinks faster than the light still on its way
-                last = residuals[-3:]
-                lam = min(max(b / a for a, b in itertools.pairwise(last)), lam_bound)
+            size, previous = np.sum(area * np.abs(d), axis=0), size
+            residuals.append(float(size.sum()) / Btot)
+            if previous is not None:
+                # a mode the lines' update missed shows in the changes' own ratio
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    measured = np.where(previous > 0, size / previous, 0.0)
+                lam = np.clip(np.maximum(lam_mode, measured), 0.0, lam_bound)
             # At least two passes: the first one's change is mostly local (a
-            # slit, a junction) and small against the whole, so the rule
-            # waits for the ratio it implies to be measured.
-            done = len(residuals) >= 2 and residuals[-1] * lam / (1 - lam) < opt.tol
+            # slit, a junction) and noisy, and its tail would amplify both.
+            remaining = float(np.sum(size * lam / (1 - lam))) / Btot
+            done = len(residuals) >= 2 and remaining < opt.tol
             if done or len(residuals) >= _TRACED_PASSES:
                 break
             d = p.rho * trace(d, later, seed=len(residuals) + 1)
             R = R + d
         if len(residuals) >= 2:
-            R = R + d * (lam / (1 - lam))
+            R = R + _tail(p, d, lam, mode)
         rays = trace.rays
     if not np.all(np.isfinite(R)):
         warnings.warn(
@@ -100,7 +159,11 @@ def traced_bounces(p: Problem, Hd: np.ndarray, R: np.ndarray) -> np.ndarray:
         "rays": int(rays),
         "samples": [opt.traced_samples, later],
         "residuals": residuals,
-        "ratio": lam,
+        # the ratio of the tail (the largest channel's), per channel, and
+        # that of the lines' slowest mode under the traced rays
+        "ratio": float(np.max(lam)),
+        "ratios": lam.tolist(),
+        "mode_ratios": lam_mode.tolist(),
         "reflected_power_change": change.tolist(),
         # records whose sum came out below zero, set to zero, and the power
         # that adds (0.01-0.06% of the reflected power in the built-in interiors)
