@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "bind_shade.h"
+#include "bind_texture.h"
 #include "camera.h"
 
 namespace py = pybind11;
@@ -110,7 +111,11 @@ py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const 
                          std::pair<double, double> lens, const F64& tri_v, const F64& tri_ng,
                          const std::optional<F64>& corner_normals, const I32& tri_object,
                          const U8& obj_two_sided, const F32& obj_emission,
-                         const voxgi::RayScene& scene, int threads) {
+                         const voxgi::RayScene& scene, int threads,
+                         const std::optional<F32>& obj_albedo,
+                         const std::optional<std::vector<U8>>& tex_texels,
+                         const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
+                         const std::optional<F32>& corner_uv) {
     const voxgi::PixelCamera cam =
         make_camera(eye, right, up, forward, tan_half_fov, width, height, aperture, focus);
     double off[2], ln[2];
@@ -118,7 +123,19 @@ py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const 
     const voxgi::PrimaryScene sc =
         make_primary_scene(tri_v, tri_ng, corner_normals, tri_object, obj_two_sided, obj_emission);
     check_scene(scene, tri_v.shape(0));
+    const py::ssize_t O = obj_emission.shape(0);
+    if (obj_albedo) check_2d(*obj_albedo, O, 3, "obj_albedo");
+    const auto tex = make_textures(tex_texels, tex_info, obj_texture, corner_uv, tri_v.shape(0), O);
+    if (tex && !obj_albedo) throw py::value_error("textures need obj_albedo");
     const py::ssize_t P = width * height;
+    py::object albedo = py::none();
+    float* pa = nullptr;
+    if (obj_albedo) {
+        F32 a({P, py::ssize_t(3)});
+        pa = a.mutable_data();
+        albedo = a;
+    }
+    const float* oa = obj_albedo ? obj_albedo->data() : nullptr;
     F64 pos({P, py::ssize_t(3)});
     F32 normal({P, py::ssize_t(3)}), ng({P, py::ssize_t(3)}), wo({P, py::ssize_t(3)}),
         le({P, py::ssize_t(3)});
@@ -134,10 +151,11 @@ py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const 
     {
         py::gil_scoped_release release;
         voxgi::camera_hits(cam, off, ln, scene, sc, ppos, pn, pg, pw, pm, pl, prim.mutable_data(),
-                           pt, threads, stop);
+                           pt, threads, stop, tex ? &tex->surface : nullptr, oa, pa);
     }
     return py::make_tuple(pos, normal, ng, wo, material, le, prim,
-                          scene.has_sheets() ? py::object(through) : py::object(py::none()));
+                          scene.has_sheets() ? py::object(through) : py::object(py::none()),
+                          albedo);
 }
 
 }  // namespace
@@ -157,13 +175,20 @@ for aperture 0, else a thin lens focused at distance focus along forward.)doc");
           "aperture"_a, "focus"_a, "offset"_a, "lens"_a, "tri_v"_a.noconvert(),
           "tri_ng"_a.noconvert(), "corner_normals"_a.noconvert(), "tri_object"_a.noconvert(),
           "obj_two_sided"_a.noconvert(), "obj_emission"_a.noconvert(), "scene"_a, "threads"_a = 0,
+          "obj_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
+          "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
+          "corner_uv"_a.noconvert() = py::none(),
           R"doc(Every pixel's camera ray (camera_rays, with eye in the scene's frame), its
 first hit in scene (a RayScene built from tri_v) and the hit: the exact point
 on the hit triangle's plane pos (P, 3) float64, normal, ng and wo (the
 unit direction back to the eye) (P, 3) float32, the shading and geometric
 normals turned to the viewer, material (P,) int32 (-1: a miss or a one-sided
 back), its emission (P, 3) float32, the hit triangle (P,) int32 (-1: none),
-P = width * height, row-major from the top-left pixel, and where the scene
-has sheets the product of their transmittances before the hit (P, 3)
-float32 (None otherwise).)doc");
+P = width * height, row-major from the top-left pixel, where the scene has
+sheets the product of their transmittances before the hit (P, 3) float32
+(None otherwise) and, with obj_albedo (O, 3) float32, each hit's albedo
+(P, 3) float32 (else None): its object's, or its texture's at the hit point
+where the textures (tex_texels, a list of (H, W, 3) uint8; tex_info (T, 12)
+float64: filter, wrap, raw, to_uv, factor; obj_texture (O,) int32, -1: none;
+corner_uv (F, 3, 2) float32) give the object one.)doc");
 }

@@ -4,6 +4,7 @@
 #include <optional>
 
 #include "bind_shade.h"
+#include "bind_texture.h"
 
 namespace py = pybind11;
 using namespace pybind11::literals;
@@ -79,24 +80,29 @@ voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_cell_start
     return grid;
 }
 
-int64_t gather_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
-                        F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
-                        int n_gather, uint64_t seed, int64_t frame, double eps, F64 tri_v,
-                        I32 tri_object, U8 obj_two_sided, I64 rec_sorted_key, I32 rec_cell_start,
-                        F32 rec_packed, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch,
-                        const voxgi::RayScene& scene, F32Out out, int threads,
-                        const std::optional<F64>& env_radiance,
-                        const std::optional<F64>& env_to_world,
-                        const std::optional<F64>& env_texel_pdf,
-                        const std::optional<F64>& env_row_solid_angle, double env_samples) {
+int64_t gather_light_py(
+    F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, F32 mat_albedo,
+    F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, int n_gather, uint64_t seed, int64_t frame,
+    double eps, F64 tri_v, I32 tri_object, U8 obj_two_sided, I64 rec_sorted_key, I32 rec_cell_start,
+    F32 rec_packed, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch,
+    const voxgi::RayScene& scene, F32Out out, int threads, const std::optional<F64>& env_radiance,
+    const std::optional<F64>& env_to_world, const std::optional<F64>& env_texel_pdf,
+    const std::optional<F64>& env_row_solid_angle, double env_samples,
+    const std::optional<F32>& hit_albedo, const std::optional<std::vector<U8>>& tex_texels,
+    const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
+    const std::optional<F32>& corner_uv) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    set_hit_albedo(hits, hit_albedo);
     if (n_gather < 1 || n_gather > 4096) throw py::value_error("n_gather must be in [1, 4096]");
     if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
     voxgi::ShadeMIS mis = make_mis(n_gather);
     voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
     check_scene(scene, tris.count);
+    const auto tex = make_textures(tex_texels, tex_info, obj_texture, corner_uv, tris.count,
+                                   obj_two_sided.shape(0));
+    if (tex) tris.textures = &tex->surface;
     voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
                                        grid_lo, grid_origin, pitch);
     const std::optional<voxgi::EnvironmentMap> env = make_environment(
@@ -128,6 +134,9 @@ void bind_gather_light(py::module_& m) {
           "env_radiance"_a.noconvert() = py::none(), "env_to_world"_a.noconvert() = py::none(),
           "env_texel_pdf"_a.noconvert() = py::none(),
           "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
+          "hit_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
+          "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
+          "corner_uv"_a.noconvert() = py::none(),
           R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit
@@ -136,6 +145,9 @@ the VPLs; added into out (P, 3) float32. With the environment's tables
 (env_radiance (H, W, 3) float64, env_to_world (3, 3), env_texel_pdf (H*W,),
 env_row_solid_angle (H,) float64, as voxgi.Environment samples), a ray that
 meets nothing adds the environment's radiance MIS-weighted against
-env_samples environment samples per pixel. Returns the number of gather
-rays.)doc");
+env_samples environment samples per pixel. With hit_albedo (P, 3) float32
+each pixel's own diffuse albedo replaces its material's; with the textures
+(as camera_hits takes them) a ray that lands on a textured object takes the
+record's radiance times the texture there over the record's albedo (the
+packed row's albedo). Returns the number of gather rays.)doc");
 }

@@ -64,6 +64,13 @@ inline voxgi::ShadeHits make_hits(const F64& hit_pos, const F32& hit_normal, con
     return hits;
 }
 
+// Each hit's own diffuse albedo (a texture's), when given: (P, 3).
+inline void set_hit_albedo(voxgi::ShadeHits& hits, const std::optional<F32>& hit_albedo) {
+    if (!hit_albedo) return;
+    check_2d(*hit_albedo, hits.count, 3, "hit_albedo");
+    hits.albedo = hit_albedo->data();
+}
+
 // ray_count (P,): each pixel's rays, non-negative and summing to all `rays`.
 inline void check_ray_counts(const I64& ray_count, py::ssize_t rays) {
     const int64_t* pc = ray_count.data();

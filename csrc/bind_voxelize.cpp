@@ -4,6 +4,7 @@
 #include <memory>
 
 #include "bind_common.h"
+#include "bind_texture.h"
 #include "voxelize.h"
 
 namespace py = pybind11;
@@ -17,7 +18,9 @@ using B8 = py::array_t<bool, py::array::c_style>;
 py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_sided,
                      const F32& albedo, const F32& emission, const F64& origin, double pitch,
                      const I32& dims, double cos_cluster, bool cut, double eps, int threads,
-                     const py::object& progress) {
+                     const py::object& progress, const std::optional<std::vector<U8>>& tex_texels,
+                     const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
+                     const std::optional<F32>& corner_uv) {
     if (triangles.ndim() != 3 || triangles.shape(1) != 3 || triangles.shape(2) != 3)
         throw py::value_error("triangles must have shape (F, 3, 3)");
     const py::ssize_t F = triangles.shape(0);
@@ -47,6 +50,8 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
     P.cos_cluster = cos_cluster;
     P.cut = cut;
     P.eps = eps;
+    const auto tex = make_textures(tex_texels, tex_info, obj_texture, corner_uv, F, O);
+    if (tex) P.textures = &tex->surface;
 
     voxgi::VoxelizeStats st;
     voxgi::VoxelizeProgress prog;
@@ -142,6 +147,8 @@ void bind_voxelize(py::module_& m) {
           "two_sided"_a.noconvert(), "albedo"_a.noconvert(), "emission"_a.noconvert(),
           "origin"_a.noconvert(), "pitch"_a, "dims"_a.noconvert(), "cos_cluster"_a = 0.5,
           "cut"_a = true, "eps"_a = 1e-9, "threads"_a = 0, "progress"_a = py::none(),
+          "tex_texels"_a = py::none(), "tex_info"_a.noconvert() = py::none(),
+          "obj_texture"_a.noconvert() = py::none(), "corner_uv"_a.noconvert() = py::none(),
           R"doc(Exact sparse supercover voxelization of triangles (low level; see voxgi.voxelize).
 
 Parameters
@@ -170,6 +177,11 @@ threads : int
 progress : callable(phase, done, total) or None
     Called from the calling thread about every 100 ms, and once at the end
     with done == total.
+tex_texels, tex_info, obj_texture, corner_uv : optional, all or none
+    The objects' textures (a list of (H, W, 3) uint8; (T, 12) float64:
+    filter, wrap, raw, to_uv, factor; (O,) int32, -1: none; (F, 3, 2)
+    float32): a textured object's records take the texture's mean over their
+    own surface as their albedo.
 
 Returns
 -------

@@ -40,10 +40,12 @@ py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 
                        F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
                        F64 vpl_pos, F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa,
                        double n_gather, double eps, const voxgi::RayScene& scene,
-                       std::optional<I32> pixel_set, std::optional<I64> set_start, int threads) {
+                       std::optional<I32> pixel_set, std::optional<I64> set_start, int threads,
+                       const std::optional<F32>& hit_albedo) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    set_hit_albedo(hits, hit_albedo);
     if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
     voxgi::ShadeMIS mis = make_mis(n_gather);
     voxgi::ShadeVPLs vpls = make_vpls(vpl_pos, vpl_normal, vpl_weight, vpl_area, vpl_pa, n_gather);
@@ -99,10 +101,11 @@ auto shade_brdf_py(F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_gl
 auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                          F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
                          I64 ray_count, F32 ray_dir, F32 ray_weight, U8 occluded, F32Out out,
-                         int threads) {
+                         int threads, const std::optional<F32>& hit_albedo) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    set_hit_albedo(hits, hit_albedo);
     const py::ssize_t P = hits.count;
     check_1d(ray_count, P, "ray_count");
     check_2d(ray_dir, -1, 3, "ray_dir");
@@ -129,10 +132,12 @@ int64_t environment_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo
                              const F64& env_texel_pdf, const F64& env_row_solid_angle,
                              const F64& env_texel_cdf, const F64& env_row_cos, int env_samples,
                              double n_gather, uint64_t seed, int64_t frame, double eps,
-                             const voxgi::RayScene& scene, F32Out out, int threads) {
+                             const voxgi::RayScene& scene, F32Out out, int threads,
+                             const std::optional<F32>& hit_albedo) {
     voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
+    set_hit_albedo(hits, hit_albedo);
     if (env_samples < 0 || env_samples > 4096)
         throw py::value_error("env_samples must be in [0, 4096]");
     if (!(n_gather >= 0.0) || !std::isfinite(n_gather))
@@ -164,7 +169,7 @@ void bind_vpl_shade(py::module_& m) {
           "env_radiance"_a.noconvert(), "env_to_world"_a.noconvert(), "env_texel_pdf"_a.noconvert(),
           "env_row_solid_angle"_a.noconvert(), "env_texel_cdf"_a.noconvert(),
           "env_row_cos"_a.noconvert(), "env_samples"_a, "n_gather"_a, "seed"_a, "frame"_a, "eps"_a,
-          "scene"_a, "out"_a.noconvert(), "threads"_a = 0,
+          "scene"_a, "out"_a.noconvert(), "threads"_a = 0, "hit_albedo"_a.noconvert() = py::none(),
           R"doc(The environment's light at the hits: env_samples directions per shaded
 pixel drawn from the environment's tables (as voxgi.Environment.sample:
 env_texel_cdf (H*W,), env_row_cos (H+1,)), each weighed by the balance
@@ -179,7 +184,7 @@ out (P, 3) float32. Returns the number of rays traced.)doc");
           "vpl_normal"_a.noconvert(), "vpl_weight"_a.noconvert(), "vpl_area"_a.noconvert(),
           "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "scene"_a,
           "pixel_set"_a.noconvert() = py::none(), "set_start"_a.noconvert() = py::none(),
-          "threads"_a = 0,
+          "threads"_a = 0, "hit_albedo"_a.noconvert() = py::none(),
           R"doc(The VPLs' light at the hits: per (pixel, VPL) pair the unoccluded term and
 its shadow ray, traced in scene (a RayScene) as it is made; returns each
 pixel's sum over its free rays in VPL order (P, 3) float32 and the number of
@@ -200,6 +205,7 @@ int64, pixel p sees only the VPLs of set pixel_set[p].)doc");
           "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(),
           "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(), "ray_weight"_a.noconvert(),
           "occluded"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0,
+          "hit_albedo"_a.noconvert() = py::none(),
           R"doc(Light along known directions (delta lights, environment samples, escaped
 gather rays): adds f(wi, wo) max(0, n.wi) weight into out (P, 3) for each ray
 (pixel-major, ray_count (P,) int64) not occluded (uint8 (R,), or empty: none).)doc");

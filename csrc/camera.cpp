@@ -33,10 +33,27 @@ void camera_rays(const PixelCamera& cam, const double offset[2], const double le
     });
 }
 
+// The diffuse albedo of a primary hit at x on triangle t of object m (-1:
+// not shaded, 0).
+static void primary_albedo(const PrimaryScene& triangles, const SurfaceTextures* textures,
+                           const float* obj_albedo, int32_t t, const double x[3], int32_t m,
+                           float out[3]) {
+    for (int c = 0; c < 3; ++c) out[c] = 0.f;
+    if (m < 0) return;
+    if (textures) {
+        const double* v0 = triangles.v + 9 * int64_t(t);
+        double b1, b2;
+        barycentric(v0, v0 + 3, v0 + 6, x, b1, b2);
+        if (surface_albedo(*textures, t, m, b1, b2, out)) return;
+    }
+    for (int c = 0; c < 3; ++c) out[c] = obj_albedo[3 * m + c];
+}
+
 void camera_hits(const PixelCamera& cam, const double offset[2], const double lens[2],
                  const RayScene& scene, const PrimaryScene& triangles, double* pos, float* normal,
                  float* ng, float* wo, int32_t* material, float* emission, int32_t* prim,
-                 float* through, int threads, const StopCheck& stop) {
+                 float* through, int threads, const StopCheck& stop,
+                 const SurfaceTextures* textures, const float* obj_albedo, float* albedo) {
     auto one_pixel = [&](int64_t p) {
         double o[3], d[3];
         camera_ray(cam, offset, lens, p, o, d);
@@ -48,6 +65,9 @@ void camera_hits(const PixelCamera& cam, const double offset[2], const double le
         primary_hit(o, d, t, triangles, pos + 3 * p, normal + 3 * p, ng + 3 * p, material + p,
                     emission + 3 * p);
         for (int c = 0; c < 3; ++c) wo[3 * p + c] = float(-d[c]);
+        if (albedo)
+            primary_albedo(triangles, textures, obj_albedo, t, pos + 3 * p, material[p],
+                           albedo + 3 * p);
     };
     // 512 pixels a task: neighbouring, coherent rays
     for_each_chunked(cam.width * cam.height, 512, threads, stop, one_pixel);

@@ -6,6 +6,7 @@
 #include <cstdint>
 
 #include "ray_scene.h"
+#include "texture.h"
 #include "util/parallel.h"
 #include "vpl_shade.h"
 
@@ -39,10 +40,15 @@ void camera_rays(const PixelCamera& cam, const double offset[2], const double le
 // pos (P, 3), normal, ng, wo (the unit direction back to the eye) (P, 3),
 // material (P,), emission (P, 3) and the hit triangle prim (P,) (-1: none),
 // P = width * height; `through` (P, 3) or null: the product of the sheets'
-// transmittances before the hit (RayScene::intersect).
+// transmittances before the hit (RayScene::intersect). With `albedo` (P, 3)
+// (nullable), also each hit's diffuse albedo: its object's `obj_albedo`
+// (O, 3), or its texture at the hit point where `textures` (nullable) gives
+// the object one; 0 where nothing is shaded.
 void camera_hits(const PixelCamera& cam, const double offset[2], const double lens[2],
                  const RayScene& scene, const PrimaryScene& triangles, double* pos, float* normal,
                  float* ng, float* wo, int32_t* material, float* emission, int32_t* prim,
-                 float* through, int threads, const StopCheck& stop);
+                 float* through, int threads, const StopCheck& stop,
+                 const SurfaceTextures* textures = nullptr, const float* obj_albedo = nullptr,
+                 float* albedo = nullptr);
 
 }  // namespace voxgi

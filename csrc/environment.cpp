@@ -112,7 +112,7 @@ void environment_light(const ShadeHits& hits, const ShadeMaterials& mats, const 
                 const float cos_x = dot3(nf, wf);
                 if (cos_x <= 0.f) continue;
                 float f[3];
-                shade_brdf(mats, m, nf, wf, wo, f);
+                shade_brdf(mats, m, hit_albedo(hits, mats, p, m), nf, wf, wo, f);
                 for (int ch = 0; ch < 3; ++ch)
                     sum[ch] += f[ch] * cos_x * float(L[ch] / dens) * T[ch];
             }

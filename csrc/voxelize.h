@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "texture.h"
 #include "util/parallel.h"
 
 namespace voxgi {
@@ -42,6 +43,10 @@ struct VoxelizeParams {
     double eps = 1e-9;             // touching tolerance, voxel units
     double cut_delta = 1e-6;       // a plane cuts a piece only if it has vertices
                                    //   farther than this (voxel units) on both sides
+    // nullable: a record of a textured object takes its texture's mean over
+    // the record's own surface (its clipped pieces) as its albedo, times
+    // nothing else; the object's albedo otherwise
+    const SurfaceTextures* textures = nullptr;
 };
 
 struct VoxelizeStats {

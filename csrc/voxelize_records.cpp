@@ -13,9 +13,13 @@ namespace voxgi {
 namespace voxelize_internal {
 namespace {
 
+// The largest float32 below 1: the bound of every albedo.
+const float kAlbedoMax = std::nextafter(1.0f, 0.0f);
+
 // ---- phase 3: records of one voxel -----------------------------------------
 
 struct Piece {
+    int64_t tri;  // the triangle it is a piece of
     int32_t obj;
     int32_t cluster;
     double tn[3];    // the triangle's unit normal (winding)
@@ -116,6 +120,63 @@ void signed_range(const PolyView& P, const double* n, double off, double& mn, do
     }
 }
 
+// The UV of point x (voxel units) of triangle T (texture.h's corner UVs
+// of triangle tri), into uv.
+void point_uv(const Tri& T, const float* corner_uv, const double x[3], double uv[2]) {
+    double b1, b2;
+    barycentric(T.g[0], T.g[1], T.g[2], x, b1, b2);
+    const double b0 = 1.0 - b1 - b2;
+    for (int c = 0; c < 2; ++c)
+        uv[c] = b0 * corner_uv[c] + b1 * corner_uv[2 + c] + b2 * corner_uv[4 + c];
+}
+
+// The mean of texture tex over the parts [begin, end) of one record (their
+// polygons fanned into triangles, each averaged in UV space and weighted by
+// its area); at the parts' points when none has area. Into albedo (3,).
+void record_texture_mean(const Context& ctx, const Texture& tex, const std::vector<Piece>& pieces,
+                         const std::vector<PartRef>& parts, size_t begin, size_t end,
+                         float albedo[3]) {
+    const SurfaceTextures& st = *ctx.P->textures;
+    double area_sum[3] = {0, 0, 0}, point_sum[3] = {0, 0, 0}, wsum = 0.0;
+    int points = 0;
+    for (size_t q = begin; q < end; ++q) {
+        const PartRef& pt = parts[q];
+        const Piece& pc = pieces[pt.piece];
+        Tri T;
+        if (!load_tri(ctx.tris, pc.tri, *ctx.P, T)) continue;
+        const float* cuv = st.corner_uv + 6 * pc.tri;
+        if (!(pt.area > 0) || pt.poly.n < 3) {
+            double uv[2];
+            point_uv(T, cuv, pt.c, uv);
+            float f[3];
+            texture_eval(tex, uv[0], uv[1], f);
+            for (int c = 0; c < 3; ++c) point_sum[c] += f[c];
+            ++points;
+            continue;
+        }
+        const double* a = pt.poly.v[0];
+        double uv[3][2];
+        point_uv(T, cuv, a, uv[0]);
+        for (int i = 1; i + 1 < pt.poly.n; ++i) {
+            const double *b = pt.poly.v[i], *c = pt.poly.v[i + 1];
+            const double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+            const double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+            double cr[3];
+            cross3(e1, e2, cr);
+            const double w = 0.5 * std::sqrt(dot3(cr, cr));
+            if (!(w > 0)) continue;
+            point_uv(T, cuv, b, uv[1]);
+            point_uv(T, cuv, c, uv[2]);
+            double m[3];
+            texture_triangle_mean(tex, uv, m);
+            for (int d = 0; d < 3; ++d) area_sum[d] += w * m[d];
+            wsum += w;
+        }
+    }
+    for (int d = 0; d < 3; ++d)
+        albedo[d] = float(wsum > 0 ? area_sum[d] / wsum : point_sum[d] / std::max(points, 1));
+}
+
 void emit_records(const Context& ctx, const int64_t* cell, const Cluster& cl,
                   const std::vector<Piece>& pieces, const std::vector<PartRef>& parts, size_t begin,
                   size_t end, std::vector<VoxelRecord>& out, ChunkStats& cs) {
@@ -177,11 +238,20 @@ void emit_records(const Context& ctx, const int64_t* cell, const Cluster& cl,
         ++cs.touch;
     }
     clamp_to_cell(cen, cell);
+    const SurfaceTextures* tx = P.textures;
+    const int32_t tk = tx && tx->object_texture ? tx->object_texture[cl.obj] : -1;
+    float tex_albedo[3];
+    if (tk >= 0) {
+        record_texture_mean(ctx, tx->textures[tk], pieces, parts, begin, end, tex_albedo);
+        // below 1 in float32, as every albedo the solve takes (docs/design.md §12)
+        for (int d = 0; d < 3; ++d)
+            tex_albedo[d] = std::min(std::max(tex_albedo[d], 0.0f), kAlbedoMax);
+    }
     VoxelRecord r;
     for (int d = 0; d < 3; ++d) {
         r.ijk[d] = static_cast<int32_t>(cell[d]);
         r.normal[d] = static_cast<float>(nrm[d]);
-        r.albedo[d] = ctx.albedo[cl.obj * 3 + d];
+        r.albedo[d] = tk >= 0 ? tex_albedo[d] : ctx.albedo[cl.obj * 3 + d];
         r.emission[d] = ctx.emission[cl.obj * 3 + d];
         r.centroid[d] = P.origin[d] + cen[d] * P.pitch;
     }
@@ -219,6 +289,7 @@ int clip_pieces(const Context& ctx, const int64_t cell[3], const Pair* pairs, in
         Tri T;
         if (!load_tri(ctx.tris, pairs[q].tri, P, T)) continue;  // counted in phase 1
         Piece& pc = pieces[n_pieces++];
+        pc.tri = pairs[q].tri;
         pc.obj = ctx.tri_object[pairs[q].tri];
         pc.cluster = -1;
         std::memcpy(pc.tn, T.n, sizeof(T.n));

@@ -52,7 +52,7 @@ inline float pow5(float x) {
 }
 
 // Tangent frame (u, v) around n: u from n x (0,1,0), or n x (1,0,0) when n is
-// near +-y (docs/design.md §6; meshes carry no UVs in voxgi).
+// near +-y (docs/design.md §6; not from a mesh's UVs, which only textures read).
 inline void tangent_frame(const float n[3], float u[3], float v[3]) {
     if (std::fabs(n[1]) < 0.99f) {  // n x (0, 1, 0)
         u[0] = -n[2];
@@ -74,7 +74,11 @@ inline void tangent_frame(const float n[3], float u[3], float v[3]) {
 
 void shade_brdf(const ShadeMaterials& mats, int32_t m, const float n[3], const float k1[3],
                 const float k2[3], float f[3]) {
-    const float* rd = mats.albedo + 3 * int64_t(m);
+    shade_brdf(mats, m, mats.albedo + 3 * int64_t(m), n, k1, k2, f);
+}
+
+void shade_brdf(const ShadeMaterials& mats, int32_t m, const float* rd, const float n[3],
+                const float k1[3], const float k2[3], float f[3]) {
     if (!mats.glossy || !mats.glossy[m]) {
         for (int c = 0; c < 3; ++c) f[c] = rd[c] * float(1.0 / kPi);
         return;
@@ -146,7 +150,7 @@ void vpl_pixel_rays(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
             g = cc / (r2 + double(vpls.area[k]) / kPi);
         }
         float f[3];
-        shade_brdf(mats, m, n, wi, wo, f);
+        shade_brdf(mats, m, hit_albedo(hits, mats, p, m), n, wi, wo, f);
         const float* wk = vpls.weight + 3 * k;
         float cr[3];
         bool any = false;
@@ -364,6 +368,8 @@ struct GatherHit {
     int64_t key;       // its key on the grid (-1: outside), or -2: no light to look up
     bool escaped;      // met nothing: sees the environment
     float through[3];  // what the sheets before the hit let through
+    bool textured;     // tex holds the albedo of a texture at y
+    float tex[3];
 };
 
 // The point of triangle (a, b, c) nearest to p (Ericson, Real-Time Collision
@@ -407,6 +413,7 @@ void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordG
                 int64_t p, const float* ro, const float df[3], int32_t t, GatherHit& h) {
     h.key = -2;
     h.escaped = t < 0;
+    h.textured = false;
     // The hit point on the ray as traced: the same direction from the
     // pixel's own point meets the plane up to the offset away, which near a
     // surface meeting the triangle can be on that surface's far side.
@@ -442,6 +449,11 @@ void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordG
     h.obj = tris.object[t];
     if (!front && !tris.two_sided[h.obj]) return;  // black back of a one-sided surface
     for (int a = 0; a < 3; ++a) h.ns[a] = float(front ? nt[a] : -nt[a]);
+    if (tris.textures) {
+        double b1, b2;
+        barycentric(v0, v1, v2, h.y, b1, b2);
+        h.textured = surface_albedo(*tris.textures, t, h.obj, b1, b2, h.tex);
+    }
     cell_of(grid, h.y, h.c);
     h.key = grid_key(grid, h.c[0], h.c[1], h.c[2]);
 }
@@ -462,8 +474,13 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     const double denom = pa * r2 / cos_y + mis.n_gather * h.cos_x / kPi;
     if (!(denom > 0.0)) return;
     float f[3];
-    shade_brdf(mats, hits.material[p], hits.normal + 3 * p, h.wi, hits.wo + 3 * p, f);
-    const float* L = R.radiance;
+    const int32_t m = hits.material[p];
+    shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi, hits.wo + 3 * p,
+               f);
+    float L[3] = {R.radiance[0], R.radiance[1], R.radiance[2]};
+    if (h.textured)
+        for (int ch = 0; ch < 3; ++ch)
+            if (R.albedo[ch] > 0.f) L[ch] *= h.tex[ch] / R.albedo[ch];
     for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.through[ch] * h.cos_x / denom;
 }
 
@@ -482,7 +499,8 @@ void gather_escape_light(const ShadeHits& hits, const ShadeMaterials& mats, cons
     const double dens = env.n_samples * pdf + mis.n_gather * std::max(cos, 0.0) / kPi;
     const double inv = dens > 0.0 ? 1.0 / dens : 0.0;
     float f[3];
-    shade_brdf(mats, hits.material[p], n, h.wi, hits.wo + 3 * p, f);
+    const int32_t m = hits.material[p];
+    shade_brdf(mats, m, hit_albedo(hits, mats, p, m), n, h.wi, hits.wo + 3 * p, f);
     const double* L = env.radiance + 3 * texel;
     for (int ch = 0; ch < 3; ++ch) s[ch] += f[ch] * cos_x * float(L[ch] * inv) * h.through[ch];
 }
@@ -635,7 +653,7 @@ void light_accumulate(const ShadeHits& hits, const ShadeMaterials& mats, const i
             const float cos_x = dot3(n, wi);
             if (cos_x <= 0.f || dot3(ng, wi) <= 0.f) continue;
             float f[3];
-            shade_brdf(mats, m, n, wi, wo, f);
+            shade_brdf(mats, m, hit_albedo(hits, mats, p, m), n, wi, wo, f);
             for (int ch = 0; ch < 3; ++ch) sum[ch] += f[ch] * cos_x * ray_weight[3 * r + ch];
         }
         for (int ch = 0; ch < 3; ++ch) out[3 * p + ch] += sum[ch];

@@ -11,6 +11,7 @@
 
 #include "environment.h"
 #include "ray_scene.h"
+#include "texture.h"
 #include "util/parallel.h"
 
 namespace voxgi {
@@ -34,7 +35,15 @@ struct ShadeHits {
     const float* wo = nullptr;      // (P, 3) unit direction from the hit point to the viewer
     const int32_t* material =
         nullptr;  // (P,) material index, or -1: not shaded (miss, black back side)
+    const float* albedo = nullptr;  // (P, 3) each hit's diffuse albedo (its texture's), or
+                                    // null: its material's
 };
+
+// The diffuse albedo of hit p (of material m): the hit's own, or its material's.
+inline const float* hit_albedo(const ShadeHits& hits, const ShadeMaterials& mats, int64_t p,
+                               int32_t m) {
+    return hits.albedo ? hits.albedo + 3 * p : mats.albedo + 3 * int64_t(m);
+}
 
 // VPLs of one frame (K lights).
 struct ShadeVPLs {
@@ -68,7 +77,8 @@ struct PackedRecord {
     int32_t object;
     float pa;           // n_v p_a of the record (0: not a MIS VPL)
     float radiance[3];  // B / pi
-    float unused[5];
+    float albedo[3];    // the record's albedo (a texture's mean over its surface)
+    float unused[2];
 };
 static_assert(sizeof(PackedRecord) == 64, "one record, one 64-byte row");
 
@@ -92,6 +102,10 @@ struct ShadeTriangles {
     const double* v = nullptr;           // (F, 3, 3) corners
     const int32_t* object = nullptr;     // (F,)
     const uint8_t* two_sided = nullptr;  // (O,) per object
+    // nullable: where a gather ray lands on a textured (non-emitting) object,
+    // the record's light is taken times the texture there over the record's
+    // albedo (the texture's detail within the record)
+    const SurfaceTextures* textures = nullptr;
 };
 
 // Per (pixel, VPL) pair the unoccluded contribution f(wi, wo) W_k G_bounded
@@ -167,5 +181,8 @@ void primary_hit(const double o[3], const double d[3], int32_t t, const PrimaryS
 // k2 towards the viewer, n the normal; all unit vectors. Writes f (3,).
 void shade_brdf(const ShadeMaterials& mats, int32_t m, const float n[3], const float k1[3],
                 const float k2[3], float f[3]);
+// The same with the diffuse albedo rd (3,) in place of the material's (a texture's).
+void shade_brdf(const ShadeMaterials& mats, int32_t m, const float* rd, const float n[3],
+                const float k1[3], const float k2[3], float f[3]);
 
 }  // namespace voxgi

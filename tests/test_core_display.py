@@ -488,8 +488,9 @@ def test_camera_hits_are_the_camera_rays_traced_and_hit(aperture, corner_normals
     scene = voxgi.scenes.cornell_box(width=40, height=30)
     cam = scene.camera.replace(aperture=aperture, focus_distance=0.9)
     got, want, _, _ = _camera_hits_both_ways(scene, cam, (0.3, 0.8), (0.6, -0.5), corner_normals)
-    pos, normal, ng, wo, material, emission, prim, through = got
+    pos, normal, ng, wo, material, emission, prim, through, albedo = got
     assert through is None  # no sheets in the scene
+    assert albedo is None  # (asked for with obj_albedo only)
     w_pos, w_normal, w_ng, w_material, w_emission, w_prim, w_wo = want
     # the rays are the same arithmetic: the same triangles
     np.testing.assert_array_equal(prim, w_prim)

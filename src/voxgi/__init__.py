@@ -27,6 +27,7 @@ from .materials import AshikhminShirley, Material, glass_transmittance
 from .pipeline import render, solve
 from .radiosity import Solution, SolveTuning
 from .scene import Scene, SceneObject
+from .textures import Texture
 from .voxels import VoxelSet, voxelize
 
 try:
@@ -49,6 +50,7 @@ __all__ = [
     "Solution",
     "SolveTuning",
     "SpotLight",
+    "Texture",
     "VoxelSet",
     "__version__",
     "denoise",

@@ -4,6 +4,7 @@
 voxgi compiled core: voxelization, discrete-line propagation, VPL shading
 """
 from __future__ import annotations
+import collections.abc
 import numpy
 import numpy.typing
 import typing
@@ -167,7 +168,7 @@ def batch_error(batches: numpy.typing.NDArray[numpy.float32], size: typing.Suppo
     (externally studentized; inf: no test). Returns (stderr float64, flagged
     uint8), each of the batches' shape without k.
     """
-def camera_hits(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.NDArray[numpy.float64], up: numpy.typing.NDArray[numpy.float64], forward: numpy.typing.NDArray[numpy.float64], tan_half_fov: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, aperture: typing.SupportsFloat | typing.SupportsIndex, focus: typing.SupportsFloat | typing.SupportsIndex, offset: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], lens: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], tri_v: numpy.typing.NDArray[numpy.float64], tri_ng: numpy.typing.NDArray[numpy.float64], corner_normals: numpy.typing.NDArray[numpy.float64] | None, tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], obj_emission: numpy.typing.NDArray[numpy.float32], scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+def camera_hits(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.NDArray[numpy.float64], up: numpy.typing.NDArray[numpy.float64], forward: numpy.typing.NDArray[numpy.float64], tan_half_fov: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, aperture: typing.SupportsFloat | typing.SupportsIndex, focus: typing.SupportsFloat | typing.SupportsIndex, offset: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], lens: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], tri_v: numpy.typing.NDArray[numpy.float64], tri_ng: numpy.typing.NDArray[numpy.float64], corner_normals: numpy.typing.NDArray[numpy.float64] | None, tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], obj_emission: numpy.typing.NDArray[numpy.float32], scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0, obj_albedo: numpy.typing.NDArray[numpy.float32] | None = None, tex_texels: collections.abc.Sequence[typing.Annotated[numpy.typing.ArrayLike, numpy.uint8]] | None = None, tex_info: numpy.typing.NDArray[numpy.float64] | None = None, obj_texture: numpy.typing.NDArray[numpy.int32] | None = None, corner_uv: numpy.typing.NDArray[numpy.float32] | None = None) -> tuple:
     """
     Every pixel's camera ray (camera_rays, with eye in the scene's frame), its
     first hit in scene (a RayScene built from tri_v) and the hit: the exact point
@@ -175,9 +176,13 @@ def camera_hits(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.ND
     unit direction back to the eye) (P, 3) float32, the shading and geometric
     normals turned to the viewer, material (P,) int32 (-1: a miss or a one-sided
     back), its emission (P, 3) float32, the hit triangle (P,) int32 (-1: none),
-    P = width * height, row-major from the top-left pixel, and where the scene
-    has sheets the product of their transmittances before the hit (P, 3)
-    float32 (None otherwise).
+    P = width * height, row-major from the top-left pixel, where the scene has
+    sheets the product of their transmittances before the hit (P, 3) float32
+    (None otherwise) and, with obj_albedo (O, 3) float32, each hit's albedo
+    (P, 3) float32 (else None): its object's, or its texture's at the hit point
+    where the textures (tex_texels, a list of (H, W, 3) uint8; tex_info (T, 12)
+    float64: filter, wrap, raw, to_uv, factor; obj_texture (O,) int32, -1: none;
+    corner_uv (F, 3, 2) float32) give the object one.
     """
 def camera_rays(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.NDArray[numpy.float64], up: numpy.typing.NDArray[numpy.float64], forward: numpy.typing.NDArray[numpy.float64], tan_half_fov: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, aperture: typing.SupportsFloat | typing.SupportsIndex, focus: typing.SupportsFloat | typing.SupportsIndex, offset: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], lens: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
     """
@@ -202,7 +207,7 @@ def direct_light_traced(emitters: tuple, point: numpy.typing.NDArray[numpy.float
     None: not used): a hemisphere ray is traced against the emitters, and
     against scene only up to the nearest emitter it meets.
     """
-def environment_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], env_radiance: numpy.typing.NDArray[numpy.float64], env_to_world: numpy.typing.NDArray[numpy.float64], env_texel_pdf: numpy.typing.NDArray[numpy.float64], env_row_solid_angle: numpy.typing.NDArray[numpy.float64], env_texel_cdf: numpy.typing.NDArray[numpy.float64], env_row_cos: numpy.typing.NDArray[numpy.float64], env_samples: typing.SupportsInt | typing.SupportsIndex, n_gather: typing.SupportsFloat | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> int:
+def environment_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], env_radiance: numpy.typing.NDArray[numpy.float64], env_to_world: numpy.typing.NDArray[numpy.float64], env_texel_pdf: numpy.typing.NDArray[numpy.float64], env_row_solid_angle: numpy.typing.NDArray[numpy.float64], env_texel_cdf: numpy.typing.NDArray[numpy.float64], env_row_cos: numpy.typing.NDArray[numpy.float64], env_samples: typing.SupportsInt | typing.SupportsIndex, n_gather: typing.SupportsFloat | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None) -> int:
     """
     The environment's light at the hits: env_samples directions per shaded
     pixel drawn from the environment's tables (as voxgi.Environment.sample:
@@ -219,7 +224,7 @@ def gather_families(ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing
     families[family_indices] and returns the partial sums, (N, 3) float64 (see
     LineSystem.gather); sums from disjoint subsets add up to the full pass.
     """
-def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], n_gather: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, tri_v: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], rec_sorted_key: numpy.typing.NDArray[numpy.int64], rec_cell_start: numpy.typing.NDArray[numpy.int32], rec_packed: numpy.typing.NDArray[numpy.float32], grid_dims: numpy.typing.NDArray[numpy.int64], grid_lo: numpy.typing.NDArray[numpy.int64], grid_origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, env_radiance: numpy.typing.NDArray[numpy.float64] | None = None, env_to_world: numpy.typing.NDArray[numpy.float64] | None = None, env_texel_pdf: numpy.typing.NDArray[numpy.float64] | None = None, env_row_solid_angle: numpy.typing.NDArray[numpy.float64] | None = None, env_samples: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> int:
+def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], n_gather: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, tri_v: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], rec_sorted_key: numpy.typing.NDArray[numpy.int64], rec_cell_start: numpy.typing.NDArray[numpy.int32], rec_packed: numpy.typing.NDArray[numpy.float32], grid_dims: numpy.typing.NDArray[numpy.int64], grid_lo: numpy.typing.NDArray[numpy.int64], grid_origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, env_radiance: numpy.typing.NDArray[numpy.float64] | None = None, env_to_world: numpy.typing.NDArray[numpy.float64] | None = None, env_texel_pdf: numpy.typing.NDArray[numpy.float64] | None = None, env_row_solid_angle: numpy.typing.NDArray[numpy.float64] | None = None, env_samples: typing.SupportsFloat | typing.SupportsIndex = 0.0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, tex_texels: collections.abc.Sequence[typing.Annotated[numpy.typing.ArrayLike, numpy.uint8]] | None = None, tex_info: numpy.typing.NDArray[numpy.float64] | None = None, obj_texture: numpy.typing.NDArray[numpy.int32] | None = None, corner_uv: numpy.typing.NDArray[numpy.float32] | None = None) -> int:
     """
     Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
     hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
@@ -229,8 +234,11 @@ def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy
     (env_radiance (H, W, 3) float64, env_to_world (3, 3), env_texel_pdf (H*W,),
     env_row_solid_angle (H,) float64, as voxgi.Environment samples), a ray that
     meets nothing adds the environment's radiance MIS-weighted against
-    env_samples environment samples per pixel. Returns the number of gather
-    rays.
+    env_samples environment samples per pixel. With hit_albedo (P, 3) float32
+    each pixel's own diffuse albedo replaces its material's; with the textures
+    (as camera_hits takes them) a ray that lands on a textured object takes the
+    record's radiance times the texture there over the record's albedo (the
+    packed row's albedo). Returns the number of gather rays.
     """
 def geometry_filter(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_glossy: numpy.typing.NDArray[numpy.uint8], eye: numpy.typing.NDArray[numpy.float64], pixel_angle: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, radius: typing.SupportsInt | typing.SupportsIndex, reflected: numpy.typing.NDArray[numpy.float32], out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
     """
@@ -246,7 +254,7 @@ def hardware_threads() -> int:
     """
     Number of hardware threads the kernels use when threads=None.
     """
-def light_accumulate(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], ray_count: numpy.typing.NDArray[numpy.int64], ray_dir: numpy.typing.NDArray[numpy.float32], ray_weight: numpy.typing.NDArray[numpy.float32], occluded: numpy.typing.NDArray[numpy.uint8], out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
+def light_accumulate(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], ray_count: numpy.typing.NDArray[numpy.int64], ray_dir: numpy.typing.NDArray[numpy.float32], ray_weight: numpy.typing.NDArray[numpy.float32], occluded: numpy.typing.NDArray[numpy.uint8], out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None) -> None:
     """
     Light along known directions (delta lights, environment samples, escaped
     gather rays): adds f(wi, wo) max(0, n.wi) weight into out (P, 3) for each ray
@@ -257,7 +265,7 @@ def shade_brdf(mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.ty
     The display's BRDF f(k1, k2) (1/sr) for Q direction pairs (tests):
     rho/pi, or Ashikhmin-Shirley coupled diffuse + specular where mat_glossy.
     """
-def voxelize(triangles: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], two_sided: numpy.typing.NDArray[numpy.bool], albedo: numpy.typing.NDArray[numpy.float32], emission: numpy.typing.NDArray[numpy.float32], origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, dims: numpy.typing.NDArray[numpy.int32], cos_cluster: typing.SupportsFloat | typing.SupportsIndex = 0.5, cut: bool = True, eps: typing.SupportsFloat | typing.SupportsIndex = 1e-09, threads: typing.SupportsInt | typing.SupportsIndex = 0, progress: typing.Any = None) -> dict:
+def voxelize(triangles: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], two_sided: numpy.typing.NDArray[numpy.bool], albedo: numpy.typing.NDArray[numpy.float32], emission: numpy.typing.NDArray[numpy.float32], origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, dims: numpy.typing.NDArray[numpy.int32], cos_cluster: typing.SupportsFloat | typing.SupportsIndex = 0.5, cut: bool = True, eps: typing.SupportsFloat | typing.SupportsIndex = 1e-09, threads: typing.SupportsInt | typing.SupportsIndex = 0, progress: typing.Any = None, tex_texels: collections.abc.Sequence[typing.Annotated[numpy.typing.ArrayLike, numpy.uint8]] | None = None, tex_info: numpy.typing.NDArray[numpy.float64] | None = None, obj_texture: numpy.typing.NDArray[numpy.int32] | None = None, corner_uv: numpy.typing.NDArray[numpy.float32] | None = None) -> dict:
     """
     Exact sparse supercover voxelization of triangles (low level; see voxgi.voxelize).
     
@@ -287,6 +295,11 @@ def voxelize(triangles: numpy.typing.NDArray[numpy.float64], tri_object: numpy.t
     progress : callable(phase, done, total) or None
         Called from the calling thread about every 100 ms, and once at the end
         with done == total.
+    tex_texels, tex_info, obj_texture, corner_uv : optional, all or none
+        The objects' textures (a list of (H, W, 3) uint8; (T, 12) float64:
+        filter, wrap, raw, to_uv, factor; (O,) int32, -1: none; (F, 3, 2)
+        float32): a textured object's records take the texture's mean over their
+        own surface as their albedo.
     
     Returns
     -------
@@ -296,7 +309,7 @@ def voxelize(triangles: numpy.typing.NDArray[numpy.float64], tri_object: numpy.t
         ``object_id`` (N,) int32, ``back`` (N,) bool, ``side`` (N,) int8 and
         ``stats`` (dict of counts and seconds).
     """
-def vpl_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], vpl_pos: numpy.typing.NDArray[numpy.float64], vpl_normal: numpy.typing.NDArray[numpy.float32], vpl_weight: numpy.typing.NDArray[numpy.float32], vpl_area: numpy.typing.NDArray[numpy.float32], vpl_pa: numpy.typing.NDArray[numpy.float32], n_gather: typing.SupportsFloat | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., pixel_set: numpy.typing.NDArray[numpy.int32] | None = None, set_start: numpy.typing.NDArray[numpy.int64] | None = None, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+def vpl_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], vpl_pos: numpy.typing.NDArray[numpy.float64], vpl_normal: numpy.typing.NDArray[numpy.float32], vpl_weight: numpy.typing.NDArray[numpy.float32], vpl_area: numpy.typing.NDArray[numpy.float32], vpl_pa: numpy.typing.NDArray[numpy.float32], n_gather: typing.SupportsFloat | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., pixel_set: numpy.typing.NDArray[numpy.int32] | None = None, set_start: numpy.typing.NDArray[numpy.int64] | None = None, threads: typing.SupportsInt | typing.SupportsIndex = 0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None) -> tuple:
     """
     The VPLs' light at the hits: per (pixel, VPL) pair the unoccluded term and
     its shadow ray, traced in scene (a RayScene) as it is made; returns each

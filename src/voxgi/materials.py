@@ -1,5 +1,5 @@
-"""Surface materials: a Lambertian albedo and emission, an optional glossy
-layer, or a transmitting sheet (glass)."""
+"""Surface materials: a Lambertian albedo (or a texture of it) and emission,
+an optional glossy layer, or a transmitting sheet (glass)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _validate
+from .textures import Texture
 
 __all__ = ["AshikhminShirley", "Material", "glass_transmittance"]
 
@@ -61,6 +62,11 @@ class Material:
         in Mitsuba 3 or pbrt; the emitted radiosity is ``pi * Le``.
     specular : AshikhminShirley or None
         Optional glossy layer, used by the display only.
+    texture : voxgi.Texture or None
+        A bitmap of the albedo, looked up by the mesh's UVs (``Scene.add``'s
+        ``uv``). With one, ``albedo`` is set to the texture's mean over the
+        whole image (kept below 1); the display reads the texture at every
+        hit and each voxel record its mean over the record's own surface.
     transmittance : float or (3,) float
         Per RGB channel in [0, 1]: a material with a channel above 0 is a
         transmitting sheet (glass, ``docs/design.md`` §13). Light crosses it
@@ -81,8 +87,17 @@ class Material:
     emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
     specular: AshikhminShirley | None = None
     transmittance: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    texture: Texture | None = None
 
     def __post_init__(self):
+        if self.texture is not None:
+            if not isinstance(self.texture, Texture):
+                raise TypeError(
+                    "Material.texture: expected voxgi.Texture or None, got "
+                    f"{type(self.texture).__name__}"
+                )
+            below_one = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
+            object.__setattr__(self, "albedo", np.minimum(self.texture.mean(), below_one))
         # The kernels hold albedo and emission in float32: a value must stay
         # itself there (an albedo that rounds to 1 never converges).
         object.__setattr__(

@@ -10,6 +10,9 @@ The translation keeps voxgi's conventions:
   (Mitsuba stores float32), winding and hence normals unchanged;
 - a Lambertian ``diffuse`` BSDF, one-sided like voxgi's surfaces (Mitsuba's
   BSDFs are black from behind), wrapped in ``twosided`` for two-sided objects;
+  a textured albedo as Mitsuba's ``bitmap`` with the same filter, wrap mode
+  and ``to_uv``, holding the texels as voxgi decodes them (linear float32),
+  and the mesh's UVs;
 - an ``area`` emitter with the material's radiance, emitting on the front
   side only (a two-sided emitter gets a second, reversed copy);
 - glossy materials are exported as their diffuse part only (Mitsuba has no
@@ -97,7 +100,7 @@ def mitsuba_module(variant: str | None = None):
     raise ImportError("no usable Mitsuba variant (tried llvm_ad_rgb, scalar_rgb)")
 
 
-def _mesh(mi, name: str, vertices: np.ndarray, faces: np.ndarray, bsdf, emitter=None):
+def _mesh(mi, name: str, vertices: np.ndarray, faces: np.ndarray, bsdf, emitter=None, uv=None):
     props = mi.Properties()
     props["bsdf"] = bsdf
     if emitter is not None:
@@ -108,10 +111,12 @@ def _mesh(mi, name: str, vertices: np.ndarray, faces: np.ndarray, bsdf, emitter=
         len(faces),
         props=props,
         has_vertex_normals=False,
-        has_vertex_texcoords=False,
+        has_vertex_texcoords=uv is not None,
     )
     params = mi.traverse(mesh)
     params["vertex_positions"] = np.ascontiguousarray(vertices, np.float32).ravel()
+    if uv is not None:
+        params["vertex_texcoords"] = np.ascontiguousarray(uv, np.float32).ravel()
     params["faces"] = np.ascontiguousarray(faces, np.uint32).ravel()
     params.update()
     return mesh
@@ -244,10 +249,31 @@ def _sensor(mi, scene: Scene, cam: Camera, spp: int, sampler: str, seed: int) ->
     return sensor
 
 
+def _bitmap(mi, tex) -> dict:
+    """Mitsuba's ``bitmap`` of a voxgi Texture: the same filter, wrap mode and
+    to_uv, and its texels as voxgi decodes them (linear float32, times the
+    factor), so that both renderers filter the same values."""
+    lin = tex.linear_texels()
+    m = np.eye(4)
+    m[:2, :2], m[:2, 3] = tex.to_uv[:2, :2], tex.to_uv[:2, 2]
+    return {
+        "type": "bitmap",
+        "bitmap": mi.Bitmap(np.ascontiguousarray(lin, np.float32)),
+        "raw": True,
+        "filter_type": tex.filter,
+        "wrap_mode": tex.wrap,
+        "to_uv": mi.ScalarTransform4f(m.tolist()),
+    }
+
+
 def _shape(mi, i: int, o) -> dict:
     """The Mitsuba mesh (or, for a two-sided emitter, meshes) of object ``i``."""
     m = o.material
     bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(m.albedo)}}
+    uv = None
+    if m.texture is not None:
+        bsdf["reflectance"] = _bitmap(mi, m.texture)
+        uv = o.uv
     if m.is_sheet:
         bsdf = {
             "type": "thindielectric",
@@ -264,13 +290,13 @@ def _shape(mi, i: int, o) -> dict:
         emitter = mi.load_dict(
             {"type": "area", "radiance": {"type": "rgb", "value": list(m.emission)}}
         )
-    out = {key: _mesh(mi, key, o.vertices, o.faces, bsdf_obj, emitter)}
+    out = {key: _mesh(mi, key, o.vertices, o.faces, bsdf_obj, emitter, uv)}
     if m.is_emitter and o.two_sided:
         back = mi.load_dict(
             {"type": "area", "radiance": {"type": "rgb", "value": list(m.emission)}}
         )
         out[key + "_back"] = _mesh(
-            mi, key + "_back", o.vertices, o.faces[:, ::-1], mi.load_dict(bsdf), back
+            mi, key + "_back", o.vertices, o.faces[:, ::-1], mi.load_dict(bsdf), back, uv
         )
     return out
 

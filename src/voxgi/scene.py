@@ -37,7 +37,9 @@ __all__ = [
 
 @dataclass
 class SceneObject:
-    """One mesh of a scene: float64 vertices, int64 faces, a material."""
+    """One mesh of a scene: float64 vertices, int64 faces, a material, and
+    (V, 2) float64 texture coordinates ``uv`` when its material has a texture
+    (``v = 0`` the image's top row, as Mitsuba 3 holds UVs)."""
 
     name: str
     vertices: np.ndarray
@@ -47,6 +49,7 @@ class SceneObject:
     vertex_normals: np.ndarray | None = None
     source: str | None = None  # mesh file it came from, if any
     transform: np.ndarray | None = field(default=None, repr=False)
+    uv: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def n_triangles(self) -> int:
@@ -99,6 +102,27 @@ def _mesh_arrays(mesh, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | 
         if vn.shape != v.shape or not np.all(np.isfinite(vn)):
             vn = None
     return v, f, vn
+
+
+def _mesh_uv(mesh, uv, n_vertices: int, name: str, textured: bool) -> np.ndarray | None:
+    """The (V, 2) float64 UVs of a textured mesh: given, or its visual's (v
+    turned to the image's top); None for an untextured one."""
+    if not textured:
+        return None
+    if uv is None:
+        vis = getattr(mesh, "visual", None)
+        vuv = getattr(vis, "uv", None)
+        if vuv is None:
+            raise ValueError(f"mesh {name!r}: a textured material needs UVs (Scene.add's uv)")
+        uv = np.array(vuv, np.float64)
+        uv[:, 1] = 1.0 - uv[:, 1]
+    uv = np.array(uv, np.float64, copy=True)
+    if uv.shape != (n_vertices, 2):
+        raise ValueError(f"mesh {name!r}: uv must have shape ({n_vertices}, 2), got {uv.shape}")
+    if not np.all(np.isfinite(uv)):
+        bad = int(np.argwhere(~np.isfinite(uv).all(axis=1))[0, 0])
+        raise ValueError(f"mesh {name!r}: uv of vertex {bad} is not finite: {uv[bad].tolist()}")
+    return uv
 
 
 class Scene:
@@ -178,6 +202,7 @@ class Scene:
         material: Material | None = None,
         name: str | None = None,
         two_sided: bool = False,
+        uv=None,
     ) -> SceneObject:
         """Add a triangle mesh with a material.
 
@@ -193,6 +218,12 @@ class Scene:
         two_sided : bool
             Both sides reflect (and emit, for an emitter). A one-sided surface
             is black and opaque from behind.
+        uv : (V, 2) float, optional
+            Texture coordinates of the mesh's vertices (``v = 0`` the image's
+            top row, as Mitsuba 3 holds them; an OBJ file's ``vt`` has it at
+            the bottom, and its reader turns them); needed with a textured
+            material, which otherwise reads ``mesh.visual.uv`` (flipped the
+            same way).
 
         Returns
         -------
@@ -211,6 +242,7 @@ class Scene:
         if not isinstance(two_sided, (bool, np.bool_)):
             raise TypeError(f"mesh {name!r}: two_sided must be a bool, got {two_sided!r}")
         v, f, vn = _mesh_arrays(mesh, name)
+        uv = _mesh_uv(mesh, uv, len(v), name, material.texture is not None)
         obj = SceneObject(
             name=name,
             vertices=v,
@@ -218,6 +250,7 @@ class Scene:
             material=material,
             two_sided=bool(two_sided),
             vertex_normals=vn,
+            uv=uv,
         )
         self.objects.append(obj)
         return obj
@@ -301,6 +334,9 @@ class Scene:
             h.update(o.vertices.tobytes())
             h.update(o.faces.tobytes())
             h.update(repr((o.material.albedo, o.material.emission, o.two_sided)).encode())
+            if o.material.texture is not None:
+                h.update(o.material.texture.digest().encode())
+                h.update(o.uv.tobytes())
             if o.material.is_sheet:  # (an opaque scene keeps the hash it had)
                 h.update(repr(("sheet", o.material.transmittance)).encode())
         for light in self.lights:
@@ -457,15 +493,18 @@ class Scene:
                 )
                 continue
             try:
+                tex = m.texture if m.uv is not None else None
                 if m.transmittance is not None and np.max(m.transmittance) > 0:
+                    tex = None
                     mat = Material(albedo=0.0, transmittance=m.transmittance)
                 else:
-                    mat = Material(albedo=m.albedo, emission=m.emission)
+                    mat = Material(albedo=m.albedo, emission=m.emission, texture=tex)
                 obj = scene.add(
                     trimesh.Trimesh(m.vertices, m.faces, process=False),
                     mat,
                     name=m.name,
                     two_sided=m.two_sided,
+                    uv=m.uv if tex is not None else None,
                 )
             except (TypeError, ValueError) as exc:  # (the message names the mesh)
                 raise ValueError(f"{source}: {exc}") from None

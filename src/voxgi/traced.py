@@ -33,7 +33,9 @@ __all__ = ["DENSE_TABLE_CELLS", "TracedGather", "record_grid", "traced_irradianc
 
 #: Columns of a row of ``rec_packed``, float32, 64 bytes: the layout of
 #: ``PackedRecord`` in ``csrc/vpl_shade.h`` (the object id as an int32's bits).
-_CENTROID, _NORMAL, _OBJECT, _PA, _RADIANCE, _ROW = slice(0, 3), slice(3, 6), 6, 7, slice(8, 11), 16
+_CENTROID, _NORMAL, _OBJECT, _PA, _RADIANCE, _ALBEDO, _ROW = (
+    slice(0, 3), slice(3, 6), 6, 7, slice(8, 11), slice(11, 14), 16
+)  # fmt: skip
 
 
 def _voxel_order(vox: VoxelSet) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -83,7 +85,7 @@ def record_grid(
     dict
         The kernels' ``rec_*``, ``grid_*`` and ``pitch`` keyword arguments.
         ``rec_packed`` holds one 64-byte row a record in key order (centroid,
-        normal, object, ``pa``, radiance), aligned to 64 bytes: a gather ray's
+        normal, object, ``pa``, radiance, albedo), aligned to 64 bytes: a gather ray's
         lookup then reads a cache line or two, where separate arrays cost one
         each.
     """
@@ -110,6 +112,7 @@ def _record_grid(vox, centre, radiance, pa, voxel_order, dense_cells=DENSE_TABLE
     if pa is not None:
         packed[:, _PA] = np.asarray(pa, np.float32)[order]
     packed[:, _RADIANCE] = np.asarray(radiance, np.float32)[order]
+    packed[:, _ALBEDO] = np.asarray(vox.albedo, np.float32)[order]
     return {
         "rec_sorted_key": sorted_key,
         "rec_cell_start": start,

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _validate
+from .textures import surface_tables
 
 __all__ = ["DEFAULT_RESOLUTION", "VoxelSet", "estimate_memory", "voxelize"]
 
@@ -283,7 +284,9 @@ def _check_memory(triangles: np.ndarray, pitch: float, resolution: int, max_memo
     return est
 
 
-def _run_kernel(tri: dict, origin, pitch: float, dims, *, cut, threads: int, progress) -> dict:
+def _run_kernel(
+    tri: dict, origin, pitch: float, dims, *, cut, threads: int, progress, textures=None
+) -> dict:
     """Run the C++ voxelization kernel on the scene's triangles, with a progress bar."""
     from . import _core
 
@@ -301,6 +304,7 @@ def _run_kernel(tri: dict, origin, pitch: float, dims, *, cut, threads: int, pro
             cut=bool(cut),
             threads=threads,
             progress=callback,
+            **(textures or {}),
         )
     finally:
         close()
@@ -476,7 +480,16 @@ def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> Voxel
         tri = {**tri, "triangles": tri["triangles"][keep], "object": tri["object"][keep]}
     triangles = tri["triangles"]
     est = _check_memory(triangles, pitch, resolution, max_memory)
-    res = _run_kernel(tri, origin, pitch, dims, cut=cut, threads=nthreads, progress=progress)
+    res = _run_kernel(
+        tri,
+        origin,
+        pitch,
+        dims,
+        cut=cut,
+        threads=nthreads,
+        progress=progress,
+        textures=surface_tables(scene),
+    )
     stats = _voxelize_stats(dict(res["stats"]), triangles, est, scene, cut=cut, seconds=0.0)
     stats["buried_records"] = _bury(res, scene, stats["closed_objects"], pitch)
     stats["seconds"] = time.perf_counter() - t_start

@@ -19,7 +19,9 @@ AOV_CHANNELS = (
 )
 
 
-def frame_aovs(hits: dict, albedo: np.ndarray, eye: np.ndarray, forward: np.ndarray) -> np.ndarray:
+def frame_aovs(
+    hits: dict, albedo: np.ndarray, eye: np.ndarray, forward: np.ndarray, *, per_hit: bool = False
+) -> np.ndarray:
     """One frame's AOV samples, a row per pixel (:data:`AOV_CHANNELS`).
 
     Parameters
@@ -28,8 +30,9 @@ def frame_aovs(hits: dict, albedo: np.ndarray, eye: np.ndarray, forward: np.ndar
         The frame's camera hits (``_FrameShader.camera_hits``): ``pos``
         (P, 3), ``normal`` (P, 3) facing the viewer, ``material`` (P,)
         (-1: nothing, or a one-sided back, which shows black).
-    albedo : (objects, 3) float32
-        Each object's diffuse albedo.
+    albedo : (objects, 3) or (P, 3) float32
+        Each object's diffuse albedo, or with ``per_hit`` each hit's own
+        (a texture's; 0 where nothing is met).
     eye, forward : (3,) float
         The camera's centre, in the hits' frame, and its unit view axis.
 
@@ -41,10 +44,13 @@ def frame_aovs(hits: dict, albedo: np.ndarray, eye: np.ndarray, forward: np.ndar
     mat = hits["material"]
     hit = mat >= 0
     out = np.empty((len(mat), len(AOV_CHANNELS)), np.float32)
-    # one zero row past the objects' for index -1 (nothing met)
-    table = np.zeros((len(albedo) + 1, 3), np.float32)
-    table[:-1] = albedo
-    out[:, 0:3] = table[mat]
+    if per_hit:
+        np.multiply(albedo, hit[:, None], out=out[:, 0:3])
+    else:
+        # one zero row past the objects' for index -1 (nothing met)
+        table = np.zeros((len(albedo) + 1, 3), np.float32)
+        table[:-1] = albedo
+        out[:, 0:3] = table[mat]
     np.multiply(hits["normal"], hit[:, None], out=out[:, 3:6])
     with np.errstate(invalid="ignore", over="ignore"):  # a miss's point is never read
         depth = (hits["pos"] - np.asarray(eye)) @ np.asarray(forward)

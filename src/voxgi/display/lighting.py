@@ -99,6 +99,7 @@ class _SceneLights:
                 self.tracer.native,
                 out,
                 self.threads,
+                hit_albedo=h.get("albedo"),
             )
 
     def _add_delta(self, h: dict, a: int, b: int, out: np.ndarray) -> None:
@@ -141,4 +142,5 @@ class _SceneLights:
             occ,
             out[a:b],
             self.threads,
+            hit_albedo=None if h.get("albedo") is None else h["albedo"][a:b],
         )

@@ -19,6 +19,7 @@ import numpy as np
 from .. import _core
 from ..rays import Tracer
 from ..scene import Camera, Scene
+from ..textures import surface_tables
 from ..traced import record_grid
 from .aovs import frame_aovs
 from .lighting import _HIT_KEYS, _SceneLights
@@ -183,7 +184,7 @@ class _FrameShader:
         sheets before the hit let through (None in a scene without)."""
         tr, cam = self.tracer, self.cam
         right, up, fwd = cam.frame()
-        pos, n_out, ng_out, wo, mat, le, prim, through = _core.camera_hits(
+        pos, n_out, ng_out, wo, mat, le, prim, through, albedo = _core.camera_hits(
             np.asarray(cam.eye, dtype=np.float64) - tr.centre,
             right,
             up,
@@ -198,6 +199,7 @@ class _FrameShader:
             *self._primary_scene,
             tr.native,
             threads=self.threads,
+            **self._textures,
         )
         self.primary_rays += len(prim)
         if self.env is not None:
@@ -205,7 +207,31 @@ class _FrameShader:
             le[miss] = self.env.eval(-wo[miss].astype(np.float64))
         hits = {"pos": pos, "normal": n_out, "ng": ng_out, "wo": wo, "material": mat}
         # what the sheets (glass) before each hit let through, None without any
-        return {**hits, "emission": le, "through": through}
+        # and each hit's albedo only where a texture makes it differ from its object's
+        return {**hits, "emission": le, "through": through, "albedo": albedo}
+
+    @cached_property
+    def _gather_textures(self) -> dict:
+        """The textures' arguments of :func:`_core.gather_light`: a gather ray
+        that lands on a textured object sees the texture's detail there (not
+        on an emitter, whose record's light holds its emission)."""
+        if not self._textures:
+            return {}
+        keys = ("tex_texels", "tex_info", "obj_texture", "corner_uv")
+        out = {k: self._textures[k] for k in keys}
+        out["obj_texture"] = np.where(
+            self.mat_emission.max(axis=1) > 0, -1, out["obj_texture"]
+        ).astype(np.int32)
+        return out
+
+    @cached_property
+    def _textures(self) -> dict:
+        """The textures' arguments of :func:`_core.camera_hits` (none without
+        a textured object): each hit's albedo is then the texture's there."""
+        tables = surface_tables(self.scene)
+        if tables is None:
+            return {}
+        return {"obj_albedo": self.mat_albedo, **tables}
 
     @cached_property
     def _primary_scene(self) -> tuple:
@@ -262,6 +288,17 @@ class _FrameShader:
         see the same smooth surface (``docs/design.md`` §6)."""
         t0 = time.perf_counter()
         cam = self.cam
+        albedo = h.get("albedo")
+        if albedo is not None:
+            # A texture's detail is the hit's own: the light is filtered
+            # divided by each hit's albedo, and multiplied back after
+            # (where a channel's albedo is 0, its light passes unfiltered).
+            keep = albedo > 1e-4
+            target, out = out, np.zeros_like(out)
+            target += np.where(keep, 0.0, reflected)
+            reflected = np.where(keep, reflected / np.where(keep, albedo, 1.0), 0.0).astype(
+                np.float32
+            )
         _core.geometry_filter(
             h["pos"],
             h["normal"],
@@ -276,6 +313,8 @@ class _FrameShader:
             out,
             threads=self.threads,
         )
+        if albedo is not None:
+            target += out * albedo
         self.seconds["filter"] = self.seconds.get("filter", 0.0) + time.perf_counter() - t0
 
     def _vpl_light(self, h: dict, vpls: dict) -> np.ndarray:
@@ -295,6 +334,7 @@ class _FrameShader:
             self._pixel_set if sets else None,
             start if sets else None,
             self.threads,
+            hit_albedo=h.get("albedo"),
         )
         self.shadow_rays += rays
         self.seconds["shadow"] += time.perf_counter() - t0
@@ -329,6 +369,8 @@ class _FrameShader:
             out=out[a:b],
             threads=self.threads,
             **self._env,
+            hit_albedo=None if h.get("albedo") is None else h["albedo"][a:b],
+            **self._gather_textures,
         )
         self.seconds["gather"] += time.perf_counter() - t0
 
@@ -343,8 +385,13 @@ class _FrameShader:
         rng = np.random.default_rng([self.seed, self._frame, 0x6B0])
         self._groups = self._pixel_groups(self.cam, self.vpl_sets(self.cam), rng)
         self.__dict__.pop("_pixel_set", None)  # the cached view of the groups
+        per_hit = h.get("albedo") is not None
         self.aovs = frame_aovs(
-            h, self.mat_albedo, np.asarray(self.cam.eye) - self.tracer.centre, self.cam.frame()[2]
+            h,
+            h["albedo"] if per_hit else self.mat_albedo,
+            np.asarray(self.cam.eye) - self.tracer.centre,
+            self.cam.frame()[2],
+            per_hit=per_hit,
         )
         vpls = None
         if not self.sampler.empty:

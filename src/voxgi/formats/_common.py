@@ -22,7 +22,8 @@ class MeshData:
     around the front normal), ``albedo`` and ``emission`` (3,) float64 linear
     RGB (emission is radiance), ``two_sided`` as :meth:`voxgi.Scene.add`;
     a sheet's ``transmittance`` makes it a transmitting sheet (its albedo
-    and emission unused).
+    and emission unused); ``texture`` and ``uv`` as :class:`voxgi.Material`
+    and ``Scene.add`` take them (the texture's mean in ``albedo``).
     """
 
     name: str
@@ -35,6 +36,10 @@ class MeshData:
     #: (3,) float64 straight-through transmittance of a sheet (glass,
     #: ``docs/design.md`` §13), or None: opaque
     transmittance: np.ndarray | None = None
+    #: a voxgi.Texture of the albedo (its factor included), or None
+    texture: object = None
+    #: (V, 2) float64 texture coordinates (v = 0 the image's top row), or None
+    uv: np.ndarray | None = None
 
 
 @dataclass

@@ -66,9 +66,9 @@ def _gltf_camera(doc: dict, path: Path) -> dict | None:
     return None
 
 
-def _gltf_material(m: dict | None, tm, where: str, path: Path, notes: Notes):
-    """(albedo, emission, two_sided) of a primitive: its glTF material ``m`` when
-    its name is unique, else trimesh's reading ``tm`` of it."""
+def _gltf_material(m: dict | None, tm, where: str, path: Path, notes: Notes, doc=None):
+    """(albedo, emission, two_sided, texture or None) of a primitive: its glTF
+    material ``m`` when its name is unique, else trimesh's reading ``tm`` of it."""
     if m is not None:
         pbr = m.get("pbrMetallicRoughness", {})
         base = np.asarray(pbr.get("baseColorFactor", [1, 1, 1, 1]), np.float64)[:3]
@@ -108,21 +108,51 @@ def _gltf_material(m: dict | None, tm, where: str, path: Path, notes: Notes):
         has_texture = tm.baseColorTexture is not None
     else:
         base, emission, two_sided, has_texture = np.ones(3), np.zeros(3), False, False
+    texture = None
     if has_texture:
         image = getattr(tm, "baseColorTexture", None)
-        if image is not None:
+        if image is not None and m is not None and doc is not None:
+            texture = _base_color_texture(m, image, base, doc, where, notes)
+        if texture is not None:
+            base = texture.mean()
+        elif image is not None:
             base = base * image_mean(image)
             notes.approx(f"{where}: baseColorTexture reduced to its mean colour")
         else:
             notes.approx(f"{where}: baseColorTexture unreadable: factor 1")
-    return base, emission, two_sided
+    return base, emission, two_sided, texture
+
+
+#: glTF sampler codes: magFilter, and wrapS / wrapT.
+_GL_FILTER = {9728: "nearest", 9729: "bilinear"}
+_GL_WRAP = {10497: "repeat", 33648: "mirror", 33071: "clamp"}
+
+
+def _base_color_texture(m: dict, image, base, doc: dict, where: str, notes: Notes):
+    """The Texture of a material's ``baseColorTexture`` (its sampler's filter
+    and wrap, times baseColorFactor), or None where voxgi reads only its
+    mean (another texCoord set than 0, a texture transform)."""
+    from ..textures import Texture
+
+    ref = m["pbrMetallicRoughness"]["baseColorTexture"]
+    if ref.get("texCoord", 0) != 0 or "KHR_texture_transform" in ref.get("extensions", {}):
+        return None
+    tex = doc.get("textures", [])[ref["index"]]
+    sampler = doc.get("samplers", [])[tex["sampler"]] if "sampler" in tex else {}
+    filt = _GL_FILTER.get(sampler.get("magFilter"), "bilinear")
+    ws, wt = sampler.get("wrapS", 10497), sampler.get("wrapT", 10497)
+    if ws != wt:
+        notes.approx(f"{where}: wrapT {wt} read as wrapS {ws}")
+    texels = np.asarray(image.convert("RGB"), np.uint8)
+    return Texture(texels, filter=filt, wrap=_GL_WRAP.get(ws, "repeat"), factor=np.minimum(base, 1))
 
 
 def load_gltf(path, *, search_paths=(), allow_outside=False, limits=None) -> SceneData:
     """Read a glTF 2.0 scene (``.gltf`` or ``.glb``): one mesh per primitive.
 
-    The albedo is ``baseColorFactor`` (times the mean linear colour of
-    ``baseColorTexture``), the radiance ``emissiveFactor`` times
+    The albedo is ``baseColorFactor`` times ``baseColorTexture`` looked up by
+    ``TEXCOORD_0`` with its sampler's filter and wrap (its mean colour for
+    another texture coordinate set or a texture transform), the radiance ``emissiveFactor`` times
     ``KHR_materials_emissive_strength``; ``doubleSided`` gives a two-sided
     surface; node transforms are applied; the first perspective camera
     (``yfov``, ``aspectRatio``, 512 pixels high) becomes the camera.
@@ -173,8 +203,15 @@ def load_gltf(path, *, search_paths=(), allow_outside=False, limits=None) -> Sce
         found = by_name.get(mname, [])
         m = found[0] if len(found) == 1 else None
         where = f"material {mname!r}"
-        base, emission, two_sided = _gltf_material(m, tm, where, path, notes)
+        base, emission, two_sided, texture = _gltf_material(m, tm, where, path, notes, doc)
         base = clamp_albedo(base, where, notes)
+        uv = getattr(g.visual, "uv", None) if texture is not None else None
+        if texture is not None and (uv is None or len(uv) != len(g.vertices)):
+            notes.approx(f"{where}: no TEXCOORD_0, baseColorTexture reduced to its mean colour")
+            texture, uv = None, None
+        if uv is not None:
+            uv = np.array(uv, np.float64)
+            uv[:, 1] = 1.0 - uv[:, 1]  # (trimesh turns glTF's v; glTF's is voxgi's)
         name = str(g.metadata.get("name") or mname or f"primitive{k}")
         data.meshes.append(
             MeshData(
@@ -185,6 +222,8 @@ def load_gltf(path, *, search_paths=(), allow_outside=False, limits=None) -> Sce
                 emission,
                 two_sided,
                 str(path),
+                texture=texture,
+                uv=uv,
             )
         )
     if not data.meshes:

@@ -17,7 +17,7 @@ from ._common import MeshData, Notes, SceneData, clamp_albedo
 from ._paths import FileAccess
 from .mitsuba_xml import PLUGIN_TAGS, Node, Plugin, XmlReader, parse_xml
 from .serialized import read_serialized
-from .textures import texture_file_mean
+from .textures import decode_rgb, texture_file_mean
 
 __all__ = ["load_mitsuba"]
 
@@ -49,12 +49,15 @@ def _colour(v, p: Plugin, key: str, notes: Notes) -> np.ndarray:
         return v.astype(np.float64)
     if isinstance(v, Plugin) and v.tag == "texture":
         if v.type == "bitmap" and "filename" in v.props:
+            if getattr(notes, "textured", False):
+                return _bitmap_texture(v, notes).mean()  # (decoded once, for the texture)
             img_path = Path(v.props["filename"])
             try:
                 mean = texture_file_mean(img_path, v.access, raw=bool(v.props.get("raw", False)))
             except (OSError, ValueError) as exc:
                 raise ValueError(f"{v.where()}: cannot read bitmap {img_path}: {exc}") from None
-            notes.approx(f"{v.label()}: bitmap {img_path.name} reduced to its mean colour")
+            if not getattr(notes, "textured", False):
+                notes.approx(f"{v.label()}: bitmap {img_path.name} reduced to its mean colour")
             return mean
         if v.type == "checkerboard":
             c0 = _colour(v.props.get("color0", 0.4), v, "color0", notes)
@@ -64,6 +67,68 @@ def _colour(v, p: Plugin, key: str, notes: Notes) -> np.ndarray:
         notes.approx(f"{v.label()}: texture replaced by grey 0.5")
         return np.full(3, 0.5)
     raise ValueError(f"{p.where()}: property {key!r} is not a colour: {v!r}")
+
+
+#: Mitsuba's bitmap filter_type and wrap_mode values voxgi's Texture holds.
+_FILTERS = ("bilinear", "nearest")
+_WRAPS = ("repeat", "mirror", "clamp")
+
+
+def _bitmap_texture(v, notes: Notes):
+    """The voxgi.Texture of a ``bitmap`` texture plugin (its filter, wrap mode
+    and to_uv, or Mitsuba 0.5's uoffset/voffset/uscale/vscale), or None for
+    anything else."""
+    if not (isinstance(v, Plugin) and v.tag == "texture" and v.type == "bitmap"):
+        return None
+    if "filename" not in v.props:
+        return None
+    # one Texture a plugin, however many shapes refer to its BSDF
+    cache = notes.__dict__.setdefault("texture_cache", {})
+    if id(v) in cache:
+        return cache[id(v)][1]
+    cache[id(v)] = (v, _read_bitmap(v))
+    return cache[id(v)][1]
+
+
+def _read_bitmap(v: Plugin):
+    from ..textures import Texture
+
+    img_path = Path(v.props["filename"])
+    filt = str(v.props.get("filter_type", "bilinear")).lower()
+    wrap = str(v.props.get("wrap_mode", "repeat")).lower()
+    if filt not in _FILTERS:
+        raise ValueError(f"{v.where()}: filter_type={filt!r}; expected one of {_FILTERS}")
+    if wrap not in _WRAPS:
+        raise ValueError(f"{v.where()}: wrap_mode={wrap!r}; expected one of {_WRAPS}")
+    m4 = np.asarray(v.props.get("to_uv", np.eye(4)), np.float64)
+    to_uv = np.array([[m4[0, 0], m4[0, 1], m4[0, 3]], [m4[1, 0], m4[1, 1], m4[1, 3]], [0, 0, 1]])
+    # Mitsuba 0.5: uv * (uscale, vscale) + (uoffset, voffset)
+    su, sv = v.number("uscale", 1.0), v.number("vscale", 1.0)
+    ou, ov = v.number("uoffset", 0.0), v.number("voffset", 0.0)
+    to_uv = np.array([[su, 0, ou], [0, sv, ov], [0, 0, 1]]) @ to_uv
+    try:
+        texels = decode_rgb(img_path, v.access)
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{v.where()}: cannot read bitmap {img_path}: {exc}") from None
+    return Texture(
+        texels,
+        filter=filt,
+        wrap=wrap,
+        to_uv=to_uv,
+        raw=bool(v.props.get("raw", False)),
+        path=str(img_path.absolute()),
+    )
+
+
+def _bsdf_texture(p: Plugin, notes: Notes):
+    """The bitmap of a BSDF's diffuse albedo (through its wrappers), or None."""
+    if p.type in _WRAPPER_BSDFS:
+        nested = p.nested("bsdf")
+        return _bsdf_texture(nested[0], notes) if nested else None
+    if p.type in _TWO_SIDED_BSDFS or p.type == "blendbsdf":
+        return None
+    key = next((k for k in _ALBEDO_KEYS if k in p.props), None)
+    return None if key is None else _bitmap_texture(p.props[key], notes)
 
 
 def _bsdf(p: Plugin, notes: Notes) -> tuple[np.ndarray, bool]:
@@ -243,11 +308,14 @@ def _canonical_shape(p: Plugin) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.asarray(s.vertices), np.asarray(s.faces), to_world @ place
 
 
-def _shape_mesh(p: Plugin) -> tuple[np.ndarray, np.ndarray, str | None]:
-    """World-space (vertices, faces, source file) of a shape plugin."""
+def _shape_mesh(p: Plugin):
+    """World-space (vertices, faces, source file, uv or None) of a shape plugin."""
+    uv = None
     if p.type in ("rectangle", "cube", "sphere", "disk"):
         v, f, m = _canonical_shape(p)
         source = None
+        if p.type == "rectangle":
+            uv = (v[:, :2] + 1.0) / 2.0  # Mitsuba's rectangle: uv = (x + 1, y + 1) / 2
     else:
         if "filename" not in p.props:
             raise ValueError(f"{p.where()}: missing property 'filename'")
@@ -269,7 +337,7 @@ def _shape_mesh(p: Plugin) -> tuple[np.ndarray, np.ndarray, str | None]:
             except ValueError as exc:
                 raise ValueError(f"{p.where()}: {exc}") from None
         else:
-            v, f = _mesh_file(data, mesh_path, p)
+            v, f, uv = _mesh_file(data, mesh_path, p)
         if len(f) == 0:
             raise ValueError(f"{p.where()}: mesh {mesh_path} has no triangles")
         m = p.props.get("to_world", np.eye(4))
@@ -283,12 +351,13 @@ def _shape_mesh(p: Plugin) -> tuple[np.ndarray, np.ndarray, str | None]:
         f = f[:, ::-1]
     if p.props.get("flip_normals", False):
         f = f[:, ::-1]
-    return v, np.ascontiguousarray(f), source
+    return v, np.ascontiguousarray(f), source, uv
 
 
-def _mesh_file(data: bytes, mesh_path: Path, p: Plugin) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices, faces) of an ``obj`` or ``ply`` shape's file, read from ``data``
-    (an OBJ's material library is not read: the shape's BSDF replaces it)."""
+def _mesh_file(data: bytes, mesh_path: Path, p: Plugin):
+    """(vertices, faces, uv or None) of an ``obj`` or ``ply`` shape's file, read
+    from ``data`` (an OBJ's material library is not read: the shape's BSDF
+    replaces it)."""
     try:
         with warnings.catch_warnings():
             # trimesh's numpy warnings on a mesh's texture coordinates
@@ -301,9 +370,16 @@ def _mesh_file(data: bytes, mesh_path: Path, p: Plugin) -> tuple[np.ndarray, np.
                 process=False,
                 maintain_order=True,
             )
-        return np.asarray(mesh.vertices), np.asarray(mesh.faces)
     except Exception as exc:
         raise ValueError(f"{p.where()}: cannot load mesh {mesh_path}: {exc}") from None
+    uv = getattr(getattr(mesh, "visual", None), "uv", None)
+    if uv is not None:
+        uv = np.array(uv, np.float64)
+        if uv.shape != (len(mesh.vertices), 2) or not np.all(np.isfinite(uv)):
+            uv = None
+        elif p.type == "obj":
+            uv[:, 1] = 1.0 - uv[:, 1]  # as Mitsuba reads an OBJ's vt: v = 0 the image's top
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces), uv
 
 
 def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
@@ -318,15 +394,28 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
     emission = np.zeros(3)
     for e in emitters:
         emission = emission + _emission(e, notes)
+    v, f, source, uv = _shape_mesh(p)
     through = _sheet(bsdfs[0], notes) if bsdfs else None
+    texture = None
+    if bsdfs and through is None and not emitters:
+        texture = _bsdf_texture(bsdfs[0], notes)
+    if texture is not None and uv is None:
+        notes.approx(
+            f"{p.label()}: bitmap {Path(texture.path).name} reduced to its mean colour "
+            "(the mesh has no UVs)"
+        )
+        texture = None
     if through is not None:
         albedo, two_sided = np.zeros(3), True
     elif bsdfs:
-        albedo, two_sided = _bsdf(bsdfs[0], notes)
+        notes.textured = texture is not None
+        try:
+            albedo, two_sided = _bsdf(bsdfs[0], notes)
+        finally:
+            notes.textured = False
     else:
         # Mitsuba's default BSDF: diffuse 0.5, black on an emitter.
         albedo, two_sided = np.full(3, 0.0 if emitters else 0.5), False
-    v, f, source = _shape_mesh(p)
     name = p.id or (Path(source).stem if source else f"{p.type}{index}")
     if not _validate.nondegenerate(v, f).any():
         # Mitsuba loads such a mesh and it draws nothing; so does voxgi
@@ -352,7 +441,7 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
                 source,
             ),
         ]
-    return [MeshData(name, v, f, albedo, emission, two_sided, source)]
+    return [MeshData(name, v, f, albedo, emission, two_sided, source, texture=texture, uv=uv)]
 
 
 def _fov_y(fov: float, axis: str, width: int, height: int) -> float:

@@ -9,8 +9,9 @@ import numpy as np
 import trimesh
 
 from ._common import MeshData, Notes, SceneData, clamp_albedo
+from ._limits import RefusedError
 from ._paths import FileAccess
-from .textures import texture_mean
+from .textures import decode_rgb, texture_mean
 
 __all__ = ["load_obj"]
 
@@ -116,12 +117,39 @@ def _read_libraries(path: Path, text: str, access: FileAccess, notes: Notes):
     return mats, texts
 
 
+def _map_kd(m: dict, g, access: FileAccess, notes: Notes, what: str):
+    """(Texture, uv) of a material's ``map_Kd`` on mesh ``g`` (its factor
+    ``Kd``, its vt turned to v = 0 at the image's top), or (None, None) where
+    the mesh has no UVs (the texture's mean colour is used then)."""
+    from ..textures import Texture
+
+    uv = getattr(g.visual, "uv", None)
+    if uv is None or len(uv) != len(g.vertices) or not np.all(np.isfinite(uv)):
+        notes.approx(f"{what}: no texture coordinates, texture reduced to its mean colour")
+        return None, None
+    cache = notes.__dict__.setdefault("texture_cache", {})
+    key = (str(m["map_Kd"]), tuple(np.asarray(m.get("Kd", np.full(3, 0.8))).tolist()))
+    if key not in cache:
+        try:
+            texels = decode_rgb(m["map_Kd"], access)
+        except RefusedError:
+            raise
+        except (OSError, ValueError):
+            return None, None  # texture_mean says why
+        kd = np.minimum(np.asarray(key[1], np.float64), 1.0)
+        cache[key] = Texture(texels, factor=kd, path=str(m["map_Kd"]))
+    uv = np.array(uv, np.float64)
+    uv[:, 1] = 1.0 - uv[:, 1]
+    return cache[key], uv
+
+
 def load_obj(path, *, search_paths=(), allow_outside=False, limits=None) -> SceneData:
     """Read an OBJ file and its MTL materials: one mesh per material.
 
     ``Kd`` is the albedo (default 0.8 when the MTL gives none), ``Ke`` the
-    emitted radiance; a ``map_Kd`` texture multiplies ``Kd`` by its mean
-    linear colour. A missing MTL file or material gives grey 0.5. All
+    emitted radiance; a ``map_Kd`` texture is the albedo, times ``Kd``, looked
+    up by the mesh's ``vt`` (bilinear, repeating; its mean colour times
+    ``Kd`` when the mesh has none). A missing MTL file or material gives grey 0.5. All
     surfaces are one-sided (OBJ has no flag for it).
 
     Parameters
@@ -173,8 +201,14 @@ def load_obj(path, *, search_paths=(), allow_outside=False, limits=None) -> Scen
             albedo = m.get("Kd", np.full(3, 0.8))
             emission = m.get("Ke", np.zeros(3))
             if "map_Kd" in m:
-                albedo = albedo * texture_mean(m["map_Kd"], access, notes, f"material {mat!r}")
+                texture, uv = _map_kd(m, g, access, notes, f"material {mat!r}")
+                if texture is None:
+                    albedo = albedo * texture_mean(m["map_Kd"], access, notes, f"material {mat!r}")
+                else:
+                    albedo = texture.mean()
         albedo = clamp_albedo(albedo, f"material {mat!r}", notes)
+        if m is None or "map_Kd" not in m:
+            texture, uv = None, None
         data.meshes.append(
             MeshData(
                 str(mat or gname),
@@ -184,6 +218,8 @@ def load_obj(path, *, search_paths=(), allow_outside=False, limits=None) -> Scen
                 emission,
                 False,
                 str(path),
+                texture=texture,
+                uv=uv,
             )
         )
     if not data.meshes:

@@ -113,6 +113,27 @@ def texture_file_mean(path: Path, access: FileAccess, raw: bool = False) -> np.n
         raise ValueError(f"texture {path}: cannot be decoded ({exc})") from None
 
 
+def decode_rgb(path: Path, access: FileAccess) -> np.ndarray:
+    """(H, W, 3) uint8 RGB codes of an image file read through ``access``, row 0
+    the image's top; its size checked against ``Limits.texture_pixels`` from
+    its header first. ValueError names the file."""
+    im = open_image(access.read_bytes(path, "texture"), f"texture {path}", access.limits)
+    try:
+        with im:
+            im.load()
+            w, h = im.size
+            if im.mode in ("L", "LA", "I;16"):
+                grey = im.convert("L") if im.mode != "L" else im
+                lum = np.frombuffer(grey.tobytes(), np.uint8).reshape(h, w)
+                return np.repeat(lum[:, :, None], 3, axis=2)
+            if im.mode != "RGB":
+                im = im.convert("RGB")
+            # one copy of the pixels beside Pillow's (np.asarray would make two)
+            return np.frombuffer(im.tobytes(), np.uint8).reshape(h, w, 3)
+    except (OSError, ValueError, SyntaxError) as exc:
+        raise ValueError(f"texture {path}: cannot be decoded ({exc})") from None
+
+
 def texture_mean(img_path: Path, access: FileAccess, notes: Notes, what: str) -> np.ndarray:
     """An OBJ material's texture factor: its mean colour, or 1 (with a note) when
     the file cannot be read; a file outside the policy or over a limit is an

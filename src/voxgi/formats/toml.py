@@ -11,6 +11,7 @@ keeps no positions).
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import re
@@ -210,7 +211,10 @@ _OBJECT_KEYS = {
     "rotate",
     "scale",
     "matrix",
+    "texture",
 } | _OBJECT_MATERIAL_KEYS
+#: Keys of an object's ``texture`` table.
+_TEXTURE_KEYS = {"file", "filter", "wrap", "to_uv", "raw", "factor"}
 # Mesh formats that are text only: trimesh guesses the encoding of any
 # other bytes with an optional package and reports that package missing.
 _TEXT_MESH_FORMATS = {".obj", ".off"}
@@ -393,12 +397,40 @@ def _add_object_from_dict(
         raise _Located(
             f"{where}: two_sided must be true or false, got {two_sided!r}", table, "two_sided"
         )
+    if "texture" in o:
+        mat = dataclasses.replace(mat, texture=_texture(o["texture"], where, table, access))
     try:
         obj = scene.add(mesh, mat, name=name, two_sided=two_sided)
     except (TypeError, ValueError) as exc:
         raise _Located(f"{where}: {exc}", table, "mesh") from None
     obj.source = str(o["mesh"])
     obj.transform = matrix
+
+
+def _texture(t, where: str, table: tuple, access: FileAccess):
+    """The Texture of an object's ``texture`` table; its file relative to the
+    scene file, read through the path policy."""
+    from ..textures import Texture
+
+    if not isinstance(t, dict) or "file" not in t:
+        raise _Located(f"{where}: texture must be a table with a 'file'", table, "texture")
+    bad = set(t) - _TEXTURE_KEYS
+    if bad:
+        raise _Located(
+            f"{where}: texture: unknown key(s) {sorted(bad)}; expected {sorted(_TEXTURE_KEYS)}",
+            table,
+            "texture",
+        )
+    img = Path(t["file"])
+    if not img.is_absolute():
+        img = access.scene_file.parent / img
+    kw = {k: t[k] for k in ("filter", "wrap", "to_uv", "raw", "factor") if k in t}
+    try:
+        return Texture.from_file(img, access, **kw)
+    except RefusedError as exc:
+        raise _Located(f"{where}: {exc}", table, "texture") from None
+    except (OSError, TypeError, ValueError) as exc:
+        raise _Located(f"{where}: texture {img}: {exc}", table, "texture") from None
 
 
 def _load_mesh(mesh_path: Path, where: str, table: tuple, access: FileAccess) -> trimesh.Trimesh:

@@ -27,11 +27,18 @@ def save_toml(scene, path: Path) -> Path:
     if scene.camera is not None:
         doc["camera"] = _camera_to_dict(scene.camera)
     objects = []
+    images: dict[int, str] = {}  # texture id -> its file beside the scene file
     for i, o in enumerate(scene.objects):
         fname = f"{path.stem}_{i:03d}.obj"
+        tex = o.material.texture
         with atomic_path(path.parent / fname) as tmp:
-            tmp.write_text(_obj_text(o.vertices, o.faces))
-        objects.append(_object_to_dict(o, fname))
+            tmp.write_text(_obj_text(o.vertices, o.faces, o.uv if tex is not None else None))
+        entry = _object_to_dict(o, fname)
+        if tex is not None:
+            if id(tex) not in images:
+                images[id(tex)] = _write_texture_image(tex, path, len(images))
+            entry["texture"] = _texture_to_dict(tex, images[id(tex)])
+        objects.append(entry)
     if objects:
         doc["object"] = objects
     if scene.lights:
@@ -74,16 +81,49 @@ def _object_to_dict(o, fname: str) -> dict:
     return entry
 
 
-def _obj_text(vertices: np.ndarray, faces: np.ndarray) -> str:
-    """OBJ text of a mesh, every float with 17 significant digits.
+def _obj_text(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None) -> str:
+    """OBJ text of a mesh, every float with 17 significant digits, with its
+    UVs as ``vt`` (v turned to the OBJ's convention, 0 at the image's bottom).
 
     ``%.17g`` reads back as the same float64 at any magnitude (a fixed
     number of decimals would not, below 0.1).
     """
     buf = io.StringIO()
     np.savetxt(buf, vertices, fmt="v %.17g %.17g %.17g")
-    np.savetxt(buf, faces + 1, fmt="f %d %d %d")
+    if uv is None:
+        np.savetxt(buf, faces + 1, fmt="f %d %d %d")
+    else:
+        np.savetxt(buf, np.stack([uv[:, 0], 1.0 - uv[:, 1]], 1), fmt="vt %.17g %.17g")
+        np.savetxt(buf, np.repeat(faces + 1, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
     return buf.getvalue()
+
+
+def _write_texture_image(tex, path: Path, k: int) -> str:
+    """A texture's image beside the scene file: a copy of the file it was read
+    from (the same bytes another renderer reads), else its texels as PNG."""
+    src = Path(tex.path) if tex.path else None
+    if src is not None and src.is_file():
+        fname = f"{path.stem}_texture{k:02d}_{src.name}"
+        with atomic_path(path.parent / fname) as tmp:
+            tmp.write_bytes(src.read_bytes())
+        return fname
+    from PIL import Image
+
+    fname = f"{path.stem}_texture{k:02d}.png"
+    with atomic_path(path.parent / fname) as tmp:
+        Image.fromarray(tex.texels).save(tmp, format="PNG")
+    return fname
+
+
+def _texture_to_dict(tex, fname: str) -> dict:
+    out = {"file": fname, "filter": tex.filter, "wrap": tex.wrap}
+    if not np.array_equal(tex.to_uv, np.eye(3)):
+        out["to_uv"] = [[float(x) for x in row] for row in tex.to_uv]
+    if tex.raw:
+        out["raw"] = True
+    if tex.factor != (1.0, 1.0, 1.0):
+        out["factor"] = [float(x) for x in tex.factor]
+    return out
 
 
 def _light_to_dict(light) -> dict:
