@@ -479,6 +479,9 @@ def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> Voxel
             raise ValueError("voxelize: every object is a transmitting sheet; nothing to voxelize")
         tri = {**tri, "triangles": tri["triangles"][keep], "object": tri["object"][keep]}
     triangles = tri["triangles"]
+    textures = surface_tables(scene)
+    if textures is not None and sheet.any():  # their corners' UVs go with the triangles
+        textures["corner_uv"] = np.ascontiguousarray(textures["corner_uv"][keep])
     est = _check_memory(triangles, pitch, resolution, max_memory)
     res = _run_kernel(
         tri,
@@ -488,7 +491,7 @@ def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> Voxel
         cut=cut,
         threads=nthreads,
         progress=progress,
-        textures=surface_tables(scene),
+        textures=textures,
     )
     stats = _voxelize_stats(dict(res["stats"]), triangles, est, scene, cut=cut, seconds=0.0)
     stats["buried_records"] = _bury(res, scene, stats["closed_objects"], pitch)
