@@ -10,28 +10,7 @@ namespace py = pybind11;
 using namespace pybind11::literals;
 using namespace voxgi::py_helpers;
 
-namespace {
-
-voxgi::ShadeTriangles make_triangles(const F64& tri_v, const I32& tri_object,
-                                     const U8& obj_two_sided) {
-    if (tri_v.ndim() != 3 || tri_v.shape(1) != 3 || tri_v.shape(2) != 3)
-        throw py::value_error("tri_v must have shape (F, 3, 3)");
-    const py::ssize_t F = tri_v.shape(0);
-    check_1d(tri_object, F, "tri_object");
-    check_1d(obj_two_sided, -1, "obj_two_sided");
-    const py::ssize_t O = obj_two_sided.shape(0);
-    {
-        const int32_t* to = tri_object.data();
-        for (py::ssize_t f = 0; f < F; ++f)
-            if (to[f] < 0 || to[f] >= O) throw py::value_error("tri_object: index out of range");
-    }
-    voxgi::ShadeTriangles tris;
-    tris.count = F;
-    tris.v = tri_v.data();
-    tris.object = tri_object.data();
-    tris.two_sided = obj_two_sided.data();
-    return tris;
-}
+namespace voxgi::py_helpers {
 
 voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_cell_start,
                             const F32& rec_packed, const I64& grid_dims, const I64& grid_lo,
@@ -78,6 +57,31 @@ voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_cell_start
             throw py::value_error("rec_sorted_key: key outside the grid");
     }
     return grid;
+}
+
+}  // namespace voxgi::py_helpers
+
+namespace {
+
+voxgi::ShadeTriangles make_triangles(const F64& tri_v, const I32& tri_object,
+                                     const U8& obj_two_sided) {
+    if (tri_v.ndim() != 3 || tri_v.shape(1) != 3 || tri_v.shape(2) != 3)
+        throw py::value_error("tri_v must have shape (F, 3, 3)");
+    const py::ssize_t F = tri_v.shape(0);
+    check_1d(tri_object, F, "tri_object");
+    check_1d(obj_two_sided, -1, "obj_two_sided");
+    const py::ssize_t O = obj_two_sided.shape(0);
+    {
+        const int32_t* to = tri_object.data();
+        for (py::ssize_t f = 0; f < F; ++f)
+            if (to[f] < 0 || to[f] >= O) throw py::value_error("tri_object: index out of range");
+    }
+    voxgi::ShadeTriangles tris;
+    tris.count = F;
+    tris.v = tri_v.data();
+    tris.object = tri_object.data();
+    tris.two_sided = obj_two_sided.data();
+    return tris;
 }
 
 int64_t gather_light_py(

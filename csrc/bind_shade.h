@@ -149,4 +149,9 @@ inline std::optional<voxgi::EnvironmentMap> make_environment(
     return env;
 }
 
+// The records' grid of the gather kernels (voxgi.traced.record_grid), checked.
+voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_cell_start,
+                            const F32& rec_packed, const I64& grid_dims, const I64& grid_lo,
+                            const F64& grid_origin, double pitch);
+
 }  // namespace voxgi::py_helpers

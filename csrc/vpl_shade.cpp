@@ -242,121 +242,6 @@ void gather_pixel_rays(const ShadeHits& hits, int n_gather, uint64_t base, doubl
 
 namespace {
 
-// The voxel of the grid that holds y.
-inline void cell_of(const RecordGrid& g, const double y[3], int64_t c[3]) {
-    for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((y[a] - g.origin[a]) / g.pitch));
-}
-
-// Key of voxel (i, j, k) on the records' bounding grid, or -1 outside it.
-inline int64_t grid_key(const RecordGrid& g, int64_t i, int64_t j, int64_t k) {
-    i -= g.lo[0], j -= g.lo[1], k -= g.lo[2];
-    if (i < 0 || j < 0 || k < 0 || i >= g.dims[0] || j >= g.dims[1] || k >= g.dims[2]) return -1;
-    return (i * g.dims[1] + j) * g.dims[2] + k;
-}
-
-// The records of voxel (i, j, k): [q0, q1) in the grid's order (empty outside it).
-inline void cell_records(const RecordGrid& g, int64_t i, int64_t j, int64_t k, int64_t& q0,
-                         int64_t& q1) {
-    q0 = q1 = 0;
-    const int64_t key = grid_key(g, i, j, k);
-    if (key < 0) return;
-    if (g.cell_start) {
-        q0 = g.cell_start[key], q1 = g.cell_start[key + 1];
-    } else {
-        q0 = std::lower_bound(g.sorted_key, g.sorted_key + g.count, key) - g.sorted_key;
-        q1 = std::upper_bound(g.sorted_key + q0, g.sorted_key + g.count, key) - g.sorted_key;
-    }
-}
-
-// How far record r stands apart from the hit point y (on a surface seen from
-// the side of normal n) by the records [q0, q1) of a voxel: 2 when
-// - it lies off the hit's own sheet: some record o whose plane holds y,
-//   facing n's side, has r's centroid strictly in front of or behind it
-//   (the other face of a slab thinner than a voxel, or its black back);
-// - or across another surface: some record o of another object, or of an
-//   orientation more than 60° away (another cluster of the voxelization),
-//   has y strictly on one side of its plane and r's centroid not on that
-//   side. Those are the planes junction cutting split r's surface by, so
-//   this keeps a hit on one side of a thin wall from reading the record on
-//   the other;
-// 1 when it is apart only by the signs of y's distances within rounding of
-// such a plane (the best guess there); 0 otherwise.
-int separation(const RecordGrid& g, const double y[3], const float n[3], const PackedRecord& r,
-               int64_t q0, int64_t q1) {
-    int level = 0;
-    for (int64_t q = q0; q < q1; ++q) {
-        const PackedRecord& o = g.rec[q];
-        if (&o == &r) continue;
-        // o's plane is as good as its float centroid: a few units in the
-        // last place of its coordinates.
-        const double tol =
-            1e-6 * g.pitch + 3e-7 * std::max({std::fabs(o.centroid[0]), std::fabs(o.centroid[1]),
-                                              std::fabs(o.centroid[2])});
-        double sy = 0.0, sr = 0.0, behind = 0.0;
-        for (int a = 0; a < 3; ++a) {
-            const double rc = double(r.centroid[a]) - o.centroid[a];
-            sy += (y[a] - o.centroid[a]) * o.normal[a];
-            sr += rc * o.normal[a];
-            behind += rc * n[a];
-        }
-        if (std::fabs(sy) <= tol && dot3(o.normal, n) > 0.5f) {
-            if (std::fabs(behind) > tol) return 2;
-            continue;
-        }
-        const float along = dot3(o.normal, r.normal);
-        // r's own sheet: its orientation, or its other side through r's
-        // centroid (a curved sheet's y lies off that plane on either side).
-        if (o.object == r.object && (along > 0.5f || (along < -0.5f && std::fabs(sr) <= tol)))
-            continue;
-        // A centroid on that plane (a sliver cut off at a junction) is on
-        // neither side: it does not stand for a point off the plane.
-        if ((sy > tol && sr < tol) || (sy < -tol && sr > -tol)) return 2;
-        if ((sy > 0.0 && sr < 0.0) || (sy < 0.0 && sr > 0.0)) level = 1;
-    }
-    return level;
-}
-
-// Position in the grid's order of the record that stands for the surface
-// point y, in voxel c, on object `obj` seen from the side of normal n, or
-// -1. Only records whose normal faces n's side qualify, and of those the
-// ones no other surface of y's voxel (or of their own) separates from y;
-// among them the nearest centroid, strongly preferring the same object and
-// orientation. The neighbouring voxels are searched only when c has no such
-// record of this surface.
-int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3], int32_t obj,
-                       const int64_t c[3]) {
-    const double p2 = g.pitch * g.pitch;
-    int64_t best = -1, h0, h1;
-    int best_apart = 0;
-    double best_score = 0.0, best_penalty = 0.0;
-    cell_records(g, c[0], c[1], c[2], h0, h1);
-    auto scan = [&](int64_t i, int64_t j, int64_t k, bool own) {
-        int64_t q0, q1;
-        cell_records(g, i, j, k, q0, q1);
-        for (int64_t q = q0; q < q1; ++q) {
-            const PackedRecord& r = g.rec[q];
-            const float facing = dot3(r.normal, n);
-            if (!(facing > 0.f)) continue;  // the other side of a sheet, or of a fold
-            const double dx = y[0] - r.centroid[0], dy = y[1] - r.centroid[1],
-                         dz = y[2] - r.centroid[2];
-            const double penalty = 4.0 * (1.0 - facing) + (r.object != obj ? 4.0 : 0.0);
-            const double score = dx * dx + dy * dy + dz * dz + p2 * penalty;
-            if (best >= 0 && best_apart == 0 && score >= best_score) continue;
-            int apart = separation(g, y, n, r, h0, h1);
-            if (!own && apart < 2) apart = std::max(apart, separation(g, y, n, r, q0, q1));
-            if (best < 0 || apart < best_apart || (apart == best_apart && score < best_score))
-                best = q, best_score = score, best_penalty = penalty, best_apart = apart;
-        }
-    };
-    scan(c[0], c[1], c[2], true);
-    if (best >= 0 && best_penalty < 0.5 && best_apart == 0) return best;
-    for (int di = -1; di <= 1; ++di)
-        for (int dj = -1; dj <= 1; ++dj)
-            for (int dk = -1; dk <= 1; ++dk)
-                if (di || dj || dk) scan(c[0] + di, c[1] + dj, c[2] + dk, false);
-    return best;
-}
-
 // Where a gather ray of pixel p landed, before its record is looked up.
 struct GatherHit {
     double y[3];       // on the hit triangle's plane, in double
@@ -530,6 +415,7 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
     constexpr int64_t kRowsAhead = 3;
     *rays = sum_over_pixel_chunks(P, threads, stop, [&](int64_t p0, int64_t p1) {
         std::vector<GatherHit> ring(size_t(kStages * n_gather));
+        LookupScratch scratch;
         auto slot = [&](int64_t p) { return ring.data() + (p % kStages) * n_gather; };
         auto shaded = [&](int64_t p) { return p >= p0 && p < p1 && hits.material[p] >= 0; };
         int64_t n_traced = 0;
@@ -562,7 +448,7 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                 double s[3] = {0.0, 0.0, 0.0};  // in ray order: the same for any thread count
                 for (int k = 0; k < n_gather; ++k) {
                     if (h[k].key == -2) continue;
-                    const int64_t rec = lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c);
+                    const int64_t rec = lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c, scratch);
                     gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s);
                 }
                 for (int ch = 0; ch < 3; ++ch) out[3 * (p - 2) + ch] += float(s[ch]);

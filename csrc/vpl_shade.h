@@ -11,6 +11,7 @@
 
 #include "environment.h"
 #include "ray_scene.h"
+#include "record_lookup.h"
 #include "texture.h"
 #include "util/parallel.h"
 
@@ -66,34 +67,6 @@ struct ShadeVPLs {
 // which is at most pi f L / n_g: no 1/r² spike at contact, and no bias.
 struct ShadeMIS {
     double n_gather = 0.0;  // gather rays per pixel per frame
-};
-
-// What a gather ray's lookup reads of one record: one 64-byte row, so that
-// scoring a voxel's records and reading the chosen one's light touch a cache
-// line or two instead of one per array (the lookup is bound by these loads).
-struct PackedRecord {
-    float centroid[3];  // in the tracer's frame; it only ranks records in a voxel
-    float normal[3];
-    int32_t object;
-    float pa;           // n_v p_a of the record (0: not a MIS VPL)
-    float radiance[3];  // B / pi
-    float albedo[3];    // the record's albedo (a texture's mean over its surface)
-    float unused[2];
-};
-static_assert(sizeof(PackedRecord) == 64, "one record, one 64-byte row");
-
-// Voxel records for looking up the radiance where a gather ray lands, in the
-// order of their voxel keys: a voxel's records are neighbours.
-struct RecordGrid {
-    int64_t count = 0;
-    const int64_t* sorted_key = nullptr;  // (N,) linear voxel keys, ascending
-    const int32_t* cell_start = nullptr;  // (dims product + 1,) first sorted index of each key,
-                                          // or null: binary search in sorted_key
-    const PackedRecord* rec = nullptr;    // (N,) in the order of sorted_key
-    int64_t dims[3] = {0, 0, 0};          // key = (i * dims[1] + j) * dims[2] + k
-    int64_t lo[3] = {0, 0, 0};            // ijk of key 0
-    double origin[3] = {0.0, 0.0, 0.0};
-    double pitch = 1.0;
 };
 
 // Scene triangles for the gather rays' hit points.

@@ -1,0 +1,83 @@
+// The record standing for a surface point where a ray lands (docs/design.md §6):
+// the records sorted by voxel, and the lookup the display's gather rays and
+// the solve's traced passes share. No pybind11 here: plain pointers and sizes.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+namespace voxgi {
+
+// What a gather ray's lookup reads of one record: one 64-byte row, so that
+// scoring a voxel's records and reading the chosen one's light touch a cache
+// line or two instead of one per array (the lookup is bound by these loads).
+struct PackedRecord {
+    float centroid[3];  // in the tracer's frame; it only ranks records in a voxel
+    float normal[3];
+    int32_t object;
+    float pa;           // n_v p_a of the record (0: not a MIS VPL)
+    float radiance[3];  // B / pi
+    float albedo[3];    // the record's albedo (a texture's mean over its surface)
+    float unused[2];
+};
+static_assert(sizeof(PackedRecord) == 64, "one record, one 64-byte row");
+
+// Voxel records for looking up the radiance where a gather ray lands, in the
+// order of their voxel keys: a voxel's records are neighbours.
+struct RecordGrid {
+    int64_t count = 0;
+    const int64_t* sorted_key = nullptr;  // (N,) linear voxel keys, ascending
+    const int32_t* cell_start = nullptr;  // (dims product + 1,) first sorted index of each key,
+                                          // or null: binary search in sorted_key
+    const PackedRecord* rec = nullptr;    // (N,) in the order of sorted_key
+    int64_t dims[3] = {0, 0, 0};          // key = (i * dims[1] + j) * dims[2] + k
+    int64_t lo[3] = {0, 0, 0};            // ijk of key 0
+    double origin[3] = {0.0, 0.0, 0.0};
+    double pitch = 1.0;
+};
+
+// The voxel of the grid that holds y.
+inline void cell_of(const RecordGrid& g, const double y[3], int64_t c[3]) {
+    for (int a = 0; a < 3; ++a) c[a] = int64_t(std::floor((y[a] - g.origin[a]) / g.pitch));
+}
+
+// Key of voxel (i, j, k) on the records' bounding grid, or -1 outside it.
+inline int64_t grid_key(const RecordGrid& g, int64_t i, int64_t j, int64_t k) {
+    i -= g.lo[0], j -= g.lo[1], k -= g.lo[2];
+    if (i < 0 || j < 0 || k < 0 || i >= g.dims[0] || j >= g.dims[1] || k >= g.dims[2]) return -1;
+    return (i * g.dims[1] + j) * g.dims[2] + k;
+}
+
+// Working memory of lookups, reused from one to the next (one per thread).
+struct LookupScratch {
+    struct Plane {      // a record of the hit's voxel, as seen from the hit point
+        double sy;      // the hit's signed distance to the record's plane
+        double tol;     // within rounding of that plane
+        bool holds;     // the plane holds the hit, facing its side: the hit's own sheet
+    };
+    struct Candidate {  // a record facing the hit's side
+        double score;   // squared distance to its centroid plus the penalty, pitch² units
+        double penalty;
+        int64_t index;  // in the grid's order
+        int32_t order;  // in the order the voxels and their records are visited
+        int32_t cell;   // which of the voxels visited holds it
+    };
+    std::vector<Plane> own;              // of each record of the hit's voxel
+    std::vector<int32_t> own_order;      // those records in the order they are asked
+    int32_t last_apart = -1;             // the last of them that set a candidate apart
+    std::vector<Candidate> candidates;
+    std::vector<int64_t> cell_first, cell_end;  // the voxels visited
+};
+
+// Position in the grid's order of the record that stands for the surface
+// point y, in voxel c, on object `obj` seen from the side of unit normal n,
+// or -1. Only records whose normal faces n's side qualify, and of those the
+// ones no other surface of y's voxel (or of their own) separates from y;
+// among them the nearest centroid, strongly preferring the same object and
+// orientation. The neighbouring voxels are searched only when c has no such
+// record of this surface. The answer does not depend on `scratch`.
+int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3], int32_t obj,
+                       const int64_t c[3], LookupScratch& scratch);
+
+}  // namespace voxgi

@@ -1,0 +1,98 @@
+"""The record a gather ray's hit reads: the kernels' lookup against a
+straightforward one (every candidate in visiting order, each asking every
+other record of its voxel), on scenes of thin walls, folds and junctions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import voxgi
+from voxgi._core import testing
+from voxgi.rays import Tracer
+from voxgi.traced import record_grid
+
+
+def _hits_of_rays(scene, vox, rng, count):
+    """Hits of cosine-distributed rays from random records, as the traced
+    passes make them: the point on the hit triangle's plane, its normal on the
+    ray's side, its object."""
+    with Tracer(scene, 1) as tr:
+        pick = rng.integers(0, len(vox), count)
+        nrm = np.asarray(vox.normal, np.float64)[pick]
+        org = np.asarray(vox.centroid, np.float64)[pick] - tr.centre
+        d = rng.normal(size=(count, 3))
+        d = nrm + d / np.linalg.norm(d, axis=1, keepdims=True)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        org = org + 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0))) * nrm
+        prim, _, _ = tr.first_hit(org, d)
+        ok = prim >= 0
+        t = tr.tris[prim[ok]]
+        org, d = org[ok], d[ok]
+        nt = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        nt /= np.linalg.norm(nt, axis=1, keepdims=True)
+        dn = np.einsum("ij,ij->i", d, nt)
+        tt = np.einsum("ij,ij->i", t[:, 0] - org, nt) / dn
+        y = org + tt[:, None] * d
+        n = -np.sign(dn)[:, None] * nt
+        obj = np.asarray(scene.triangles()["object"], np.int32)[prim[ok]]
+        return y, n, obj, tr.centre
+
+
+def _surface_points(scene, centre, rng, count):
+    """Points on the triangles (by area, many near an edge or a corner), seen
+    from either side."""
+    tri = scene.triangles()
+    v = np.asarray(tri["triangles"], np.float64)
+    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    f = rng.choice(len(v), count, p=area / area.sum())
+    b = rng.uniform(size=(count, 2))
+    b = np.where(b.sum(axis=1, keepdims=True) > 1, 1 - b, b)
+    edge = rng.uniform(size=count) < 0.5  # within a thousandth of an edge
+    b[edge, 0] *= 1e-3
+    y = v[f, 0] + b[:, :1] * (v[f, 1] - v[f, 0]) + b[:, 1:] * (v[f, 2] - v[f, 0]) - centre
+    nt = np.cross(v[f, 1] - v[f, 0], v[f, 2] - v[f, 0])
+    nt /= np.linalg.norm(nt, axis=1, keepdims=True)
+    side = np.where(rng.uniform(size=count) < 0.5, -1.0, 1.0)
+    return y, side[:, None] * nt, np.asarray(tri["object"], np.int32)[f]
+
+
+@pytest.mark.parametrize("name", ["split-box", "door-room", "cornell-box", "bunny-room"])
+def test_lookup_matches_the_straightforward_one(name):
+    scene = voxgi.scenes.get(name)
+    vox = voxgi.voxelize(scene, resolution=48, progress=False)
+    rng = np.random.default_rng(7)
+    y1, n1, o1, centre = _hits_of_rays(scene, vox, rng, 40_000)
+    y2, n2, o2 = _surface_points(scene, centre, rng, 40_000)
+    y, n, obj = np.concatenate([y1, y2]), np.concatenate([n1, n2]), np.concatenate([o1, o2])
+    grid = record_grid(vox, centre, np.zeros((len(vox), 3), np.float32))
+    args = (grid["rec_sorted_key"], grid["rec_cell_start"], grid["rec_packed"],
+            grid["grid_dims"], grid["grid_lo"], grid["grid_origin"], grid["pitch"],
+            np.ascontiguousarray(y), np.ascontiguousarray(n, np.float32),
+            np.ascontiguousarray(obj))  # fmt: skip
+    got = testing.record_lookup(*args)
+    want = testing.record_lookup(*args, reference=True)
+    # the hits reach records of every kind the lookup tells apart
+    assert np.count_nonzero(want < 0) < len(want) // 2
+    bad = np.flatnonzero(got != want)
+    assert bad.size == 0, (
+        f"{bad.size} of {len(want)} hits read another record, e.g. hit {bad[0]} at "
+        f"{y[bad[0]]} (normal {n[bad[0]]}, object {obj[bad[0]]}): {got[bad[0]]} "
+        f"instead of {want[bad[0]]}"
+    )
+
+
+def test_lookup_without_the_dense_table_is_the_same():
+    scene = voxgi.scenes.get("door-room")
+    vox = voxgi.voxelize(scene, resolution=32, progress=False)
+    rng = np.random.default_rng(3)
+    y, n, obj, centre = _hits_of_rays(scene, vox, rng, 20_000)
+    dense = record_grid(vox, centre, np.zeros((len(vox), 3), np.float32))
+    searched = record_grid(vox, centre, np.zeros((len(vox), 3), np.float32), dense_cells=0)
+    hits = (np.ascontiguousarray(y), np.ascontiguousarray(n, np.float32), obj)
+    keys = ("rec_sorted_key", "rec_cell_start", "rec_packed", "grid_dims", "grid_lo",
+            "grid_origin", "pitch")  # fmt: skip
+    a = testing.record_lookup(*(dense[k] for k in keys), *hits)
+    b = testing.record_lookup(*(searched[k] for k in keys), *hits)
+    assert searched["rec_cell_start"].size == 0
+    np.testing.assert_array_equal(a, b)
