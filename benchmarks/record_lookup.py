@@ -68,9 +68,10 @@ def main() -> int:
         if args.records_per_voxel:
             _, counts = np.unique(np.asarray(vox.ijk), axis=0, return_counts=True)
             q = np.percentile(counts, [50, 90, 99, 100])
+            crowd = np.sum(counts**2) / len(vox)
             print(f"{name}: {len(vox)} records in {len(counts)} voxels; per voxel "
                   f"median {q[0]:.0f} p90 {q[1]:.0f} p99 {q[2]:.0f} max {q[3]:.0f}; "
-                  f"a record's voxel holds {np.sum(counts**2) / len(vox):.1f} on average")  # fmt: skip
+                  f"a record's voxel holds {crowd:.1f} on average")  # fmt: skip
         rng = np.random.default_rng(1)
         values = rng.uniform(0.0, 1.0, (len(vox), 3))
         with TracedGather(scene, vox, threads=args.threads) as trace:

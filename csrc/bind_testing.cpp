@@ -190,7 +190,6 @@ py::tuple input_alignment(I32 i32, I64 i64, F32 f32, F64 f64) {
         aligned(f32.data(), alignof(float)), aligned(f64.data(), alignof(double)));
 }
 
-
 // The record each hit (y (H, 3) float64 in the tracer's frame, n (H, 3)
 // unit float32 normals on the side seen, obj (H,)) reads on the grid of
 // voxgi.traced.record_grid, by the kernels' lookup or by the reference one:
@@ -215,10 +214,10 @@ I64 record_lookup(I64 rec_sorted_key, I32 rec_cell_start, F32 rec_packed, I64 gr
         for (py::ssize_t h = 0; h < H; ++h) {
             int64_t c[3];
             voxgi::cell_of(g, yp + 3 * h, c);
-            res[h] = reference ? voxgi::lookup_reference::lookup_in_cell(g, yp + 3 * h, pn + 3 * h,
-                                                                         po[h], c)
-                               : voxgi::lookup_in_cell(g, yp + 3 * h, pn + 3 * h, po[h], c,
-                                                       scratch);
+            res[h] =
+                reference
+                    ? voxgi::lookup_reference::lookup_in_cell(g, yp + 3 * h, pn + 3 * h, po[h], c)
+                    : voxgi::lookup_in_cell(g, yp + 3 * h, pn + 3 * h, po[h], c, scratch);
         }
     }
     return out;

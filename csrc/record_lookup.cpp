@@ -198,8 +198,8 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
         const PackedRecord& r = g.rec[k.index];
         int apart = separation_own(g, n, r, h0, S);
         if (!own && apart < 2)
-            apart = std::max(apart,
-                             separation(g, y, n, r, S.cell_first[k.cell], S.cell_end[k.cell]));
+            apart =
+                std::max(apart, separation(g, y, n, r, S.cell_first[k.cell], S.cell_end[k.cell]));
         if (best < 0 || apart < best_apart || (apart == best_apart && nearer(k)))
             best = k.index, best_score = k.score, best_penalty = k.penalty, best_apart = apart,
             best_order = k.order;

@@ -51,10 +51,10 @@ inline int64_t grid_key(const RecordGrid& g, int64_t i, int64_t j, int64_t k) {
 
 // Working memory of lookups, reused from one to the next (one per thread).
 struct LookupScratch {
-    struct Plane {      // a record of the hit's voxel, as seen from the hit point
-        double sy;      // the hit's signed distance to the record's plane
-        double tol;     // within rounding of that plane
-        bool holds;     // the plane holds the hit, facing its side: the hit's own sheet
+    struct Plane {   // a record of the hit's voxel, as seen from the hit point
+        double sy;   // the hit's signed distance to the record's plane
+        double tol;  // within rounding of that plane
+        bool holds;  // the plane holds the hit, facing its side: the hit's own sheet
     };
     struct Candidate {  // a record facing the hit's side
         double score;   // squared distance to its centroid plus the penalty, pitch² units
@@ -63,9 +63,9 @@ struct LookupScratch {
         int32_t order;  // in the order the voxels and their records are visited
         int32_t cell;   // which of the voxels visited holds it
     };
-    std::vector<Plane> own;              // of each record of the hit's voxel
-    std::vector<int32_t> own_order;      // those records in the order they are asked
-    int32_t last_apart = -1;             // the last of them that set a candidate apart
+    std::vector<Plane> own;          // of each record of the hit's voxel
+    std::vector<int32_t> own_order;  // those records in the order they are asked
+    int32_t last_apart = -1;         // the last of them that set a candidate apart
     std::vector<Candidate> candidates;
     std::vector<int64_t> cell_first, cell_end;  // the voxels visited
 };

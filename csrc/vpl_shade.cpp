@@ -448,7 +448,8 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                 double s[3] = {0.0, 0.0, 0.0};  // in ray order: the same for any thread count
                 for (int k = 0; k < n_gather; ++k) {
                     if (h[k].key == -2) continue;
-                    const int64_t rec = lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c, scratch);
+                    const int64_t rec =
+                        lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c, scratch);
                     gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s);
                 }
                 for (int ch = 0; ch < 3; ++ch) out[3 * (p - 2) + ch] += float(s[ch]);
