@@ -102,7 +102,7 @@ class Microfacet:
     >>> lobe = voxgi.Microfacet("conductor", alpha=0.2, eta=voxgi.CONDUCTORS["Au"][0],
     ...                         k=voxgi.CONDUCTORS["Au"][1])
     >>> [round(x, 2) for x in lobe.albedo()]
-    [0.94, 0.69, 0.38]
+    [0.88, 0.74, 0.32]
     """
 
     kind: str = "plastic"

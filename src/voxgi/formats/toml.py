@@ -316,7 +316,7 @@ def _materials_from_dict(mats, source: str) -> dict[str, Material]:
 
 def _microfacet(spec: dict) -> Microfacet:
     """A ``specular = {type = "roughplastic" | "roughconductor", ...}`` table,
-    in the names of Mitsuba's plugins (``docs/scene-files.md``)."""
+    in the names of Mitsuba's plugins (``docs/design.md`` §14)."""
     spec = dict(spec)
     kind = {"roughplastic": "plastic", "roughconductor": "conductor"}.get(spec.pop("type"))
     if kind is None:
