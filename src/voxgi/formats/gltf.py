@@ -132,6 +132,11 @@ def gltf_lobe(m: dict | None, base, where: str, notes: Notes):
 
     pbr = m.get("pbrMetallicRoughness", {})
     metallic = float(pbr.get("metallicFactor", 1.0))
+    if "metallicFactor" not in pbr:
+        # glTF's default is 1, a metal; exporters that leave it out mostly
+        # mean a dielectric (a textured asset would lose its texture)
+        notes.approx(f"{where}: no metallicFactor (glTF's default 1, a metal) read as 0")
+        metallic = 0.0
     roughness = float(pbr.get("roughnessFactor", 1.0))
     if not (0.0 <= metallic <= 1.0 and 0.0 <= roughness <= 1.0):
         raise ValueError(f"{where}: metallicFactor or roughnessFactor outside [0, 1]")
