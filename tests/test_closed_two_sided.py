@@ -58,7 +58,7 @@ def solves():
 
 
 def test_a_closed_two_sided_box_has_black_inner_records(solves):
-    scene, vox, _ = solves[True]
+    scene, vox, sol = solves[True]
     k = len(scene.objects) - 1
     assert vox.stats["sealed_objects"] == [k]
     assert k in vox.stats["closed_objects"]
@@ -67,6 +67,7 @@ def test_a_closed_two_sided_box_has_black_inner_records(solves):
     # one side of every record pair is inside: as many inner records as outer
     assert vox.stats["inner_records"] == inner.sum() == (mine & ~vox.back).sum() > 50
     assert np.all(vox.albedo[inner] == 0)
+    assert f"{inner.sum()} records on the inner side" in sol.stats["skipped"]["inner_records"]
     # the one-sided box's records: the same, record for record
     _, one, _ = solves[False]
     np.testing.assert_array_equal(vox.back, one.back)

@@ -139,6 +139,12 @@ def build_problem(vox, a, opt) -> Problem:
         "skipped": {},
         "closed_back_records": len(twins.back),
     }
+    vstats = getattr(vox, "stats", None) or {}
+    if vstats.get("inner_records"):
+        stats["skipped"]["inner_records"] = (
+            f"{vstats['inner_records']} records on the inner side of the closed two-sided "
+            f"objects {vstats.get('sealed_objects')}, which no light reaches, are black"
+        )
     return Problem(
         vox=vox,
         a=a,
