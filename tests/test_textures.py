@@ -142,6 +142,26 @@ def test_record_albedo_is_the_texture_mean_over_its_own_surface():
     np.testing.assert_allclose(sc.objects[0].material.albedo, lin.mean(axis=0), rtol=1e-6)
 
 
+def test_a_glass_sheet_beside_a_textured_plane_keeps_the_records_texture():
+    # the sheets are not voxelized: the textures' UVs must follow the
+    # triangles that are (a sheet listed first failed the kernel's shape check)
+    texels = np.zeros((4, 4, 3), np.uint8)
+    texels[:, :2] = 30
+    texels[:, 2:] = 230
+    tex = voxgi.Texture(texels, filter="nearest")
+    plane = _textured_plane(tex)
+    sc = voxgi.Scene(plane.camera)
+    pane = voxgi.Material(albedo=0.0, transmittance=0.8)
+    sc.add(trimesh.Trimesh([[-1, 1, -1], [1, 1, -1], [1, 1, 1]], [[0, 1, 2]]), pane, name="pane")
+    o = plane.objects[0]
+    sc.add(trimesh.Trimesh(o.vertices, o.faces, process=False), o.material, name="plane", uv=o.uv)
+    vox = voxgi.voxelize(sc, resolution=8, progress=False)
+    up = (vox.normal[:, 1] > 0.5) & (vox.area > 0)
+    lin = tex.eval(np.array([[0.1, 0.5], [0.9, 0.5]]))
+    dark = vox.centroid[up, 0] < -0.05
+    np.testing.assert_allclose(vox.albedo[up][dark], np.tile(lin[0], (dark.sum(), 1)), rtol=1e-6)
+
+
 def test_record_albedo_against_numpy_integration():
     # bilinear texture, voxels that cut the triangles into pieces: each
     # record's albedo is the area-weighted mean of the filter over its pieces
