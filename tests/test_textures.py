@@ -317,3 +317,23 @@ def test_obj_map_kd_and_gltf_base_color_texture_load_as_textures(tmp_path, suffi
     # the same visual gives the same UVs from either format: v = 0 the image's top
     order = [int(np.argmin(np.linalg.norm(o.vertices - p, axis=1))) for p in mesh.vertices]
     np.testing.assert_allclose(o.uv[order], np.c_[uv[:, 0], 1 - uv[:, 1]], atol=1e-6)
+
+
+def test_textured_floor_under_a_glass_pane_voxelizes_with_its_texture():
+    # the sheets have no records, so the kernel sees the other objects'
+    # triangles only, each with its own UVs: the floor keeps its two halves
+    texels = np.zeros((4, 4, 3), np.uint8)
+    texels[:, :2] = 30
+    texels[:, 2:] = 230
+    tex = voxgi.Texture(texels, filter="nearest")
+    sc = _textured_plane(tex)
+    pane = trimesh.Trimesh([[-1, 1, -1], [1, 1, -1], [1, 1, 1], [-1, 1, 1]], [[0, 1, 2], [0, 2, 3]],
+                           process=False)  # fmt: skip
+    sc.add(pane, voxgi.Material(albedo=0.0, transmittance=0.8), name="pane", two_sided=True)
+    vox = voxgi.voxelize(sc, resolution=8, progress=False)
+    up = (vox.normal[:, 1] > 0.5) & (vox.area > 0)
+    lin = tex.eval(np.array([[0.1, 0.5], [0.9, 0.5]]))
+    x = vox.centroid[up, 0]
+    assert (vox.centroid[:, 1] < 0.5).all()  # no record on the pane
+    np.testing.assert_allclose(vox.albedo[up][x < -0.05], np.tile(lin[0], ((x < -0.05).sum(), 1)), rtol=1e-6)
+    np.testing.assert_allclose(vox.albedo[up][x > 0.05], np.tile(lin[1], ((x > 0.05).sum(), 1)), rtol=1e-6)

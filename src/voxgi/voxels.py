@@ -473,11 +473,14 @@ def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> Voxel
     # (docs/design.md §13): light crosses them on the rays, not on the lines.
     pitch, origin, dims = _grid(tri["triangles"], resolution)
     sheet = np.array([o.material.is_sheet for o in scene.objects])
+    textures = surface_tables(scene)
     if sheet.any():
         keep = ~sheet[tri["object"]]
         if not keep.any():
             raise ValueError("voxelize: every object is a transmitting sheet; nothing to voxelize")
         tri = {**tri, "triangles": tri["triangles"][keep], "object": tri["object"][keep]}
+        if textures is not None:  # one UV triple per triangle the kernel sees
+            textures = {**textures, "corner_uv": np.ascontiguousarray(textures["corner_uv"][keep])}
     triangles = tri["triangles"]
     est = _check_memory(triangles, pitch, resolution, max_memory)
     res = _run_kernel(
@@ -488,7 +491,7 @@ def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> Voxel
         cut=cut,
         threads=nthreads,
         progress=progress,
-        textures=surface_tables(scene),
+        textures=textures,
     )
     stats = _voxelize_stats(dict(res["stats"]), triangles, est, scene, cut=cut, seconds=0.0)
     stats["buried_records"] = _bury(res, scene, stats["closed_objects"], pitch)
