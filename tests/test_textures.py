@@ -335,5 +335,9 @@ def test_textured_floor_under_a_glass_pane_voxelizes_with_its_texture():
     lin = tex.eval(np.array([[0.1, 0.5], [0.9, 0.5]]))
     x = vox.centroid[up, 0]
     assert (vox.centroid[:, 1] < 0.5).all()  # no record on the pane
-    np.testing.assert_allclose(vox.albedo[up][x < -0.05], np.tile(lin[0], ((x < -0.05).sum(), 1)), rtol=1e-6)
-    np.testing.assert_allclose(vox.albedo[up][x > 0.05], np.tile(lin[1], ((x > 0.05).sum(), 1)), rtol=1e-6)
+    np.testing.assert_allclose(
+        vox.albedo[up][x < -0.05], np.tile(lin[0], ((x < -0.05).sum(), 1)), rtol=1e-6
+    )
+    np.testing.assert_allclose(
+        vox.albedo[up][x > 0.05], np.tile(lin[1], ((x > 0.05).sum(), 1)), rtol=1e-6
+    )
