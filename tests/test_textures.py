@@ -341,3 +341,35 @@ def test_textured_floor_under_a_glass_pane_voxelizes_with_its_texture():
     np.testing.assert_allclose(
         vox.albedo[up][x > 0.05], np.tile(lin[1], ((x > 0.05).sum(), 1)), rtol=1e-6
     )
+
+
+@pytest.mark.parametrize(
+    "filt, wrap, uv, want",
+    [
+        # raw codes 0, 255 / 51, 102 (linear 0, 1 / 0.2, 0.4), row 0 at v = 0
+        ("bilinear", "repeat", (0.25, 0.25), 0.0),  # a texel centre
+        ("bilinear", "repeat", (0.5, 0.25), 0.5),  # midway between two centres
+        ("bilinear", "repeat", (0.5, 0.5), (0 + 1 + 0.2 + 0.4) / 4),  # the four
+        ("bilinear", "repeat", (-0.25, 0.25), 1.0),  # column -1 is column 1
+        ("bilinear", "mirror", (-0.25, 0.25), 0.0),  # column -1 is column 0
+        ("bilinear", "clamp", (1.5, 0.75), 0.4),  # past the edge: the edge texel
+        ("bilinear", "repeat", (0.0, 0.25), 0.5),  # the seam blends columns 1 and 0
+        ("bilinear", "clamp", (0.0, 0.25), 0.0),
+        ("nearest", "repeat", (0.49, 0.51), 0.2),
+        ("nearest", "repeat", (1.76, -0.2), 0.4),  # column 3, row -1: texel (1, 1)
+        ("nearest", "mirror", (1.26, 0.1), 1.0),  # column 2 mirrors to column 1
+    ],
+)
+def test_texture_lookup_by_hand(filt, wrap, uv, want):
+    codes = np.array([[0, 255], [51, 102]], np.uint8)
+    tex = voxgi.Texture(np.repeat(codes[..., None], 3, axis=2), filter=filt, wrap=wrap, raw=True)
+    # the decode table is float32
+    np.testing.assert_allclose(tex.eval(np.array([uv])), [[want] * 3], rtol=1e-7, atol=1e-9)
+
+
+def test_texture_srgb_decoding_by_hand():
+    # IEC 61966-2-1: code 128 is ((128/255 + 0.055) / 1.055)^2.4 = 0.2158605;
+    # 10 is on the linear toe, 10 / 255 / 12.92 = 0.0030353
+    tex = voxgi.Texture(np.array([[[128, 10, 255]]], np.uint8), filter="nearest")
+    np.testing.assert_allclose(tex.eval([[0.5, 0.5]]), [[0.2158605, 0.0030353, 1.0]], rtol=1e-5)
+    np.testing.assert_allclose(tex.mean(), [0.2158605, 0.0030353, 1.0], rtol=1e-5)
