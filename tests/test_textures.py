@@ -344,7 +344,7 @@ def test_textured_floor_under_a_glass_pane_voxelizes_with_its_texture():
 
 
 @pytest.mark.parametrize(
-    "filt, wrap, uv, want",
+    ("filt", "wrap", "uv", "want"),
     [
         # raw codes 0, 255 / 51, 102 (linear 0, 1 / 0.2, 0.4), row 0 at v = 0
         ("bilinear", "repeat", (0.25, 0.25), 0.0),  # a texel centre
