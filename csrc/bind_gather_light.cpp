@@ -90,8 +90,9 @@ int64_t gather_light_py(
     const std::optional<F64>& env_row_solid_angle, double env_samples,
     const std::optional<F32>& hit_albedo, const std::optional<std::vector<U8>>& tex_texels,
     const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
-    const std::optional<F32>& corner_uv) {
-    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+    const std::optional<F32>& corner_uv, const std::optional<F32>& mat_lobe) {
+    voxgi::ShadeMaterials mats =
+        materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
     set_hit_albedo(hits, hit_albedo);
@@ -136,7 +137,7 @@ void bind_gather_light(py::module_& m) {
           "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
           "hit_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
           "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
-          "corner_uv"_a.noconvert() = py::none(),
+          "corner_uv"_a.noconvert() = py::none(), "mat_lobe"_a.noconvert() = py::none(),
           R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit

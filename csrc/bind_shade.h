@@ -16,7 +16,8 @@
 namespace voxgi::py_helpers {
 
 inline voxgi::ShadeMaterials materials(const F32& albedo, const F32& rs, const F32& nu,
-                                       const F32& nv, const U8& glossy) {
+                                       const F32& nv, const U8& glossy,
+                                       const std::optional<F32>& lobe = std::nullopt) {
     check_2d(albedo, -1, 3, "mat_albedo");
     const py::ssize_t m = albedo.shape(0);
     check_2d(rs, m, 3, "mat_rs");
@@ -30,6 +31,20 @@ inline voxgi::ShadeMaterials materials(const F32& albedo, const F32& rs, const F
     s.nu = nu.data();
     s.nv = nv.data();
     s.glossy = glossy.data();
+    if (lobe) {
+        // (M, kLobeWidth) float32 rows of voxgi.materials.Microfacet.lobe_row
+        check_2d(*lobe, m, voxgi::kLobeWidth, "mat_lobe");
+        s.lobe = reinterpret_cast<const voxgi::MicrofacetLobe*>(lobe->data());
+        for (py::ssize_t i = 0; i < m; ++i) {
+            const voxgi::MicrofacetLobe& L = s.lobe[i];
+            if (L.kind == 0.f) continue;
+            if (!(L.kind == 1.f || L.kind == 2.f) || !(L.alpha >= 1e-4f && L.alpha <= 4.f) ||
+                !(L.lobe_share >= 0.f && L.lobe_share <= 1.f) || !(L.eta > 0.f))
+                throw py::value_error("mat_lobe: row " + std::to_string(i) +
+                                      " is not a lobe (kind 1 or 2, alpha in [1e-4, 4], "
+                                      "lobe_share in [0, 1], eta > 0)");
+        }
+    }
     return s;
 }
 

@@ -41,8 +41,9 @@ py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 
                        F64 vpl_pos, F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa,
                        double n_gather, double eps, const voxgi::RayScene& scene,
                        std::optional<I32> pixel_set, std::optional<I64> set_start, int threads,
-                       const std::optional<F32>& hit_albedo) {
-    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+                       const std::optional<F32>& hit_albedo, const std::optional<F32>& mat_lobe) {
+    voxgi::ShadeMaterials mats =
+        materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
     set_hit_albedo(hits, hit_albedo);
@@ -80,8 +81,9 @@ py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 
 }
 
 auto shade_brdf_py(F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, I32 material,
-                   F32 n, F32 k1, F32 k2) {
-    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+                   F32 n, F32 k1, F32 k2, const std::optional<F32>& mat_lobe) {
+    voxgi::ShadeMaterials mats =
+        materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     check_1d(material, -1, "material");
     const py::ssize_t Q = material.shape(0);
     check_2d(n, Q, 3, "n");
@@ -101,8 +103,10 @@ auto shade_brdf_py(F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_gl
 auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                          F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
                          I64 ray_count, F32 ray_dir, F32 ray_weight, U8 occluded, F32Out out,
-                         int threads, const std::optional<F32>& hit_albedo) {
-    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+                         int threads, const std::optional<F32>& hit_albedo,
+                         const std::optional<F32>& mat_lobe) {
+    voxgi::ShadeMaterials mats =
+        materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
     set_hit_albedo(hits, hit_albedo);
@@ -133,8 +137,10 @@ int64_t environment_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo
                              const F64& env_texel_cdf, const F64& env_row_cos, int env_samples,
                              double n_gather, uint64_t seed, int64_t frame, double eps,
                              const voxgi::RayScene& scene, F32Out out, int threads,
-                             const std::optional<F32>& hit_albedo) {
-    voxgi::ShadeMaterials mats = materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy);
+                             const std::optional<F32>& hit_albedo,
+                             const std::optional<F32>& mat_lobe) {
+    voxgi::ShadeMaterials mats =
+        materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
     set_hit_albedo(hits, hit_albedo);
@@ -170,6 +176,7 @@ void bind_vpl_shade(py::module_& m) {
           "env_row_solid_angle"_a.noconvert(), "env_texel_cdf"_a.noconvert(),
           "env_row_cos"_a.noconvert(), "env_samples"_a, "n_gather"_a, "seed"_a, "frame"_a, "eps"_a,
           "scene"_a, "out"_a.noconvert(), "threads"_a = 0, "hit_albedo"_a.noconvert() = py::none(),
+          "mat_lobe"_a.noconvert() = py::none(),
           R"doc(The environment's light at the hits: env_samples directions per shaded
 pixel drawn from the environment's tables (as voxgi.Environment.sample:
 env_texel_cdf (H*W,), env_row_cos (H+1,)), each weighed by the balance
@@ -185,6 +192,7 @@ out (P, 3) float32. Returns the number of rays traced.)doc");
           "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "scene"_a,
           "pixel_set"_a.noconvert() = py::none(), "set_start"_a.noconvert() = py::none(),
           "threads"_a = 0, "hit_albedo"_a.noconvert() = py::none(),
+          "mat_lobe"_a.noconvert() = py::none(),
           R"doc(The VPLs' light at the hits: per (pixel, VPL) pair the unoccluded term and
 its shadow ray, traced in scene (a RayScene) as it is made; returns each
 pixel's sum over its free rays in VPL order (P, 3) float32 and the number of
@@ -205,7 +213,7 @@ int64, pixel p sees only the VPLs of set pixel_set[p].)doc");
           "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(),
           "ray_count"_a.noconvert(), "ray_dir"_a.noconvert(), "ray_weight"_a.noconvert(),
           "occluded"_a.noconvert(), "out"_a.noconvert(), "threads"_a = 0,
-          "hit_albedo"_a.noconvert() = py::none(),
+          "hit_albedo"_a.noconvert() = py::none(), "mat_lobe"_a.noconvert() = py::none(),
           R"doc(Light along known directions (delta lights, environment samples, escaped
 gather rays): adds f(wi, wo) max(0, n.wi) weight into out (P, 3) for each ray
 (pixel-major, ray_count (P,) int64) not occluded (uint8 (R,), or empty: none).)doc");
@@ -213,6 +221,9 @@ gather rays): adds f(wi, wo) max(0, n.wi) weight into out (P, 3) for each ray
     m.def("shade_brdf", &shade_brdf_py, "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(),
           "mat_nu"_a.noconvert(), "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(),
           "material"_a.noconvert(), "n"_a.noconvert(), "k1"_a.noconvert(), "k2"_a.noconvert(),
+          "mat_lobe"_a.noconvert() = py::none(),
           R"doc(The display's BRDF f(k1, k2) (1/sr) for Q direction pairs (tests):
-rho/pi, or Ashikhmin-Shirley coupled diffuse + specular where mat_glossy.)doc");
+rho/pi, or Ashikhmin-Shirley coupled diffuse + specular where mat_glossy, or
+where mat_lobe (M, 85) float32 has a row of kind 1 or 2 the microfacet lobe
+(voxgi.Microfacet.lobe_row) with k1 towards the light.)doc");
 }

@@ -104,7 +104,9 @@ void environment_light(const ShadeHits& hits, const ShadeMaterials& mats, const 
                 const double* L = env.radiance + 3 * k;
                 const double cos = w[0] * nf[0] + w[1] * nf[1] + w[2] * nf[2];
                 const double pdf = env.texel_pdf[k] / env.row_solid_angle[k / env.width];
-                const double dens = env.n_samples * pdf + n_gather * std::max(cos, 0.0) / kPi;
+                const double pg = mats.lobe ? gather_density(mats.lobe, m, nf, wo, wf, cos)
+                                            : std::max(cos, 0.0) / kPi;
+                const double dens = env.n_samples * pdf + n_gather * pg;
                 if (!(dens > 0.0) || !(L[0] > 0.0 || L[1] > 0.0 || L[2] > 0.0)) continue;
                 ++traced;
                 float T[3];

@@ -83,6 +83,8 @@ void shade_brdf(const ShadeMaterials& mats, int32_t m, const float* rd, const fl
         for (int c = 0; c < 3; ++c) f[c] = rd[c] * float(1.0 / kPi);
         return;
     }
+    if (mats.lobe && mats.lobe[m].kind != 0.f)
+        return microfacet_brdf(mats.lobe[m], rd, n, k1, k2, f);
     // Ashikhmin & Shirley 2000, eqs. (4) and (5): coupled diffuse + specular.
     const float* rs = mats.rs + 3 * int64_t(m);
     const float nu = mats.nu[m], nv = mats.nv[m];
@@ -141,8 +143,12 @@ void vpl_pixel_rays(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
         const double cc = double(cos_x) * cos_y;
         double g;
         if (vpls.pa && vpls.pa[k] > 0.f) {
-            // Balance heuristic with the gather rays (see ShadeMIS).
-            g = cc / (r2 * vpls.pa[k] + mis.n_gather * cc / kPi);
+            // Balance heuristic with the gather rays (see ShadeMIS), whose
+            // density per unit area at y is n_g p_g(wi) cos_y / r².
+            g = mats.lobe
+                    ? cc / (r2 * vpls.pa[k] +
+                            mis.n_gather * cos_y * gather_density(mats.lobe, m, n, wo, wi, cos_x))
+                    : cc / (r2 * vpls.pa[k] + mis.n_gather * cc / kPi);
         } else {
             // The VPL is a disc of area dA: on the axis of a disc the exact
             // point-to-disc term is cos cos / (r² + dA/pi); bounded, and
@@ -207,15 +213,20 @@ uint64_t gather_base(uint64_t seed, int64_t frame) {
     return splitmix64(seed ^ splitmix64(uint64_t(frame) + 0x6A09E667F3BCC909ull));
 }
 
-// The n_gather rays of shaded pixel p: emit(k, org, dir).
+// The n_gather rays of shaded pixel p: emit(k, org, dir), dir null for a
+// lobe sample that falls below the surface (it brings nothing).
+// Cosine-distributed, or for a material with a microfacet lobe each ray drawn
+// from the lobe with probability lobe_share (from the same stratified pair).
 template <class Emit>
-void gather_pixel_rays(const ShadeHits& hits, int n_gather, uint64_t base, double eps, int64_t p,
-                       Emit&& emit) {
+void gather_pixel_rays(const ShadeHits& hits, const ShadeMaterials& mats, int n_gather,
+                       uint64_t base, double eps, int64_t p, Emit&& emit) {
     const double* x = hits.pos + 3 * p;
     const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p;
     float u[3], v[3];
     tangent_frame(n, u, v);
     uint64_t h = splitmix64(base ^ uint64_t(p) * 0xD1B54A32D192ED03ull);
+    const MicrofacetLobe* lobe = mats.lobe ? mats.lobe + hits.material[p] : nullptr;
+    if (lobe && lobe->kind == 0.f) lobe = nullptr;
     // A square count is stratified in both cos²θ and the azimuth (m x m
     // cells); any other in cos²θ alone.
     const int m = int(std::lround(std::sqrt(double(n_gather))));
@@ -226,14 +237,21 @@ void gather_pixel_rays(const ShadeHits& hits, int n_gather, uint64_t base, doubl
         h = splitmix64(h);
         const double j2 = to_unit(h);
         const double u1 = grid ? (k / m + j1) / m : (k + j1) / n_gather;
-        const double phi = 2.0 * kPi * (grid ? (k % m + j2) / m : j2);
+        const double u2 = grid ? (k % m + j2) / m : j2;
+        float ro[3], rd[3];
+        for (int a = 0; a < 3; ++a) ro[a] = float(x[a] + eps * ng[a]);
+        if (lobe) {
+            h = splitmix64(h);
+            if (to_unit(h) < lobe->lobe_share) {
+                const bool up = microfacet_sample(*lobe, n, hits.wo + 3 * p, u1, u2, rd);
+                emit(k, ro, up ? rd : nullptr);
+                continue;
+            }
+        }
+        const double phi = 2.0 * kPi * u2;
         const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
         const double lx = r * std::cos(phi), ly = r * std::sin(phi);
-        float ro[3], rd[3];
-        for (int a = 0; a < 3; ++a) {
-            ro[a] = float(x[a] + eps * ng[a]);
-            rd[a] = float(lx * u[a] + ly * v[a] + z * n[a]);
-        }
+        for (int a = 0; a < 3; ++a) rd[a] = float(lx * u[a] + ly * v[a] + z * n[a]);
         emit(k, ro, rd);
     }
 }
@@ -471,16 +489,22 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
                       (h.y[2] - x[2]) * (h.y[2] - x[2]);
     const PackedRecord& R = grid.rec[rec];
     const double pa = R.pa;
-    const double denom = pa * r2 / cos_y + mis.n_gather * h.cos_x / kPi;
+    const int32_t m = hits.material[p];
+    const double pg = mats.lobe ? gather_density(mats.lobe, m, hits.normal + 3 * p, hits.wo + 3 * p,
+                                                 h.wi, h.cos_x)
+                                : h.cos_x / kPi;
+    const double denom = pa * r2 / cos_y + mis.n_gather * pg;
     if (!(denom > 0.0)) return;
     float f[3];
-    const int32_t m = hits.material[p];
     shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi, hits.wo + 3 * p,
                f);
     float L[3] = {R.radiance[0], R.radiance[1], R.radiance[2]};
-    if (h.textured)
+    if (h.textured) {
+        // the record's albedo is the solve's (a plastic's: its coat's too)
+        const MicrofacetLobe* hit_lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
         for (int ch = 0; ch < 3; ++ch)
-            if (R.albedo[ch] > 0.f) L[ch] *= h.tex[ch] / R.albedo[ch];
+            if (R.albedo[ch] > 0.f) L[ch] *= solve_albedo(hit_lobe, h.tex[ch], ch) / R.albedo[ch];
+    }
     for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.through[ch] * h.cos_x / denom;
 }
 
@@ -496,10 +520,12 @@ void gather_escape_light(const ShadeHits& hits, const ShadeMaterials& mats, cons
     const int64_t texel = environment_texel(env, d);
     const double cos = d[0] * double(n[0]) + d[1] * double(n[1]) + d[2] * double(n[2]);
     const double pdf = env.texel_pdf[texel] / env.row_solid_angle[texel / env.width];
-    const double dens = env.n_samples * pdf + mis.n_gather * std::max(cos, 0.0) / kPi;
+    const int32_t m = hits.material[p];
+    const double pg = mats.lobe ? gather_density(mats.lobe, m, n, hits.wo + 3 * p, h.wi, cos)
+                                : std::max(cos, 0.0) / kPi;
+    const double dens = env.n_samples * pdf + mis.n_gather * pg;
     const double inv = dens > 0.0 ? 1.0 / dens : 0.0;
     float f[3];
-    const int32_t m = hits.material[p];
     shade_brdf(mats, m, hit_albedo(hits, mats, p, m), n, h.wi, hits.wo + 3 * p, f);
     const double* L = env.radiance + 3 * texel;
     for (int ch = 0; ch < 3; ++ch) s[ch] += f[ch] * cos_x * float(L[ch] * inv) * h.through[ch];
@@ -536,15 +562,21 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
         for (int64_t p = p0; p < p1 + kStages - 1; ++p) {
             if (shaded(p)) {
                 GatherHit* h = slot(p);
-                gather_pixel_rays(
-                    hits, n_gather, base, eps, p, [&](int k, const float* ro, const float* rd) {
-                        float T[3];
-                        const int32_t t = scene.intersect(ro, rd, nullptr, nullptr, nullptr, T);
-                        gather_hit(hits, tris, grid, p, ro, rd, t, h[k]);
-                        for (int ch = 0; ch < 3; ++ch) h[k].through[ch] = T[ch];
-                        if (h[k].key >= 0 && grid.cell_start)
-                            __builtin_prefetch(grid.cell_start + h[k].key);
-                    });
+                gather_pixel_rays(hits, mats, n_gather, base, eps, p,
+                                  [&](int k, const float* ro, const float* rd) {
+                                      if (!rd) {  // a lobe sample below the surface
+                                          h[k].key = -2;
+                                          h[k].escaped = false;
+                                          return;
+                                      }
+                                      float T[3];
+                                      const int32_t t =
+                                          scene.intersect(ro, rd, nullptr, nullptr, nullptr, T);
+                                      gather_hit(hits, tris, grid, p, ro, rd, t, h[k]);
+                                      for (int ch = 0; ch < 3; ++ch) h[k].through[ch] = T[ch];
+                                      if (h[k].key >= 0 && grid.cell_start)
+                                          __builtin_prefetch(grid.cell_start + h[k].key);
+                                  });
                 n_traced += n_gather;
             }
             if (shaded(p - 1) && grid.cell_start) {

@@ -10,6 +10,7 @@
 #include <cstdint>
 
 #include "environment.h"
+#include "microfacet.h"
 #include "ray_scene.h"
 #include "texture.h"
 #include "util/parallel.h"
@@ -24,6 +25,9 @@ struct ShadeMaterials {
     const float* nu = nullptr;  // (M,)   AS exponent along the tangent u
     const float* nv = nullptr;  // (M,)   AS exponent along the bitangent v
     const uint8_t* glossy = nullptr;  // (M,) 1 where the material has a specular layer
+    // (M,) microfacet lobes (kind 0: the Ashikhmin-Shirley layer or none), or
+    // null: no material has one (and no pixel pays for them)
+    const MicrofacetLobe* lobe = nullptr;
 };
 
 // Hit points of one frame (P pixels).
@@ -176,9 +180,9 @@ void primary_hit(const double o[3], const double d[3], int32_t t, const PrimaryS
                  double x[3], float ns_out[3], float ng_out[3], int32_t* material, float le[3]);
 
 // The BRDF used by the display for one pair of directions (exposed for tests):
-// Lambertian rho/pi, or with a specular layer the Ashikhmin-Shirley pair
-// (coupled diffuse + anisotropic Phong specular). k1 towards the light,
-// k2 towards the viewer, n the normal; all unit vectors. Writes f (3,).
+// Lambertian rho/pi, a microfacet lobe (microfacet.h), or with a specular
+// layer the Ashikhmin-Shirley pair (coupled diffuse + anisotropic Phong specular). k1 towards the
+// light, k2 towards the viewer, n the normal; all unit vectors. Writes f (3,).
 void shade_brdf(const ShadeMaterials& mats, int32_t m, const float n[3], const float k1[3],
                 const float k2[3], float f[3]);
 // The same with the diffuse albedo rd (3,) in place of the material's (a texture's).

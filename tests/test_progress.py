@@ -54,7 +54,10 @@ def test_a_warning_is_one_line_without_source(tmp_path, capsys):
     assert main([*argv, "--frames", "2"]) == 0
     err = capsys.readouterr().err
     warned = [line for line in err.splitlines() if line.startswith("warning:")]
-    assert warned == [f"warning: {scene}: approximated: bsdf 'conductor': diffuse with albedo 0.5"]
+    assert warned == [
+        f"warning: {scene}: approximated: bsdf 'conductor': its mirror reflection as a GGX lobe "
+        "of alpha 0.02 (the display's reflections of other surfaces read their records)"
+    ]
     for source in (".py:", "SceneWarning", "return cls"):
         assert source not in err
 

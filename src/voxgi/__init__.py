@@ -24,6 +24,7 @@ from .display import RenderResult, RenderTuning
 from .formats import SceneWarning
 from .lights import DirectionalLight, Environment, PointLight, SpotLight
 from .materials import AshikhminShirley, Material, glass_transmittance
+from .microfacet import CONDUCTORS, Microfacet
 from .pipeline import render, solve
 from .radiosity import Solution, SolveTuning
 from .scene import Scene, SceneObject
@@ -36,11 +37,13 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = getattr(_core, "__version__", "0+unknown")
 
 __all__ = [
+    "CONDUCTORS",
     "AshikhminShirley",
     "Camera",
     "DirectionalLight",
     "Environment",
     "Material",
+    "Microfacet",
     "PointLight",
     "RenderResult",
     "RenderTuning",

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _validate
+from .microfacet import Microfacet
 from .textures import Texture
 
 __all__ = ["AshikhminShirley", "Material", "glass_transmittance"]
@@ -60,8 +61,12 @@ class Material:
     emission : float or (3,) float
         Emitted radiance ``Le`` per RGB channel (>= 0), as for an area emitter
         in Mitsuba 3 or pbrt; the emitted radiosity is ``pi * Le``.
-    specular : AshikhminShirley or None
-        Optional glossy layer, used by the display only.
+    specular : Microfacet, AshikhminShirley or None
+        Optional glossy layer, used by the display only (the solve is
+        diffuse). A :class:`Microfacet` plastic takes ``albedo`` (or the
+        texture) as its diffuse base; a conductor has none, and its
+        ``albedo`` is set to the lobe's hemispherical reflectance, which the
+        diffuse solve bounces (``docs/design.md`` §14).
     texture : voxgi.Texture or None
         A bitmap of the albedo, looked up by the mesh's UVs (``Scene.add``'s
         ``uv``). With one, ``albedo`` is set to the texture's mean over the
@@ -85,7 +90,7 @@ class Material:
 
     albedo: tuple[float, float, float] = (0.8, 0.8, 0.8)
     emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    specular: AshikhminShirley | None = None
+    specular: Microfacet | AshikhminShirley | None = None
     transmittance: tuple[float, float, float] = (0.0, 0.0, 0.0)
     texture: Texture | None = None
 
@@ -110,11 +115,18 @@ class Material:
         object.__setattr__(
             self, "emission", _validate.rgb(self.emission, "Material.emission", float32=True)
         )
-        if self.specular is not None and not isinstance(self.specular, AshikhminShirley):
+        if self.specular is not None and not isinstance(
+            self.specular, (Microfacet, AshikhminShirley)
+        ):
             raise TypeError(
-                "Material.specular: expected voxgi.AshikhminShirley or None, got "
-                f"{type(self.specular).__name__}"
+                "Material.specular: expected voxgi.Microfacet, voxgi.AshikhminShirley or None, "
+                f"got {type(self.specular).__name__}"
             )
+        if self.is_conductor:
+            if self.texture is not None:
+                raise ValueError("Material: a conductor has no diffuse base to texture")
+            below_one = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
+            object.__setattr__(self, "albedo", np.minimum(self.specular.albedo(), below_one))
         object.__setattr__(
             self,
             "transmittance",
@@ -133,6 +145,11 @@ class Material:
     @property
     def is_emitter(self) -> bool:
         return max(self.emission) > 0.0
+
+    @property
+    def is_conductor(self) -> bool:
+        """Whether the material is a :class:`Microfacet` conductor (no diffuse base)."""
+        return isinstance(self.specular, Microfacet) and self.specular.kind == "conductor"
 
     @property
     def is_sheet(self) -> bool:

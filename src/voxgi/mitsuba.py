@@ -15,8 +15,10 @@ The translation keeps voxgi's conventions:
   and the mesh's UVs;
 - an ``area`` emitter with the material's radiance, emitting on the front
   side only (a two-sided emitter gets a second, reversed copy);
-- glossy materials are exported as their diffuse part only (Mitsuba has no
-  Ashikhmin–Shirley BSDF): the comparison is meant for diffuse scenes;
+- a :class:`~voxgi.Microfacet` lobe as the same ``roughplastic`` (its
+  diffuse base the albedo or texture) or ``roughconductor`` (``eta``, ``k``
+  per channel), with the same distribution and ``alpha``; an
+  Ashikhmin–Shirley layer as its diffuse part only (Mitsuba has none);
 - a transmitting sheet (glass, ``docs/design.md`` §13) as ``thindielectric``
   with equal inner and outer indices and ``specular_transmittance`` T: no
   Fresnel reflection, a path crosses it straight scaled by T per channel,
@@ -42,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from .lights import DirectionalLight, Environment, SpotLight
+from .microfacet import Microfacet
 from .scene import Camera, Scene
 
 __all__ = [
@@ -266,6 +269,26 @@ def _bitmap(mi, tex) -> dict:
     }
 
 
+def _lobe(lobe: Microfacet, base: dict) -> dict:
+    """Mitsuba's BSDF of a microfacet lobe over the diffuse base ``base``."""
+    out = {
+        "type": "roughplastic" if lobe.kind == "plastic" else "roughconductor",
+        "distribution": lobe.distribution,
+        "alpha": float(lobe.alpha),
+        "specular_reflectance": _rgb(lobe.specular_reflectance),
+    }
+    if lobe.kind == "plastic":
+        out.update(
+            diffuse_reflectance=base,
+            int_ior=float(lobe.ior),
+            ext_ior=1.0,
+            nonlinear=bool(lobe.nonlinear),
+        )
+    else:
+        out.update(eta=_rgb(lobe.eta), k=_rgb(lobe.k))
+    return out
+
+
 def _shape(mi, i: int, o) -> dict:
     """The Mitsuba mesh (or, for a two-sided emitter, meshes) of object ``i``."""
     m = o.material
@@ -274,6 +297,9 @@ def _shape(mi, i: int, o) -> dict:
     if m.texture is not None:
         bsdf["reflectance"] = _bitmap(mi, m.texture)
         uv = o.uv
+    lobe = m.specular if isinstance(m.specular, Microfacet) else None
+    if lobe is not None:
+        bsdf = _lobe(lobe, bsdf["reflectance"])
     if m.is_sheet:
         bsdf = {
             "type": "thindielectric",

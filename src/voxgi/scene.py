@@ -21,6 +21,7 @@ from . import _validate, formats
 from .camera import Camera
 from .lights import DELTA_LIGHTS, DirectionalLight, Environment, PointLight, SpotLight
 from .materials import AshikhminShirley, Material
+from .microfacet import Microfacet
 
 __all__ = [
     "AshikhminShirley",
@@ -339,6 +340,8 @@ class Scene:
                 h.update(o.uv.tobytes())
             if o.material.is_sheet:  # (an opaque scene keeps the hash it had)
                 h.update(repr(("sheet", o.material.transmittance)).encode())
+            if isinstance(o.material.specular, Microfacet):  # (the solve's albedo follows it)
+                h.update(repr(("lobe", o.material.specular)).encode())
         for light in self.lights:
             h.update(repr(light).encode())
         if self.environment is not None:
@@ -498,7 +501,11 @@ class Scene:
                     tex = None
                     mat = Material(albedo=0.0, transmittance=m.transmittance)
                 else:
-                    mat = Material(albedo=m.albedo, emission=m.emission, texture=tex)
+                    if m.specular is not None and m.specular.kind == "conductor":
+                        tex = None  # (a conductor has no diffuse base)
+                    mat = Material(
+                        albedo=m.albedo, emission=m.emission, texture=tex, specular=m.specular
+                    )
                 obj = scene.add(
                     trimesh.Trimesh(m.vertices, m.faces, process=False),
                     mat,

@@ -349,13 +349,33 @@ def _voxelize_stats(
     }
 
 
+def _solve_albedo(scene, albedo: np.ndarray, object_id: np.ndarray, back: np.ndarray):
+    """The records' albedo as the diffuse solve reflects: a plastic's whole
+    hemispherical reflectance (its coat's specular light and its base's light
+    through the coat) from the base albedo the kernel gave each record
+    (``docs/design.md`` §14); a conductor's is its material's already."""
+    from .microfacet import Microfacet
+
+    out = albedo
+    for i, o in enumerate(scene.objects):
+        lobe = o.material.specular
+        if not (isinstance(lobe, Microfacet) and lobe.kind == "plastic"):
+            continue
+        sel = (object_id == i) & ~back
+        if out is albedo:
+            out = albedo.copy()
+        below_one = np.nextafter(np.float32(1.0), np.float32(0.0))
+        out[sel] = np.minimum(lobe.solve_albedo(albedo[sel]), below_one)
+    return out
+
+
 def _voxel_set(res: dict, pitch: float, origin, resolution: int, scene, stats: dict) -> VoxelSet:
     """The :class:`VoxelSet` of the kernel's record arrays on the grid."""
     return VoxelSet(
         ijk=res["ijk"],
         normal=res["normal"],
         area=res["area"],
-        albedo=res["albedo"],
+        albedo=_solve_albedo(scene, res["albedo"], res["object_id"], res["back"]),
         emission=res["emission"],
         centroid=res["centroid"],
         object_id=res["object_id"],
@@ -479,8 +499,8 @@ def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> Voxel
         if not keep.any():
             raise ValueError("voxelize: every object is a transmitting sheet; nothing to voxelize")
         tri = {**tri, "triangles": tri["triangles"][keep], "object": tri["object"][keep]}
-        if textures is not None:  # one UV triple per triangle the kernel sees
-            textures = {**textures, "corner_uv": np.ascontiguousarray(textures["corner_uv"][keep])}
+        if textures is not None:  # (one UV triple per triangle voxelized)
+            textures = {**textures, "corner_uv": textures["corner_uv"][keep]}
     triangles = tri["triangles"]
     est = _check_memory(triangles, pitch, resolution, max_memory)
     res = _run_kernel(

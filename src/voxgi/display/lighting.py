@@ -51,6 +51,8 @@ class _SceneLights:
         self.eps, self.seed, self.n_env, self.threads = eps, seed, n_env, threads
         #: shadow rays traced to the lights and the environment
         self.rays = 0
+        #: the materials' microfacet lobes (csrc/microfacet.h), or None
+        self.lobe = None
 
     @property
     def any(self) -> bool:
@@ -100,6 +102,7 @@ class _SceneLights:
                 out,
                 self.threads,
                 hit_albedo=h.get("albedo"),
+                mat_lobe=self.lobe,
             )
 
     def _add_delta(self, h: dict, a: int, b: int, out: np.ndarray) -> None:
@@ -143,4 +146,5 @@ class _SceneLights:
             out[a:b],
             self.threads,
             hit_albedo=None if h.get("albedo") is None else h["albedo"][a:b],
+            mat_lobe=self.lobe,
         )

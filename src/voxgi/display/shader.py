@@ -17,6 +17,8 @@ from functools import cached_property
 import numpy as np
 
 from .. import _core
+from ..materials import AshikhminShirley
+from ..microfacet import LOBE_WIDTH, Microfacet
 from ..rays import Tracer
 from ..scene import Camera, Scene
 from ..textures import surface_tables
@@ -134,6 +136,7 @@ class _FrameShader:
         self.lights = _SceneLights(
             scene, tracer, self._materials(), self.eps, self.seed, n_env, self.threads
         )
+        self.lights.lobe = self.mat_lobe
         self.tile = 1 << 16
         self._groups = self._pixel_groups(cam, self.vpl_sets(cam))
         self.primary_rays = 0
@@ -165,9 +168,17 @@ class _FrameShader:
         self.two_sided = np.array([o.two_sided for o in objs], bool)
         spec = [o.material.specular for o in objs]
         self.mat_glossy = np.array([s is not None for s in spec], np.uint8)
-        self.mat_rs = np.array([s.rs if s else (0.0, 0.0, 0.0) for s in spec], np.float32)
-        self.mat_nu = np.array([s.nu if s else 1.0 for s in spec], np.float32)
-        self.mat_nv = np.array([s.nv if s else 1.0 for s in spec], np.float32)
+        ash = [s if isinstance(s, AshikhminShirley) else None for s in spec]
+        self.mat_rs = np.array([s.rs if s else (0.0, 0.0, 0.0) for s in ash], np.float32)
+        self.mat_nu = np.array([s.nu if s else 1.0 for s in ash], np.float32)
+        self.mat_nv = np.array([s.nv if s else 1.0 for s in ash], np.float32)
+        # the microfacet lobes' rows, or None: no pixel pays for lobes
+        self.mat_lobe = None
+        if any(isinstance(s, Microfacet) for s in spec):
+            self.mat_lobe = np.zeros((len(objs), LOBE_WIDTH), np.float32)
+            for i, s in enumerate(spec):
+                if isinstance(s, Microfacet):
+                    self.mat_lobe[i] = s.lobe_row()
 
     @property
     def light_rays(self) -> int:
@@ -335,6 +346,7 @@ class _FrameShader:
             start if sets else None,
             self.threads,
             hit_albedo=h.get("albedo"),
+            mat_lobe=self.mat_lobe,
         )
         self.shadow_rays += rays
         self.seconds["shadow"] += time.perf_counter() - t0
@@ -371,6 +383,7 @@ class _FrameShader:
             **self._env,
             hit_albedo=None if h.get("albedo") is None else h["albedo"][a:b],
             **self._gather_textures,
+            mat_lobe=self.mat_lobe,
         )
         self.seconds["gather"] += time.perf_counter() - t0
 

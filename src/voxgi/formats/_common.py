@@ -40,6 +40,8 @@ class MeshData:
     texture: object = None
     #: (V, 2) float64 texture coordinates (v = 0 the image's top row), or None
     uv: np.ndarray | None = None
+    #: a voxgi.Microfacet lobe (its diffuse base in ``albedo``), or None
+    specular: object = None
 
 
 @dataclass

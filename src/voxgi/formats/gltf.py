@@ -76,10 +76,8 @@ def _gltf_material(m: dict | None, tm, where: str, path: Path, notes: Notes, doc
         strength = m.get("extensions", {}).get("KHR_materials_emissive_strength", {})
         emission = emission * float(strength.get("emissiveStrength", 1.0))
         two_sided = bool(m.get("doubleSided", False))
-        # glTF's metallicFactor defaults to 1: a metal, read as diffuse
-        metallic = pbr.get("metallicFactor", 1.0)
-        if metallic or "metallicRoughnessTexture" in pbr:
-            notes.approx(f"{where}: metallic {metallic} read as diffuse base colour")
+        if "metallicRoughnessTexture" in pbr:
+            notes.approx(f"{where}: metallicRoughnessTexture read as its factors")
         extra = sorted(
             {*m.get("extensions", {}), "emissiveTexture" in m and "emissiveTexture"}
             - {"KHR_materials_emissive_strength", False}
@@ -121,6 +119,44 @@ def _gltf_material(m: dict | None, tm, where: str, path: Path, notes: Notes, doc
         else:
             notes.approx(f"{where}: baseColorTexture unreadable: factor 1")
     return base, emission, two_sided, texture
+
+
+def gltf_lobe(m: dict | None, base, where: str, notes: Notes):
+    """The microfacet lobe of a glTF metallic-roughness material (None for a
+    material voxgi reads only through trimesh): alpha = roughness², a metal
+    (metallic >= 0.5) a conductor whose normal reflectance is the base colour,
+    a dielectric a plastic coat of index 1.5 over it (docs/design.md §14)."""
+    if m is None:
+        return None
+    from ..microfacet import Microfacet
+
+    pbr = m.get("pbrMetallicRoughness", {})
+    metallic = float(pbr.get("metallicFactor", 1.0))
+    if "metallicFactor" not in pbr:
+        # glTF's default is 1, a metal; exporters that leave it out mostly
+        # mean a dielectric (a textured asset would lose its texture)
+        notes.approx(f"{where}: no metallicFactor (glTF's default 1, a metal) read as 0")
+        metallic = 0.0
+    roughness = float(pbr.get("roughnessFactor", 1.0))
+    if not (0.0 <= metallic <= 1.0 and 0.0 <= roughness <= 1.0):
+        raise ValueError(f"{where}: metallicFactor or roughnessFactor outside [0, 1]")
+    alpha = max(roughness * roughness, 1e-4)
+    if metallic >= 0.5:
+        # F0 = k² / (4 + k²) at eta 1: k from the base colour
+        f0 = np.clip(np.asarray(base, np.float64), 0.0, 0.999)
+        k = 2.0 * np.sqrt(f0 / (1.0 - f0))
+        notes.approx(
+            f"{where}: metallic {metallic:g} as a GGX conductor of alpha roughness² "
+            f"{alpha:.3g} whose normal reflectance is the base colour (eta 1)"
+        )
+        return Microfacet("conductor", alpha=alpha, eta=(1.0, 1.0, 1.0), k=k)
+    if metallic > 0.0:
+        notes.approx(f"{where}: metallic {metallic:g} read as 0 (a dielectric)")
+    notes.approx(
+        f"{where}: a dielectric as a GGX plastic coat of index 1.5 and alpha roughness² "
+        f"{alpha:.3g} over the base colour"
+    )
+    return Microfacet("plastic", alpha=alpha, ior=1.5)
 
 
 #: glTF sampler codes: magFilter, and wrapS / wrapT.
@@ -205,6 +241,9 @@ def load_gltf(path, *, search_paths=(), allow_outside=False, limits=None) -> Sce
         where = f"material {mname!r}"
         base, emission, two_sided, texture = _gltf_material(m, tm, where, path, notes, doc)
         base = clamp_albedo(base, where, notes)
+        lobe = gltf_lobe(m, base, where, notes)
+        if lobe is not None and lobe.kind == "conductor":
+            texture = None  # (a metal's base colour is its specular reflectance: its mean)
         uv = getattr(g.visual, "uv", None) if texture is not None else None
         if texture is not None and (uv is None or len(uv) != len(g.vertices)):
             notes.approx(f"{where}: no TEXCOORD_0, baseColorTexture reduced to its mean colour")
@@ -224,6 +263,7 @@ def load_gltf(path, *, search_paths=(), allow_outside=False, limits=None) -> Sce
                 str(path),
                 texture=texture,
                 uv=uv,
+                specular=lobe,
             )
         )
     if not data.meshes:

@@ -37,6 +37,10 @@ _NAMED_IOR = {
     "pyrex": 1.47, "acrylic glass": 1.49, "polypropylene": 1.49, "bk7": 1.5046,
     "sodium chloride": 1.544, "amber": 1.55, "pet": 1.575, "diamond": 2.419,
 }  # fmt: skip
+#: BSDFs read as a microfacet lobe over a diffuse base (docs/design.md §14).
+_LOBE_BSDFS = {"roughplastic", "plastic", "roughconductor", "conductor"}
+#: Roughness of the lobe that stands for a smooth surface's mirror reflection.
+SMOOTH_ALPHA = 0.02
 #: Properties whose colour approximates another BSDF's diffuse albedo.
 _ALBEDO_KEYS = ("reflectance", "diffuse_reflectance", "base_color")
 
@@ -156,6 +160,12 @@ def _bsdf(p: Plugin, notes: Notes) -> tuple[np.ndarray, bool]:
         (a0, s0), (a1, s1) = _bsdf(nested[0], notes), _bsdf(nested[1], notes)
         notes.approx(f"{p.label()}: the blend of its BSDFs' albedos")
         return (1 - w) * a0 + w * a1, s0 and s1
+    if p.type in ("plastic", "roughplastic"):
+        return _colour(
+            p.props.get("diffuse_reflectance", 0.5), p, "diffuse_reflectance", notes
+        ), False
+    if p.type in ("conductor", "roughconductor"):
+        return np.zeros(3), False  # (no base: the material sets the lobe's albedo)
     if p.type in _TWO_SIDED_BSDFS:
         # (a shape's own glass BSDF is a sheet, _sheet; this is glass inside another BSDF)
         notes.approx(
@@ -166,6 +176,58 @@ def _bsdf(p: Plugin, notes: Notes) -> tuple[np.ndarray, bool]:
     albedo = np.full(3, 0.5) if key is None else _colour(p.props[key], p, key, notes)
     notes.approx(f"{p.label()}: diffuse with albedo {'0.5' if key is None else key}")
     return albedo, p.type in _TWO_SIDED_BSDFS
+
+
+def _lobe(p: Plugin, notes: Notes):
+    """The :class:`voxgi.Microfacet` of a BSDF plugin (through ``twosided``),
+    or None (docs/design.md §14)."""
+    while p.type == "twosided" and p.nested("bsdf"):
+        p = p.nested("bsdf")[0]
+    if p.type not in _LOBE_BSDFS:
+        return None
+    from ..microfacet import CONDUCTORS, Microfacet
+
+    smooth = p.type in ("plastic", "conductor")
+    alpha = SMOOTH_ALPHA
+    if not smooth:
+        if "alpha_u" in p.props or "alpha_v" in p.props:
+            au, av = p.number("alpha_u", 0.1), p.number("alpha_v", 0.1)
+            alpha = math.sqrt(au * av)
+            if au != av:
+                notes.approx(f"{p.label()}: anisotropic roughness as its mean alpha {alpha:.3g}")
+        else:
+            alpha = p.number("alpha", 0.1)
+        if not 0.0 <= alpha <= 4.0:
+            raise ValueError(f"{p.where()}: alpha {alpha} is outside [0, 4]")
+    dist = "ggx" if smooth else str(p.props.get("distribution", "beckmann")).strip().lower()
+    if dist not in ("ggx", "beckmann"):
+        raise ValueError(f"{p.where()}: distribution {dist!r} is neither 'beckmann' nor 'ggx'")
+    spec = _colour(p.props.get("specular_reflectance", 1.0), p, "specular_reflectance", notes)
+    kw = {"alpha": max(alpha, 1e-4), "distribution": dist, "specular_reflectance": spec}
+    if p.type.endswith("plastic"):
+        ior = _ior(p, "int_ior", 1.49) / _ior(p, "ext_ior", 1.000277)
+        if ior == 1.0:
+            raise ValueError(f"{p.where()}: int_ior equals ext_ior (Mitsuba rejects it)")
+        lobe = Microfacet("plastic", ior=ior, nonlinear=bool(p.props.get("nonlinear", False)), **kw)
+    else:
+        if "eta" in p.props or "k" in p.props:
+            eta = _colour(p.props.get("eta", 0.0), p, "eta", notes)
+            k = _colour(p.props.get("k", 1.0), p, "k", notes)
+        else:
+            name = str(p.props.get("material", "none")).strip()
+            if name not in CONDUCTORS:
+                raise ValueError(
+                    f"{p.where()}: material {name!r} is not one of Mitsuba's conductors "
+                    f"({', '.join(sorted(CONDUCTORS))})"
+                )
+            eta, k = CONDUCTORS[name]
+        lobe = Microfacet("conductor", eta=eta, k=k, **kw)
+    if smooth:
+        notes.approx(
+            f"{p.label()}: its mirror reflection as a GGX lobe of alpha {SMOOTH_ALPHA} "
+            "(the display's reflections of other surfaces read their records)"
+        )
+    return lobe
 
 
 def _ior(p: Plugin, key: str, default: float) -> float:
@@ -405,6 +467,9 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
             "(the mesh has no UVs)"
         )
         texture = None
+    lobe = _lobe(bsdfs[0], notes) if bsdfs and through is None else None
+    if lobe is not None and lobe.kind == "conductor" and texture is not None:
+        texture = None  # (a texture there is of the specular reflectance: reduced to its mean)
     if through is not None:
         albedo, two_sided = np.zeros(3), True
     elif bsdfs:
@@ -441,7 +506,11 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
                 source,
             ),
         ]
-    return [MeshData(name, v, f, albedo, emission, two_sided, source, texture=texture, uv=uv)]
+    return [
+        MeshData(
+            name, v, f, albedo, emission, two_sided, source, texture=texture, uv=uv, specular=lobe
+        )
+    ]
 
 
 def _fov_y(fov: float, axis: str, width: int, height: int) -> float:

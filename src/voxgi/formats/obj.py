@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -16,8 +17,26 @@ from .textures import decode_rgb, texture_mean
 __all__ = ["load_obj"]
 
 
+def _phong_lobe(m: dict, what: str, notes: Notes):
+    """The microfacet lobe standing for an MTL material's Phong highlight
+    (``Ks``, exponent ``Ns``), or None without one (docs/design.md §14)."""
+    ks = np.asarray(m.get("Ks", np.zeros(3)), np.float64)
+    if not np.any(ks > 0):
+        return None
+    from ..microfacet import Microfacet
+
+    ns = float(m.get("Ns", 0.0))
+    alpha = float(np.clip(math.sqrt(2.0 / (ns + 2.0)), 1e-4, 1.0))
+    notes.approx(
+        f"{what}: its Phong highlight (Ks, Ns {ns:g}) as a GGX plastic coat of alpha "
+        f"sqrt(2 / (Ns + 2)) = {alpha:.3g}, index 1.5, specular_reflectance Ks"
+    )
+    return Microfacet("plastic", alpha=alpha, ior=1.5, specular_reflectance=np.minimum(ks, 1.0))
+
+
 def _parse_mtl(path: Path, text: str) -> dict[str, dict]:
-    """``{material: {"Kd": (3,), "Ke": (3,), "map_Kd": Path}}`` of an MTL file's text."""
+    """``{material: {"Kd": (3,), "Ke": (3,), "Ks": (3,), "Ns": float, "map_Kd": Path}}``
+    of an MTL file's text."""
     mats: dict[str, dict] = {}
     cur = None
     for k, line in enumerate(text.splitlines(), 1):
@@ -29,7 +48,15 @@ def _parse_mtl(path: Path, text: str) -> dict[str, dict]:
             cur = mats.setdefault(" ".join(parts[1:]), {})
         elif cur is None:
             continue
-        elif key in ("Kd", "Ke"):
+        elif key == "Ns":
+            try:
+                ns = float(parts[1])
+            except (IndexError, ValueError):
+                raise ValueError(f"{path}: line {k}: Ns: not a number: {line.strip()!r}") from None
+            if not (np.isfinite(ns) and ns >= 0):
+                raise ValueError(f"{path}: line {k}: Ns: expected a number >= 0: {line.strip()!r}")
+            cur["Ns"] = ns
+        elif key in ("Kd", "Ke", "Ks"):
             try:
                 c = np.array([float(x) for x in parts[1:4]], np.float64)
             except ValueError:
@@ -207,6 +234,7 @@ def load_obj(path, *, search_paths=(), allow_outside=False, limits=None) -> Scen
                 else:
                     albedo = texture.mean()
         albedo = clamp_albedo(albedo, f"material {mat!r}", notes)
+        lobe = _phong_lobe(m, f"material {mat!r}", notes) if m is not None else None
         if m is None or "map_Kd" not in m:
             texture, uv = None, None
         data.meshes.append(
@@ -220,6 +248,7 @@ def load_obj(path, *, search_paths=(), allow_outside=False, limits=None) -> Scen
                 str(path),
                 texture=texture,
                 uv=uv,
+                specular=lobe,
             )
         )
     if not data.meshes:

@@ -26,6 +26,7 @@ from .. import _validate
 from ..camera import Camera
 from ..lights import Environment
 from ..materials import AshikhminShirley, Material
+from ..microfacet import Microfacet
 from ._common import SceneWarning
 from ._limits import RefusedError
 from ._paths import FileAccess
@@ -313,6 +314,23 @@ def _materials_from_dict(mats, source: str) -> dict[str, Material]:
     }
 
 
+def _microfacet(spec: dict) -> Microfacet:
+    """A ``specular = {type = "roughplastic" | "roughconductor", ...}`` table,
+    in the names of Mitsuba's plugins (``docs/design.md`` §14)."""
+    spec = dict(spec)
+    kind = {"roughplastic": "plastic", "roughconductor": "conductor"}.get(spec.pop("type"))
+    if kind is None:
+        raise ValueError("specular.type must be 'roughplastic' or 'roughconductor'")
+    keys = {"alpha", "distribution", "specular_reflectance"}
+    keys |= {"int_ior", "nonlinear"} if kind == "plastic" else {"eta", "k"}
+    bad = set(spec) - keys
+    if bad:
+        raise ValueError(f"specular: unknown key(s) {sorted(bad)} for type {kind!r}")
+    if "int_ior" in spec:
+        spec["ior"] = spec.pop("int_ior")
+    return Microfacet(kind, **spec)
+
+
 def _material_from_dict(m, where: str, table: tuple) -> Material:
     if not isinstance(m, dict):
         raise _Located(f"{where}: material must be a table", table)
@@ -323,9 +341,16 @@ def _material_from_dict(m, where: str, table: tuple) -> Material:
     spec = m.get("specular")
     if spec is not None:
         if not isinstance(spec, dict):
-            raise _Located(f"{where}: specular must be a table {{rs, nu, nv}}", table, "specular")
+            raise _Located(
+                f"{where}: specular must be a table {{rs, nu, nv}} or {{type, alpha, ...}}",
+                table,
+                "specular",
+            )
         try:
-            kw["specular"] = AshikhminShirley(**spec)
+            if "type" in spec:
+                kw["specular"] = _microfacet(spec)
+            else:
+                kw["specular"] = AshikhminShirley(**spec)
         except (TypeError, ValueError) as exc:
             raise _Located(f"{where}: {exc}", table, "specular") from None
     return _build(Material, kw, where, table)

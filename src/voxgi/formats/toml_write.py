@@ -10,6 +10,7 @@ import numpy as np
 from ..camera import Camera
 from ..io import atomic_path
 from ..lights import DirectionalLight, Environment, PointLight, SpotLight
+from ..microfacet import Microfacet
 
 __all__ = ["save_toml"]
 
@@ -72,7 +73,18 @@ def _object_to_dict(o, fname: str) -> dict:
     if o.material.is_sheet:
         entry["transmittance"] = [float(x) for x in o.material.transmittance]
     spec = o.material.specular
-    if spec is not None:
+    if isinstance(spec, Microfacet):
+        entry["specular"] = {
+            "type": "rough" + spec.kind,
+            "alpha": float(spec.alpha),
+            "distribution": spec.distribution,
+            "specular_reflectance": [float(x) for x in spec.specular_reflectance],
+        }
+        if spec.kind == "plastic":
+            entry["specular"].update(int_ior=float(spec.ior), nonlinear=spec.nonlinear)
+        else:
+            entry["specular"].update(eta=[float(x) for x in spec.eta], k=[float(x) for x in spec.k])
+    elif spec is not None:
         entry["specular"] = {
             "rs": [float(x) for x in spec.rs],
             "nu": float(spec.nu),
