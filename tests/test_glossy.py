@@ -250,3 +250,35 @@ def test_glossy_plane_matches_mitsuba_with_the_same_lobes():
 
     r = compare(glossy_plane(128), spp=1024, sweep_spp=(16,), denoise=False, threads=2)
     assert r.rows[0]["rel_mse_net"] <= 2e-3, r.table()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("alpha", "base", "nonlinear"), [(0.1, 0.3, True), (0.15, 0.73, False)])
+def test_the_solves_plastic_albedo_is_mitsubas_hemispherical_reflectance(alpha, base, nonlinear):
+    # Mitsuba's own sampling of its roughplastic under uniform (cosine-
+    # distributed) light, 40000 samples (measured 0.2106 and 0.6368 against
+    # voxgi's 0.2110 and 0.6370; the base albedo itself would be 0.3, 0.73).
+    mi = _mitsuba()
+    bsdf = mi.load_dict(
+        {
+            "type": "roughplastic",
+            "distribution": "ggx",
+            "alpha": alpha,
+            "int_ior": 1.5,
+            "ext_ior": 1.0,
+            "nonlinear": nonlinear,
+            "diffuse_reflectance": {"type": "rgb", "value": [base] * 3},
+        }
+    )
+    lobe = Microfacet("plastic", alpha=alpha, ior=1.5, nonlinear=nonlinear)
+    rng = np.random.default_rng(0)
+    si = mi.SurfaceInteraction3f()
+    si.sh_frame = mi.Frame3f([0, 0, 1])
+    w = []
+    for u in rng.random((40000, 5)):
+        r, phi = math.sqrt(u[0]), 2 * math.pi * u[1]
+        si.wi = mi.Vector3f(r * math.cos(phi), r * math.sin(phi), math.sqrt(1 - u[0]))
+        _, weight = bsdf.sample(mi.BSDFContext(), si, u[2], mi.Point2f(u[3], u[4]))
+        w.append(float(np.array(weight)[0]))
+    err = np.std(w) / math.sqrt(len(w))
+    assert abs(np.mean(w) - lobe.solve_albedo([base] * 3)[0]) < 4 * err + 1e-4

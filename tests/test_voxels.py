@@ -437,7 +437,7 @@ def test_inside_test_near_corners_and_edges_is_exact_and_repeatable():
     # Points a thousandth in and out of a cube's corners, edge midpoints and
     # face centres, where rays run close to edges: the answer is |x|_inf <
     # 1/2, the same on every call, and the same for the cube wound inwards.
-    from voxgi.voxels import _inside
+    from voxgi._solids import inside as _inside
 
     mesh = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
     base = np.concatenate(

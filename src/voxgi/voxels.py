@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _validate
+from ._solids import bury, is_closed, seal
 from .textures import surface_tables
 
 __all__ = ["DEFAULT_RESOLUTION", "VoxelSet", "estimate_memory", "voxelize"]
@@ -223,12 +224,6 @@ def _progress_bar(enabled: bool):
     return update, close
 
 
-def _is_closed(obj) -> bool:
-    """True when an object's mesh is watertight with consistent winding."""
-    m = obj.to_trimesh()
-    return bool(m.is_watertight and m.is_winding_consistent)
-
-
 def _check_arguments(scene, resolution, max_memory, threads, progress, cut):
     """Validate :func:`voxelize`'s arguments; returns ``(resolution, max_memory, threads)``."""
     from .scene import Scene
@@ -338,7 +333,7 @@ def _voxelize_stats(
         # Objects whose mesh is closed (watertight, consistently wound): their
         # inside can never be seen, which voxgi.solve uses (closed=None).
         "closed_objects": [
-            i for i, o in enumerate(scene.objects) if not o.material.is_sheet and _is_closed(o)
+            i for i, o in enumerate(scene.objects) if not o.material.is_sheet and is_closed(o)
         ],
         "seconds": seconds,
         "phase_seconds": {
@@ -514,80 +509,10 @@ def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> Voxel
         textures=textures,
     )
     stats = _voxelize_stats(dict(res["stats"]), triangles, est, scene, cut=cut, seconds=0.0)
-    stats["buried_records"] = _bury(res, scene, stats["closed_objects"], pitch)
+    sealed, inner = seal(res, scene, pitch)
+    stats["buried_records"] = bury(res, scene, stats["closed_objects"], pitch, sealed)
+    stats["closed_objects"] = sorted(set(stats["closed_objects"]) | set(sealed))
+    stats["sealed_objects"] = sorted(sealed)
+    stats["inner_records"] = inner
     stats["seconds"] = time.perf_counter() - t_start
     return _voxel_set(res, pitch, origin, resolution, scene, stats)
-
-
-#: Directions of the rays of :func:`_inside`: fixed, and none along an axis or
-#: a face or cube diagonal, along which built scenes line up their edges.
-_PARITY_DIRECTIONS = np.array(
-    [[0.5286, 0.6213, 0.5784], [-0.7071, 0.1612, 0.6885], [0.2195, -0.8416, 0.4935]]
-)
-
-
-def _inside(mesh, points: np.ndarray) -> np.ndarray:
-    """(P,) bool: whether each point lies inside the closed ``mesh``, by the
-    parity of the crossings along rays, as ``trimesh.Trimesh.contains``
-    decides it, but with the same answer on every call.
-
-    For each of three fixed directions, the crossings forward and backward:
-    no crossing either way says outside; equal parities say what they say;
-    unequal ones (a ray through an edge or a vertex counted a crossing twice
-    or not at all) say nothing. The most votes win, ties outside.
-    ``contains`` settles such rays with a random direction instead.
-    """
-    n = len(points)
-    inside = np.zeros(n, np.int64)
-    outside = np.zeros(n, np.int64)
-    for d in _PARITY_DIRECTIONS:
-        d = d / np.linalg.norm(d)
-        odd = []
-        for sign in (1.0, -1.0):
-            _, ray = mesh.ray.intersects_id(
-                points,
-                np.broadcast_to(sign * d, (n, 3)),
-                multiple_hits=True,
-                return_locations=False,
-            )
-            odd.append(np.bincount(ray, minlength=n))
-        fwd, back = odd
-        free = (fwd == 0) | (back == 0)
-        agree = ~free & (fwd % 2 == back % 2)
-        inside += agree & (fwd % 2 == 1)
-        outside += free | (agree & (fwd % 2 == 0))
-    return inside > outside
-
-
-def _bury(res: dict, scene, closed: list[int], pitch: float) -> int:
-    """Make black the records that face into another object's closed volume.
-
-    Where a closed object touches another surface (a wall slab built against
-    the ceiling and the side walls, a box standing on a floor), junction
-    cutting leaves pieces of that surface against the object's faces, facing
-    its inside. No light reaches them, but on the discrete lines they pair
-    with records on both sides of the object and carry light through it. A
-    record is buried when a point a thousandth of a voxel in front of it
-    lies in the solid of a closed object of another id (inside it, or
-    outside it when its faces point inwards); only records in voxels that
-    hold records of that object are tested. Returns how many were made black.
-    """
-    if not closed:
-        return 0
-    ijk = res["ijk"].astype(np.int64)
-    key = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
-    oid = res["object_id"]
-    buried = np.zeros(len(key), bool)
-    for k in closed:
-        idx = np.flatnonzero(np.isin(key, np.unique(key[oid == k])) & (oid != k) & ~buried)
-        if not len(idx):
-            continue
-        probe = res["centroid"][idx] + 1e-3 * pitch * res["normal"][idx].astype(np.float64)
-        mesh = scene.objects[k].to_trimesh()
-        # the solid side: inside an outward-wound mesh, outside an inward one
-        # (a room seen from within)
-        solid = _inside(mesh, probe) != (mesh.volume < 0)
-        buried[idx[solid]] = True
-    res["albedo"][buried] = 0.0
-    res["emission"][buried] = 0.0
-    return int(buried.sum())

@@ -56,15 +56,22 @@ def _closed_twins(vox: VoxelSet, a: dict, closed) -> _Twins:
             ids = _validate.as_c_array(np.atleast_1d(closed), np.int32, (-1,), "closed")
             sel_obj = np.isin(obj, ids)
         b = np.flatnonzero(a["back"] & sel_obj)
-        b = b[b > 0]
-        f_ = b - 1
-        ok = (
-            ~a["back"][f_]
-            & np.all(a["ijk"][f_] == a["ijk"][b], axis=1)
-            & (obj[f_] == obj[b])
-            & (np.einsum("ij,ij->i", a["normal"][f_], a["normal"][b]) < -0.99)
-        )
-        twin_b, twin_f = b[ok], f_[ok]
+
+        def twin_at(f_):
+            f_ = np.clip(f_, 0, n - 1)
+            return (
+                ~a["back"][f_]
+                & np.all(a["ijk"][f_] == a["ijk"][b], axis=1)
+                & (obj[f_] == obj[b])
+                & (np.einsum("ij,ij->i", a["normal"][f_], a["normal"][b]) < -0.99)
+            )
+
+        # the twin precedes a back record, or, where the inner side of a
+        # sealed two-sided object is its winding's side, follows it
+        before = twin_at(b - 1) & (b > 0)
+        after = ~before & twin_at(b + 1) & (b < n - 1)
+        ok = before | after
+        twin_b, twin_f = b[ok], np.where(before, b - 1, b + 1)[ok]
     stand_in = None
     if len(twin_b):
         stand_in = np.zeros(n, np.bool_)
@@ -132,6 +139,12 @@ def build_problem(vox, a, opt) -> Problem:
         "skipped": {},
         "closed_back_records": len(twins.back),
     }
+    vstats = getattr(vox, "stats", None) or {}
+    if vstats.get("inner_records"):
+        stats["skipped"]["inner_records"] = (
+            f"{vstats['inner_records']} records on the inner side of the closed two-sided "
+            f"objects {vstats.get('sealed_objects')}, which no light reaches, are black"
+        )
     return Problem(
         vox=vox,
         a=a,

@@ -1,0 +1,189 @@
+"""Closed objects' solids: which records face into them (``docs/design.md`` §2).
+
+A closed mesh bounds a solid that no light path enters. The records of other
+surfaces pressed against it (buried records) and the inner side of a closed
+two-sided object (sealed objects) face that solid; they are made black, and
+the solve's lines let them stand in for their outer twin (§5).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def is_closed(obj) -> bool:
+    """True when an object's mesh is watertight with consistent winding."""
+    m = obj.to_trimesh()
+    return bool(m.is_watertight and m.is_winding_consistent)
+
+
+#: Directions of the rays of :func:`inside`: fixed, and none along an axis or
+#: a face or cube diagonal, along which built scenes line up their edges.
+_PARITY_DIRECTIONS = np.array(
+    [[0.5286, 0.6213, 0.5784], [-0.7071, 0.1612, 0.6885], [0.2195, -0.8416, 0.4935]]
+)
+
+
+def inside(mesh, points: np.ndarray) -> np.ndarray:
+    """(P,) bool: whether each point lies inside the closed ``mesh``, by the
+    parity of the crossings along rays, as ``trimesh.Trimesh.contains``
+    decides it, but with the same answer on every call.
+
+    For each of three fixed directions, the crossings forward and backward:
+    no crossing either way says outside; equal parities say what they say;
+    unequal ones (a ray through an edge or a vertex counted a crossing twice
+    or not at all) say nothing. The most votes win, ties outside.
+    ``contains`` settles such rays with a random direction instead.
+    """
+    n = len(points)
+    inside = np.zeros(n, np.int64)
+    outside = np.zeros(n, np.int64)
+    for d in _PARITY_DIRECTIONS:
+        d = d / np.linalg.norm(d)
+        odd = []
+        for sign in (1.0, -1.0):
+            _, ray = mesh.ray.intersects_id(
+                points,
+                np.broadcast_to(sign * d, (n, 3)),
+                multiple_hits=True,
+                return_locations=False,
+            )
+            odd.append(np.bincount(ray, minlength=n))
+        fwd, back = odd
+        free = (fwd == 0) | (back == 0)
+        agree = ~free & (fwd % 2 == back % 2)
+        inside += agree & (fwd % 2 == 1)
+        outside += free | (agree & (fwd % 2 == 0))
+    return inside > outside
+
+
+def bury(res: dict, scene, closed: list[int], pitch: float, sealed: dict | None = None) -> int:
+    """Make black the records that face into another object's closed volume.
+
+    Where a closed object touches another surface (a wall slab built against
+    the ceiling and the side walls, a box standing on a floor), junction
+    cutting leaves pieces of that surface against the object's faces, facing
+    its inside. No light reaches them, but on the discrete lines they pair
+    with records on both sides of the object and carry light through it. A
+    record is buried when a point a thousandth of a voxel in front of it
+    lies in the solid of a closed object of another id (inside it, or
+    outside it when its faces point inwards); only records in voxels that
+    hold records of that object are tested. The two-sided objects of
+    ``sealed`` (:func:`seal`, object id to its merged mesh) bury alike,
+    their solid the inside of that mesh. Returns how many were made black.
+    """
+    sealed = sealed or {}
+    if not closed and not sealed:
+        return 0
+    ijk = res["ijk"].astype(np.int64)
+    key = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
+    oid = res["object_id"]
+    buried = np.zeros(len(key), bool)
+    for k in sorted(set(closed) | set(sealed)):
+        idx = np.flatnonzero(np.isin(key, np.unique(key[oid == k])) & (oid != k) & ~buried)
+        if not len(idx):
+            continue
+        probe = res["centroid"][idx] + 1e-3 * pitch * res["normal"][idx].astype(np.float64)
+        if k in sealed:
+            solid = inside(sealed[k], probe)
+        else:
+            mesh = scene.objects[k].to_trimesh()
+            # the solid side: inside an outward-wound mesh, outside an inward
+            # one (a room seen from within)
+            solid = inside(mesh, probe) != (mesh.volume < 0)
+        buried[idx[solid]] = True
+    res["albedo"][buried] = 0.0
+    res["emission"][buried] = 0.0
+    return int(buried.sum())
+
+
+def surface_without_boundary(obj):
+    """The object's mesh with coincident vertices merged, or None when some
+    edge of it is shared by an odd number of faces (a hole or a rim).
+
+    Meshes exported with split vertices (a seam of normals or UVs) count as
+    closed once merged; an edge shared by four faces (two shells touching
+    along it) leaves the parity of a ray's crossings well defined, so only an
+    odd count says that the surface has a boundary."""
+    import trimesh
+
+    m = trimesh.Trimesh(obj.vertices.copy(), obj.faces.copy(), process=False)
+    m.merge_vertices(merge_tex=True, merge_norm=True)
+    if len(m.faces) == 0:
+        return None
+    _, uses = np.unique(m.edges_sorted, axis=0, return_counts=True)
+    return None if np.any(uses % 2) else m
+
+
+#: Vertices of another object tested against a closed object's solid
+#: (:func:`seal`): a fixed sample of at most this many.
+_OCCUPANT_SAMPLES = 64
+
+
+def occupied(scene, k: int, mesh) -> bool:
+    """Whether anything that can be seen or that shines lies inside the solid
+    of object ``k``: the camera's eye, a point or spot light, or another object
+    of which more than half of the sampled vertices lie inside (a room
+    modelled as one closed two-sided box holds its furniture and camera).
+    Another object merely touching or piercing the solid (a leg under a
+    cushion) does not occupy it."""
+    lo, hi = mesh.bounds
+    points = []
+    if scene.camera is not None:
+        points.append(np.asarray(scene.camera.eye, np.float64))
+    points += [
+        np.asarray(li.position, np.float64) for li in scene.lights if hasattr(li, "position")
+    ]
+    if points:
+        pts = np.array(points)
+        box = np.all((pts >= lo) & (pts <= hi), axis=1)
+        if box.any() and inside(mesh, pts[box]).any():
+            return True
+    for j, o in enumerate(scene.objects):
+        if j == k or o.material.is_sheet:
+            continue
+        v = o.vertices
+        if np.any(v.max(axis=0) < lo) or np.any(v.min(axis=0) > hi):
+            continue
+        v = v[:: max(1, len(v) // _OCCUPANT_SAMPLES)]
+        if 2 * int(inside(mesh, v).sum()) > len(v):
+            return True
+    return False
+
+
+def seal(res: dict, scene, pitch: float) -> tuple[dict, int]:
+    """Make the inner side of closed two-sided objects black back records.
+
+    A two-sided object whose surface has no boundary (:func:`surface_without_boundary`)
+    and whose solid holds nothing (:func:`occupied`) shows only its outside:
+    no light path from the scene reaches its inner side. Left live, those
+    records gather only what the discrete lines carry through the object
+    between its two faces, and at albedo near 1 that light rings inside
+    for thousands of iterations. A record is inner when a point a thousandth
+    of a voxel in front of its centroid lies in the solid (the parity of
+    :func:`inside`, whatever the winding); it becomes what the inside of a
+    one-sided closed object is: a black back record, the stand-in of its
+    twin on the lines (``docs/design.md`` §2, §5). Returns the objects so
+    sealed (id to merged mesh) and how many records were made black.
+    """
+    oid = res["object_id"]
+    sealed, count = {}, 0
+    for k, o in enumerate(scene.objects):
+        if not o.two_sided or o.material.is_sheet:
+            continue
+        idx = np.flatnonzero(oid == k)
+        if not len(idx):
+            continue
+        mesh = surface_without_boundary(o)
+        if mesh is None or occupied(scene, k, mesh):
+            continue
+        probe = res["centroid"][idx] + 1e-3 * pitch * res["normal"][idx].astype(np.float64)
+        inner = idx[inside(mesh, probe)]
+        if not len(inner):
+            continue
+        res["albedo"][inner] = 0.0
+        res["emission"][inner] = 0.0
+        res["back"][inner] = True
+        sealed[k] = mesh
+        count += len(inner)
+    return sealed, count
