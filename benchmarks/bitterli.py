@@ -18,7 +18,9 @@ estimates the reference's own noise). It prints, per scene, voxgi's relMSE,
 SSIM, brightness off the lamps per channel and seconds (voxelize / solve /
 display), and Mitsuba's seconds to voxgi's relMSE and to relMSE 5e-3 and
 1e-3, plain and +OIDN (log-log interpolation over the sweep), with SSIM at
-each sweep point; ``--json`` writes everything.
+each sweep point; ``--voxgi-denoise`` adds voxgi's solution displayed
+denoised (``RenderTuning(denoise=True)``) and Mitsuba + OIDN's time to its
+relMSE; ``--json`` writes everything.
 
 Usage::
 
@@ -200,6 +202,7 @@ def side_by_side(path: Path, images: list[np.ndarray]) -> Path:
 def summary(name: str, scene: voxgi.Scene, res) -> dict:
     """The figures of one scene: voxgi's row and Mitsuba's times to each target."""
     v = res.rows[0]
+    den = next((r for r in res.rows if r["method"] == "voxgi+oidn"), None)
 
     def best(method, target):
         t = res.time_to.get(method, {}).get(target)
@@ -217,6 +220,9 @@ def summary(name: str, scene: voxgi.Scene, res) -> dict:
         "voxgi_seconds": v["seconds"],
         "voxgi_phases": v["phases"],
         "frames": v["frames"],
+        "voxgi_oidn": None
+        if den is None
+        else {k: den[k] for k in ("rel_mse", "rel_mse_net", "ssim", "flip", "seconds", "frames")},
         "reference_noise": res.reference_noise,
         "time_to": {m: {str(k): best(m, k) for k in t} for m, t in res.time_to.items()},
         "rows": res.rows,
@@ -233,8 +239,13 @@ def print_table(rows: list[dict]) -> None:
         " | voxgi s (vox/solve/display)"
         " | Mitsuba s to voxgi's relMSE: plain / +OIDN | to 5e-3: plain / +OIDN"
         " | to 1e-3: plain / +OIDN | ref noise |"
+        + (
+            " voxgi+OIDN net relMSE, SSIM, s; Mitsuba+OIDN s to it |"
+            if any(r.get("voxgi_oidn") for r in rows)
+            else ""
+        )
     )
-    print("|" + "---|" * 10)
+    print("|" + "---|" * (11 if any(r.get("voxgi_oidn") for r in rows) else 10))
     for r in rows:
         ph, t = r["voxgi_phases"], r["time_to"]
         b = " / ".join(f"{x:.3f}" for x in r["brightness"])
@@ -252,6 +263,13 @@ def print_table(rows: list[dict]) -> None:
             den = t.get("mitsuba+oidn", {}).get(key)
             cells.append(f"{_fmt(plain)} / {_fmt(den)}")
         cells.append(f"{r['reference_noise']:.1e}")
+        den = r.get("voxgi_oidn")
+        if den is not None:
+            to = t.get("mitsuba+oidn", {}).get("voxgi+oidn")
+            cells.append(
+                f"{den['rel_mse_net']:.2e}, SSIM {den['ssim']:.4f}, {den['seconds']:.1f} s; "
+                f"Mitsuba+OIDN {_fmt(to)} s"
+            )
         print("| " + " | ".join(cells) + " |")
 
 
@@ -265,6 +283,11 @@ def main(argv=None) -> int:
     ap.add_argument("--refs", type=Path, default=REFS_DIR)
     ap.add_argument("--references-only", action="store_true")
     ap.add_argument("--no-denoise", action="store_true")
+    ap.add_argument(
+        "--voxgi-denoise",
+        action="store_true",
+        help="also voxgi's solution displayed with RenderTuning(denoise=True)",
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument(
         "--pictures",
@@ -292,6 +315,7 @@ def main(argv=None) -> int:
             sweep_spp=args.sweep,
             denoise=not args.no_denoise,
             seed=args.seed,
+            voxgi_denoise=args.voxgi_denoise,
         )
         print(res.table(), flush=True)
         rows.append(summary(name, scene, res) | {"reference_spp": info["spp"]})

@@ -154,7 +154,7 @@ RayScene::RayScene(const std::string& library, const float* tris, int64_t n_tris
     if (n_tris < 0 || n_tris >= static_cast<int64_t>(kInvalidId) / 3)
         throw std::invalid_argument("RayScene: triangle count out of range");
     // Sheets go in a scene of their own: the opaque rays stay Embree's own
-    // queries, and a scene without sheets traces exactly as before.
+    // queries, and a scene without sheets builds no second scene at all.
     std::vector<uint32_t> sheets;
     if (transmittance) {
         for (int64_t i = 0; i < n_tris; ++i) {

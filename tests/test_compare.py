@@ -95,7 +95,7 @@ def test_compare_writes_both_images_and_prints_the_table(tmp_path, capsys):
     code = cli.main(
         [
             *("compare", "sky-objects", "--width", "16", "--height", "16", "--spp", "64"),
-            *("--resolution", "16", "-o", str(tmp_path)),
+            *("--resolution", "16", "-o", str(tmp_path), "--denoise"),
         ]
     )
     assert code == 0
@@ -103,6 +103,9 @@ def test_compare_writes_both_images_and_prints_the_table(tmp_path, capsys):
     number = r"\s+[\d.e+-]+"
     assert re.search(rf"^voxgi{number * 4}", out, flags=re.MULTILINE), out
     assert re.search(rf"^mitsuba\+oidn\s+4{number * 4}", out, flags=re.MULTILINE), out
+    assert re.search(rf"^voxgi\+oidn{number * 4}", out, flags=re.MULTILINE), out
+    assert "; voxgi+oidn's relMSE: " in out
+    assert "voxgi+oidn to relMSE 5e-03" in out
     assert "mitsuba to voxgi's relMSE" in out
     assert "mitsuba+oidn to voxgi's relMSE" in out
     for name in ("voxgi.exr", "reference.exr", "difference.png"):

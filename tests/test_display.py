@@ -935,7 +935,6 @@ def test_many_vpl_sets_decorrelate_the_image_mean(monkeypatch):
     sixteen = spread()
     monkeypatch.setattr(_FrameShader, "VPL_SETS", 1)
     shared = spread()
-    print(many, sixteen, shared)
     assert sixteen < 0.5 * shared
     assert many < 0.5 * sixteen
 

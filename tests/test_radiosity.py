@@ -735,3 +735,25 @@ def test_traced_bounces_that_go_wrong_leave_the_lines_answer(monkeypatch):
         sol = voxgi.solve(vox, tuning=paper(shoot_radius=4, indirect_light="traced"), **kw)
     np.testing.assert_array_equal(sol.radiosity, lines.radiosity)
     assert sol.stats["skipped"]["traced_bounces"] == "their answer was not finite"
+
+
+def test_traced_passes_sum_a_closed_furnaces_series_from_nothing(monkeypatch):
+    # In a closed room of one albedo every traced ray lands on rho, so the
+    # ratio by which the slowest mode fades a pass is rho exactly (design §5).
+    # Started from no reflected light at all, the passes must then carry the
+    # whole series, and the tail d rho / (1 - rho) completes it: the mean
+    # radiance is Le / (1 - rho). Measured at rho 0.5, resolution 16: 10
+    # passes, mean error 5e-5; without the tail 5.4e-4.
+    from voxgi.radiosity import solver, traced_passes
+
+    def from_nothing(p, Hd, R, mode):
+        return traced_passes.traced_bounces(p, Hd, np.zeros_like(R), mode)
+
+    monkeypatch.setattr(solver, "traced_bounces", from_nothing)
+    rho = 0.5
+    vox = voxgi.voxelize(voxgi.scenes.furnace_box(albedo=rho, emission=1.0), 16, progress=False)
+    sol = voxgi.solve(vox, progress=False)
+    np.testing.assert_allclose(sol.stats["traced"]["mode_ratios"], [rho] * 3, rtol=1e-6)
+    front = (vox.area > 0) & ~vox.back
+    mean = (sol.radiance[front] * vox.area[front, None]).sum(0) / vox.area[front].sum()
+    np.testing.assert_allclose(mean * (1 - rho), 1.0, rtol=2e-4)

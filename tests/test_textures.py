@@ -18,8 +18,7 @@ import pytest
 import trimesh
 
 import voxgi
-from voxgi import _core
-from voxgi.display.samples import frame_samples
+from voxgi.display.samples import camera_rays, frame_samples
 
 
 def _random_texture(h=8, w=8, seed=1, **kw) -> voxgi.Texture:
@@ -48,22 +47,9 @@ def _textured_plane(tex, uv_scale=1.0, flip_v=False) -> voxgi.Scene:
 
 
 def _expected_pixels(sc: voxgi.Scene, light: voxgi.PointLight, tex: voxgi.Texture, offset):
-    """albedo(uv) I cos / (pi r²) at each pixel's ray's hit of y = 0 (0: a miss)."""
-    cam = sc.camera
-    right, up, fwd = cam.frame()
-    org, d = _core.camera_rays(
-        np.asarray(cam.eye, np.float64),
-        right,
-        up,
-        fwd,
-        math.tan(math.radians(cam.fov) / 2),
-        cam.width,
-        cam.height,
-        0.0,
-        1.0,
-        offset,
-        (0.0, 0.0),
-    )
+    """albedo(uv) I cos / (pi r²) at each pixel's ray's hit of y = 0 (0: a
+    miss), which pixels hit the plane, and the UVs there."""
+    org, d = camera_rays(sc.camera, offset)
     t = -org[:, 1] / d[:, 1]
     x = org + t[:, None] * d
     inside = np.all(np.abs(x[:, [0, 2]]) < 1, axis=1)
@@ -72,8 +58,7 @@ def _expected_pixels(sc: voxgi.Scene, light: voxgi.PointLight, tex: voxgi.Textur
     r2 = np.einsum("ij,ij->i", to_light, to_light)
     e = np.asarray(light.intensity)[None, :] * (to_light[:, 1] / r2**1.5)[:, None]
     want = tex.eval(uv) * e / math.pi
-    _expected_pixels.uv = uv  # (the UVs, for the albedo AOV's check)
-    return np.where(inside[:, None], want, 0.0), inside
+    return np.where(inside[:, None], want, 0.0), inside, uv
 
 
 @pytest.mark.parametrize(
@@ -92,12 +77,12 @@ def test_textured_plane_under_a_point_light_is_exact(filt, wrap, scale):
     res = voxgi.render(sc, tol=0, max_frames=1, progress=False, threads=1)
     # (the uv scale enters through the mesh's UVs; the reference looks up uv * scale)
     ref_tex = voxgi.Texture(tex.texels, filter=filt, wrap=wrap, to_uv=np.diag([scale, scale, 1]))
-    want, inside = _expected_pixels(sc, light, ref_tex, frame_samples(0, 0)[0])
+    want, inside, uv = _expected_pixels(sc, light, ref_tex, frame_samples(0, 0)[0])
     got = res.image.reshape(-1, 3)
     assert inside.sum() > 1000
     np.testing.assert_allclose(got[inside], want[inside], rtol=2e-5, atol=1e-7)
     # the albedo AOV is the texture at the same points
-    albedo = ref_tex.eval(_expected_pixels.uv)
+    albedo = ref_tex.eval(uv)
     np.testing.assert_allclose(res.albedo.reshape(-1, 3)[inside], albedo[inside], rtol=2e-5)
 
 
@@ -107,18 +92,9 @@ def test_flipped_v_is_seen():
     sc = _textured_plane(tex, flip_v=True)
     light = sc.add_light(voxgi.PointLight((0.3, 1.5, -0.2), 1.0))
     res = voxgi.render(sc, tol=0, max_frames=1, progress=False, threads=1)
-    want, inside = _expected_pixels(sc, light, tex, frame_samples(0, 0)[0])
+    want, inside, _ = _expected_pixels(sc, light, tex, frame_samples(0, 0)[0])
     err = np.abs(res.image.reshape(-1, 3)[inside] - want[inside]).max() / want[inside].max()
     assert err > 0.1
-
-
-def _polygon_mean_numpy(tex, tri_xyz, tri_uv, n=400):
-    """The texture's mean over a triangle, by a dense barycentric grid."""
-    a, b = np.meshgrid((np.arange(n) + 0.5) / n, (np.arange(n) + 0.5) / n)
-    keep = a + b < 1
-    a, b = a[keep], b[keep]
-    uv = tri_uv[0] + a[:, None] * (tri_uv[1] - tri_uv[0]) + b[:, None] * (tri_uv[2] - tri_uv[0])
-    return tex.eval(uv).mean(axis=0)
 
 
 def test_record_albedo_is_the_texture_mean_over_its_own_surface():
@@ -199,11 +175,13 @@ def test_texture_validation_names_the_field():
         sc.add(trimesh.creation.box(), voxgi.Material(texture=_random_texture()), name="box")
 
 
-def test_untextured_scene_has_no_per_hit_albedo():
+def test_untextured_scene_albedo_aov_is_each_objects_albedo():
+    # no texture: the render's albedo AOV is each object's own albedo
     sc = voxgi.scenes.cornell_box(8, 8)
-    from voxgi.textures import surface_tables
-
-    assert surface_tables(sc) is None
+    res = voxgi.render(sc, tol=0, max_frames=1, progress=False, threads=1)
+    albedos = {tuple(np.float32(o.material.albedo)) for o in sc.objects}
+    seen = {tuple(a) for a in res.albedo.reshape(-1, 3) if a.any()}
+    assert seen <= albedos, seen - albedos
 
 
 def test_textured_quad_matches_mitsuba():
@@ -337,3 +315,35 @@ def test_obj_map_kd_and_gltf_base_color_texture_load_as_textures(tmp_path, suffi
     # the same visual gives the same UVs from either format: v = 0 the image's top
     order = [int(np.argmin(np.linalg.norm(o.vertices - p, axis=1))) for p in mesh.vertices]
     np.testing.assert_allclose(o.uv[order], np.c_[uv[:, 0], 1 - uv[:, 1]], atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("filt", "wrap", "uv", "want"),
+    [
+        # raw codes 0, 255 / 51, 102 (linear 0, 1 / 0.2, 0.4), row 0 at v = 0
+        ("bilinear", "repeat", (0.25, 0.25), 0.0),  # a texel centre
+        ("bilinear", "repeat", (0.5, 0.25), 0.5),  # midway between two centres
+        ("bilinear", "repeat", (0.5, 0.5), (0 + 1 + 0.2 + 0.4) / 4),  # the four
+        ("bilinear", "repeat", (-0.25, 0.25), 1.0),  # column -1 is column 1
+        ("bilinear", "mirror", (-0.25, 0.25), 0.0),  # column -1 is column 0
+        ("bilinear", "clamp", (1.5, 0.75), 0.4),  # past the edge: the edge texel
+        ("bilinear", "repeat", (0.0, 0.25), 0.5),  # the seam blends columns 1 and 0
+        ("bilinear", "clamp", (0.0, 0.25), 0.0),
+        ("nearest", "repeat", (0.49, 0.51), 0.2),
+        ("nearest", "repeat", (1.76, -0.2), 0.4),  # column 3, row -1: texel (1, 1)
+        ("nearest", "mirror", (1.26, 0.1), 1.0),  # column 2 mirrors to column 1
+    ],
+)
+def test_texture_lookup_by_hand(filt, wrap, uv, want):
+    codes = np.array([[0, 255], [51, 102]], np.uint8)
+    tex = voxgi.Texture(np.repeat(codes[..., None], 3, axis=2), filter=filt, wrap=wrap, raw=True)
+    # the decode table is float32
+    np.testing.assert_allclose(tex.eval(np.array([uv])), [[want] * 3], rtol=1e-7, atol=1e-9)
+
+
+def test_texture_srgb_decoding_by_hand():
+    # IEC 61966-2-1: code 128 is ((128/255 + 0.055) / 1.055)^2.4 = 0.2158605;
+    # 10 is on the linear toe, 10 / 255 / 12.92 = 0.0030353
+    tex = voxgi.Texture(np.array([[[128, 10, 255]]], np.uint8), filter="nearest")
+    np.testing.assert_allclose(tex.eval([[0.5, 0.5]]), [[0.2158605, 0.0030353, 1.0]], rtol=1e-5)
+    np.testing.assert_allclose(tex.mean(), [0.2158605, 0.0030353, 1.0], rtol=1e-5)

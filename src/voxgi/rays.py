@@ -168,16 +168,14 @@ class Tracer:
         self.close()
 
     def occluded(self, org: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
-        """(R,) uint8: 1 where something lies on the segment [org, org + length * dirs), else 0."""
+        """(R,) uint8: 1 where an opaque triangle lies on the segment
+        [org, org + length * dirs), else 0 (sheets do not block it)."""
         return self.native.occluded(_f32(org), _f32(dirs), _f32(length), self.threads)
 
     def transmittance(self, org: np.ndarray, dirs: np.ndarray, length: np.ndarray) -> np.ndarray:
         """(R, 3) float32: the light that passes [org, org + length * dirs): 0
         where an opaque triangle lies on it, else the product of the
         transmittances of the sheets on it (1 without)."""
-        if not self.has_sheets:
-            free = self.occluded(org, dirs, length) == 0
-            return np.repeat(free.astype(np.float32)[:, None], 3, axis=1)
         return self.native.transmittance(_f32(org), _f32(dirs), _f32(length), self.threads)
 
     def intersect(self, org: np.ndarray, dirs: np.ndarray, *, through: bool = False):
@@ -186,14 +184,11 @@ class Tracer:
         transmittances of the sheets before it."""
         if not through:
             return self.native.intersect(_f32(org), _f32(dirs), False, self.threads)[0]
-        if not self.has_sheets:
-            prim = self.native.intersect(_f32(org), _f32(dirs), False, self.threads)[0]
-            return prim, np.ones((len(prim), 3), np.float32)
         prim, _, _, T = self.native.intersect(_f32(org), _f32(dirs), False, self.threads, True)
         return prim, T
 
     def first_hit(self, org: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, ...]:
-        """(R,) int32 first triangle (-1: none) and float32 barycentrics u, v there."""
+        """(R,) int32 first opaque triangle (-1: none) and float32 barycentrics u, v there."""
         return self.native.intersect(_f32(org), _f32(dirs), True, self.threads)
 
 

@@ -159,7 +159,12 @@ class Texture:
 
     def digest(self) -> str:
         """A hash of the texels and the lookup (for scene fingerprints)."""
-        h = hashlib.sha1(self.texels.tobytes())
+        # the texels are read-only and the fields frozen: hash the image once
+        texel_hash = self.__dict__.get("_texel_hash")
+        if texel_hash is None:
+            texel_hash = hashlib.sha1(self.texels.data)
+            object.__setattr__(self, "_texel_hash", texel_hash)
+        h = texel_hash.copy()
         h.update(repr((self.texels.shape, self.filter, self.wrap, self.raw, self.factor)).encode())
         h.update(self.to_uv.tobytes())
         return h.hexdigest()[:16]

@@ -194,6 +194,12 @@ def _add_compare_arguments(c: argparse.ArgumentParser) -> None:
         action="store_true",
         help="leave out Mitsuba + OIDN (the denoised sweep; it needs mitsuba-oidn)",
     )
+    c.add_argument(
+        "--denoise",
+        action="store_true",
+        help="also display voxgi's solution denoised by OIDN (the row voxgi+oidn, beside "
+        "Mitsuba + OIDN)",
+    )
     c.add_argument("--plot", action="store_true", help="also plot relMSE against seconds")
     c.add_argument("--seed", metavar="S", type=int, default=0, help="voxgi's seed")
     c.add_argument(

@@ -28,6 +28,7 @@ def run_compare(args) -> int:
             out_dir=out_dir,
             plot=args.plot,
             denoise=not args.no_denoise,
+            voxgi_denoise=args.denoise,
         )
     except ImportError as exc:
         raise SystemExit(f"voxgi compare: error: {exc}") from None
