@@ -384,11 +384,19 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi, hits.wo + 3 * p,
                f);
     float L[3] = {R.radiance[0], R.radiance[1], R.radiance[2]};
-    if (h.textured) {
+    const MicrofacetLobe* hit_lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
+    for (int ch = 0; ch < 3; ++ch) {
         // the record's albedo is the solve's (a plastic's: its coat's too)
-        const MicrofacetLobe* hit_lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
-        for (int ch = 0; ch < 3; ++ch)
-            if (R.albedo[ch] > 0.f) L[ch] *= solve_albedo(hit_lobe, h.tex[ch], ch) / R.albedo[ch];
+        float a = R.albedo[ch];
+        if (h.textured && a > 0.f) {
+            const float here = solve_albedo(hit_lobe, h.tex[ch], ch);
+            L[ch] *= here / a;
+            a = here;
+        }
+        // a plastic's base light leaves in the shape of its coat's
+        // transmittance; an emitter's record (a MIS VPL) is mostly its
+        // emission, which leaves alike in every direction
+        if (!(pa > 0.0)) L[ch] *= float(plastic_record_view(hit_lobe, a, ch, cos_y));
     }
     for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.through[ch] * h.cos_x / denom;
 }
