@@ -162,7 +162,8 @@ def test_a_plastics_record_sends_its_base_light_in_the_coats_shape():
     # straight down to grazing, so its irradiance from a plastic floor is
     # 2 ∫ (S + (A − S) T / τ̄) sin²θ dθ where a diffuse floor of albedo A
     # (the same records) gives A π / 2: 0.908 of it here. Read as a diffuse
-    # record the ratio is 1.
+    # record by the gather rays and the VPLs the ratio is 1 (fails); read so
+    # by the VPLs alone, whose MIS weights then mix two readings, 0.923.
     lobe = Microfacet("plastic", alpha=0.1, ior=1.5)
     base, rho = 0.8, 0.5
     a = float(lobe.solve_albedo([base] * 3)[0])
@@ -183,7 +184,7 @@ def test_a_plastics_record_sends_its_base_light_in_the_coats_shape():
     th, w = 0.25 * math.pi * (x + 1), 0.25 * math.pi * w  # θ over [0, π/2]
     shape = np.interp(np.cos(th), mu, lobe.coat_transmittance()) / tau
     expect = 2 * np.sum(w * (s + (a - s) * shape) * np.sin(th) ** 2) / (a * math.pi / 2)
-    assert abs(ratio - expect) < 0.03, (ratio, expect)
+    assert abs(ratio - expect) < 0.015, (ratio, expect)
 
 
 def test_lobes_round_trip_a_toml_scene(tmp_path):
