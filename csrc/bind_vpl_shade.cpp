@@ -41,8 +41,7 @@ py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 
                        F64 vpl_pos, F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa,
                        double n_gather, double eps, const voxgi::RayScene& scene,
                        std::optional<I32> pixel_set, std::optional<I64> set_start, int threads,
-                       const std::optional<F32>& hit_albedo, const std::optional<F32>& mat_lobe,
-                       const std::optional<I32>& vpl_object, const std::optional<F32>& vpl_albedo) {
+                       const std::optional<F32>& hit_albedo, const std::optional<F32>& mat_lobe) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     voxgi::ShadeHits hits =
@@ -51,18 +50,6 @@ py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 
     if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
     voxgi::ShadeMIS mis = make_mis(n_gather);
     voxgi::ShadeVPLs vpls = make_vpls(vpl_pos, vpl_normal, vpl_weight, vpl_area, vpl_pa, n_gather);
-    if (vpl_object.has_value() != vpl_albedo.has_value())
-        throw py::value_error("vpl_object and vpl_albedo go together");
-    if (vpl_object) {
-        check_1d(*vpl_object, vpls.count, "vpl_object");
-        check_2d(*vpl_albedo, vpls.count, 3, "vpl_albedo");
-        const int32_t* vo = vpl_object->data();
-        for (int64_t k = 0; k < vpls.count; ++k)
-            if (vo[k] < -1 || vo[k] >= mats.count)
-                throw py::value_error("vpl_object: index out of range");
-        vpls.object = vo;
-        vpls.albedo = vpl_albedo->data();
-    }
     if (pixel_set.has_value() != set_start.has_value())
         throw py::value_error("pixel_set and set_start go together");
     const int32_t* ps = nullptr;
@@ -205,8 +192,7 @@ out (P, 3) float32. Returns the number of rays traced.)doc");
           "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "scene"_a,
           "pixel_set"_a.noconvert() = py::none(), "set_start"_a.noconvert() = py::none(),
           "threads"_a = 0, "hit_albedo"_a.noconvert() = py::none(),
-          "mat_lobe"_a.noconvert() = py::none(), "vpl_object"_a.noconvert() = py::none(),
-          "vpl_albedo"_a.noconvert() = py::none(),
+          "mat_lobe"_a.noconvert() = py::none(),
           R"doc(The VPLs' light at the hits: per (pixel, VPL) pair the unoccluded term and
 its shadow ray, traced in scene (a RayScene) as it is made; returns each
 pixel's sum over its free rays in VPL order (P, 3) float32 and the number of
@@ -219,10 +205,7 @@ mat_nv (M,) float32, mat_glossy (M,) uint8; vpl_pos (K, 3) float64,
 vpl_normal (K, 3), vpl_weight (K, 3) = (TA/n) B/pi, vpl_area (K,) float32,
 vpl_pa (K,) float32: n_v times the area pdf of VPLs combined with gather rays
 (their weight is B/pi; n_gather rays per pixel), 0 for the others. With pixel_set (P,) int32 and set_start (S+1,)
-int64, pixel p sees only the VPLs of set pixel_set[p]. With mat_lobe, vpl_object
-(K,) int32 (-1: none) and vpl_albedo (K, 3) float32, each VPL's object and
-its record's albedo: a plastic's record sends its base's share of the light
-in the shape of its coat's transmittance.)doc");
+int64, pixel p sees only the VPLs of set pixel_set[p].)doc");
 
     m.def("light_accumulate", &light_accumulate_py, "hit_pos"_a.noconvert(),
           "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(),

@@ -114,11 +114,6 @@ void microfacet_brdf(const MicrofacetLobe& L, const float* rd, const float n[3],
     for (int c = 0; c < 3; ++c) f[c] = float(spec[c]);
 }
 
-double plastic_base_exit(const MicrofacetLobe& L, double c) {
-    const double mean = double(L.eta) * std::sqrt(double(L.solve_c));  // τ̄ = η sqrt(solve_c)
-    return mean > 0.0 ? coat_transmittance(L, c) / mean : 1.0;
-}
-
 double microfacet_pdf(const MicrofacetLobe& L, const float n[3], const float wo[3],
                       const float wi[3]) {
     const double ci = dot3(n, wi), co = dot3(n, wo);

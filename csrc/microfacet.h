@@ -5,8 +5,6 @@
 // No pybind11 here: plain pointers and sizes.
 #pragma once
 
-#include <algorithm>
-#include <cmath>
 #include <cstdint>
 
 namespace voxgi {
@@ -31,14 +29,11 @@ struct MicrofacetLobe {
     // carry, g(rd) = rd / (1 - Fdr) (or rd / (1 - Fdr rd), nonlinear)
     float solve_s[3];
     float solve_c;
-    // plastic: 1 where a ray that lands on the object reads its record through
-    // the coat (plastic_record_view), 0 where as the record's mean (an emitter)
-    float record_view;
     // plastic: the coat's transmittance at cos θ = i / (samples - 1), as Mitsuba tabulates it
     float coat_transmittance[kCoatTransmittanceSamples];
 };
 constexpr int kLobeWidth = int(sizeof(MicrofacetLobe) / sizeof(float));
-static_assert(kLobeWidth == 22 + kCoatTransmittanceSamples, "a packed float32 row");
+static_assert(kLobeWidth == 21 + kCoatTransmittanceSamples, "a packed float32 row");
 
 // The BRDF f(wi, wo) (3,) of the lobe's material, without the cosine: the
 // specular term F D G / (4 cos_i cos_o), and for a plastic the diffuse base
@@ -53,24 +48,6 @@ inline float solve_albedo(const MicrofacetLobe* lobe, float rd, int c) {
     if (!lobe || lobe->kind != 1.f) return rd;
     const float inner = lobe->nonlinear != 0.f ? rd * lobe->fdr_int : lobe->fdr_int;
     return lobe->solve_s[c] + lobe->solve_c * rd / (1.f - inner);
-}
-
-// The shape of a plastic's base light leaving at cos θ = c: T(c) / τ̄, the
-// coat's transmittance over its cosine-weighted mean τ̄ = 2 ∫ T(μ) μ dμ
-// (whose square over η² is solve_c), so that its cosine-weighted mean over
-// the hemisphere is 1. The base is diffuse under the coat, so whatever light
-// it gets leaves in this shape.
-double plastic_base_exit(const MicrofacetLobe& lobe, double c);
-
-// A gather ray's reading of a plastic's record (albedo a, channel ch, the
-// record's light B / π) seen at cos θ = c from the ray's origin: the base's
-// share of a, a − S, leaves in the shape plastic_base_exit, the coat's share
-// S as the record's mean (docs/design.md §14). 1 for a material without a
-// plastic lobe, an emitter (record_view 0) or a black record.
-inline double plastic_record_view(const MicrofacetLobe* lobe, float a, int ch, double c) {
-    if (!lobe || lobe->kind != 1.f || lobe->record_view == 0.f || !(a > 0.f)) return 1.0;
-    const double base = std::max(0.0, double(a) - lobe->solve_s[ch]);
-    return 1.0 + base / a * (plastic_base_exit(*lobe, c) - 1.0);
 }
 
 // The solid-angle density of microfacet_sample's directions wi for viewer wo.

@@ -158,14 +158,10 @@ void vpl_pixel_rays(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
         float f[3];
         shade_brdf(mats, m, hit_albedo(hits, mats, p, m), n, wi, wo, f);
         const float* wk = vpls.weight + 3 * k;
-        const MicrofacetLobe* vpl_lobe =
-            mats.lobe && vpls.object && vpls.object[k] >= 0 ? mats.lobe + vpls.object[k] : nullptr;
         float cr[3];
         bool any = false;
         for (int ch = 0; ch < 3; ++ch) {
-            const double view =
-                vpl_lobe ? plastic_record_view(vpl_lobe, vpls.albedo[3 * k + ch], ch, cos_y) : 1.0;
-            cr[ch] = float(g * f[ch] * wk[ch] * view);
+            cr[ch] = float(g * f[ch] * wk[ch]);
             any |= cr[ch] > 0.f;
         }
         if (!any) continue;
@@ -197,7 +193,6 @@ void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPL
             mine.pos += 3 * a, mine.normal += 3 * a, mine.weight += 3 * a;
             mine.area += a;
             if (mine.pa) mine.pa += a;
-            if (mine.object) mine.object += a, mine.albedo += 3 * a;
         }
         vpl_pixel_rays(hits, mats, mine, mis, eps, p,
                        [&](const float* ro, const float* rd, float len, const float* cr) {
@@ -389,17 +384,11 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi, hits.wo + 3 * p,
                f);
     float L[3] = {R.radiance[0], R.radiance[1], R.radiance[2]};
-    const MicrofacetLobe* hit_lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
-    for (int ch = 0; ch < 3; ++ch) {
+    if (h.textured) {
         // the record's albedo is the solve's (a plastic's: its coat's too)
-        float a = R.albedo[ch];
-        if (h.textured && a > 0.f) {
-            const float here = solve_albedo(hit_lobe, h.tex[ch], ch);
-            L[ch] *= here / a;
-            a = here;
-        }
-        // a plastic's base light leaves in the shape of its coat's transmittance
-        L[ch] *= float(plastic_record_view(hit_lobe, a, ch, cos_y));
+        const MicrofacetLobe* hit_lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
+        for (int ch = 0; ch < 3; ++ch)
+            if (R.albedo[ch] > 0.f) L[ch] *= solve_albedo(hit_lobe, h.tex[ch], ch) / R.albedo[ch];
     }
     for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.through[ch] * h.cos_x / denom;
 }

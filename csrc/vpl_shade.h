@@ -61,11 +61,6 @@ struct ShadeVPLs {
     const float* pa = nullptr;      // (K,) n_v x the VPL's area pdf (per unit area) for VPLs
                                     // combined with gather rays (balance heuristic), 0 for
                                     // the others; or null: none
-    // nullable, with ShadeMaterials::lobe: each VPL's object (K,) and its
-    // record's albedo (K, 3), so that a plastic's record sends its light
-    // through its coat (plastic_record_view) as a gather ray reads it
-    const int32_t* object = nullptr;
-    const float* albedo = nullptr;
 };
 
 // Multiple importance sampling of each VPL set (emitters, the rest) between VPLs (n_v a

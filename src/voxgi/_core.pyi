@@ -311,7 +311,7 @@ def voxelize(triangles: numpy.typing.NDArray[numpy.float64], tri_object: numpy.t
         ``object_id`` (N,) int32, ``back`` (N,) bool, ``side`` (N,) int8 and
         ``stats`` (dict of counts and seconds).
     """
-def vpl_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], vpl_pos: numpy.typing.NDArray[numpy.float64], vpl_normal: numpy.typing.NDArray[numpy.float32], vpl_weight: numpy.typing.NDArray[numpy.float32], vpl_area: numpy.typing.NDArray[numpy.float32], vpl_pa: numpy.typing.NDArray[numpy.float32], n_gather: typing.SupportsFloat | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., pixel_set: numpy.typing.NDArray[numpy.int32] | None = None, set_start: numpy.typing.NDArray[numpy.int64] | None = None, threads: typing.SupportsInt | typing.SupportsIndex = 0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, mat_lobe: numpy.typing.NDArray[numpy.float32] | None = None, vpl_object: numpy.typing.NDArray[numpy.int32] | None = None, vpl_albedo: numpy.typing.NDArray[numpy.float32] | None = None) -> tuple:
+def vpl_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], vpl_pos: numpy.typing.NDArray[numpy.float64], vpl_normal: numpy.typing.NDArray[numpy.float32], vpl_weight: numpy.typing.NDArray[numpy.float32], vpl_area: numpy.typing.NDArray[numpy.float32], vpl_pa: numpy.typing.NDArray[numpy.float32], n_gather: typing.SupportsFloat | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., pixel_set: numpy.typing.NDArray[numpy.int32] | None = None, set_start: numpy.typing.NDArray[numpy.int64] | None = None, threads: typing.SupportsInt | typing.SupportsIndex = 0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, mat_lobe: numpy.typing.NDArray[numpy.float32] | None = None) -> tuple:
     """
     The VPLs' light at the hits: per (pixel, VPL) pair the unoccluded term and
     its shadow ray, traced in scene (a RayScene) as it is made; returns each
@@ -325,9 +325,6 @@ def vpl_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.ty
     vpl_normal (K, 3), vpl_weight (K, 3) = (TA/n) B/pi, vpl_area (K,) float32,
     vpl_pa (K,) float32: n_v times the area pdf of VPLs combined with gather rays
     (their weight is B/pi; n_gather rays per pixel), 0 for the others. With pixel_set (P,) int32 and set_start (S+1,)
-    int64, pixel p sees only the VPLs of set pixel_set[p]. With mat_lobe, vpl_object
-    (K,) int32 (-1: none) and vpl_albedo (K, 3) float32, each VPL's object and
-    its record's albedo: a plastic's record sends its base's share of the light
-    in the shape of its coat's transmittance.
+    int64, pixel p sees only the VPLs of set pixel_set[p].
     """
 __version__: str = '0.1.0'

@@ -60,7 +60,7 @@ CONDUCTORS: dict[str, tuple[tuple[float, float, float], tuple[float, float, floa
 #: Samples of the coat's transmittance table over cos θ (Mitsuba's resolution).
 _COAT_SAMPLES = 64
 #: Width of one packed row (csrc/microfacet.h, MicrofacetLobe).
-LOBE_WIDTH = 22 + _COAT_SAMPLES
+LOBE_WIDTH = 21 + _COAT_SAMPLES
 #: Share of a pixel's gather rays drawn from the lobe (the rest cosine-
 #: distributed): a plastic's base is lit mostly by the diffuse rays, a
 #: conductor has no base (docs/design.md §14).
@@ -137,7 +137,7 @@ class Microfacet:
         object.__setattr__(self, "nonlinear", bool(self.nonlinear))
 
     def lobe_row(self) -> np.ndarray:
-        """(86,) float32: the lobe as the display's kernels read it
+        """(85,) float32: the lobe as the display's kernels read it
         (csrc/microfacet.h)."""
         return _lobe_row(self).copy()
 
@@ -158,8 +158,7 @@ class Microfacet:
             s, c = self._plastic_albedo_terms()
             row[17:20] = s
             row[20] = c
-            row[21] = 1.0  # its records read through the coat (an emitter's: 0)
-            row[22:] = self.coat_transmittance()
+            row[21:] = self.coat_transmittance()
         else:
             row[3] = 1.0
         return row

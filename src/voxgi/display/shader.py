@@ -31,10 +31,6 @@ from .vpls import VPLSampler, place_vpls
 
 __all__ = ["frame_surface"]
 
-#: The lobe row's flag: a ray that lands on the object reads its plastic's
-#: record through the coat (csrc/microfacet.h).
-_RECORD_VIEW = 21
-
 #: What the VPL kernel reads of each VPL.
 _VPL_KEYS = ("pos", "normal", "weight", "area", "pa")
 
@@ -183,10 +179,6 @@ class _FrameShader:
             for i, s in enumerate(spec):
                 if isinstance(s, Microfacet):
                     self.mat_lobe[i] = s.lobe_row()
-                    if objs[i].material.is_emitter:
-                        # an emitter's record is mostly its emission, which
-                        # leaves alike in every direction
-                        self.mat_lobe[i, _RECORD_VIEW] = 0.0
 
     @property
     def light_rays(self) -> int:
@@ -342,14 +334,6 @@ class _FrameShader:
         t0 = time.perf_counter()
         cat = [vpls[k] for k in _VPL_KEYS]
         start = vpls["start"]
-        records = {}
-        if self.mat_lobe is not None:
-            # a plastic's record sends its light through its coat (§14)
-            vox, idx = self.sampler.vox, vpls["index"]
-            records = {
-                "vpl_object": np.ascontiguousarray(vox.object_id[idx], np.int32),
-                "vpl_albedo": np.ascontiguousarray(vox.albedo[idx], np.float32),
-            }
         sets = len(start) > 2
         out, rays = _core.vpl_light(
             *(h[k] for k in _HIT_KEYS),
@@ -363,7 +347,6 @@ class _FrameShader:
             self.threads,
             hit_albedo=h.get("albedo"),
             mat_lobe=self.mat_lobe,
-            **records,
         )
         self.shadow_rays += rays
         self.seconds["shadow"] += time.perf_counter() - t0
