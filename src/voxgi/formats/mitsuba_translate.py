@@ -491,6 +491,11 @@ def _shape(p: Plugin, index: int, notes: Notes) -> list[MeshData]:
             notes.drop(f"{p.label()} {name!r}: the emission of a glass shape")
         return [MeshData(name, v, f, np.zeros(3), np.zeros(3), True, source, transmittance=through)]
     albedo = clamp_albedo(albedo, p.label(), notes)
+    if max(emission) > 0 and two_sided and not max(albedo) > 0 and texture is None:
+        # Mitsuba's area emitter lights the front side only; with a black
+        # BSDF its back is black, as a one-sided surface's back is (§12): no
+        # coincident back surface for the rays to meet in the front's place.
+        two_sided = False
     if max(emission) > 0 and two_sided:
         # Mitsuba's area emitter lights the front side only, whatever the
         # BSDF: the back becomes a second, reflecting-only surface (§12).
