@@ -175,8 +175,13 @@ class _Iteration:
 
     def converged(self, res: float) -> bool:
         """The estimated remaining error of the geometric tail, ``res λ / (1 − λ)``
-        with λ bounded by the largest albedo, is under ``tol``."""
-        return res * self.lam_bound / (1 - self.lam_bound) < self.p.opt.tol
+        with λ bounded by the largest albedo, is under ``tol`` (the study
+        tuning's ``lines_tol`` where traced passes follow)."""
+        opt = self.p.opt
+        tol = opt.tol
+        if opt.lines_tol is not None and opt.indirect_light == "traced" and opt.max_bounces is None:
+            tol = opt.lines_tol
+        return res * self.lam_bound / (1 - self.lam_bound) < tol
 
     def at_floor(self, res: float) -> bool:
         """Switch Jacobi to the correction form when its residual sits at the
