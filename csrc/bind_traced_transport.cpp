@@ -68,8 +68,7 @@ void transport_apply_py(const I64& row_ptr, const I32& column, const F32& weight
 
 void bind_traced_transport(py::module_& m) {
     m.def("transport_compact", &transport_compact_py, "n"_a, "to_column"_a.noconvert(),
-          "record"_a.noconvert(), "weight"_a.noconvert(), "row_ptr"_a.noconvert(),
-          "threads"_a = 0,
+          "record"_a.noconvert(), "weight"_a.noconvert(), "row_ptr"_a.noconvert(), "threads"_a = 0,
           R"doc(In place: the n rays of each row of record (P * n,) int32 and weight
 (P * n, 3) float32, as gather_light's transport_record and transport_weight
 hold them, become that row's distinct columns (to_column[record], or the

@@ -524,8 +524,8 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                         lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c, scratch);
                     gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s);
                     if (transport)
-                        gather_hit_weight(hits, mats, mis, grid, p - 2, h[k], rec,
-                                          *transport, int64_t(n_gather) * (p - 2) + k);
+                        gather_hit_weight(hits, mats, mis, grid, p - 2, h[k], rec, *transport,
+                                          int64_t(n_gather) * (p - 2) + k);
                 }
                 for (int ch = 0; ch < 3; ++ch) out[3 * (p - 2) + ch] += float(s[ch]);
                 if (env) {

@@ -730,7 +730,9 @@ def test_traced_bounces_that_go_wrong_leave_the_lines_answer(monkeypatch):
     vox = voxgi.voxelize(voxgi.scenes.furnace_box(albedo=0.5), 8, progress=False)
     kw = dict(radius=4, progress=False)
     lines = voxgi.solve(vox, tuning=paper(shoot_radius=4), **kw)
-    monkeypatch.setattr(traced.TracedGather, "__call__", lambda self, v, n, seed, keep=0: v * np.nan)
+    monkeypatch.setattr(
+        traced.TracedGather, "__call__", lambda self, v, n, seed, keep=0: v * np.nan
+    )
     monkeypatch.setattr(traced.TracedGather, "apply", lambda self, v: v * np.nan)
     with pytest.warns(RuntimeWarning, match="traced bounces gave a non-finite"):
         sol = voxgi.solve(vox, tuning=paper(shoot_radius=4, indirect_light="traced"), **kw)
@@ -798,7 +800,9 @@ def test_kept_traced_passes_give_a_closed_furnace_its_exact_radiance(monkeypatch
     # Le / (1 - rho) to rounding (measured: 1.8e-7 at rho 0.8, 66 passes to
     # tol 1e-6).
     L, st = _furnace_from_exact_direct_light(monkeypatch)
-    assert st["kept"] and st["converged"] and st["samples"][1] == 0
+    assert st["kept"]
+    assert st["converged"]
+    assert st["samples"][1] == 0
     np.testing.assert_allclose(L, 1.0, rtol=1e-5)
 
 

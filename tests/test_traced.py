@@ -263,7 +263,8 @@ def test_the_kept_rays_apply_the_same_pass_to_other_values(scene):
         assert g.rays == 2 * rays  # apply traces nothing
     # no more entries than rays, one per distinct record read, ascending
     assert len(column) <= rays
-    assert np.all(np.diff(row_ptr) >= 0) and row_ptr[-1] == len(column)
+    assert np.all(np.diff(row_ptr) >= 0)
+    assert row_ptr[-1] == len(column)
     for p in range(len(vox)):
         assert np.all(np.diff(column[row_ptr[p] : row_ptr[p + 1]]) > 0)
     # the pane's colour: some rays read through it, their weights differ per channel
@@ -291,5 +292,5 @@ def test_the_kept_rays_do_not_depend_on_the_thread_count():
         with TracedGather(scene, vox, threads=threads) as g:
             g(values, 16, seed=1, keep=True)
             out.append((*g.matrix, g.apply(values)))
-    for x, y in zip(*out):
+    for x, y in zip(*out, strict=True):
         np.testing.assert_array_equal(x, y)

@@ -153,7 +153,7 @@ def traced_bounces(
         t_first = time.perf_counter() - t_first
         if keep and trace.matrix is not None:
             matrix = {
-                "entries": int(len(trace.matrix[1])),
+                "entries": len(trace.matrix[1]),
                 "bytes": int(sum(a.nbytes for a in trace.matrix)),
             }
         t_later = time.perf_counter()

@@ -291,7 +291,5 @@ def settings(radius, max_bounces, tol, threads, tuning) -> Settings:
         indirect_light=t.indirect_light,
         traced_samples=_validate.integer(t.traced_samples, "traced_samples", low=1, high=4096),
         traced_cache=t.traced_cache,
-        lines_tol=_validate.real(
-            s.lines_tol, "lines_tol", low=0.0, low_open=True, allow_none=True
-        ),
+        lines_tol=_validate.real(s.lines_tol, "lines_tol", low=0.0, low_open=True, allow_none=True),
     )
