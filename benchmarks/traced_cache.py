@@ -51,9 +51,9 @@ from voxgi.radiosity import solver, traced_passes
 from voxgi.radiosity.tuning import _StudyTuning
 from voxgi.traced import TracedGather
 
-#: Samples per pixel of the Mitsuba references rendered here when missing
-#: (the Cornell box converges fast; the interiors take bitterli.py's 4096).
-REFERENCE_SPP = {"cornell-box": 1024}
+#: Samples per pixel of the Mitsuba references (bitterli.py's cache holds
+#: these; more would be rendered here, minutes a pass); others take 4096.
+REFERENCE_SPP = {"cornell-box": 1024, "staircase2": 1280}
 
 
 def load(name: str, width: int = 256) -> voxgi.Scene:
@@ -82,17 +82,18 @@ def _capture(vox, threads):
     return sol, seen
 
 
-def _finish(seen, keep: bool, later_seed: int = 0):
+def _finish(seen, keep: bool, later_seed: int = 0, first_seed: int = 1):
     """The traced passes from the captured start: kept rays, or fresh ones
-    whose later passes are seeded ``later_seed`` on (the first pass, seed 1,
-    is the same)."""
+    whose later passes are seeded ``later_seed`` on (the first pass's seed,
+    1 in the solve, is ``first_seed``)."""
     p = seen["p"]
     p.stats["skipped"].pop("traced_cache", None)
     p.opt = dataclasses.replace(p.opt, traced_cache=keep)
     call = TracedGather.__call__
 
     def seeded(self, values, samples, seed, keep=False):
-        return call(self, values, samples, seed if seed <= 1 else seed + later_seed, keep=keep)
+        seed = {0: 0, 1: first_seed}.get(seed, seed + later_seed)
+        return call(self, values, samples, seed, keep=keep)
 
     TracedGather.__call__ = seeded
     try:
@@ -114,7 +115,7 @@ def _difference(p, B, ref, lit):
     }
 
 
-def bias(name: str, threads: int) -> dict:
+def bias(name: str, threads: int, seeds: int) -> dict:
     scene = load(name)
     vox = voxgi.voxelize(scene, 64, progress=False)
     _, seen = _capture(vox, threads)
@@ -124,10 +125,25 @@ def bias(name: str, threads: int) -> dict:
         "fresh A": _finish(seen, False, 0),
         "fresh B": _finish(seen, False, 1000),
     }
+    area = p.area[:, None]
+    # the reflected power, kept against fresh, over first passes of other seeds
+    ratio = []
+    for j in range(seeds):
+        first = 1 + 7919 * (j + 1)
+        kept = (area * (_finish(seen, True, 0, first)[0] - p.E)).sum(0)
+        fresh = (area * (_finish(seen, False, 0, first)[0] - p.E)).sum(0)
+        ratio.append(kept / fresh - 1)
     ref = runs["fresh A"][0]
     lit = (p.area > 0) & (p.rho.max(axis=1) > 0) & (ref.sum(axis=1) > 1e-3 * np.median(ref.sum(1)))
     power = {k: (p.area[:, None] * (B - p.E)).sum(axis=0) for k, (B, _, _) in runs.items()}
     out = {"records": len(vox), "runs": {}}
+    if seeds:
+        r = np.array(ratio)
+        out["power_kept_vs_fresh_over_seeds"] = {
+            "seeds": seeds,
+            "mean": r.mean(0).tolist(),
+            "std_of_mean": (r.std(0, ddof=1) / np.sqrt(seeds)).tolist() if seeds > 1 else None,
+        }
     for k, (B, st, sec) in runs.items():
         row = {
             "passes": st["passes"],
@@ -208,6 +224,9 @@ def main() -> int:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--lines-tol", type=float, default=1e-2)
     ap.add_argument("--render", action="store_true")
+    ap.add_argument(
+        "--seeds", type=int, default=0, help="bias: first passes of more seeds, kept and fresh"
+    )
     ap.add_argument("--no-fresh", action="store_true", help="timing: skip the fresh-ray solve")
     ap.add_argument("--json", type=Path, default=RESULTS / "traced_cache.json")
     args = ap.parse_args()
@@ -215,9 +234,11 @@ def main() -> int:
     for name in args.scenes:
         print(name, flush=True)
         if args.part == "bias":
-            res = bias(name, args.threads)
+            res = bias(name, args.threads, args.seeds)
             for k, row in res["runs"].items():
                 print(f"  {k}: {row}", flush=True)
+            if args.seeds:
+                print(f"  over seeds: {res['power_kept_vs_fresh_over_seeds']}", flush=True)
         else:
             res = timing(name, args.threads, args.lines_tol, args.render, not args.no_fresh)
         results["scenes"][name] = res

@@ -816,3 +816,24 @@ def test_a_kept_pass_that_loses_light_misses_the_furnace(monkeypatch):
     L, st = _furnace_from_exact_direct_light(monkeypatch, spoil=lose)
     assert st["kept"]
     assert np.all(np.abs(L - 1) > 0.02)
+
+
+def test_traced_rays_over_the_budget_are_traced_fresh_each_pass():
+    # Kept rays that do not fit in max_cache_bytes fall back to fresh rays
+    # every pass, and say so; the answer is then that of traced_cache=False.
+    vox = voxgi.voxelize(voxgi.scenes.cornell_box(), 8, progress=False)
+    small = voxgi.SolveTuning(max_cache_bytes=1 << 16)
+    over = voxgi.solve(vox, progress=False, tuning=small)
+    assert not over.stats["traced"]["kept"]
+    assert "traced_cache" in over.stats["skipped"]
+    assert "max_cache_bytes" in over.stats["skipped"]["traced_cache"]
+    fresh = voxgi.solve(
+        vox, progress=False, tuning=voxgi.SolveTuning(max_cache_bytes=1 << 16, traced_cache=False)
+    )
+    np.testing.assert_array_equal(over.radiosity, fresh.radiosity)
+    assert fresh.stats["skipped"]["traced_cache"] == "traced_cache=False"
+    kept = voxgi.solve(vox, progress=False)
+    assert kept.stats["traced"]["kept"]
+    assert kept.stats["traced"]["bytes"] <= voxgi.traced.transport_bytes(vox, 64)
+    with pytest.raises(TypeError, match="traced_cache"):
+        voxgi.solve(vox, progress=False, tuning=voxgi.SolveTuning(traced_cache="yes"))
