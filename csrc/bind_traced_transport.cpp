@@ -54,14 +54,10 @@ void transport_apply_py(const I64& row_ptr, const I32& column, const F32& weight
     if (rp[0] != 0 || rp[P] != nnz) throw py::value_error("row_ptr: bad bounds");
     for (int64_t p = 0; p < P; ++p)
         if (rp[p + 1] < rp[p]) throw py::value_error("row_ptr must be ascending");
-    const int32_t* col = column.data();
-    const py::ssize_t N = val.shape(0);
-    for (py::ssize_t e = 0; e < nnz; ++e)
-        if (col[e] < 0 || col[e] >= N) throw py::value_error("column: index out of range");
     auto stop = make_stop_check();
     py::gil_scoped_release release;
-    voxgi::transport_apply(P, rp, col, weight.data(), val.data(), out.mutable_data(), threads,
-                           stop);
+    voxgi::transport_apply(P, val.shape(0), rp, column.data(), weight.data(), val.data(),
+                           out.mutable_data(), threads, stop);
 }
 
 }  // namespace

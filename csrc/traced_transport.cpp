@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <numeric>
+#include <stdexcept>
 #include <vector>
 
 namespace voxgi {
@@ -60,11 +61,14 @@ int64_t transport_compact(int64_t P, int n, const int32_t* to_column, int32_t* r
     return row_ptr[P];
 }
 
-void transport_apply(int64_t P, const int64_t* row_ptr, const int32_t* column, const float* weight,
-                     const double* val, double* out, int threads, const StopCheck& stop) {
+void transport_apply(int64_t P, int64_t N, const int64_t* row_ptr, const int32_t* column,
+                     const float* weight, const double* val, double* out, int threads,
+                     const StopCheck& stop) {
     for_each_chunked(P, kRows, threads, stop, [&](int64_t p) {
         double s0 = 0.0, s1 = 0.0, s2 = 0.0;
         for (int64_t e = row_ptr[p]; e < row_ptr[p + 1]; ++e) {
+            if (column[e] < 0 || column[e] >= N)
+                throw std::invalid_argument("column: index out of range");
             const double* v = val + 3 * int64_t(column[e]);
             const float* w = weight + 3 * e;
             s0 += double(w[0]) * v[0];

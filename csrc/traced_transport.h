@@ -26,8 +26,11 @@ int64_t transport_compact(int64_t P, int n, const int32_t* to_column, int32_t* r
 
 // out[p] = sum over the entries e of row p of weight[e] * val[column[e]],
 // per channel (RGB), summed in double in column order; out (P, 3) is
-// overwritten. The same for any thread count.
-void transport_apply(int64_t P, const int64_t* row_ptr, const int32_t* column, const float* weight,
-                     const double* val, double* out, int threads, const StopCheck& stop);
+// overwritten; val has N rows. The same for any thread count. Throws
+// std::invalid_argument for a column outside [0, N) (checked as the entries
+// are read: a pass reads each once).
+void transport_apply(int64_t P, int64_t N, const int64_t* row_ptr, const int32_t* column,
+                     const float* weight, const double* val, double* out, int threads,
+                     const StopCheck& stop);
 
 }  // namespace voxgi

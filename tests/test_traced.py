@@ -294,3 +294,17 @@ def test_the_kept_rays_do_not_depend_on_the_thread_count():
             out.append((*g.matrix, g.apply(values)))
     for x, y in zip(*out, strict=True):
         np.testing.assert_array_equal(x, y)
+
+
+def test_a_kept_matrix_with_a_column_out_of_range_is_refused():
+    from voxgi import _core
+
+    row_ptr = np.array([0, 1, 2], np.int64)
+    weight = np.ones((2, 3), np.float32)
+    out = np.empty((2, 3))
+    ok = np.array([1, 0], np.int32)
+    _core.transport_apply(row_ptr, ok, weight, np.arange(6.0).reshape(2, 3), out)
+    np.testing.assert_array_equal(out, [[3, 4, 5], [0, 1, 2]])
+    for bad in ([1, 2], [-1, 0]):
+        with pytest.raises(ValueError, match="column"):
+            _core.transport_apply(row_ptr, np.array(bad, np.int32), weight, np.ones((2, 3)), out)
