@@ -166,7 +166,9 @@ def bias(name: str, threads: int, seeds: int) -> dict:
     return out
 
 
-def timing(name: str, threads: int, lines_tol: float, render: bool, fresh: bool = True) -> dict:
+def timing(
+    name: str, threads: int, lines_tol: float, render: bool, fresh: bool = True, kept: bool = True
+) -> dict:
     scene = load(name)
     t = time.perf_counter()
     vox = voxgi.voxelize(scene, 64, progress=False)
@@ -178,6 +180,8 @@ def timing(name: str, threads: int, lines_tol: float, render: bool, fresh: bool 
     }
     if not fresh:
         del configs["fresh"]
+    if not kept:
+        del configs["kept"]
     ref = None
     if render:
         from bitterli import reference
@@ -213,6 +217,7 @@ def timing(name: str, threads: int, lines_tol: float, render: bool, fresh: bool 
     area = np.asarray(vox.area)[:, None]
     for k, sol in sols.items():
         B = sol.radiosity.astype(np.float64)
+        out["runs"][k]["power"] = (area * B).sum(0).tolist()
         out["runs"][k]["power_vs_first"] = ((area * B).sum(0) / (area * base).sum(0) - 1).tolist()
     return out
 
@@ -228,6 +233,9 @@ def main() -> int:
         "--seeds", type=int, default=0, help="bias: first passes of more seeds, kept and fresh"
     )
     ap.add_argument("--no-fresh", action="store_true", help="timing: skip the fresh-ray solve")
+    ap.add_argument(
+        "--no-kept", action="store_true", help="timing: skip the kept-ray solve at the lines' tol"
+    )
     ap.add_argument("--json", type=Path, default=RESULTS / "traced_cache.json")
     args = ap.parse_args()
     results = {"commit": git_commit(), "load": os.getloadavg(), "part": args.part, "scenes": {}}
@@ -240,7 +248,9 @@ def main() -> int:
             if args.seeds:
                 print(f"  over seeds: {res['power_kept_vs_fresh_over_seeds']}", flush=True)
         else:
-            res = timing(name, args.threads, args.lines_tol, args.render, not args.no_fresh)
+            res = timing(
+                name, args.threads, args.lines_tol, args.render, not args.no_fresh, not args.no_kept
+            )
         results["scenes"][name] = res
     results["load_after"] = os.getloadavg()
     args.json.parent.mkdir(parents=True, exist_ok=True)

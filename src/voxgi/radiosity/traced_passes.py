@@ -24,7 +24,7 @@ _TRACED_PASSES = 32
 _KEPT_PASSES = 1024
 
 
-def _why_not_traced(p: Problem) -> str | None:
+def why_not_traced(p: Problem) -> str | None:
     """Why the lines alone carry the reflected light though traced passes were
     asked for (None: the passes run)."""
     if getattr(p.vox, "scene", None) is None:
@@ -129,7 +129,7 @@ def traced_bounces(
     opt = p.opt
     if opt.indirect_light != "traced":
         return R
-    why = _why_not_traced(p)
+    why = why_not_traced(p)
     if why is not None:
         p.stats["skipped"]["traced_bounces"] = why + ": the lines alone carried the reflected light"
         return R

@@ -54,8 +54,10 @@ class SolveTuning:
         None: :data:`TRACED_RADIUS` (4) where traced passes finish the
         reflected light, else :data:`LINES_RADIUS` (8).
     tol : float
-        Bound on the estimated remaining relative error of the gathering
-        (and of the traced passes); ``voxgi.solve(tol=...)`` overrides it.
+        Bound on the estimated remaining relative error of the traced passes
+        (and of the gathering along the lines; where traced passes keep
+        their rays, ``traced_cache``, the lines stop at 10 times it);
+        ``voxgi.solve(tol=...)`` overrides it.
     direct_light : {"exact", "shoot"}
         How the records get their direct light (``docs/design.md`` §5):
         ``"exact"`` traces shadow rays from every record to points on the
@@ -179,8 +181,10 @@ class _StudyTuning(SolveTuning):
     max_iterations : int
         Bound on the iterations when ``max_bounces`` is None.
     lines_tol : float or None
-        The lines' own tolerance where traced passes follow them (None:
-        ``tol``); the passes still run to ``tol``.
+        The lines' own tolerance where traced passes follow them; the passes
+        still run to ``tol``. None: 10 times ``tol`` where the passes keep
+        their rays (``traced_cache`` not False), else ``tol``
+        (:func:`voxgi.radiosity.iteration.lines_tol`).
     closed : bool, sequence of int or None
         Objects (ids into ``vox.object_id``; True: all; False: none) whose
         meshes are closed: their back records send their front twin's
