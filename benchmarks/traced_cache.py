@@ -167,7 +167,12 @@ def bias(name: str, threads: int, seeds: int) -> dict:
 
 
 def timing(
-    name: str, threads: int, lines_tol: float, render: bool, fresh: bool = True, kept: bool = True
+    name: str,
+    threads: int,
+    lines_tol: list[float],
+    render: bool,
+    fresh: bool = True,
+    kept: bool = True,
 ) -> dict:
     scene = load(name)
     t = time.perf_counter()
@@ -176,7 +181,7 @@ def timing(
     configs = {
         "fresh": voxgi.SolveTuning(traced_cache=False),
         "kept": voxgi.SolveTuning(),
-        f"kept, lines_tol {lines_tol:g}": _StudyTuning(lines_tol=lines_tol),
+        **{f"kept, lines_tol {t:g}": _StudyTuning(lines_tol=t) for t in lines_tol},
     }
     if not fresh:
         del configs["fresh"]
@@ -227,7 +232,7 @@ def main() -> int:
     ap.add_argument("part", choices=["bias", "timing"])
     ap.add_argument("scenes", nargs="+")
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--lines-tol", type=float, default=1e-2)
+    ap.add_argument("--lines-tol", type=float, nargs="+", default=[1e-2])
     ap.add_argument("--render", action="store_true")
     ap.add_argument(
         "--seeds", type=int, default=0, help="bias: first passes of more seeds, kept and fresh"
