@@ -103,6 +103,9 @@ void bind_rays(py::module_& m) {
              "sheet that rays cross, scaled by it.")
         .def_property_readonly("has_sheets", &voxgi::RayScene::has_sheets)
         .def_property_readonly("triangle_count", &voxgi::RayScene::triangle_count)
+        .def_property_readonly("twin_count", &voxgi::RayScene::twin_count,
+                               "Triangles with a reversed twin: the same corners in reverse order "
+                               "(a first hit on one returns the one whose front the ray meets).")
         .def_property_readonly(
             "embree_version",
             [](const voxgi::RayScene& s) { return voxgi::version_string(s.embree_version()); },

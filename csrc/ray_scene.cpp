@@ -5,6 +5,7 @@
 #endif
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstring>
@@ -179,6 +180,7 @@ RayScene::RayScene(const std::string& library, const float* tris, int64_t n_tris
     }
     try {
         scene_ = build(tris, sheets.empty() ? nullptr : &opaque_index_);
+        find_twins(tris, sheets.empty() ? nullptr : transmittance);
         if (!sheets.empty()) {
             sheet_scene_ = build(tris, &sheets);
             sheet_transmittance_.resize(3 * sheets.size());
@@ -192,6 +194,78 @@ RayScene::RayScene(const std::string& library, const float* tris, int64_t n_tris
         api_->release_device(device_);
         throw;
     }
+}
+
+// Two coincident faces of opposite winding are one surface seen from two
+// sides (a one-sided emitter and the black or reflecting back that a file's
+// two-sided emitter loads as, docs/design.md §12). Embree meets either at
+// the same distance, so without this half the rays that reach the emitter
+// from its front would read its back, black. The twins are found by their
+// corners, exactly: each triangle's corners rotated to start at the least
+// (in coordinate order), forwards and reversed, sorted and matched.
+void RayScene::find_twins(const float* tris, const float* transmittance) {
+    using Key = std::array<float, 9>;
+    auto corner_less = [](const float* a, const float* b) {
+        return std::lexicographical_compare(a, a + 3, b, b + 3);
+    };
+    auto key = [&](int64_t i, bool reversed) {
+        const float* t = tris + 9 * i;
+        const float* c[3] = {t, reversed ? t + 6 : t + 3, reversed ? t + 3 : t + 6};
+        int first = 0;
+        for (int k = 1; k < 3; ++k)
+            if (corner_less(c[k], c[first])) first = k;
+        Key out;
+        for (int k = 0; k < 3; ++k) std::memcpy(out.data() + 3 * k, c[(first + k) % 3], 12);
+        return out;
+    };
+    auto opaque = [&](int64_t i) {
+        if (!transmittance) return true;
+        const float* T = transmittance + 3 * i;
+        return !(T[0] > 0.f || T[1] > 0.f || T[2] > 0.f);
+    };
+    auto degenerate = [&](int64_t i) {
+        const float* t = tris + 9 * i;
+        return std::equal(t, t + 3, t + 3) || std::equal(t, t + 3, t + 6) ||
+               std::equal(t + 3, t + 6, t + 6);
+    };
+    std::vector<std::pair<Key, int32_t>> fwd;
+    for (int64_t i = 0; i < n_tris_; ++i)
+        if (opaque(i) && !degenerate(i)) fwd.emplace_back(key(i, false), int32_t(i));
+    std::sort(fwd.begin(), fwd.end());
+    for (const auto& [k, i] : fwd) {
+        const Key want = key(i, true);
+        auto it = std::lower_bound(fwd.begin(), fwd.end(), std::make_pair(want, int32_t(-1)));
+        if (it == fwd.end() || it->first != want) continue;
+        if (twins_.empty()) twins_.resize(size_t(n_tris_));
+        Twin& w = twins_[size_t(i)];
+        w.tri = it->second;
+        const float *p = tris + 9 * int64_t(i), *q = tris + 9 * int64_t(w.tri);
+        auto corner_of_p = [&](const float* c) {
+            for (int k = 0; k < 3; ++k)
+                if (std::equal(c, c + 3, p + 3 * k)) return uint8_t(k);
+            return uint8_t(0);
+        };
+        w.c1 = corner_of_p(q + 3);
+        w.c2 = corner_of_p(q + 6);
+        const double e1[3] = {p[3] - p[0], p[4] - p[1], p[5] - p[2]};
+        const double e2[3] = {p[6] - p[0], p[7] - p[1], p[8] - p[2]};
+        w.n[0] = float(e1[1] * e2[2] - e1[2] * e2[1]);
+        w.n[1] = float(e1[2] * e2[0] - e1[0] * e2[2]);
+        w.n[2] = float(e1[0] * e2[1] - e1[1] * e2[0]);
+        ++n_twins_;
+    }
+}
+
+int32_t RayScene::facing(int32_t prim, const float dir[3], float* u, float* v) const {
+    if (twins_.empty()) return prim;
+    const Twin& w = twins_[size_t(prim)];
+    if (w.tri < 0 || !(dir[0] * w.n[0] + dir[1] * w.n[1] + dir[2] * w.n[2] > 0.f)) return prim;
+    if (u && v) {
+        const float b[3] = {1.f - *u - *v, *u, *v};
+        *u = b[w.c1];
+        *v = b[w.c2];
+    }
+    return w.tri;
 }
 
 // An Embree scene of the triangles `pick` lists (null: all of them).
@@ -303,7 +377,7 @@ int32_t RayScene::intersect(const float org[3], const float dir[3], float* u, fl
     }
     if (!hit) return -1;
     const uint32_t prim = opaque_index_.empty() ? rh.hit.prim_id : opaque_index_[rh.hit.prim_id];
-    return static_cast<int32_t>(prim);
+    return facing(static_cast<int32_t>(prim), dir, u, v);
 }
 
 void RayScene::occluded(const float* org, const float* dir, const float* tfar, int64_t n,

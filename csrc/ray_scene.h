@@ -38,6 +38,8 @@ class RayScene {
     RayScene& operator=(const RayScene&) = delete;
 
     int64_t triangle_count() const { return n_tris_; }
+    // How many triangles have a reversed twin (see intersect).
+    int64_t twin_count() const { return n_twins_; }
     // The library's version, 10000 major + 100 minor + patch.
     int64_t embree_version() const { return version_; }
 
@@ -53,6 +55,9 @@ class RayScene {
     // One ray: the first opaque triangle hit (-1: none), with its
     // barycentrics u, v and distance t when the pointers are not null, and
     // with `through` the product of the sheets' transmittances before it.
+    // Of two opaque triangles with the same corners in reverse order (a
+    // one-sided surface and its back, as a file's two-sided emitter loads),
+    // the one whose front the ray meets.
     int32_t intersect(const float org[3], const float dir[3], float* u, float* v, float* t,
                       float* through = nullptr) const;
 
@@ -67,6 +72,11 @@ class RayScene {
     // Multiplies `through` by the transmittance of each sheet on [0, tfar).
     void cross_sheets(const float org[3], const float dir[3], float tfar, float* through) const;
     void* build(const float* tris, const std::vector<uint32_t>* pick) const;
+    void find_twins(const float* tris, const float* transmittance);
+    // The triangle a hit on `prim` (a scene index) stands for, its
+    // barycentrics moved along: prim's reversed twin where the ray meets
+    // prim's back.
+    int32_t facing(int32_t prim, const float dir[3], float* u, float* v) const;
 
     const EmbreeApi* api_ = nullptr;
     void* device_ = nullptr;
@@ -76,6 +86,16 @@ class RayScene {
     // and each sheet's RGB transmittance in sheet_scene_'s order.
     std::vector<uint32_t> opaque_index_;
     std::vector<float> sheet_transmittance_;
+    // Per triangle (empty where none has one): its reversed twin, -1 for
+    // none, the twin's corners 1 and 2 as corners of this triangle, and this
+    // triangle's normal by its winding.
+    struct Twin {
+        int32_t tri = -1;
+        uint8_t c1 = 0, c2 = 0;
+        float n[3] = {0.f, 0.f, 0.f};
+    };
+    std::vector<Twin> twins_;
+    int64_t n_twins_ = 0;
     int64_t n_tris_ = 0;
     int64_t version_ = 0;
 };

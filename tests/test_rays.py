@@ -152,3 +152,41 @@ def test_a_library_that_cannot_be_opened_is_named(monkeypatch, tmp_path):
     with pytest.raises(ImportError, match=r"embreex>=4\.4,<5") as info:
         Tracer(unit_square_scene(), 1)
     assert str(fake) in str(info.value)
+
+
+def test_a_ray_meets_the_face_of_coincident_reversed_triangles_turned_to_it():
+    # A one-sided surface and its reversed copy (a lamp and its back, as a
+    # file's two-sided emitter loads) lie at the same distance on every ray;
+    # the first hit is the one whose front faces the ray, at the same point.
+    import trimesh
+
+    square = unit_square_scene()
+    sq = square.objects[0]
+    scene = voxgi.Scene()
+    scene.add(trimesh.Trimesh(sq.vertices, sq.faces, process=False), voxgi.Material(0.5), "up")
+    # the back's triangles split the square along the other diagonal's
+    # reverse, starting at another corner: the twin is found by its corners
+    back = np.array([[2, 1, 0], [3, 2, 0]])
+    scene.add(trimesh.Trimesh(sq.vertices, back, process=False), voxgi.Material(0.5), "down")
+    rng = np.random.default_rng(0)
+    n = 2000
+    xy = rng.uniform(0.1, 0.9, (n, 2))
+    with Tracer(scene, 2) as tr:
+        assert tr.native.twin_count == 4
+        for z, obj_wanted in ((1.0, 0), (-1.0, 1)):
+            org = np.column_stack([xy, np.full(n, z)]) - tr.centre
+            dirs = np.column_stack([rng.uniform(-0.09, 0.09, (n, 2)), np.full(n, -z)])
+            dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+            prim, u, v = tr.first_hit(org, dirs)
+            assert (prim >= 0).all()
+            obj = scene.triangles()["object"][prim]
+            np.testing.assert_array_equal(obj, obj_wanted)
+            t = -(org[:, 2] + tr.centre[2]) / dirs[:, 2]
+            want = org + t[:, None] * dirs
+            tri = tr.tris[prim]
+            got = (
+                tri[:, 0]
+                + u[:, None] * (tri[:, 1] - tri[:, 0])
+                + v[:, None] * (tri[:, 2] - tri[:, 0])
+            )
+            np.testing.assert_allclose(got, want, atol=1e-5)

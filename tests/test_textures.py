@@ -262,6 +262,38 @@ def test_xml_bitmap_loads_as_a_texture_and_saves_with_it(tmp_path):
     assert back.objects[0].material.texture.filter == "nearest"
 
 
+def test_a_mesh_with_an_unused_vertex_keeps_its_uvs(tmp_path):
+    # Bitterli's OBJ files hold vertices no face uses among the used ones;
+    # trimesh's order-keeping OBJ reader then drops every UV of the mesh.
+    # The texture must stay a texture, through Scene.save and back, with each
+    # used vertex's own UV.
+    from PIL import Image
+
+    tex = _random_texture(4, 6, seed=3)
+    Image.fromarray(tex.texels).save(tmp_path / "tex.png")
+    (tmp_path / "quad.obj").write_text(
+        "v 0 0 0\nv 1 0 0\nv 9 9 9\nv 1 0 1\nv 0 0 1\n"
+        "vt 0 0\nvt 1 0\nvt 0.5 0.5\nvt 1 1\nvt 0 1\n"
+        "f 1/1 4/4 2/2\nf 1/1 5/5 4/4\n"
+    )
+    (tmp_path / "scene.xml").write_text(_XML)
+    with _no_mean_warning():
+        sc = voxgi.Scene.load(tmp_path / "scene.xml")
+    obj = sc.objects[0]
+    assert obj.material.texture is not None
+    # each face corner keeps the UV its vertex had in the file (v turned to
+    # the image's top, as Mitsuba reads an OBJ)
+    want = {(0, 0, 0): (0, 1), (1, 0, 0): (1, 1), (1, 0, 1): (1, 0), (0, 0, 1): (0, 0)}
+    for f in obj.faces:
+        for i in f:
+            np.testing.assert_allclose(obj.uv[i], want[tuple(obj.vertices[i].round(6))])
+    sc.save(tmp_path / "out" / "scene.toml")
+    with _no_mean_warning():
+        back = voxgi.Scene.load(tmp_path / "out" / "scene.toml")
+    assert back.objects[0].material.texture is not None
+    assert back.fingerprint() == sc.fingerprint()
+
+
 class _no_mean_warning:
     """No warning that a bitmap was reduced to its mean colour."""
 

@@ -160,6 +160,11 @@ class RayScene:
     @property
     def triangle_count(self) -> int:
         ...
+    @property
+    def twin_count(self) -> int:
+        """
+        Triangles with a reversed twin: the same corners in reverse order (a first hit on one returns the one whose front the ray meets).
+        """
 def batch_error(batches: numpy.typing.NDArray[numpy.float32], size: typing.SupportsFloat | typing.SupportsIndex, frames: typing.SupportsFloat | typing.SupportsIndex, crit: typing.SupportsFloat | typing.SupportsIndex, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
     """
     Per-value standard error of a running mean of `frames` frames from k

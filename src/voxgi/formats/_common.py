@@ -3,6 +3,7 @@ that lists what it approximated or left out, and the albedo bound."""
 
 from __future__ import annotations
 
+import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -99,3 +100,44 @@ def clamp_albedo(albedo, what: str, notes: Notes) -> np.ndarray:
         notes.approx(f"{what}: albedo {a.tolist()} clamped below 1")
         a = np.minimum(a, ALBEDO_MAX)
     return a
+
+
+#: An OBJ face that names texture coordinates (``f 1/1 ...``).
+_OBJ_FACE_WITH_VT = re.compile(rb"^f[ \t]+[^ \t/]+/[^ \t/]", re.MULTILINE)
+
+
+def load_trimesh(data: bytes, file_type: str, **kwargs):
+    """``trimesh.load`` of a mesh file's bytes, keeping the file's vertex order
+    and its UVs.
+
+    With ``maintain_order=True`` trimesh drops the UVs of an OBJ whose faces
+    name texture coordinates when a vertex no face uses lies among the used
+    ones (Bitterli's meshes hold such vertices), and the texture would be lost
+    without a word. Such a file is read again without keeping the order:
+    trimesh then drops the unused vertices and keeps each used one's UV.
+    """
+    import trimesh
+
+    def load(maintain_order: bool):
+        with warnings.catch_warnings():
+            # trimesh's numpy warnings on such a file's texture coordinates
+            # (an all-NaN median) say nothing about the geometry read
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return trimesh.load(
+                trimesh.util.wrap_as_stream(data),
+                file_type=file_type,
+                process=False,
+                maintain_order=maintain_order,
+                **kwargs,
+            )
+
+    mesh = load(True)
+    if file_type == "obj" and _OBJ_FACE_WITH_VT.search(data) and _lost_uv(mesh):
+        mesh = load(False)
+    return mesh
+
+
+def _lost_uv(loaded) -> bool:
+    """Whether any mesh of ``loaded`` (a mesh or a scene) came without UVs."""
+    meshes = loaded.geometry.values() if hasattr(loaded, "geometry") else [loaded]
+    return any(getattr(getattr(m, "visual", None), "uv", None) is None for m in meshes)

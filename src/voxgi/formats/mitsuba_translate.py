@@ -3,17 +3,15 @@ lights, shapes to meshes, the sensor to a camera (docs/design.md §12)."""
 
 from __future__ import annotations
 
-import io
 import math
 import re
-import warnings
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
 from .. import _validate
-from ._common import MeshData, Notes, SceneData, clamp_albedo
+from ._common import MeshData, Notes, SceneData, clamp_albedo, load_trimesh
 from ._paths import FileAccess
 from .mitsuba_xml import PLUGIN_TAGS, Node, Plugin, XmlReader, parse_xml
 from .serialized import read_serialized
@@ -421,17 +419,7 @@ def _mesh_file(data: bytes, mesh_path: Path, p: Plugin):
     from ``data`` (an OBJ's material library is not read: the shape's BSDF
     replaces it)."""
     try:
-        with warnings.catch_warnings():
-            # trimesh's numpy warnings on a mesh's texture coordinates
-            # (an all-NaN median) say nothing about the geometry read
-            warnings.simplefilter("ignore", RuntimeWarning)
-            mesh = trimesh.load(
-                io.BytesIO(data),
-                file_type=p.type,
-                force="mesh",
-                process=False,
-                maintain_order=True,
-            )
+        mesh = load_trimesh(data, p.type, force="mesh")
     except Exception as exc:
         raise ValueError(f"{p.where()}: cannot load mesh {mesh_path}: {exc}") from None
     uv = getattr(getattr(mesh, "visual", None), "uv", None)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from ._common import MeshData, Notes, SceneData, clamp_albedo
+from ._common import MeshData, Notes, SceneData, clamp_albedo, load_trimesh
 from ._limits import RefusedError
 from ._paths import FileAccess
 from .textures import decode_rgb, texture_mean
@@ -199,13 +199,11 @@ def load_obj(path, *, search_paths=(), allow_outside=False, limits=None) -> Scen
         raise ValueError(f"scene file {path}: cannot be read as OBJ text ({exc})") from None
     mats, texts = _read_libraries(path, text, access, notes)
     try:
-        loaded = trimesh.load(
-            trimesh.util.wrap_as_stream(_absolute_obj_indices(text)),
-            file_type="obj",
+        loaded = load_trimesh(
+            _absolute_obj_indices(text).encode("utf-8"),
+            "obj",
             resolver=_Libraries(texts),
-            process=False,
             group_material=True,
-            maintain_order=True,
         )
     except Exception as exc:
         raise ValueError(f"scene file {path}: cannot load OBJ: {exc}") from None

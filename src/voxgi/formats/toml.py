@@ -12,7 +12,6 @@ keeps no positions).
 from __future__ import annotations
 
 import dataclasses
-import io
 import math
 import re
 import sys
@@ -27,7 +26,7 @@ from ..camera import Camera
 from ..lights import Environment
 from ..materials import AshikhminShirley, Material
 from ..microfacet import Microfacet
-from ._common import SceneWarning
+from ._common import SceneWarning, load_trimesh
 from ._limits import RefusedError
 from ._paths import FileAccess
 from .textures import check_image_size
@@ -478,13 +477,8 @@ def _load_mesh(mesh_path: Path, where: str, table: tuple, access: FileAccess) ->
                 "mesh",
             ) from None
     try:
-        return trimesh.load(
-            io.BytesIO(data),
-            file_type=kind[1:],
-            resolver=access.resolver(mesh_path.parent),
-            force="mesh",
-            process=False,
-            maintain_order=True,
+        return load_trimesh(
+            data, kind[1:], resolver=access.resolver(mesh_path.parent), force="mesh"
         )
     except RefusedError as exc:
         raise _Located(f"{where}: {exc}", table, "mesh") from None
