@@ -11,7 +11,7 @@ import numpy as np
 from .. import _progress
 from .linesystem import Gatherer
 from .problem import Problem
-from .traced_passes import why_not_traced
+from .traced_passes import keeps_rays, why_not_traced
 
 #: Where traced passes through kept rays follow the lines, the lines stop
 #: at this many times ``tol``: the passes, milliseconds each, carry the
@@ -22,15 +22,16 @@ LINES_TOL_FACTOR = 10.0
 
 def lines_tol(p: Problem) -> float:
     """The tolerance the lines stop at: ``tol``, or where traced passes follow
-    (``indirect_light="traced"``, a scene to trace, no ``max_bounces``) and
-    keep their rays (``traced_cache`` not False), the study tuning's
-    ``lines_tol``, by default :data:`LINES_TOL_FACTOR` times ``tol``."""
+    (``indirect_light="traced"``, a scene to trace, no ``max_bounces``), the
+    study tuning's ``lines_tol``, by default, where the passes will keep
+    their rays (``traced_cache`` and its budget, :func:`keeps_rays`),
+    :data:`LINES_TOL_FACTOR` times ``tol``."""
     opt = p.opt
     if opt.indirect_light != "traced" or why_not_traced(p) is not None:
         return opt.tol
     if opt.lines_tol is not None:
         return opt.lines_tol
-    return opt.tol if opt.traced_cache is False else LINES_TOL_FACTOR * opt.tol
+    return LINES_TOL_FACTOR * opt.tol if keeps_rays(p)[0] else opt.tol
 
 
 __all__ = ["State", "iterate"]

@@ -87,7 +87,7 @@ def _tail(p: Problem, d: np.ndarray, lam: np.ndarray, mode: np.ndarray | None) -
     return np.where(norm > 0, bounded, d) * (lam / (1 - lam))
 
 
-def _keeps_rays(p: Problem) -> tuple[bool, str | None]:
+def keeps_rays(p: Problem) -> tuple[bool, str | None]:
     """Whether the first traced pass's rays are kept for the later passes
     (``traced_cache``), and why not."""
     opt = p.opt
@@ -120,7 +120,7 @@ def traced_bounces(
     least, the remaining error of the geometric series ``Σ_c r_c λ_c / (1 − λ_c)``
     is under ``tol``, its tail ``d λ / (1 − λ)`` is added.
 
-    Where they fit (``traced_cache``, :func:`_keeps_rays`), the first pass's
+    Where they fit (``traced_cache``, :func:`keeps_rays`), the first pass's
     rays are kept as a sparse matrix ``T̂`` and every later pass is
     ``d_{k+1} = ρ T̂ d_k`` with those same rays (up to :data:`_KEPT_PASSES`
     passes); otherwise each later pass traces fresh rays, a quarter as many
@@ -140,7 +140,7 @@ def traced_bounces(
     later = max(16, opt.traced_samples // 4)
     lam_bound = float(min(max(float(p.rho.max()), 0.5), 1 - 1e-6))
     residuals = []
-    keep, why_fresh = _keeps_rays(p)
+    keep, why_fresh = keeps_rays(p)
     if why_fresh is not None:
         p.stats["skipped"]["traced_cache"] = why_fresh
     cap = _KEPT_PASSES if keep else _TRACED_PASSES

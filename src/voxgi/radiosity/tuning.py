@@ -183,7 +183,7 @@ class _StudyTuning(SolveTuning):
     lines_tol : float or None
         The lines' own tolerance where traced passes follow them; the passes
         still run to ``tol``. None: 10 times ``tol`` where the passes keep
-        their rays (``traced_cache`` not False), else ``tol``
+        their rays (``traced_cache`` not False, within its budget), else ``tol``
         (:func:`voxgi.radiosity.iteration.lines_tol`).
     closed : bool, sequence of int or None
         Objects (ids into ``vox.object_id``; True: all; False: none) whose
