@@ -29,6 +29,7 @@ using U8 = py::array_t<uint8_t, kInput>;
 // Arrays a kernel writes into in place are taken as they are, never copied
 // (a copy would keep the answer from the caller): C-contiguous (noconvert),
 // then check_inplace refuses one that is read-only or misaligned.
+using I32Out = py::array_t<int32_t, py::array::c_style>;
 using I64Out = py::array_t<int64_t, py::array::c_style>;
 using F32Out = py::array_t<float, py::array::c_style>;
 

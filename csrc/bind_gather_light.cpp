@@ -94,7 +94,8 @@ int64_t gather_light_py(
     const std::optional<F64>& env_row_solid_angle, double env_samples,
     const std::optional<F32>& hit_albedo, const std::optional<std::vector<U8>>& tex_texels,
     const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
-    const std::optional<F32>& corner_uv, const std::optional<F32>& mat_lobe) {
+    const std::optional<F32>& corner_uv, const std::optional<F32>& mat_lobe,
+    std::optional<I32Out> transport_record, std::optional<F32Out> transport_weight) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     voxgi::ShadeHits hits =
@@ -115,12 +116,24 @@ int64_t gather_light_py(
     check_2d(out, hits.count, 3, "out");
     check_inplace(out, "out");
     float* po = out.mutable_data();
+    voxgi::GatherTransport transport;
+    if (transport_record.has_value() != transport_weight.has_value())
+        throw py::value_error("transport_record and transport_weight go together");
+    if (transport_record) {
+        check_1d(*transport_record, hits.count * n_gather, "transport_record");
+        check_2d(*transport_weight, hits.count * n_gather, 3, "transport_weight");
+        check_inplace(*transport_record, "transport_record");
+        check_inplace(*transport_weight, "transport_weight");
+        transport.record = transport_record->mutable_data();
+        transport.weight = transport_weight->mutable_data();
+    }
     int64_t rays = 0;
     auto stop = make_stop_check();
     {
         py::gil_scoped_release release;
         voxgi::gather_light(hits, mats, mis, n_gather, seed, frame, eps, tris, grid,
-                            env ? &*env : nullptr, scene, po, &rays, threads, stop);
+                            env ? &*env : nullptr, scene, po, &rays, threads, stop,
+                            transport_record ? &transport : nullptr);
     }
     return rays;
 }
@@ -142,6 +155,8 @@ void bind_gather_light(py::module_& m) {
           "hit_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
           "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
           "corner_uv"_a.noconvert() = py::none(), "mat_lobe"_a.noconvert() = py::none(),
+          "transport_record"_a.noconvert() = py::none(),
+          "transport_weight"_a.noconvert() = py::none(),
           R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit
@@ -154,5 +169,9 @@ env_samples environment samples per pixel. With hit_albedo (P, 3) float32
 each pixel's own diffuse albedo replaces its material's; with the textures
 (as camera_hits takes them) a ray that lands on a textured object takes the
 record's radiance times the texture there over the record's albedo (the
-packed row's albedo). Returns the number of gather rays.)doc");
+packed row's albedo). With transport_record (P * n_gather,) int32 and
+transport_weight (P * n_gather, 3) float32, ray k of shaded pixel p writes at
+p * n_gather + k the record it read (position in rec_packed, -1: none) and
+the factor the record's radiance was multiplied by (transport_compact).
+Returns the number of gather rays.)doc");
 }

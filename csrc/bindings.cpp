@@ -13,6 +13,7 @@ void bind_batch_error(py::module_& m);
 void bind_camera(py::module_& m);
 void bind_vpl_shade(py::module_& m);
 void bind_gather_light(py::module_& m);
+void bind_traced_transport(py::module_& m);
 void bind_pixel_filter(py::module_& m);
 void bind_direct_light(py::module_& m);
 void bind_rays(py::module_& m);
@@ -42,6 +43,7 @@ PYBIND11_MODULE(_core, m) {
     bind_camera(m);
     bind_vpl_shade(m);
     bind_gather_light(m);
+    bind_traced_transport(m);
     bind_pixel_filter(m);
     bind_direct_light(m);
     bind_rays(m);

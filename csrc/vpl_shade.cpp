@@ -393,6 +393,45 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.through[ch] * h.cos_x / denom;
 }
 
+// No record read by ray r (yet).
+inline void record_transport(const GatherTransport& t, int64_t r) {
+    t.record[r] = -1;
+    t.weight[3 * r] = t.weight[3 * r + 1] = t.weight[3 * r + 2] = 0.f;
+}
+
+// What gather_hit_light multiplies record rec's radiance by for pixel p's
+// gather ray h, as ray r of the transport: the same factors with a radiance
+// of 1 (and a texture's ratio to the record's albedo).
+void gather_hit_weight(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
+                       const RecordGrid& grid, int64_t p, const GatherHit& h, int64_t rec,
+                       const GatherTransport& t, int64_t r) {
+    if (rec < 0) return;
+    const float cos_y = -dot3(h.ns, h.wi);
+    if (cos_y <= 0.f) return;
+    const double* x = hits.pos + 3 * p;
+    const double r2 = (h.y[0] - x[0]) * (h.y[0] - x[0]) + (h.y[1] - x[1]) * (h.y[1] - x[1]) +
+                      (h.y[2] - x[2]) * (h.y[2] - x[2]);
+    const PackedRecord& R = grid.rec[rec];
+    const int32_t m = hits.material[p];
+    const double pg = mats.lobe ? gather_density(mats.lobe, m, hits.normal + 3 * p, hits.wo + 3 * p,
+                                                 h.wi, h.cos_x)
+                                : h.cos_x / kPi;
+    const double denom = double(R.pa) * r2 / cos_y + mis.n_gather * pg;
+    if (!(denom > 0.0)) return;
+    float f[3];
+    shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi, hits.wo + 3 * p,
+               f);
+    float L[3] = {1.f, 1.f, 1.f};
+    if (h.textured) {
+        const MicrofacetLobe* hit_lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
+        for (int ch = 0; ch < 3; ++ch)
+            if (R.albedo[ch] > 0.f) L[ch] = solve_albedo(hit_lobe, h.tex[ch], ch) / R.albedo[ch];
+    }
+    t.record[r] = int32_t(rec);
+    for (int ch = 0; ch < 3; ++ch)
+        t.weight[3 * r + ch] = float(double(f[ch]) * L[ch] * h.through[ch] * h.cos_x / denom);
+}
+
 // The environment's light along pixel p's escaped gather ray h, MIS-weighted
 // against the environment samples, added into s (the arithmetic of
 // light_accumulate with the weight the display computes for such a ray).
@@ -422,7 +461,7 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                   int n_gather, uint64_t seed, int64_t frame, double eps,
                   const ShadeTriangles& tris, const RecordGrid& grid, const EnvironmentMap* env,
                   const RayScene& scene, float* out, int64_t* rays, int threads,
-                  const StopCheck& stop) {
+                  const StopCheck& stop, const GatherTransport* transport) {
     const uint64_t base = gather_base(seed, frame);
     const int64_t P = hits.count;
     if (n_gather <= 0) {
@@ -479,10 +518,14 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                 const GatherHit* h = slot(p - 2);
                 double s[3] = {0.0, 0.0, 0.0};  // in ray order: the same for any thread count
                 for (int k = 0; k < n_gather; ++k) {
+                    if (transport) record_transport(*transport, int64_t(n_gather) * (p - 2) + k);
                     if (h[k].key == -2) continue;
                     const int64_t rec =
                         lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c, scratch);
                     gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s);
+                    if (transport)
+                        gather_hit_weight(hits, mats, mis, grid, p - 2, h[k], rec, *transport,
+                                          int64_t(n_gather) * (p - 2) + k);
                 }
                 for (int ch = 0; ch < 3; ++ch) out[3 * (p - 2) + ch] += float(s[ch]);
                 if (env) {

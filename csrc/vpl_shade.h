@@ -113,11 +113,21 @@ void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPL
 // environment samples and the gather rays, summed per pixel after the
 // records' light as light_accumulate sums. Writes the number of gather rays
 // traced into *rays.
+//
+// With `transport`, each gather ray's outcome is written too, at
+// p * n_gather + k for ray k of shaded pixel p (the rest left as they are):
+// the record it read (grid order, -1: none) and the factor its radiance was
+// multiplied by, so that the same rays can be applied to other radiances
+// without tracing them again (the solve's traced passes, traced_transport.h).
+struct GatherTransport {
+    int32_t* record = nullptr;  // (P * n_gather,)
+    float* weight = nullptr;    // (P * n_gather, 3)
+};
 void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                   int n_gather, uint64_t seed, int64_t frame, double eps,
                   const ShadeTriangles& tris, const RecordGrid& grid, const EnvironmentMap* env,
                   const RayScene& scene, float* out, int64_t* rays, int threads,
-                  const StopCheck& stop);
+                  const StopCheck& stop, const GatherTransport* transport = nullptr);
 
 // Light arriving along known directions: point, spot and directional lights
 // (one shadow ray each), environment samples and gather rays that leave the

@@ -262,3 +262,81 @@ def test_the_display_gathers_the_same_light_with_the_key_search(monkeypatch):
     search = voxgi.display.render(scene, sol, **kw)
     assert dense.stats["gather_rays"] == search.stats["gather_rays"] > 0
     np.testing.assert_array_equal(search.image, dense.image)
+
+
+def _pane_over_floor():
+    """The parallel squares with a coloured glass pane between them: the
+    rays from the floor to the top cross it and carry its transmittance, a
+    factor per channel."""
+    scene = _parallel_squares()
+    pane = np.array([(0, 0, 0.25), (1, 0, 0.25), (1, 1, 0.25), (0, 1, 0.25)], float)
+    glass = Material(albedo=0.0, transmittance=(0.9, 0.5, 0.2))
+    mesh = trimesh.Trimesh(pane, [[0, 1, 2], [0, 2, 3]], process=False)
+    scene.add(mesh, glass, "pane", two_sided=True)
+    return scene
+
+
+@pytest.mark.parametrize("scene", [voxgi.scenes.cornell_box, _pane_over_floor])
+def test_the_kept_rays_apply_the_same_pass_to_other_values(scene):
+    # A pass kept as a sparse matrix is the same rays: applied to any values
+    # it gives what tracing them again gives (the weights rounded to float32,
+    # the sums in another order), with each channel's transmittance.
+    scene = scene()
+    vox = voxgi.voxelize(scene, 8, progress=False)
+    rng = np.random.default_rng(1)
+    a, b = rng.random((len(vox), 3)), rng.random((len(vox), 3))
+    with TracedGather(scene, vox, threads=2) as g:
+        Ha = g(a, 64, seed=7, keep=True)
+        rays = g.rays
+        Hb = g(b, 64, seed=7)
+        row_ptr, column, weight = g.matrix
+        np.testing.assert_allclose(g.apply(a), Ha, rtol=1e-6, atol=1e-7)
+        np.testing.assert_allclose(g.apply(b), Hb, rtol=1e-6, atol=1e-7)
+        assert g.rays == 2 * rays  # apply traces nothing
+    # no more entries than rays, one per distinct record read, ascending
+    assert len(column) <= rays
+    assert np.all(np.diff(row_ptr) >= 0)
+    assert row_ptr[-1] == len(column)
+    for p in range(len(vox)):
+        assert np.all(np.diff(column[row_ptr[p] : row_ptr[p + 1]]) > 0)
+    # the pane's colour: some rays read through it, their weights differ per channel
+    coloured = np.any(weight[:, 0] != weight[:, 2])
+    assert coloured == (scene.objects[-1].name == "pane")
+
+
+def test_a_pass_not_kept_cannot_be_applied():
+    scene = _parallel_squares()
+    vox = voxgi.voxelize(scene, 8, progress=False)
+    with TracedGather(scene, vox, threads=1) as g:
+        with pytest.raises(RuntimeError, match="keep=True"):
+            g.apply(np.ones((len(vox), 3)))
+        g(np.ones((len(vox), 3)), 4, seed=0, keep=True)
+        with pytest.raises(ValueError, match="values: expected shape"):
+            g.apply(np.ones((3, 3)))
+
+
+def test_the_kept_rays_do_not_depend_on_the_thread_count():
+    scene = voxgi.scenes.cornell_box()
+    vox = voxgi.voxelize(scene, 8, progress=False)
+    values = np.random.default_rng(2).random((len(vox), 3))
+    out = []
+    for threads in (1, 2):
+        with TracedGather(scene, vox, threads=threads) as g:
+            g(values, 16, seed=1, keep=True)
+            out.append((*g.matrix, g.apply(values)))
+    for x, y in zip(*out, strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_a_kept_matrix_with_a_column_out_of_range_is_refused():
+    from voxgi import _core
+
+    row_ptr = np.array([0, 1, 2], np.int64)
+    weight = np.ones((2, 3), np.float32)
+    out = np.empty((2, 3))
+    ok = np.array([1, 0], np.int32)
+    _core.transport_apply(row_ptr, ok, weight, np.arange(6.0).reshape(2, 3), out)
+    np.testing.assert_array_equal(out, [[3, 4, 5], [0, 1, 2]])
+    for bad in ([1, 2], [-1, 0]):
+        with pytest.raises(ValueError, match="column"):
+            _core.transport_apply(row_ptr, np.array(bad, np.int32), weight, np.ones((2, 3)), out)

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_hits', 'camera_rays', 'direct_light_traced', 'environment_light', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'voxelize', 'vpl_light']
+__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_hits', 'camera_rays', 'direct_light_traced', 'environment_light', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'transport_apply', 'transport_compact', 'voxelize', 'vpl_light']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -229,7 +229,7 @@ def gather_families(ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing
     families[family_indices] and returns the partial sums, (N, 3) float64 (see
     LineSystem.gather); sums from disjoint subsets add up to the full pass.
     """
-def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], n_gather: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, tri_v: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], rec_sorted_key: numpy.typing.NDArray[numpy.int64], rec_cell_start: numpy.typing.NDArray[numpy.int32], rec_packed: numpy.typing.NDArray[numpy.float32], grid_dims: numpy.typing.NDArray[numpy.int64], grid_lo: numpy.typing.NDArray[numpy.int64], grid_origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, env_radiance: numpy.typing.NDArray[numpy.float64] | None = None, env_to_world: numpy.typing.NDArray[numpy.float64] | None = None, env_texel_pdf: numpy.typing.NDArray[numpy.float64] | None = None, env_row_solid_angle: numpy.typing.NDArray[numpy.float64] | None = None, env_samples: typing.SupportsFloat | typing.SupportsIndex = 0.0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, tex_texels: collections.abc.Sequence[typing.Annotated[numpy.typing.ArrayLike, numpy.uint8]] | None = None, tex_info: numpy.typing.NDArray[numpy.float64] | None = None, obj_texture: numpy.typing.NDArray[numpy.int32] | None = None, corner_uv: numpy.typing.NDArray[numpy.float32] | None = None, mat_lobe: numpy.typing.NDArray[numpy.float32] | None = None) -> int:
+def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], n_gather: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, tri_v: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], rec_sorted_key: numpy.typing.NDArray[numpy.int64], rec_cell_start: numpy.typing.NDArray[numpy.int32], rec_packed: numpy.typing.NDArray[numpy.float32], grid_dims: numpy.typing.NDArray[numpy.int64], grid_lo: numpy.typing.NDArray[numpy.int64], grid_origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, env_radiance: numpy.typing.NDArray[numpy.float64] | None = None, env_to_world: numpy.typing.NDArray[numpy.float64] | None = None, env_texel_pdf: numpy.typing.NDArray[numpy.float64] | None = None, env_row_solid_angle: numpy.typing.NDArray[numpy.float64] | None = None, env_samples: typing.SupportsFloat | typing.SupportsIndex = 0.0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, tex_texels: collections.abc.Sequence[typing.Annotated[numpy.typing.ArrayLike, numpy.uint8]] | None = None, tex_info: numpy.typing.NDArray[numpy.float64] | None = None, obj_texture: numpy.typing.NDArray[numpy.int32] | None = None, corner_uv: numpy.typing.NDArray[numpy.float32] | None = None, mat_lobe: numpy.typing.NDArray[numpy.float32] | None = None, transport_record: numpy.typing.NDArray[numpy.int32] | None = None, transport_weight: numpy.typing.NDArray[numpy.float32] | None = None) -> int:
     """
     Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
     hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
@@ -243,7 +243,11 @@ def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy
     each pixel's own diffuse albedo replaces its material's; with the textures
     (as camera_hits takes them) a ray that lands on a textured object takes the
     record's radiance times the texture there over the record's albedo (the
-    packed row's albedo). Returns the number of gather rays.
+    packed row's albedo). With transport_record (P * n_gather,) int32 and
+    transport_weight (P * n_gather, 3) float32, ray k of shaded pixel p writes at
+    p * n_gather + k the record it read (position in rec_packed, -1: none) and
+    the factor the record's radiance was multiplied by (transport_compact).
+    Returns the number of gather rays.
     """
 def geometry_filter(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_glossy: numpy.typing.NDArray[numpy.uint8], eye: numpy.typing.NDArray[numpy.float64], pixel_angle: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, radius: typing.SupportsInt | typing.SupportsIndex, reflected: numpy.typing.NDArray[numpy.float32], out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
     """
@@ -271,6 +275,23 @@ def shade_brdf(mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.ty
     rho/pi, or Ashikhmin-Shirley coupled diffuse + specular where mat_glossy, or
     where mat_lobe (M, 85) float32 has a row of kind 1 or 2 the microfacet lobe
     (voxgi.Microfacet.lobe_row) with k1 towards the light.
+    """
+def transport_apply(row_ptr: numpy.typing.NDArray[numpy.int64], column: numpy.typing.NDArray[numpy.int32], weight: numpy.typing.NDArray[numpy.float32], val: numpy.typing.NDArray[numpy.float64], out: numpy.typing.NDArray[numpy.float64], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
+    """
+    out[p] = sum of weight[e] * val[column[e]] over the entries e of row p
+    (row_ptr (P + 1,) int64, column (nnz,) int32, weight (nnz, 3) float32,
+    val (N, 3) float64), per channel, summed in double; out (P, 3) float64 is
+    overwritten. The same for any thread count.
+    """
+def transport_compact(n: typing.SupportsInt | typing.SupportsIndex, to_column: numpy.typing.NDArray[numpy.int32] | None, record: numpy.typing.NDArray[numpy.int32], weight: numpy.typing.NDArray[numpy.float32], row_ptr: numpy.typing.NDArray[numpy.int64], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> int:
+    """
+    In place: the n rays of each row of record (P * n,) int32 and weight
+    (P * n, 3) float32, as gather_light's transport_record and transport_weight
+    hold them, become that row's distinct columns (to_column[record], or the
+    record itself when to_column is None), ascending, each with the sum of its
+    rays' weights; rays that read nothing or with weight 0 are dropped. The rows
+    are moved to the front: row p holds entries [row_ptr[p], row_ptr[p + 1])
+    (row_ptr (P + 1,) int64, written). Returns the number of entries.
     """
 def voxelize(triangles: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], two_sided: numpy.typing.NDArray[numpy.bool], albedo: numpy.typing.NDArray[numpy.float32], emission: numpy.typing.NDArray[numpy.float32], origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, dims: numpy.typing.NDArray[numpy.int32], cos_cluster: typing.SupportsFloat | typing.SupportsIndex = 0.5, cut: bool = True, eps: typing.SupportsFloat | typing.SupportsIndex = 1e-09, threads: typing.SupportsInt | typing.SupportsIndex = 0, progress: typing.Any = None, tex_texels: collections.abc.Sequence[typing.Annotated[numpy.typing.ArrayLike, numpy.uint8]] | None = None, tex_info: numpy.typing.NDArray[numpy.float64] | None = None, obj_texture: numpy.typing.NDArray[numpy.int32] | None = None, corner_uv: numpy.typing.NDArray[numpy.float32] | None = None) -> dict:
     """

@@ -28,7 +28,13 @@ from .rays import Tracer
 from .scene import Scene
 from .voxels import VoxelSet
 
-__all__ = ["DENSE_TABLE_CELLS", "TracedGather", "record_grid", "traced_irradiance"]
+__all__ = [
+    "DENSE_TABLE_CELLS",
+    "TracedGather",
+    "record_grid",
+    "traced_irradiance",
+    "transport_bytes",
+]
 
 
 #: Columns of a row of ``rec_packed``, float32, 64 bytes: the layout of
@@ -188,6 +194,9 @@ class TracedGather:
         self._order = voxel_order[3]  # puts each pass's values in the grid's order
         self._grid = _record_grid(vox, c, np.zeros((n, 3), np.float32), None, voxel_order)
         self.rays = 0
+        #: The rays of the pass called with ``keep=True``, as a sparse matrix
+        #: (``row_ptr``, ``column``, ``weight``; :meth:`apply`), or None.
+        self.matrix: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def close(self) -> None:
         """Release the tracer's threads."""
@@ -199,16 +208,31 @@ class TracedGather:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def __call__(self, values: np.ndarray, samples: int, seed: int) -> np.ndarray:
+    def __call__(
+        self, values: np.ndarray, samples: int, seed: int, *, keep: bool = False
+    ) -> np.ndarray:
         """One pass: (N, 3) float64 mean of ``values`` under ``samples`` rays
         per reflecting record (0 elsewhere), stratified in cos²θ and hashed
-        from ``seed`` and the record (the same for any thread count)."""
+        from ``seed`` and the record (the same for any thread count).
+
+        With ``keep``, the pass's rays are also kept as :attr:`matrix`: per
+        record, the records its rays read and the sum of the factors they
+        read them by (:func:`transport_bytes` of memory while it is made),
+        so that :meth:`apply` gives the same pass for other values without
+        tracing the rays again.
+        """
         n = len(self.vox)
         values = np.asarray(values)
         if values.shape != (n, 3):
             raise ValueError(f"values: expected shape ({n}, 3), got {values.shape}")
         self._grid["rec_packed"][:, _RADIANCE] = values[self._order]
         out = np.zeros((n, 3), np.float32)
+        kept = {}
+        if keep:
+            kept = {
+                "transport_record": np.full(n * samples, -1, np.int32),
+                "transport_weight": np.zeros((n * samples, 3), np.float32),
+            }
         self.rays += _core.gather_light(
             *self._hits,
             *self._materials,
@@ -221,8 +245,39 @@ class TracedGather:
             scene=self.tracer.native,
             out=out,
             threads=self.threads,
+            **kept,
         )
+        if keep:
+            record, weight = kept["transport_record"], kept["transport_weight"]
+            row_ptr = np.empty(n + 1, np.int64)
+            nnz = _core.transport_compact(
+                samples, self._order.astype(np.int32), record, weight, row_ptr, self.threads
+            )
+            del kept
+            self.matrix = (row_ptr, record[:nnz].copy(), weight[:nnz].copy())
         return out.astype(np.float64)
+
+    def apply(self, values: np.ndarray) -> np.ndarray:
+        """The pass kept by ``keep=True``, applied to ``values`` (N, 3): the
+        (N, 3) float64 mean of ``values`` under the same rays, to rounding,
+        without tracing them."""
+        if self.matrix is None:
+            raise RuntimeError("no pass was kept: call with keep=True first")
+        n = len(self.vox)
+        values = np.ascontiguousarray(values, np.float64)
+        if values.shape != (n, 3):
+            raise ValueError(f"values: expected shape ({n}, 3), got {values.shape}")
+        out = np.empty((n, 3), np.float64)
+        _core.transport_apply(*self.matrix, values, out, self.threads)
+        return out
+
+
+def transport_bytes(vox: VoxelSet, samples: int) -> int:
+    """Bytes that keeping a traced pass of ``samples`` rays per record takes
+    at most (``TracedGather(..., keep=True)``): the rays' records and factors
+    (16 bytes a ray) while they are summed per record pair, then at most as
+    much again for the kept matrix, and its row pointers."""
+    return 2 * 16 * len(vox) * int(samples) + 8 * (len(vox) + 1)
 
 
 def traced_irradiance(

@@ -11,6 +11,28 @@ import numpy as np
 from .. import _progress
 from .linesystem import Gatherer
 from .problem import Problem
+from .traced_passes import keeps_rays, why_not_traced
+
+#: Where traced passes through kept rays follow the lines, the lines stop
+#: at this many times ``tol``: the passes, milliseconds each, carry the
+#: slowest mode from there, and their answer does not depend on where the
+#: lines stopped (``docs/design.md`` §5).
+LINES_TOL_FACTOR = 10.0
+
+
+def lines_tol(p: Problem) -> float:
+    """The tolerance the lines stop at: ``tol``, or where traced passes follow
+    (``indirect_light="traced"``, a scene to trace, no ``max_bounces``), the
+    study tuning's ``lines_tol``, by default, where the passes will keep
+    their rays (``traced_cache`` and its budget, :func:`keeps_rays`),
+    :data:`LINES_TOL_FACTOR` times ``tol``."""
+    opt = p.opt
+    if opt.indirect_light != "traced" or why_not_traced(p) is not None:
+        return opt.tol
+    if opt.lines_tol is not None:
+        return opt.lines_tol
+    return LINES_TOL_FACTOR * opt.tol if keeps_rays(p)[0] else opt.tol
+
 
 __all__ = ["State", "iterate"]
 
@@ -113,6 +135,9 @@ class _Iteration:
         rmax = float(p.rho.max())
         self.lam_bound = float(min(max(rmax, 0.5), 1 - 1e-6))
         self.best = (float("inf"), 0)  # lowest residual and its iteration
+        self.tol = lines_tol(p)
+        if self.tol != p.opt.tol:
+            p.stats["lines_tol"] = self.tol
 
     def step(self) -> tuple:
         """One gathering pass: (R_new, Hg_new, update, residual, h_inc, use_later), not kept."""
@@ -163,7 +188,7 @@ class _Iteration:
             if bar is not None:  # the way to tol on a log scale: the quantity falls geometrically
                 q = res * self.lam_bound / (1 - self.lam_bound)
                 first = q if first is None else first
-                bar.update(round(100 * _progress.log_share(first, q, self.p.opt.tol)) - bar.n)
+                bar.update(round(100 * _progress.log_share(first, q, self.tol)) - bar.n)
                 bar.set_postfix_str(f"iteration {s.it}, residual {res:.2e}")
             if self.converged(res):
                 break
@@ -175,8 +200,9 @@ class _Iteration:
 
     def converged(self, res: float) -> bool:
         """The estimated remaining error of the geometric tail, ``res λ / (1 − λ)``
-        with λ bounded by the largest albedo, is under ``tol``."""
-        return res * self.lam_bound / (1 - self.lam_bound) < self.p.opt.tol
+        with λ bounded by the largest albedo, is under the lines' tolerance
+        (:func:`lines_tol`)."""
+        return res * self.lam_bound / (1 - self.lam_bound) < self.tol
 
     def at_floor(self, res: float) -> bool:
         """Switch Jacobi to the correction form when its residual sits at the

@@ -54,8 +54,10 @@ class SolveTuning:
         None: :data:`TRACED_RADIUS` (4) where traced passes finish the
         reflected light, else :data:`LINES_RADIUS` (8).
     tol : float
-        Bound on the estimated remaining relative error of the gathering
-        (and of the traced passes); ``voxgi.solve(tol=...)`` overrides it.
+        Bound on the estimated remaining relative error of the traced passes
+        (and of the gathering along the lines; where traced passes keep
+        their rays, ``traced_cache``, the lines stop at 10 times it);
+        ``voxgi.solve(tol=...)`` overrides it.
     direct_light : {"exact", "shoot"}
         How the records get their direct light (``docs/design.md`` §5):
         ``"exact"`` traces shadow rays from every record to points on the
@@ -91,9 +93,19 @@ class SolveTuning:
         :func:`voxgi.radiosity.pair_table_bytes`). None: when they fit in
         ``max_cache_bytes``; True: the same with no default budget; False:
         walk every pass (least memory).
+    traced_cache : bool or None
+        Keep the first traced pass's rays (the record each one read and the
+        factor it read it by, summed per record pair: a sparse matrix of at
+        most ``traced_samples`` entries a record) and make every later pass a
+        product with that matrix instead of fresh rays (``docs/design.md``
+        §5). None: when they fit in ``max_cache_bytes``
+        (:func:`voxgi.traced.transport_bytes`); True: the same with no
+        default budget; False: fresh rays every pass.
     max_cache_bytes : int or None
-        Budget for the recorded pairs; None: a quarter of the memory available
-        when the solve starts (``pair_cache=None``), no limit (True).
+        Budget for the recorded pairs, and for the kept traced rays; None: a
+        quarter of the memory available when the solve starts, or when the
+        traced passes start (``pair_cache=None``, ``traced_cache=None``), no
+        limit (True).
 
     >>> SolveTuning().direct_light, SolveTuning.paper().radius
     ('exact', 22)
@@ -107,6 +119,7 @@ class SolveTuning:
     indirect_light: str = "traced"
     traced_samples: int = 64
     pair_cache: bool | None = None
+    traced_cache: bool | None = None
     max_cache_bytes: int | None = None
 
     @staticmethod
@@ -167,6 +180,11 @@ class _StudyTuning(SolveTuning):
         a run of them in one plane counts once).
     max_iterations : int
         Bound on the iterations when ``max_bounces`` is None.
+    lines_tol : float or None
+        The lines' own tolerance where traced passes follow them; the passes
+        still run to ``tol``. None: 10 times ``tol`` where the passes keep
+        their rays (``traced_cache`` not False, within its budget), else ``tol``
+        (:func:`voxgi.radiosity.iteration.lines_tol`).
     closed : bool, sequence of int or None
         Objects (ids into ``vox.object_id``; True: all; False: none) whose
         meshes are closed: their back records send their front twin's
@@ -185,6 +203,7 @@ class _StudyTuning(SolveTuning):
     epsilon: float = 0.02
     history: int = 16
     max_iterations: int = 10000
+    lines_tol: float | None = None
     closed: bool | Sequence[int] | None = None
     diagnostics: bool = False
 
@@ -214,6 +233,8 @@ class Settings:
     direct_samples: int = 16
     indirect_light: str = "traced"
     traced_samples: int = 64
+    traced_cache: bool | None = None
+    lines_tol: float | None = None
 
 
 def _checked_tuning(tuning) -> SolveTuning:
@@ -246,8 +267,10 @@ def settings(radius, max_bounces, tol, threads, tuning) -> Settings:
     raise TypeError/ValueError naming the bad one."""
     t = _checked_tuning(tuning)
     s = t if isinstance(t, _StudyTuning) else _NO_STUDY
-    if t.pair_cache is not None and not isinstance(t.pair_cache, (bool, np.bool_)):
-        raise TypeError(f"pair_cache: expected True, False or None, got {t.pair_cache!r}")
+    for name in ("pair_cache", "traced_cache"):
+        value = getattr(t, name)
+        if value is not None and not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{name}: expected True, False or None, got {value!r}")
     if t.direct_light not in ("shoot", "exact"):
         raise ValueError(f"direct_light: expected 'shoot' or 'exact', got {t.direct_light!r}")
     if t.indirect_light not in ("lines", "traced"):
@@ -271,4 +294,6 @@ def settings(radius, max_bounces, tol, threads, tuning) -> Settings:
         direct_samples=_validate.integer(t.direct_samples, "direct_samples", low=1, high=1 << 16),
         indirect_light=t.indirect_light,
         traced_samples=_validate.integer(t.traced_samples, "traced_samples", low=1, high=4096),
+        traced_cache=t.traced_cache,
+        lines_tol=_validate.real(s.lines_tol, "lines_tol", low=0.0, low_open=True, allow_none=True),
     )
