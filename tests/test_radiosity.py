@@ -873,10 +873,10 @@ def test_kept_traced_passes_do_not_depend_on_where_the_lines_stopped():
     assert worst > 1e-2
 
 
-def test_the_lines_stop_at_ten_times_tol_where_kept_passes_follow():
+def test_the_lines_stop_at_a_hundred_times_tol_where_kept_passes_follow():
     vox = voxgi.voxelize(voxgi.scenes.cornell_box(), 8, progress=False)
     kept = voxgi.solve(vox, progress=False)
-    assert kept.stats["lines_tol"] == pytest.approx(1e-2)
+    assert kept.stats["lines_tol"] == pytest.approx(1e-1)
     fresh = voxgi.solve(vox, progress=False, tuning=voxgi.SolveTuning(traced_cache=False))
     assert "lines_tol" not in fresh.stats
     assert fresh.bounces > kept.bounces

@@ -56,7 +56,7 @@ class SolveTuning:
     tol : float
         Bound on the estimated remaining relative error of the traced passes
         (and of the gathering along the lines; where traced passes keep
-        their rays, ``traced_cache``, the lines stop at 10 times it);
+        their rays, ``traced_cache``, the lines stop at 100 times it);
         ``voxgi.solve(tol=...)`` overrides it.
     direct_light : {"exact", "shoot"}
         How the records get their direct light (``docs/design.md`` §5):
@@ -182,7 +182,7 @@ class _StudyTuning(SolveTuning):
         Bound on the iterations when ``max_bounces`` is None.
     lines_tol : float or None
         The lines' own tolerance where traced passes follow them; the passes
-        still run to ``tol``. None: 10 times ``tol`` where the passes keep
+        still run to ``tol``. None: 100 times ``tol`` where the passes keep
         their rays (``traced_cache`` not False, within its budget), else ``tol``
         (:func:`voxgi.radiosity.iteration.lines_tol`).
     closed : bool, sequence of int or None
