@@ -818,6 +818,21 @@ def test_a_kept_pass_that_loses_light_misses_the_furnace(monkeypatch):
     assert np.all(np.abs(L - 1) > 0.02)
 
 
+def test_rays_are_not_kept_where_an_albedo_near_one_could_trap_light():
+    # The kept operator loses only what its sampled rays lose: records of
+    # albedo near 1 whose kept rays all land on each other would keep their
+    # light forever (Bitterli's living room came out 1.6 times too bright).
+    # Above the bound every pass traces fresh rays and says why.
+    scene = voxgi.scenes.cornell_box()
+    white = next(o for o in scene.objects if max(o.material.emission) == 0)
+    white.material = voxgi.Material(albedo=(0.99, 0.99, 0.99))
+    vox = voxgi.voxelize(scene, 8, progress=False)
+    sol = voxgi.solve(vox, progress=False)
+    assert not sol.stats["traced"]["kept"]
+    assert "albedo" in sol.stats["skipped"]["traced_cache"]
+    assert "lines_tol" not in sol.stats
+
+
 def test_traced_rays_over_the_budget_are_traced_fresh_each_pass():
     # Kept rays that do not fit in max_cache_bytes fall back to fresh rays
     # every pass, and say so; the answer is then that of traced_cache=False.
