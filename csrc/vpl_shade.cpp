@@ -361,36 +361,53 @@ void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordG
     h.key = grid_key(grid, h.c[0], h.c[1], h.c[2]);
 }
 
+// The factors by which pixel p's gather ray h reads record rec (-1: none),
+// short of the record's radiance: the BRDF f, the texture's ratio to the
+// record's albedo (1 untextured) and the MIS denominator; false where the
+// ray reads nothing.
+static bool gather_hit_factors(const ShadeHits& hits, const ShadeMaterials& mats,
+                               const ShadeMIS& mis, const RecordGrid& grid, int64_t p,
+                               const GatherHit& h, int64_t rec, float f[3], float ratio[3],
+                               double& denom) {
+    if (rec < 0) return false;
+    const float cos_y = -dot3(h.ns, h.wi);
+    if (cos_y <= 0.f) return false;
+    const double* x = hits.pos + 3 * p;
+    const double r2 = (h.y[0] - x[0]) * (h.y[0] - x[0]) + (h.y[1] - x[1]) * (h.y[1] - x[1]) +
+                      (h.y[2] - x[2]) * (h.y[2] - x[2]);
+    const PackedRecord& R = grid.rec[rec];
+    const int32_t m = hits.material[p];
+    const double pg = mats.lobe ? gather_density(mats.lobe, m, hits.normal + 3 * p, hits.wo + 3 * p,
+                                                 h.wi, h.cos_x)
+                                : h.cos_x / kPi;
+    denom = double(R.pa) * r2 / cos_y + mis.n_gather * pg;
+    if (!(denom > 0.0)) return false;
+    shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi, hits.wo + 3 * p,
+               f);
+    ratio[0] = ratio[1] = ratio[2] = 1.f;
+    if (h.textured) {
+        // the record's albedo is the solve's (a plastic's: its coat's too)
+        const MicrofacetLobe* hit_lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
+        for (int ch = 0; ch < 3; ++ch)
+            if (R.albedo[ch] > 0.f)
+                ratio[ch] = solve_albedo(hit_lobe, h.tex[ch], ch) / R.albedo[ch];
+    }
+    return true;
+}
+
 // The MIS-weighted light of pixel p's gather ray h from record rec (-1: none)
 // into s, through the sheets before the hit.
 void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                       const RecordGrid& grid, int64_t p, const GatherHit& h, int64_t rec,
                       double s[3]) {
-    if (rec < 0) return;
-    const float cos_y = -dot3(h.ns, h.wi);
-    if (cos_y <= 0.f) return;
-    const double* x = hits.pos + 3 * p;
-    const double r2 = (h.y[0] - x[0]) * (h.y[0] - x[0]) + (h.y[1] - x[1]) * (h.y[1] - x[1]) +
-                      (h.y[2] - x[2]) * (h.y[2] - x[2]);
-    const PackedRecord& R = grid.rec[rec];
-    const double pa = R.pa;
-    const int32_t m = hits.material[p];
-    const double pg = mats.lobe ? gather_density(mats.lobe, m, hits.normal + 3 * p, hits.wo + 3 * p,
-                                                 h.wi, h.cos_x)
-                                : h.cos_x / kPi;
-    const double denom = pa * r2 / cos_y + mis.n_gather * pg;
-    if (!(denom > 0.0)) return;
-    float f[3];
-    shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi, hits.wo + 3 * p,
-               f);
-    float L[3] = {R.radiance[0], R.radiance[1], R.radiance[2]};
-    if (h.textured) {
-        // the record's albedo is the solve's (a plastic's: its coat's too)
-        const MicrofacetLobe* hit_lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
-        for (int ch = 0; ch < 3; ++ch)
-            if (R.albedo[ch] > 0.f) L[ch] *= solve_albedo(hit_lobe, h.tex[ch], ch) / R.albedo[ch];
+    float f[3], ratio[3];
+    double denom;
+    if (!gather_hit_factors(hits, mats, mis, grid, p, h, rec, f, ratio, denom)) return;
+    const float* radiance = grid.rec[rec].radiance;
+    for (int ch = 0; ch < 3; ++ch) {
+        const float L = radiance[ch] * ratio[ch];
+        s[ch] += double(f[ch]) * L * h.through[ch] * h.cos_x / denom;
     }
-    for (int ch = 0; ch < 3; ++ch) s[ch] += double(f[ch]) * L[ch] * h.through[ch] * h.cos_x / denom;
 }
 
 // No record read by ray r (yet).
@@ -401,35 +418,16 @@ inline void record_transport(const GatherTransport& t, int64_t r) {
 
 // What gather_hit_light multiplies record rec's radiance by for pixel p's
 // gather ray h, as ray r of the transport: the same factors with a radiance
-// of 1 (and a texture's ratio to the record's albedo).
+// of 1.
 void gather_hit_weight(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                        const RecordGrid& grid, int64_t p, const GatherHit& h, int64_t rec,
                        const GatherTransport& t, int64_t r) {
-    if (rec < 0) return;
-    const float cos_y = -dot3(h.ns, h.wi);
-    if (cos_y <= 0.f) return;
-    const double* x = hits.pos + 3 * p;
-    const double r2 = (h.y[0] - x[0]) * (h.y[0] - x[0]) + (h.y[1] - x[1]) * (h.y[1] - x[1]) +
-                      (h.y[2] - x[2]) * (h.y[2] - x[2]);
-    const PackedRecord& R = grid.rec[rec];
-    const int32_t m = hits.material[p];
-    const double pg = mats.lobe ? gather_density(mats.lobe, m, hits.normal + 3 * p, hits.wo + 3 * p,
-                                                 h.wi, h.cos_x)
-                                : h.cos_x / kPi;
-    const double denom = double(R.pa) * r2 / cos_y + mis.n_gather * pg;
-    if (!(denom > 0.0)) return;
-    float f[3];
-    shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi, hits.wo + 3 * p,
-               f);
-    float L[3] = {1.f, 1.f, 1.f};
-    if (h.textured) {
-        const MicrofacetLobe* hit_lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
-        for (int ch = 0; ch < 3; ++ch)
-            if (R.albedo[ch] > 0.f) L[ch] = solve_albedo(hit_lobe, h.tex[ch], ch) / R.albedo[ch];
-    }
+    float f[3], ratio[3];
+    double denom;
+    if (!gather_hit_factors(hits, mats, mis, grid, p, h, rec, f, ratio, denom)) return;
     t.record[r] = int32_t(rec);
     for (int ch = 0; ch < 3; ++ch)
-        t.weight[3 * r + ch] = float(double(f[ch]) * L[ch] * h.through[ch] * h.cos_x / denom);
+        t.weight[3 * r + ch] = float(double(f[ch]) * ratio[ch] * h.through[ch] * h.cos_x / denom);
 }
 
 // The environment's light along pixel p's escaped gather ray h, MIS-weighted

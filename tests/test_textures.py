@@ -236,19 +236,26 @@ _XML = """<scene version="3.0.0">
 """
 
 
-def test_xml_bitmap_loads_as_a_texture_and_saves_with_it(tmp_path):
+def _load_xml_quad(tmp_path, obj_text: str):
+    """(texture, scene): ``_XML`` loaded over ``obj_text`` as its quad.obj,
+    a random 4 x 6 texture as its tex.png; no mean-colour warning."""
     from PIL import Image
 
     tex = _random_texture(4, 6, seed=3)
     Image.fromarray(tex.texels).save(tmp_path / "tex.png")
-    # an OBJ's vt has v = 0 at the image's bottom (Mitsuba turns it)
-    (tmp_path / "quad.obj").write_text(
-        "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
-        "f 1/1 3/3 2/2\nf 1/1 4/4 3/3\n"
-    )
+    (tmp_path / "quad.obj").write_text(obj_text)
     (tmp_path / "scene.xml").write_text(_XML)
     with _no_mean_warning():
-        sc = voxgi.Scene.load(tmp_path / "scene.xml")
+        return tex, voxgi.Scene.load(tmp_path / "scene.xml")
+
+
+def test_xml_bitmap_loads_as_a_texture_and_saves_with_it(tmp_path):
+    # an OBJ's vt has v = 0 at the image's bottom (Mitsuba turns it)
+    tex, sc = _load_xml_quad(
+        tmp_path,
+        "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+        "f 1/1 3/3 2/2\nf 1/1 4/4 3/3\n",
+    )
     t = sc.objects[0].material.texture
     assert t is not None
     assert (t.filter, t.wrap) == ("nearest", "clamp")
@@ -267,18 +274,12 @@ def test_a_mesh_with_an_unused_vertex_keeps_its_uvs(tmp_path):
     # trimesh's order-keeping OBJ reader then drops every UV of the mesh.
     # The texture must stay a texture, through Scene.save and back, with each
     # used vertex's own UV.
-    from PIL import Image
-
-    tex = _random_texture(4, 6, seed=3)
-    Image.fromarray(tex.texels).save(tmp_path / "tex.png")
-    (tmp_path / "quad.obj").write_text(
+    _, sc = _load_xml_quad(
+        tmp_path,
         "v 0 0 0\nv 1 0 0\nv 9 9 9\nv 1 0 1\nv 0 0 1\n"
         "vt 0 0\nvt 1 0\nvt 0.5 0.5\nvt 1 1\nvt 0 1\n"
-        "f 1/1 4/4 2/2\nf 1/1 5/5 4/4\n"
+        "f 1/1 4/4 2/2\nf 1/1 5/5 4/4\n",
     )
-    (tmp_path / "scene.xml").write_text(_XML)
-    with _no_mean_warning():
-        sc = voxgi.Scene.load(tmp_path / "scene.xml")
     obj = sc.objects[0]
     assert obj.material.texture is not None
     # each face corner keeps the UV its vertex had in the file (v turned to
