@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -44,6 +45,9 @@ __all__ = ["State", "iterate"]
 #: :data:`_FLOOR_ITERATIONS` iterations is their rounding, not the iteration's.
 _FLOOR_RESIDUAL = 1e-6
 _FLOOR_ITERATIONS = 10
+#: The two-iteration ratios of the residuals the lines' stopping rule takes
+#: the largest of.
+_RATIO_WINDOW = 4
 #: Iterations without a new lowest residual after which the iteration has
 #: stalled for good.
 _STALL_ITERATIONS = 50
@@ -137,6 +141,9 @@ class _Iteration:
         rmax = float(p.rho.max())
         self.lam_bound = float(min(max(rmax, 0.5), 1 - 1e-6))
         self.best = (float("inf"), 0)  # lowest residual and its iteration
+        # ratios res_k / res_{k-1} of the residuals (None after a tail jump,
+        # whose next update is no step of the series)
+        self.ratios: list = []
         self.tol = lines_tol(p)
         if self.tol != p.opt.tol:
             p.stats["lines_tol"] = self.tol
@@ -177,6 +184,7 @@ class _Iteration:
         non-finite iterate; return the last finite state."""
         s = self.s
         first = None  # the stopping quantity after the first iteration
+        jumps = self.extrap.count
         while s.it < self.p.limit:
             R_new, Hg, d, res, h_inc, use_later = self.step()
             if not (np.all(np.isfinite(R_new)) and np.isfinite(res)):
@@ -186,9 +194,15 @@ class _Iteration:
             if self.extrap.count == 0:
                 s.mode = s.dk
             s.it += 1
+            if s.residuals:
+                after_jump = self.extrap.count != jumps
+                last = s.residuals[-1]
+                self.ratios.append(None if after_jump or last <= 0 else res / last)
+            jumps = self.extrap.count
             s.residuals.append(res)
             if bar is not None:  # the way to tol on a log scale: the quantity falls geometrically
-                q = res * self.lam_bound / (1 - self.lam_bound)
+                lam = self.ratio()
+                q = res * lam / (1 - lam)
                 first = q if first is None else first
                 bar.update(round(100 * _progress.log_share(first, q, self.tol)) - bar.n)
                 bar.set_postfix_str(f"iteration {s.it}, residual {res:.2e}")
@@ -200,11 +214,34 @@ class _Iteration:
                 break
         return s
 
+    def ratio(self) -> float:
+        """The ratio λ by which the updates shrink an iteration: once steady,
+        the largest of the last :data:`_RATIO_WINDOW` two-iteration ratios
+        ``sqrt(res_k / res_{k−2})``; until then the largest albedo
+        (``docs/design.md`` §5).
+
+        Two iterations, because facing surfaces of high albedo make the
+        residual alternate (ratios 0.92, 1.01, 0.92, ... in Bitterli's living
+        room) about a steady decay. Steady: the last two within 2% of
+        ``1 − λ``. The largest albedo bounds λ but can sit far above it: one
+        white object (albedo 1, a sofa) among darker surfaces made it
+        ``1 − 1e-6``, and the lines then ran until their float32 rounding
+        stalled them (3740 iterations, 272 s, in the living room).
+        """
+        r = self.ratios[-(_RATIO_WINDOW + 1) :]
+        if len(r) <= _RATIO_WINDOW or any(x is None or x <= 0 for x in r):
+            return self.lam_bound
+        q = [float(np.sqrt(a * b)) for a, b in itertools.pairwise(r)]
+        if not (q[-1] < 1 and abs(q[-1] - q[-2]) <= 0.02 * (1 - q[-1])):
+            return self.lam_bound
+        return min(self.lam_bound, max(q))
+
     def converged(self, res: float) -> bool:
         """The estimated remaining error of the geometric tail, ``res λ / (1 − λ)``
-        with λ bounded by the largest albedo, is under the lines' tolerance
-        (:func:`lines_tol`)."""
-        return res * self.lam_bound / (1 - self.lam_bound) < self.tol
+        with λ the updates' measured ratio (:meth:`ratio`), is under the
+        lines' tolerance (:func:`lines_tol`)."""
+        lam = self.ratio()
+        return res * lam / (1 - lam) < self.tol
 
     def at_floor(self, res: float) -> bool:
         """Switch Jacobi to the correction form when its residual sits at the
