@@ -1,8 +1,8 @@
 """voxgi's defaults against Mitsuba 3, plain and denoised, on real interiors.
 
 The scenes: every whole scene of Bitterli's Mitsuba interiors as
-``scripts/extract_bitterli.py`` extracts them (their diffuse-approximated
-variant ``<scenes>/<name>/diffuse/scene.toml``, the scene as voxgi loads it),
+``scripts/extract_bitterli.py`` extracts them (``<scenes>/<name>/diffuse/scene.toml``,
+the scene as voxgi loads it, textures and glossy lobes included),
 and the built-in Cornell box, window room and door room. Each is rendered at
 ``--width`` pixels wide (the height keeps the camera's aspect) by
 

@@ -14,9 +14,10 @@ For each scene folder of the mirror (a bare git directory holding the
 3. applies the small edits Mitsuba 3 needs to load the file, the same file
    that voxgi reads, so that both renderers see the same scene (the original
    is kept as ``scene.original.xml``);
-4. for a whole scene, writes the diffuse-approximated variant that both
-   renderers render: ``voxgi.Scene.load(scene.xml)`` (every material as voxgi
-   approximates it) saved with ``Scene.save`` as ``diffuse/scene.toml``;
+4. for a whole scene, writes the variant that both renderers render:
+   ``voxgi.Scene.load(scene.xml)`` (every material as voxgi maps it: diffuse
+   part, texture, glossy lobe, glass) saved with ``Scene.save`` as
+   ``diffuse/scene.toml`` (the folder's name is historical);
    ``voxgi.mitsuba.to_mitsuba`` exports that same scene to Mitsuba.
 
 Usage::
