@@ -12,7 +12,7 @@ import numpy as np
 from .. import _progress
 from .linesystem import Gatherer
 from .problem import Problem
-from .traced_passes import keeps_rays, why_not_traced
+from .traced_passes import lines_stop_early, why_not_traced
 
 #: Where traced passes through kept rays follow the lines, the lines stop
 #: at this many times ``tol``: the passes, milliseconds each, carry the
@@ -27,14 +27,14 @@ def lines_tol(p: Problem) -> float:
     """The tolerance the lines stop at: ``tol``, or where traced passes follow
     (``indirect_light="traced"``, a scene to trace, no ``max_bounces``), the
     study tuning's ``lines_tol``, by default, where the passes will keep
-    their rays (``traced_cache`` and its budget, :func:`keeps_rays`),
+    their rays and no albedo is near 1 (:func:`lines_stop_early`),
     :data:`LINES_TOL_FACTOR` times ``tol``."""
     opt = p.opt
     if opt.indirect_light != "traced" or why_not_traced(p) is not None:
         return opt.tol
     if opt.lines_tol is not None:
         return opt.lines_tol
-    return LINES_TOL_FACTOR * opt.tol if keeps_rays(p)[0] else opt.tol
+    return LINES_TOL_FACTOR * opt.tol if lines_stop_early(p) else opt.tol
 
 
 __all__ = ["State", "iterate"]

@@ -87,30 +87,64 @@ def _tail(p: Problem, d: np.ndarray, lam: np.ndarray, mode: np.ndarray | None) -
     return np.where(norm > 0, bounded, d) * (lam / (1 - lam))
 
 
-#: Largest record albedo for which the rays are kept. The kept operator
-#: ``ρ T̂`` loses at every pass only what its sampled rays lose: where
-#: surfaces of albedo near 1 face each other (a sofa's cushions, 1 in
-#: Bitterli's living room) every kept ray of a record can land on the others,
-#: and that pocket then keeps its light forever (the living room came out
-#: 1.6 times too bright, the sofa glowing). Under this bound every pass shrinks
-#: any change by at least ``1 − 0.98``, and the 1024 passes leave 0.98^1024
-#: ≈ 1e-9 of it.
+#: A record whose kept rays carry at least ``1 − _TRAP_LOSS`` of its
+#: reflected light back onto records of such a set belongs to a trap
+#: (:func:`trapped_records`).
+_TRAP_LOSS = 0.02
+
+#: Largest record albedo up to which the lines stop early (at
+#: :data:`~voxgi.radiosity.iteration.LINES_TOL_FACTOR` times ``tol``) ahead
+#: of kept rays: above it the kept rays may turn out trapped, and the fresh
+#: passes that then follow should start from lines converged to ``tol``.
 _KEPT_ALBEDO_MAX = 0.98
+
+
+def trapped_records(rho: np.ndarray, matrix: tuple) -> np.ndarray:
+    """The records of the largest set in which every record's kept rays
+    return at least ``1 − 2%`` of its reflected light to the set, in some
+    channel: ``ρ_i Σ_{j∈S} T̂_ij ≥ 0.98`` (``docs/design.md`` §5).
+
+    The kept operator ``ρ T̂`` loses at every pass only what its sampled
+    rays lose. Where surfaces of albedo near 1 face each other (the inside
+    of a sofa of albedo 1, lit through its gaps, in Bitterli's living room)
+    every kept ray of a record can land on the others; such a set keeps its
+    light forever, or nearly, however fast the true light leaves it (the
+    living room came out 1.6 times too bright, the sofa glowing). The set is
+    found by pruning: start from every record that returns 98% of its light
+    to any record, and drop, until none is left to drop, each that no longer
+    returns 98% to those kept. Empty: every set of records holds one that
+    loses at least 2% a pass. Vectorized over the matrix's entries; a
+    pruning that has not settled after 256 rounds counts what is left.
+    """
+    row_ptr, column, weight = matrix
+    n = len(row_ptr) - 1
+    rho = np.asarray(rho, np.float64)
+    keep_at = 1.0 - _TRAP_LOSS
+    candidate = np.any(rho >= keep_at, axis=1)
+    if not candidate.any():
+        return np.zeros(n, bool)
+    rows = np.repeat(np.arange(n), np.diff(row_ptr))
+    trapped = np.zeros(n, bool)
+    for c in range(3):
+        returned = rho[rows, c] * weight[:, c]
+        inside = np.bincount(rows, returned, minlength=n) >= keep_at
+        for _ in range(256):
+            kept = np.bincount(rows, returned * inside[column], minlength=n) >= keep_at
+            kept &= inside
+            if np.array_equal(kept, inside):
+                break
+            inside = kept
+        trapped |= inside
+    return trapped
 
 
 def keeps_rays(p: Problem) -> tuple[bool, str | None]:
     """Whether the first traced pass's rays are kept for the later passes
-    (``traced_cache``), and why not."""
+    (``traced_cache``, within its memory budget), and why not. Kept rays
+    found trapped (:func:`trapped_records`) are dropped after that pass."""
     opt = p.opt
     if opt.traced_cache is False:
         return False, "traced_cache=False"
-    rho_max = float(np.max(p.rho)) if np.size(p.rho) else 0.0
-    if rho_max > _KEPT_ALBEDO_MAX:
-        return False, (
-            f"an albedo of {rho_max:.6g} (over {_KEPT_ALBEDO_MAX}): a pocket of such records "
-            "whose kept rays all land on each other would keep its light forever; "
-            "every pass traced fresh rays"
-        )
     need = transport_bytes(p.vox, opt.traced_samples)
     budget = opt.cache_cap
     if budget is None and opt.traced_cache is None:
@@ -121,6 +155,14 @@ def keeps_rays(p: Problem) -> tuple[bool, str | None]:
             f"{budget / 2**20:.0f} MiB (max_cache_bytes): every pass traced fresh rays"
         )
     return True, None
+
+
+def lines_stop_early(p: Problem) -> bool:
+    """Whether the lines may stop at ``LINES_TOL_FACTOR`` times ``tol``:
+    where the rays will be kept and no albedo is above
+    :data:`_KEPT_ALBEDO_MAX` (kept rays that may turn out trapped)."""
+    rho_max = float(np.max(p.rho)) if np.size(p.rho) else 0.0
+    return keeps_rays(p)[0] and rho_max <= _KEPT_ALBEDO_MAX
 
 
 def traced_bounces(
@@ -169,6 +211,17 @@ def traced_bounces(
         t_first = time.perf_counter()
         R_new = p.rho * (Hd + trace(R, opt.traced_samples, seed=1, keep=keep))
         t_first = time.perf_counter() - t_first
+        if keep and trace.matrix is not None:
+            trapped = trapped_records(p.rho, trace.matrix)
+            if trapped.any():
+                keep = False
+                trace.matrix = None
+                cap = _TRACED_PASSES
+                p.stats["skipped"]["traced_cache"] = (
+                    f"{int(trapped.sum())} records of albedo near 1 return over "
+                    f"{1 - _TRAP_LOSS:.0%} of their light to each other through the kept rays, "
+                    "which would keep it there: every later pass traced fresh rays"
+                )
         if keep and trace.matrix is not None:
             matrix = {
                 "entries": len(trace.matrix[1]),
