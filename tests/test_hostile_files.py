@@ -10,6 +10,7 @@ may raise its peak resident memory by more than twice what the scene
 legitimately needs plus 64 MiB: the floor covers a Python exception, the
 readers' lazily imported modules and numpy's temporaries.
 
+The probes that take seconds (``slow=True``) run with the long tests (``-m slow``).
 ``python -m pytest -s tests/test_hostile_files.py`` prints the table.
 """
 
@@ -25,7 +26,7 @@ from pathlib import Path
 import hostile_probes_other  # noqa: F401  (registers its probes)
 import hostile_probes_scenes  # noqa: F401
 import pytest
-from hostile_common import LOADS, PROBES
+from hostile_common import LOADS, PROBES, SLOW
 
 if not sys.platform.startswith("linux"):  # RLIMIT_AS, fork and /proc/self/status
     pytest.skip("the probes' limits and memory figures need Linux", allow_module_level=True)
@@ -159,9 +160,17 @@ def _run_servers(specs: list, chunks: int = 2) -> dict:
 
 
 @pytest.fixture(scope="module")
-def outcomes(tmp_path_factory):
+def outcomes(request, tmp_path_factory):
+    # the probes of the tests selected (the slow ones take seconds each)
+    chosen = {
+        item.callspec.params["name"]
+        for item in request.session.items
+        if item.originalname == "test_probe" and item.module is sys.modules[__name__]
+    }
     specs = []
     for k, (name, (build, _, _)) in enumerate(PROBES.items()):
+        if name not in chosen:
+            continue
         folder = tmp_path_factory.mktemp(f"probe{k:03d}")
         call, path, kw = build(folder)
         if "limits" in kw:
@@ -172,7 +181,7 @@ def outcomes(tmp_path_factory):
     results = _run_servers(specs)
     print()
     print(f"{'probe':<58} {'outcome':<12} {'MiB':>6} {'s':>5}  message")
-    for name in PROBES:
+    for name in (n for n in PROBES if n in chosen):
         r = results.get(name, {"outcome": "missing"})
         msg = r.get("message", "").replace(str(Path.home()), "~")
         msg = msg if len(msg) < 150 else msg[:147] + "..."
@@ -185,9 +194,12 @@ def outcomes(tmp_path_factory):
 
 def test_there_are_at_least_60_probes():
     assert len(PROBES) >= 60
+    assert SLOW <= set(PROBES)
 
 
-@pytest.mark.parametrize("name", list(PROBES))
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW else n for n in PROBES]
+)
 def test_probe(outcomes, name):
     _, pattern, need_mb = PROBES[name]
     r = outcomes[name]
