@@ -60,10 +60,10 @@ def triangle_solution(scene: voxgi.Scene, radiosity) -> Solution:
     return Solution(vox=vox, radiosity=np.asarray(radiosity(vox), np.float32))
 
 
-def real_solution(scene, resolution=32, directions=8):
-    """voxelize + solve."""
+def real_solution(scene, resolution=32, directions=8, **tuning):
+    """voxelize + solve (the paper's settings with ``tuning``'s changes)."""
     vox = voxgi.voxelize(scene, resolution=resolution)
-    return voxgi.solve(vox, radius=directions, tuning=paper())
+    return voxgi.solve(vox, radius=directions, tuning=paper(**tuning))
 
 
 # -- the normalisation: furnaces ----------------------------------------------------------
@@ -191,9 +191,12 @@ def test_furnace_at_the_defaults_every_pixel_within_one_percent(rho):
 
 def test_furnace_sphere_full_pipeline_coarse():
     # The whole pipeline (voxelize, solve, display) at a coarse setting that
-    # runs in seconds: rho 0.5 at resolution 16, R 6.
+    # runs in seconds: rho 0.5 at resolution 16, R 6 for the gathering and
+    # the shooting. (Every record emits alike: the pixels' largest error is
+    # 0.22% with the shooting's radius 6 as with its 35; the image scaled by
+    # 1.02 is 2% off.)
     scene = voxgi.scenes.furnace_sphere(albedo=0.5, emission=1.0, width=24, height=24)
-    sol = real_solution(scene, resolution=16, directions=6)
+    sol = real_solution(scene, resolution=16, directions=6, shoot_radius=6)
     out = voxgi.render(scene, sol, progress=False, max_frames=32, tol=0.0)
     err = np.abs(out.image * 0.5 - 1.0)
     assert err.max() < 0.01, err.max()
