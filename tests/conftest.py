@@ -40,3 +40,42 @@ def paper(**changes) -> voxgi.SolveTuning:
     the lines alone, radius 22, tol 1e-4, diagnostics; ``changes`` may set the
     experiment switches too (``later_radius``, ``epsilon``, ``closed``, ...)."""
     return dataclasses.replace(voxgi.SolveTuning.paper(), **changes)
+
+
+def fails_to_write(write, *args, fsize: int) -> str:
+    """Call ``write(*args)`` in a forked child whose files may not grow past
+    ``fsize`` bytes (``RLIMIT_FSIZE``, ``SIGXFSZ`` ignored, so a write past
+    it fails with ``EFBIG``). The child starts from this process as it is (no
+    fresh interpreter to import voxgi into). Returns the ``OSError``'s text;
+    fails the test where the call succeeds or raises anything else."""
+    import os
+    import resource
+    import traceback
+
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: report through the pipe, never return into pytest
+        code = 1
+        try:
+            os.close(r)
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+            resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
+            try:
+                write(*args)
+                text = "the write succeeded"
+            except OSError as exc:
+                text, code = f"refused: {exc}", 3
+            except BaseException:
+                text = traceback.format_exc()
+            os.write(w, text.encode())
+        finally:
+            os._exit(code)
+    os.close(w)
+    chunks = []
+    while chunk := os.read(r, 1 << 16):
+        chunks.append(chunk)
+    os.close(r)
+    _, status = os.waitpid(pid, 0)
+    text = b"".join(chunks).decode()
+    assert os.waitstatus_to_exitcode(status) == 3, text
+    return text
