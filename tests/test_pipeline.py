@@ -29,8 +29,8 @@ def test_render_solves_as_solve_does():
     sol = voxgi.solve(vox, progress=False)
     assert np.array_equal(sol.radiosity, one_call.solution.radiosity)
     assert np.array_equal(voxgi.render(scene, sol, **kw).image, one_call.image)
-    # the comparison sees the solve: another solve, another picture
-    other = voxgi.solve(vox, max_bounces=1, progress=False)
+    # the comparison sees the solution: other records, another picture
+    other = voxgi.Solution(vox=vox, radiosity=sol.radiosity * np.float32(0.5))
     assert not np.array_equal(voxgi.render(scene, other, **kw).image, one_call.image)
 
 
