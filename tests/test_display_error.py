@@ -150,7 +150,7 @@ def test_at_edges_the_blocks_spread_is_shrunk_and_still_errs_high(rng):
 
 
 def test_the_exact_coverage_is_a_fine_grids_count(rng):
-    c, th = rng.random(200) - 0.5, rng.random(200) * np.pi
+    c, th = rng.random(50) - 0.5, rng.random(50) * np.pi
     u, v = np.cos(th), np.sin(th)
     g = (np.arange(256) + 0.5) / 256 - 0.5
     gx, gy = (a.ravel() for a in np.meshgrid(g, g))
