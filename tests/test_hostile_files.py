@@ -130,13 +130,11 @@ SERVER = (
 )
 
 
-def _run_servers(specs: list, chunks: int = 2) -> dict:
-    """Run the probes in ``chunks`` servers at once; returns the outcome of each by name."""
+def _start_servers(chunks: int = 2) -> list:
+    """Start ``chunks`` servers; they import voxgi while the files are written."""
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    procs = []
-    for k in range(chunks):
-        mine = specs[k::chunks]
-        p = subprocess.Popen(
+    return [
+        subprocess.Popen(
             [sys.executable, "-c", SERVER],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
@@ -144,10 +142,23 @@ def _run_servers(specs: list, chunks: int = 2) -> dict:
             text=True,
             env=env,
         )
-        procs.append((p, json.dumps(mine)))
+        for _ in range(chunks)
+    ]
+
+
+def _run_servers(procs: list, specs: list) -> dict:
+    """Run the probes in the servers ``procs`` at once (every len(procs)-th
+    to each); returns the outcome of each by name."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    def talk(k):
+        payload = json.dumps(specs[k :: len(procs)])
+        return procs[k].communicate(payload, timeout=TIMEOUT_S * max(1, len(specs)))
+
+    with ThreadPoolExecutor(len(procs)) as pool:
+        talks = list(pool.map(talk, range(len(procs))))
     results, failed = {}, []
-    for p, payload in procs:
-        out, err = p.communicate(payload, timeout=TIMEOUT_S * len(specs))
+    for p, (out, err) in zip(procs, talks):
         if p.returncode != 0:
             failed.append(err[-2000:])
         for line in out.splitlines():
@@ -167,6 +178,7 @@ def outcomes(request, tmp_path_factory):
         for item in request.session.items
         if item.originalname == "test_probe" and item.module is sys.modules[__name__]
     }
+    procs = _start_servers()
     specs = []
     for k, (name, (build, _, _)) in enumerate(PROBES.items()):
         if name not in chosen:
@@ -178,7 +190,7 @@ def outcomes(request, tmp_path_factory):
         if "search_paths" in kw:
             kw["search_paths"] = [str(p) for p in kw["search_paths"]]
         specs.append({"name": name, "call": call, "path": path, "kw": kw})
-    results = _run_servers(specs)
+    results = _run_servers(procs, specs)
     print()
     print(f"{'probe':<58} {'outcome':<12} {'MiB':>6} {'s':>5}  message")
     for name in (n for n in PROBES if n in chosen):
