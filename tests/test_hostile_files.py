@@ -158,7 +158,7 @@ def _run_servers(procs: list, specs: list) -> dict:
     with ThreadPoolExecutor(len(procs)) as pool:
         talks = list(pool.map(talk, range(len(procs))))
     results, failed = {}, []
-    for p, (out, err) in zip(procs, talks):
+    for p, (out, err) in zip(procs, talks, strict=True):
         if p.returncode != 0:
             failed.append(err[-2000:])
         for line in out.splitlines():
