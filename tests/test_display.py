@@ -67,7 +67,9 @@ def real_solution(scene, resolution=32, directions=8, **tuning):
 
 
 # -- the normalisation: furnaces ----------------------------------------------------------
-@pytest.mark.parametrize("rho", [0.5, 0.9])
+# (rho 0.9 by default, where the reflected light is nine tenths of the answer;
+# rho 0.5 with the long tests)
+@pytest.mark.parametrize("rho", [pytest.param(0.5, marks=pytest.mark.slow), 0.9])
 def test_furnace_sphere_analytic_radiosity(rho):
     # Every record of the closed furnace has B = pi Le / (1 - rho); the display
     # must give L = Le + (rho/pi) E = Le / (1 - rho) in every pixel. Inside a
@@ -97,7 +99,7 @@ def test_furnace_sphere_analytic_radiosity(rho):
     assert est_rel / 3 < rms_rel < 3 * est_rel + 1e-4
 
 
-@pytest.mark.parametrize("rho", [0.5, 0.9])
+@pytest.mark.parametrize("rho", [pytest.param(0.5, marks=pytest.mark.slow), 0.9])
 def test_furnace_sphere_voxel_records_analytic_radiosity(rho):
     # Real voxel records (supercover, clipped areas, black back records that
     # must never be VPLs) with the analytic B on the front records. The
