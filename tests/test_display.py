@@ -753,7 +753,7 @@ def test_shading_normals_approach_the_smooth_surface():
 
     def image(sc):
         sol = triangle_solution(sc, lambda vox: np.pi * vox.emission)
-        return voxgi.render(sc, sol, max_frames=24, tol=0.0, seed=3, progress=False).image
+        return voxgi.render(sc, sol, max_frames=12, tol=0.0, seed=3, progress=False).image
 
     lo_flat, lo_smooth, hi = (scene(1, False), scene(1, True), scene(4, False))
     assert lo_smooth.objects[0].vertex_normals is not None
@@ -765,6 +765,7 @@ def test_shading_normals_approach_the_smooth_surface():
         k: float(np.mean(((image(s) - ref)[lit]) ** 2 / (ref[lit] ** 2 + 0.01)))
         for k, s in (("flat", lo_flat), ("smooth", lo_smooth))
     }
+    # measured 0.115 (0.116 at seed 4; 0.112 at 24 frames); flat normals give 1
     assert err["smooth"] < 0.35 * err["flat"]
 
 
