@@ -11,7 +11,7 @@ from voxgi.radiosity.tuning import LINES_RADIUS, TRACED_RADIUS
 
 @pytest.fixture(scope="module")
 def cornell_records():
-    return voxgi.voxelize(voxgi.scenes.cornell_box(), resolution=32, progress=False)
+    return voxgi.voxelize(voxgi.scenes.cornell_box(), resolution=16, progress=False)
 
 
 def _area_l1(vox, x) -> float:
@@ -68,6 +68,8 @@ def test_traced_passes_shrink_the_lines_radius_error(cornell_records):
     # record in every pass (two standard errors, the change being no
     # rougher than the light). Hence, in the area-weighted L1 norm,
     # |traced(4) - traced(12)| <= rho_max |lines(4) - lines(12)| / 2 + 2 tol |B|.
+    # Measured at resolution 16: 1.1% of the bound (3.5% at 32); the lines'
+    # own gap in its place is 1.69 times the bound.
     vox = cornell_records
     traced = {R: voxgi.solve(vox, radius=R, progress=False) for R in (4, 12)}
     lines_only = voxgi.SolveTuning(indirect_light="lines")
