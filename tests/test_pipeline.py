@@ -21,8 +21,9 @@ def _area_l1(vox, x) -> float:
 
 def test_render_solves_as_solve_does():
     # render(scene) voxelizes and solves with the defaults of voxelize and
-    # solve: solving first gives the same picture, bit for bit.
-    scene = voxgi.scenes.cornell_box(width=24, height=24)
+    # solve: solving first gives the same picture, bit for bit. (Objects
+    # under a sky: a fifth of the Cornell box's records at the defaults.)
+    scene = voxgi.scenes.sky_objects(width=24, height=24)
     kw = dict(max_frames=4, tol=0.0, seed=5, progress=False)
     one_call = voxgi.render(scene, **kw)
     vox = voxgi.voxelize(scene)
