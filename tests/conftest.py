@@ -42,18 +42,26 @@ def paper(**changes) -> voxgi.SolveTuning:
     return dataclasses.replace(voxgi.SolveTuning.paper(), **changes)
 
 
-def fails_to_write(write, *args, fsize: int) -> str:
+def fails_to_write(write, *args, fsize: int, timeout: float = 60.0) -> str:
     """Call ``write(*args)`` in a forked child whose files may not grow past
     ``fsize`` bytes (``RLIMIT_FSIZE``, ``SIGXFSZ`` ignored, so a write past
     it fails with ``EFBIG``). The child starts from this process as it is (no
-    fresh interpreter to import voxgi into). Returns the ``OSError``'s text;
-    fails the test where the call succeeds or raises anything else."""
+    fresh interpreter to import voxgi into): call ``write`` once here first,
+    so that the child imports nothing. Returns the ``OSError``'s text; fails
+    the test where the call succeeds, raises anything else or runs past
+    ``timeout`` seconds."""
     import os
     import resource
+    import time
     import traceback
+    import warnings
 
     r, w = os.pipe()
-    pid = os.fork()
+    with warnings.catch_warnings():
+        # Python 3.12 warns of fork in a process with threads (a Dask test's
+        # leftovers): the child takes no lock that they may hold
+        warnings.simplefilter("ignore", DeprecationWarning)
+        pid = os.fork()
     if pid == 0:  # the child: report through the pipe, never return into pytest
         code = 1
         try:
@@ -71,11 +79,21 @@ def fails_to_write(write, *args, fsize: int) -> str:
         finally:
             os._exit(code)
     os.close(w)
+    t0, status = time.monotonic(), None
+    while status is None and time.monotonic() - t0 < timeout:
+        done, st = os.waitpid(pid, os.WNOHANG)
+        if done:
+            status = st
+        else:
+            time.sleep(0.01)
+    if status is None:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
     chunks = []
     while chunk := os.read(r, 1 << 16):
         chunks.append(chunk)
     os.close(r)
-    _, status = os.waitpid(pid, 0)
+    assert status is not None, f"the write ran past {timeout} s"
     text = b"".join(chunks).decode()
     assert os.waitstatus_to_exitcode(status) == 3, text
     return text
