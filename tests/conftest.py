@@ -40,3 +40,60 @@ def paper(**changes) -> voxgi.SolveTuning:
     the lines alone, radius 22, tol 1e-4, diagnostics; ``changes`` may set the
     experiment switches too (``later_radius``, ``epsilon``, ``closed``, ...)."""
     return dataclasses.replace(voxgi.SolveTuning.paper(), **changes)
+
+
+def fails_to_write(write, *args, fsize: int, timeout: float = 60.0) -> str:
+    """Call ``write(*args)`` in a forked child whose files may not grow past
+    ``fsize`` bytes (``RLIMIT_FSIZE``, ``SIGXFSZ`` ignored, so a write past
+    it fails with ``EFBIG``). The child starts from this process as it is (no
+    fresh interpreter to import voxgi into): call ``write`` once here first,
+    so that the child imports nothing. Returns the ``OSError``'s text; fails
+    the test where the call succeeds, raises anything else or runs past
+    ``timeout`` seconds."""
+    import os
+    import resource
+    import time
+    import traceback
+    import warnings
+
+    r, w = os.pipe()
+    with warnings.catch_warnings():
+        # Python 3.12 warns of fork in a process with threads (a Dask test's
+        # leftovers): the child takes no lock that they may hold
+        warnings.simplefilter("ignore", DeprecationWarning)
+        pid = os.fork()
+    if pid == 0:  # the child: report through the pipe, never return into pytest
+        code = 1
+        try:
+            os.close(r)
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+            resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
+            try:
+                write(*args)
+                text = "the write succeeded"
+            except OSError as exc:
+                text, code = f"refused: {exc}", 3
+            except BaseException:
+                text = traceback.format_exc()
+            os.write(w, text.encode())
+        finally:
+            os._exit(code)
+    os.close(w)
+    t0, status = time.monotonic(), None
+    while status is None and time.monotonic() - t0 < timeout:
+        done, st = os.waitpid(pid, os.WNOHANG)
+        if done:
+            status = st
+        else:
+            time.sleep(0.01)
+    if status is None:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+    chunks = []
+    while chunk := os.read(r, 1 << 16):
+        chunks.append(chunk)
+    os.close(r)
+    assert status is not None, f"the write ran past {timeout} s"
+    text = b"".join(chunks).decode()
+    assert os.waitstatus_to_exitcode(status) == 3, text
+    return text

@@ -15,11 +15,15 @@ LOADS = None  # the pattern of a probe whose file is valid
 
 #: name -> (build(folder) -> (call, path, kwargs), pattern or LOADS, legitimate MB)
 PROBES: dict = {}
+#: the probes that take seconds to read (run with the long tests, ``-m slow``)
+SLOW: set = set()
 
 
-def probe(name: str, pattern: str | None, need_mb: float = 0.0):
+def probe(name: str, pattern: str | None, need_mb: float = 0.0, slow: bool = False):
     def register(build):
         PROBES[name] = (build, pattern, need_mb)
+        if slow:
+            SLOW.add(name)
         return build
 
     return register

@@ -55,7 +55,9 @@ def _(d):
 
 
 @probe(
-    "xml: 9 files including the next 10 times", r"inc\d\.xml: line 2: <include>: 10,001 included"
+    "xml: 9 files including the next 10 times",
+    r"inc\d\.xml: line 2: <include>: 10,001 included",
+    slow=True,  # 10,001 files parsed: about 5 s
 )
 def _(d):
     for k in range(1, 9):
@@ -228,7 +230,7 @@ def _bitmap_scene(d: Path, image: str) -> tuple:
 
 
 # (kept as the texture of the rectangle: 3 bytes a texel)
-@probe("xml: 12000x12000 PNG texture (140 KB)", LOADS, need_mb=432)
+@probe("xml: 12000x12000 PNG texture (140 KB)", LOADS, need_mb=432, slow=True)  # about 5 s
 def _(d):
     _png(d / "big.png", 12000, 12000)
     return _bitmap_scene(d, "big.png")

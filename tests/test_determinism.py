@@ -144,7 +144,7 @@ def test_voxelize_threads_identical():
 def test_render_seed_decides_the_image():
     scene = SCENES["cornell_box"]()
     vox = voxgi.voxelize(scene, resolution=16, progress=False)
-    sol = voxgi.solve(vox, radius=4, progress=False, tuning=paper())
+    sol = voxgi.solve(vox, radius=4, progress=False, tuning=paper(shoot_radius=4))
     kw = dict(max_frames=2, progress=False, threads=2)
     a = voxgi.display.render(scene, sol, seed=7, **kw)
     b = voxgi.display.render(scene, sol, seed=7, **kw)
@@ -166,7 +166,7 @@ def test_full_pipeline_twice_identical(tmp_path):
             voxgi.voxelize(sc, resolution=10, progress=False),
             radius=4,
             progress=False,
-            tuning=paper(),
+            tuning=paper(shoot_radius=4),
         )
         imgs.append(voxgi.display.render(sc, sol, max_frames=2, progress=False, seed=3).image)
     assert np.array_equal(imgs[0], imgs[1])

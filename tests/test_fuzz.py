@@ -116,10 +116,11 @@ def fuzz_dir(tmp_path_factory):
     return d
 
 
-def test_fuzz_scene_files(fuzz_dir):
+@pytest.mark.parametrize("examples", [150, pytest.param(500, marks=pytest.mark.slow)])
+def test_fuzz_scene_files(fuzz_dir, examples):
     count = {"n": 0, "loaded": 0, "voxelized": 0}
 
-    @settings(max_examples=500, **SETTINGS)
+    @settings(max_examples=examples, **SETTINGS)
     @given(text=scene_texts())
     def run(text):
         count["n"] += 1

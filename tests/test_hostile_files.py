@@ -10,6 +10,7 @@ may raise its peak resident memory by more than twice what the scene
 legitimately needs plus 64 MiB: the floor covers a Python exception, the
 readers' lazily imported modules and numpy's temporaries.
 
+The probes that take seconds (``slow=True``) run with the long tests (``-m slow``).
 ``python -m pytest -s tests/test_hostile_files.py`` prints the table.
 """
 
@@ -25,7 +26,7 @@ from pathlib import Path
 import hostile_probes_other  # noqa: F401  (registers its probes)
 import hostile_probes_scenes  # noqa: F401
 import pytest
-from hostile_common import LOADS, PROBES
+from hostile_common import LOADS, PROBES, SLOW
 
 if not sys.platform.startswith("linux"):  # RLIMIT_AS, fork and /proc/self/status
     pytest.skip("the probes' limits and memory figures need Linux", allow_module_level=True)
@@ -129,13 +130,11 @@ SERVER = (
 )
 
 
-def _run_servers(specs: list, chunks: int = 2) -> dict:
-    """Run the probes in ``chunks`` servers at once; returns the outcome of each by name."""
+def _start_servers(chunks: int = 2) -> list:
+    """Start ``chunks`` servers; they import voxgi while the files are written."""
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    procs = []
-    for k in range(chunks):
-        mine = specs[k::chunks]
-        p = subprocess.Popen(
+    return [
+        subprocess.Popen(
             [sys.executable, "-c", SERVER],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
@@ -143,10 +142,23 @@ def _run_servers(specs: list, chunks: int = 2) -> dict:
             text=True,
             env=env,
         )
-        procs.append((p, json.dumps(mine)))
+        for _ in range(chunks)
+    ]
+
+
+def _run_servers(procs: list, specs: list) -> dict:
+    """Run the probes in the servers ``procs`` at once (every len(procs)-th
+    to each); returns the outcome of each by name."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    def talk(k):
+        payload = json.dumps(specs[k :: len(procs)])
+        return procs[k].communicate(payload, timeout=TIMEOUT_S * max(1, len(specs)))
+
+    with ThreadPoolExecutor(len(procs)) as pool:
+        talks = list(pool.map(talk, range(len(procs))))
     results, failed = {}, []
-    for p, payload in procs:
-        out, err = p.communicate(payload, timeout=TIMEOUT_S * len(specs))
+    for p, (out, err) in zip(procs, talks, strict=True):
         if p.returncode != 0:
             failed.append(err[-2000:])
         for line in out.splitlines():
@@ -159,9 +171,18 @@ def _run_servers(specs: list, chunks: int = 2) -> dict:
 
 
 @pytest.fixture(scope="module")
-def outcomes(tmp_path_factory):
+def outcomes(request, tmp_path_factory):
+    # the probes of the tests selected (the slow ones take seconds each)
+    chosen = {
+        item.callspec.params["name"]
+        for item in request.session.items
+        if item.originalname == "test_probe" and item.module is sys.modules[__name__]
+    }
+    procs = _start_servers()
     specs = []
     for k, (name, (build, _, _)) in enumerate(PROBES.items()):
+        if name not in chosen:
+            continue
         folder = tmp_path_factory.mktemp(f"probe{k:03d}")
         call, path, kw = build(folder)
         if "limits" in kw:
@@ -169,10 +190,10 @@ def outcomes(tmp_path_factory):
         if "search_paths" in kw:
             kw["search_paths"] = [str(p) for p in kw["search_paths"]]
         specs.append({"name": name, "call": call, "path": path, "kw": kw})
-    results = _run_servers(specs)
+    results = _run_servers(procs, specs)
     print()
     print(f"{'probe':<58} {'outcome':<12} {'MiB':>6} {'s':>5}  message")
-    for name in PROBES:
+    for name in (n for n in PROBES if n in chosen):
         r = results.get(name, {"outcome": "missing"})
         msg = r.get("message", "").replace(str(Path.home()), "~")
         msg = msg if len(msg) < 150 else msg[:147] + "..."
@@ -185,9 +206,12 @@ def outcomes(tmp_path_factory):
 
 def test_there_are_at_least_60_probes():
     assert len(PROBES) >= 60
+    assert SLOW <= set(PROBES)
 
 
-@pytest.mark.parametrize("name", list(PROBES))
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW else n for n in PROBES]
+)
 def test_probe(outcomes, name):
     _, pattern, need_mb = PROBES[name]
     r = outcomes[name]

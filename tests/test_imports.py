@@ -9,6 +9,7 @@ function-level imports alike, so a cycle cannot hide inside a function.
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -105,13 +106,19 @@ def find_cycle(edges: dict) -> list | None:
     return None
 
 
+@functools.cache
+def voxgi_graph() -> tuple[dict, list]:
+    """:func:`import_graph` of the installed voxgi, read once (the tests only read it)."""
+    return import_graph()
+
+
 def test_import_graph_has_no_cycle():
-    edges, _ = import_graph()
+    edges, _ = voxgi_graph()
     assert find_cycle(edges) is None, " -> ".join(find_cycle(edges))
 
 
 def test_no_module_imports_a_private_name_of_another():
-    _, private = import_graph()
+    _, private = voxgi_graph()
     assert private == [], private
 
 
@@ -135,7 +142,7 @@ def _in_stage(module: str, stage: str) -> bool:
     ],
 )
 def test_stages_import_only_those_before_them(stage, later):
-    edges, _ = import_graph()
+    edges, _ = voxgi_graph()
     # a stage may be a package: every module of it counts, and so does every
     # module of a later stage's package
     bad = {

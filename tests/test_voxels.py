@@ -364,12 +364,19 @@ def test_centroid_on_surface_and_inside_voxel(case):
     assert np.all(vox.centroid >= lo - 1e-9 * vox.pitch)
     assert np.all(vox.centroid <= lo + vox.pitch + 1e-9 * vox.pitch)
     f = np.flatnonzero(front(vox))
+    tol = 1e-9 * size
     for o, obj in enumerate(s.objects):
         sel = f[vox.object_id[f] == o]
         tris = obj.vertices[obj.faces]
+        tlo, thi = tris.min(axis=1), tris.max(axis=1)
         for chunk in np.array_split(sel, max(1, len(sel) // 256)):
-            d = point_triangle_distance(vox.centroid[chunk], tris).min(axis=1)
-            assert d.max() <= 1e-9 * size
+            # a triangle within tol of a centroid inside the chunk's voxels
+            # reaches their box: the others cannot be the nearest within tol
+            c = vox.centroid[chunk]
+            near = np.all((thi >= c.min(axis=0) - tol) & (tlo <= c.max(axis=0) + tol), axis=1)
+            assert near.any()
+            d = point_triangle_distance(c, tris[near]).min(axis=1)
+            assert d.max() <= tol
 
 
 # ---------------------------------------------------------------- cutting
@@ -562,7 +569,10 @@ print(json.dumps({"rss0": rss0, "before": before, "peak": peak,
     "libasan" in os.environ.get("LD_PRELOAD", ""),
     reason="AddressSanitizer's allocator (red zones, quarantine) changes the peak",
 )
-@pytest.mark.parametrize(("subdivisions", "resolution"), [(0, 256), (3, 48), (3, 128)])
+@pytest.mark.parametrize(
+    ("subdivisions", "resolution"),
+    [(0, 256), pytest.param(3, 48, marks=pytest.mark.slow), (3, 128)],
+)
 def test_memory_estimate_is_within_2x_of_the_measured_peak(subdivisions, resolution, tmp_path):
     """The estimate against the peak RSS the call adds, in a fresh process:
     big triangles (the bunny at 256) and triangles smaller than a voxel
