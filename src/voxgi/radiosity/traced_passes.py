@@ -94,9 +94,10 @@ _TRAP_LOSS = 0.02
 
 #: Largest record albedo up to which the lines stop early (at
 #: :data:`~voxgi.radiosity.iteration.LINES_TOL_FACTOR` times ``tol``) ahead
-#: of kept rays: above it the kept rays may turn out trapped, and the fresh
+#: of kept rays: no record of a lower albedo can return ``1 − _TRAP_LOSS``
+#: of its light; above it the kept rays may turn out trapped, and the fresh
 #: passes that then follow should start from lines converged to ``tol``.
-_KEPT_ALBEDO_MAX = 0.98
+_KEPT_ALBEDO_MAX = 1.0 - _TRAP_LOSS
 
 
 def trapped_records(rho: np.ndarray, matrix: tuple) -> np.ndarray:
@@ -120,8 +121,7 @@ def trapped_records(rho: np.ndarray, matrix: tuple) -> np.ndarray:
     n = len(row_ptr) - 1
     rho = np.asarray(rho, np.float64)
     keep_at = 1.0 - _TRAP_LOSS
-    candidate = np.any(rho >= keep_at, axis=1)
-    if not candidate.any():
+    if not np.any(rho >= keep_at):
         return np.zeros(n, bool)
     rows = np.repeat(np.arange(n), np.diff(row_ptr))
     trapped = np.zeros(n, bool)
