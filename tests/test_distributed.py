@@ -264,3 +264,34 @@ def test_progress_bar_counts_finished_tasks(cornell_small, client, monkeypatch):
     tasks = [b for b in made if b.desc == "gather tasks"]
     assert tasks
     assert all(b.n == b.total == 2 for b in tasks)
+
+
+def _slow_square(x):
+    time.sleep(0.2)
+    return x * x
+
+
+def test_a_task_the_scheduler_forgot_runs_again(client):
+    # A worker killed while another fetches a result from it can leave a
+    # task's future cancelled ("already forgotten"); its inputs are on every
+    # worker, so the farm submits it again and the results stay in order.
+    from voxgi.distributed.farm import _Farm
+
+    farm = _Farm(client, progress=False, desc="test")
+    submit = client.submit
+    cancelled = []
+
+    def submit_then_forget(*args, **kwargs):
+        fut = submit(*args, **kwargs)
+        if not cancelled:
+            client.cancel(fut)
+            cancelled.append(fut.key)
+        return fut
+
+    client.submit = submit_then_forget
+    try:
+        out = farm._map(_slow_square, [(i,) for i in range(6)], key_prefix="voxgi-test")
+    finally:
+        client.submit = submit
+    assert cancelled
+    assert out == [i * i for i in range(6)]

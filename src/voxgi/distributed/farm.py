@@ -56,23 +56,22 @@ class _Farm:
         another may take over if it dies); return the results in chunk order."""
         from distributed import as_completed
 
-        futs = []
-        for i, chunk in enumerate(chunks):
-            w = self.workers[i % len(self.workers)]
-            futs.append(
-                self.client.submit(
-                    fn,
-                    *common,
-                    *chunk,
-                    workers=[w],
-                    allow_other_workers=True,
-                    pure=False,
-                    key=f"{key_prefix}-{i}-{_uid()}",
-                )
+        def submit(i):
+            return self.client.submit(
+                fn,
+                *common,
+                *chunks[i],
+                workers=[self.workers[i % len(self.workers)]],
+                allow_other_workers=True,
+                pure=False,
+                key=f"{key_prefix}-{i}-{_uid()}",
             )
+
+        futs = [submit(i) for i in range(len(chunks))]
         self.stats["tasks"] += len(futs)
         out = [None] * len(futs)
         where = {f.key: i for i, f in enumerate(futs)}
+        resubmitted = 0
         bar = None
         if self.progress and len(futs) > 1:
             from .. import _progress
@@ -80,8 +79,19 @@ class _Farm:
             bar = _progress.bar(self.desc, len(futs), unit="task")
         t = time.perf_counter()
         try:
-            for fut in as_completed(futs):
-                out[where[fut.key]] = fut.result()
+            pending = as_completed(futs)
+            for fut in pending:
+                i = where[fut.key]
+                if fut.cancelled() and resubmitted < len(futs):
+                    # A worker killed while another fetched a result from it
+                    # can leave the scheduler forgetting that task ("already
+                    # forgotten"): the inputs are on every worker, so it runs again.
+                    resubmitted += 1
+                    again = submit(i)
+                    where[again.key] = i
+                    pending.add(again)
+                    continue
+                out[i] = fut.result()
                 if bar is not None:
                     bar.update(1)
         finally:
