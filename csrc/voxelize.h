@@ -62,6 +62,7 @@ struct VoxelizeStats {
     int64_t cut_clusters = 0;        // clusters split by another surface's plane
     int64_t cut_records = 0;         // front records made by those splits (beyond one each)
     int64_t cut_limit_hits = 0;      // cutting planes ignored (more than kMaxCuts in a voxel)
+    int64_t cut_small_planes = 0;    // planes of small clusters (they cut only large ones)
     int64_t polygon_overflows = 0;   // clipped polygons that hit the vertex limit (should be 0)
     int64_t peak_bytes = 0;          // peak of the kernel's own large buffers
     double seconds_pairs = 0, seconds_sort = 0, seconds_records = 0;
@@ -76,6 +77,10 @@ struct VoxelizeProgress {
 };
 
 constexpr int kMaxCuts = 20;
+// A cluster's plane cuts the other surfaces of its voxel only where the
+// cluster covers at least this share of the voxel's section by that plane
+// (docs/design.md §2, junction cutting).
+constexpr double kSeparatingShare = 0.25;
 
 // Voxelize `n_tris` triangles.
 //   tris        (n_tris, 3, 3) world corner positions, C order

@@ -60,7 +60,7 @@ struct Scratch {
 
 struct ChunkStats {
     int64_t cells = 0, records = 0, back = 0, two_sided = 0, touch = 0, clusters = 0,
-            cut_clusters = 0, cut_records = 0, cut_limit = 0, overflows = 0;
+            cut_clusters = 0, cut_records = 0, cut_limit = 0, cut_small = 0, overflows = 0;
 };
 
 struct Context {
@@ -401,18 +401,56 @@ void cluster_pieces(const Context& ctx, int n_pieces, Scratch& S, ChunkStats& cs
 }
 
 // A cutting plane: through a cluster's area-weighted centroid, normal to its
-// area-weighted normal (ok: the cluster has area).
+// area-weighted normal (ok: the cluster has area; separates: the cluster
+// covers enough of the voxel's section by that plane to part it).
 struct Plane {
     double n[3], off;
-    bool ok;
+    bool ok, separates;
 };
 
-void cutting_planes(const std::vector<Cluster>& clusters, Plane planes[64]) {
+// The area of the section of the unit cube `cell` by the plane n·x = off
+// (voxel units²): a square on the plane wider than the cube, clipped to it.
+double section_area(const double n[3], double off, const int64_t* cell) {
+    double c[3];
+    for (int d = 0; d < 3; ++d) c[d] = double(cell[d]) + 0.5;
+    const double s = dot3(n, c) - off;
+    for (int d = 0; d < 3; ++d) c[d] -= s * n[d];
+    // an axis of the plane: n crossed with the coordinate axis least along it
+    int m = 0;
+    for (int d = 1; d < 3; ++d)
+        if (std::fabs(n[d]) < std::fabs(n[m])) m = d;
+    double e[3] = {0.0, 0.0, 0.0}, a[3], b[3];
+    e[m] = 1.0;
+    cross3(n, e, a);
+    const double la = std::sqrt(dot3(a, a));
+    for (int d = 0; d < 3; ++d) a[d] /= la;
+    cross3(n, a, b);
+    Poly q, tmp;
+    q.n = 0;
+    q.overflow = false;
+    const double corner[4][2] = {{-2, -2}, {2, -2}, {2, 2}, {-2, 2}};  // half-width 2 > √3/2
+    for (const auto& k : corner) {
+        double v[3];
+        for (int d = 0; d < 3; ++d) v[d] = c[d] + k[0] * a[d] + k[1] * b[d];
+        q.push(v);
+    }
+    for (int d = 0; d < 3; ++d) {
+        clip_axis(q, tmp, d, double(cell[d]), 1.0);
+        clip_axis(tmp, q, d, double(cell[d] + 1), -1.0);
+        if (q.n == 0) return 0.0;
+    }
+    double ctr[3];
+    return q.n >= 3 ? area_centroid(view(q), n, ctr) : 0.0;
+}
+
+void cutting_planes(const std::vector<Cluster>& clusters, const int64_t* cell, Plane planes[64],
+                    ChunkStats& cs) {
     const size_t ncl = clusters.size();
     for (size_t q = 0; q < ncl && q < 64; ++q) {
         const Cluster& c = clusters[q];
         const double len = std::sqrt(dot3(c.sum_an, c.sum_an));
         planes[q].ok = c.sum_a > 0 && len > 0;
+        planes[q].separates = false;
         if (!planes[q].ok) continue;
         double ctr[3];
         for (int d = 0; d < 3; ++d) {
@@ -420,6 +458,9 @@ void cutting_planes(const std::vector<Cluster>& clusters, Plane planes[64]) {
             ctr[d] = c.sum_ac[d] / c.sum_a;
         }
         planes[q].off = dot3(planes[q].n, ctr);
+        planes[q].separates =
+            c.sum_a >= kSeparatingShare * section_area(planes[q].n, planes[q].off, cell);
+        if (!planes[q].separates) ++cs.cut_small;
     }
 }
 
@@ -438,6 +479,16 @@ int cut_cluster(const Context& ctx, size_t ci, size_t ncl, const Plane* planes, 
         for (size_t sj = 0; sj < ncl && sj < 64; ++sj) {
             if (sj == ci || !planes[sj].ok) continue;
             const Plane& pl = planes[sj];
+            // A small surface (one that covers a small share of the voxel's
+            // section by its plane: a trinket, a facet of a small curved
+            // object) parts nothing a small cluster has: light goes round
+            // both inside the voxel. Cut by each other's planes, a voxel of
+            // a few small curved objects split into thousands of records,
+            // each lookup in it asking all of them. A large cluster is still
+            // cut by a small surface's plane: a lamp's low sides bound its
+            // footprint on the ceiling, which is then buried (§2).
+            const bool ci_large = ci < 64 && planes[ci].ok && planes[ci].separates;
+            if (!pl.separates && !ci_large) continue;
             // A surface of the same orientation (as clustering judges it)
             // is the same sheet continued, e.g. where two objects of one
             // curved surface meet: nothing to separate.
@@ -504,7 +555,7 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
     const size_t ncl = clusters.size();
     Plane planes[64];
     const bool do_cut = P.cut && ncl > 1;
-    if (do_cut) cutting_planes(clusters, planes);
+    if (do_cut) cutting_planes(clusters, cell, planes, cs);
     auto& parts = S.parts;
     S.pool.clear();
     for (size_t ci = 0; ci < ncl; ++ci) {
@@ -577,6 +628,7 @@ std::vector<std::vector<VoxelRecord>> cell_records(const double* tris, const int
         st.cut_clusters += cs.cut_clusters;
         st.cut_records += cs.cut_records;
         st.cut_limit_hits += cs.cut_limit;
+        st.cut_small_planes += cs.cut_small;
         st.polygon_overflows += cs.overflows;
         rec_bytes += out[ch].capacity() * sizeof(VoxelRecord);
     }

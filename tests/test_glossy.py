@@ -141,6 +141,34 @@ def test_plastic_records_carry_its_hemispherical_albedo():
     assert 0.6 < vox.albedo[front][0, 0] < 0.7
 
 
+def test_a_lobe_shared_by_many_objects_is_integrated_once(monkeypatch):
+    # A loaded interior gives hundreds of objects a few distinct lobes (the
+    # wooden staircase: 337 plastic objects, 7 lobes); each lobe's tables
+    # take about 0.4 s of facet integrals, so they are computed once per
+    # lobe, not once per object. Recomputed per object, 30 objects call the
+    # integral 90 times.
+    from voxgi import microfacet
+
+    calls = []
+    integral = microfacet._reflectance
+    monkeypatch.setattr(
+        microfacet, "_reflectance", lambda *a, **k: calls.append(a) or integral(*a, **k)
+    )
+    lobe = Microfacet("plastic", alpha=0.123, ior=1.37)  # a lobe no other test caches
+    cam = Camera(eye=(0.0, 1.0, 2.0), target=(0.0, 0.0, 0.0), width=8, height=8)
+    sc = Scene(cam)
+    for i in range(30):
+        x = -3.0 + 0.2 * i
+        v = [[x, 0, -1], [x + 0.15, 0, -1], [x + 0.15, 0, 1], [x, 0, 1]]
+        sc.add(
+            trimesh.Trimesh(v, [[0, 2, 1], [0, 3, 2]], process=False), Material(0.6, specular=lobe)
+        )
+    vox = voxgi.voxelize(sc, resolution=16)
+    assert len(calls) <= 3  # coat transmittance, internal reflectance, coat albedo
+    front = ~np.asarray(vox.back)
+    np.testing.assert_allclose(vox.albedo[front][:, 0], lobe.solve_albedo([0.6] * 3)[0], rtol=1e-6)
+
+
 def _patch_over_a_floor(floor: Material, rho: float) -> Scene:
     """A small vertical diffuse patch of albedo rho just above a wide floor,
     under a uniform sky of radiance 1, seen face on."""

@@ -440,6 +440,66 @@ def test_a_surface_under_a_closed_object_is_buried():
     assert shadow.emission[~shadow.back].max() > 0
 
 
+def _room_with_a_flat_lamp(pitch_share=0.5, height_share=0.1):
+    """A floor and a ceiling 1 apart and a closed flat box (a lamp) against
+    the ceiling, centred in a voxel of the 16-voxel grid, pitch_share of a
+    voxel wide and height_share of one tall; and the lamp's footprint area."""
+    floor = quad([[0, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]])  # normal +y
+    ceiling = quad([[0, 1, 0], [1, 1, 0], [1, 1, 1], [0, 1, 1]])  # normal -y
+    probe = voxgi.voxelize(scene_of(floor, ceiling), 16, progress=False)
+    p = probe.pitch
+    centre = probe.origin[[0, 2]] + (np.floor((0.5 - probe.origin[[0, 2]]) / p) + 0.5) * p
+    w, h = pitch_share * p, height_share * p
+    lamp = trimesh.creation.box(extents=[w, h, w])
+    lamp.apply_translation([centre[0], 1.0 - h / 2, centre[1]])
+    lamp = trimesh.Trimesh(lamp.vertices, lamp.faces, process=False)
+    return scene_of(floor, ceiling, lamp), w * w
+
+
+def test_the_footprint_of_a_flat_lamp_on_the_ceiling_is_buried_alone():
+    # The lamp's low sides cover a twentieth of the voxel's section by
+    # their planes, too little to part the voxel, but they bound the
+    # lamp's footprint on the ceiling: the ceiling is still cut by them, so
+    # that exactly the footprint is made black. Left uncut, the ceiling's
+    # one record in that voxel has its centroid under the lamp, and the
+    # whole voxel's ceiling (four times the footprint) turns black.
+    scene, footprint = _room_with_a_flat_lamp()
+    vox = voxgi.voxelize(scene, 16, progress=False)
+    ceiling = front(vox) & (vox.object_id == 1)
+    black = ceiling & np.all(vox.albedo == 0, axis=1)
+    assert black.sum() >= 1
+    assert vox.area[black].sum(dtype=np.float64) == pytest.approx(footprint, rel=1e-5)
+    assert vox.area[ceiling].sum(dtype=np.float64) == pytest.approx(1.0, rel=1e-5)
+
+
+def test_small_objects_in_one_voxel_do_not_split_each_other():
+    # Six small two-sided balls (a fifth of a voxel across, 320 facets
+    # each) in one voxel: their facets cover too small a share of the
+    # voxel to part it, so they do not cut one another, and each keeps one
+    # record per orientation and side (20 a ball). Cut by each other's
+    # planes they made 328 to 700 records a ball, 2958 in the voxel (a
+    # lookup there asks every record).
+    p = 1.0 / 16
+    rng = np.random.default_rng(3)
+    floor = quad([[0, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]])
+    balls = []
+    for k in range(6):
+        b = trimesh.creation.icosphere(subdivisions=2, radius=0.1 * p)
+        b.apply_translation([0.5 + 0.25 * p * rng.uniform(-1, 1), 0.5, 0.5 + 0.25 * p * (k % 2)])
+        balls.append(b)
+    scene = scene_of(floor, *balls, two_sided=True)
+    vox = voxgi.voxelize(scene, 16, progress=False)
+    on_balls = vox.object_id > 0
+    assert vox.stats["cut_small_planes"] > 0
+    assert len(np.unique(vox.ijk[on_balls], axis=0)) == 1
+    # a ball's facets fall into ten orientation clusters of 60 degrees, two sides each
+    per_ball = np.bincount(vox.object_id[on_balls])[1:]
+    assert per_ball.max() <= 2 * 12, per_ball
+    for o in range(1, 7):
+        got = vox.area[front(vox) & (vox.object_id == o)].sum(dtype=np.float64)
+        assert got == pytest.approx(scene.objects[o].area(), rel=1e-5)
+
+
 def test_inside_test_near_corners_and_edges_is_exact_and_repeatable():
     # Points a thousandth in and out of a cube's corners, edge midpoints and
     # face centres, where rays run close to edges: the answer is |x|_inf <

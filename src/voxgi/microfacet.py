@@ -167,30 +167,20 @@ class Microfacet:
         """(64,) the rough coat's transmittance at cos θ = i / 63: the light
         refracted into it that its facets do not mask (the table Mitsuba's
         roughplastic interpolates)."""
-        mu = np.maximum(1e-6, np.linspace(0.0, 1.0, _COAT_SAMPLES))
-        return _reflectance(self.distribution, self.alpha, mu, ("dielectric", self.ior), True)
+        return _coat_transmittance(self).copy()
 
     def internal_reflectance(self) -> float:
         """The coat's reflectance of the base's light from inside, as
         Mitsuba's roughplastic computes it (twice the mean over the table's
         cosines of the reflectance times the cosine)."""
-        mu = np.maximum(1e-6, np.linspace(0.0, 1.0, _COAT_SAMPLES))
-        r = _reflectance(self.distribution, self.alpha, mu, ("dielectric", 1.0 / self.ior))
-        return float(2.0 * np.mean(r * mu))
+        return _internal_reflectance(self)
 
     def _plastic_albedo_terms(self) -> tuple[np.ndarray, float]:
         """(S, c): a plastic's hemispherical reflectance under uniform light
         is S + c g(rd), S (3,) its coat's and c g(rd) its base's, with
         g(rd) = rd / (1 - Fdr) (or rd / (1 - Fdr rd), nonlinear)."""
-        x, w = np.polynomial.legendre.leggauss(48)
-        mu, w = 0.5 * (x + 1.0), 0.5 * w
-        fres = ("dielectric", self.ior)
-        r = _reflectance(self.distribution, self.alpha, mu, fres)
-        s = float(np.sum(2.0 * w * mu * r)) * np.asarray(self.specular_reflectance)
-        # the base's light: (2 ∫ t(μ) μ dμ)² / eta², t interpolated as Mitsuba does
-        t = np.interp(mu, np.linspace(0.0, 1.0, _COAT_SAMPLES), self.coat_transmittance())
-        c = float(np.sum(2.0 * w * mu * t)) ** 2 / self.ior**2
-        return s, c
+        s, c = _plastic_albedo_terms(self)
+        return s.copy(), c
 
     def solve_albedo(self, base) -> np.ndarray:
         """The hemispherical reflectance under uniform light of a plastic of
@@ -208,19 +198,60 @@ class Microfacet:
         """The specular term's hemispherical reflectance under uniform
         light, per channel (the albedo a conductor's records carry in the
         diffuse solve)."""
-        x, w = np.polynomial.legendre.leggauss(48)
-        mu, w = 0.5 * (x + 1.0), 0.5 * w
-        out = []
-        for c in range(3):
-            fres = ("conductor", self.eta[c], self.k[c])
-            r = _reflectance(self.distribution, self.alpha, mu, fres)
-            out.append(float(np.sum(2.0 * w * mu * r)) * self.specular_reflectance[c])
-        return tuple(out)
+        return _conductor_albedo(self)
+
+
+# The lobe's tables are integrals over thousands of facet samples (a
+# plastic's, about 0.4 s); a loaded interior gives hundreds of objects a
+# few distinct lobes, so each lobe's are computed once. Cached arrays are
+# read-only and handed out as copies.
 
 
 @functools.lru_cache(maxsize=1024)
 def _lobe_row(lobe: Microfacet) -> np.ndarray:
     return lobe._row()
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+@functools.lru_cache(maxsize=1024)
+def _coat_transmittance(lobe: Microfacet) -> np.ndarray:
+    mu = np.maximum(1e-6, np.linspace(0.0, 1.0, _COAT_SAMPLES))
+    return _frozen(_reflectance(lobe.distribution, lobe.alpha, mu, ("dielectric", lobe.ior), True))
+
+
+@functools.lru_cache(maxsize=1024)
+def _internal_reflectance(lobe: Microfacet) -> float:
+    mu = np.maximum(1e-6, np.linspace(0.0, 1.0, _COAT_SAMPLES))
+    r = _reflectance(lobe.distribution, lobe.alpha, mu, ("dielectric", 1.0 / lobe.ior))
+    return float(2.0 * np.mean(r * mu))
+
+
+@functools.lru_cache(maxsize=1024)
+def _plastic_albedo_terms(lobe: Microfacet) -> tuple[np.ndarray, float]:
+    x, w = np.polynomial.legendre.leggauss(48)
+    mu, w = 0.5 * (x + 1.0), 0.5 * w
+    r = _reflectance(lobe.distribution, lobe.alpha, mu, ("dielectric", lobe.ior))
+    s = float(np.sum(2.0 * w * mu * r)) * np.asarray(lobe.specular_reflectance, np.float64)
+    # the base's light: (2 ∫ t(μ) μ dμ)² / eta², t interpolated as Mitsuba does
+    t = np.interp(mu, np.linspace(0.0, 1.0, _COAT_SAMPLES), _coat_transmittance(lobe))
+    c = float(np.sum(2.0 * w * mu * t)) ** 2 / lobe.ior**2
+    return _frozen(s), c
+
+
+@functools.lru_cache(maxsize=1024)
+def _conductor_albedo(lobe: Microfacet) -> tuple[float, float, float]:
+    x, w = np.polynomial.legendre.leggauss(48)
+    mu, w = 0.5 * (x + 1.0), 0.5 * w
+    out = []
+    for c in range(3):
+        fres = ("conductor", lobe.eta[c], lobe.k[c])
+        r = _reflectance(lobe.distribution, lobe.alpha, mu, fres)
+        out.append(float(np.sum(2.0 * w * mu * r)) * lobe.specular_reflectance[c])
+    return tuple(out)
 
 
 def _smith_g1(dist: str, alpha: float, cv: np.ndarray, vm: np.ndarray) -> np.ndarray:

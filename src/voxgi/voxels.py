@@ -322,6 +322,7 @@ def _voxelize_stats(
         "cut_clusters": int(st["cut_clusters"]),
         "cut_records": int(st["cut_records"]),
         "cut_limit_hits": int(st["cut_limit_hits"]),
+        "cut_small_planes": int(st["cut_small_planes"]),
         "polygon_overflows": int(st["polygon_overflows"]),
         "peak_bytes": int(st["peak_bytes"] + triangles.nbytes),
         "estimate_bytes": est["bytes"],
