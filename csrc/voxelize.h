@@ -81,6 +81,9 @@ constexpr int kMaxCuts = 20;
 // cluster covers at least this share of the voxel's section by that plane
 // (docs/design.md §2, junction cutting).
 constexpr double kSeparatingShare = 0.25;
+// A small cluster's plane cuts a large cluster only where one of its pieces
+// comes this close to the large cluster's plane (voxel units).
+constexpr double kTouch = 0.05;
 
 // Voxelize `n_tris` triangles.
 //   tris        (n_tris, 3, 3) world corner positions, C order

@@ -464,6 +464,19 @@ void cutting_planes(const std::vector<Cluster>& clusters, const int64_t* cell, P
     }
 }
 
+// Whether a piece of cluster q comes within kTouch voxel units of plane pl.
+bool touches(const Scratch& S, size_t q, const Plane& pl) {
+    for (int k = S.cl_start[q]; k < S.cl_start[q + 1]; ++k) {
+        const Piece& pc = S.pieces[S.cl_items[k]];
+        const PolyView pv{
+            reinterpret_cast<const double (*)[3]>(S.verts.data() + 3 * size_t(pc.v_off)), pc.v_n};
+        double mn, mx;
+        signed_range(pv, pl.n, pl.off, mn, mx);
+        if (mn <= kTouch && mx >= -kTouch) return true;
+    }
+    return false;
+}
+
 // Cut the parts of cluster ci (S.parts) by the planes of the other clusters
 // that they straddle; each part's sig gets one bit per cut (its side).
 // Returns the cuts made.
@@ -489,6 +502,9 @@ int cut_cluster(const Context& ctx, size_t ci, size_t ncl, const Plane* planes, 
             // footprint on the ceiling, which is then buried (§2).
             const bool ci_large = ci < 64 && planes[ci].ok && planes[ci].separates;
             if (!pl.separates && !ci_large) continue;
+            // and only where the small surface meets it: a trinket
+            // standing clear of a wall bounds nothing on it.
+            if (!pl.separates && !touches(S, sj, planes[ci])) continue;
             // A surface of the same orientation (as clustering judges it)
             // is the same sheet continued, e.g. where two objects of one
             // curved surface meet: nothing to separate.

@@ -500,6 +500,27 @@ def test_small_objects_in_one_voxel_do_not_split_each_other():
         assert got == pytest.approx(scene.objects[o].area(), rel=1e-5)
 
 
+def test_a_small_object_clear_of_the_floor_does_not_cut_it():
+    # A small ball in a floor voxel, clear of the floor: its facets' planes
+    # bound nothing on the floor, so the floor keeps one record there. Cut
+    # by them (as a touching object's sides cut it, to bound its
+    # footprint), that voxel's floor came out in 31 records.
+    floor = quad([[0, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]])
+    probe = voxgi.voxelize(scene_of(floor, quad([[0, 1, 0], [1, 1, 0], [1, 1, 1], [0, 1, 1]])), 16)
+    p, o = probe.pitch, probe.origin
+    ijk = np.floor((np.array([0.5, 0.0, 0.5]) - o) / p).astype(int)
+    top = o[1] + (ijk[1] + 1) * p  # the floor voxel's top face
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=0.1 * p)
+    centre = o + (ijk + 0.5) * p
+    ball.apply_translation([centre[0], top - 0.15 * p, centre[2]])
+    ceiling = quad([[0, 1, 0], [1, 1, 0], [1, 1, 1], [0, 1, 1]])
+    vox = voxgi.voxelize(scene_of(floor, ceiling, ball, two_sided=True), 16, progress=False)
+    assert top - 0.25 * p > 0.0  # the ball is clear of the floor, in the floor's voxel
+    here = np.all(vox.ijk == ijk, axis=1)
+    assert np.any(here & (vox.object_id == 2))
+    assert np.count_nonzero(here & front(vox) & (vox.object_id == 0)) == 1
+
+
 def test_inside_test_near_corners_and_edges_is_exact_and_repeatable():
     # Points a thousandth in and out of a cube's corners, edge midpoints and
     # face centres, where rays run close to edges: the answer is |x|_inf <
