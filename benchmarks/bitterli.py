@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 import voxgi
-from voxgi.compare import compare
+from voxgi.compare import SWEEP_TOL, compare
 from voxgi.metrics import rel_mse
 
 SCENES_DIR = Path("/work/scenes")
@@ -225,6 +225,7 @@ def summary(name: str, scene: voxgi.Scene, res) -> dict:
         else {k: den[k] for k in ("rel_mse", "rel_mse_net", "ssim", "flip", "seconds", "frames")},
         "reference_noise": res.reference_noise,
         "time_to": {m: {str(k): best(m, k) for k in t} for m, t in res.time_to.items()},
+        "sweep_voxgi": res.sweep_voxgi,
         "rows": res.rows,
     }
 
@@ -237,8 +238,9 @@ def print_table(rows: list[dict]) -> None:
     print(
         "| scene | tris | voxgi relMSE (net) | SSIM | brightness R/G/B"
         " | voxgi s (vox/solve/display)"
-        " | Mitsuba s to voxgi's relMSE: plain / +OIDN | to 5e-3: plain / +OIDN"
-        " | to 1e-3: plain / +OIDN | ref noise |"
+        " | Mitsuba s to voxgi's relMSE: plain / +OIDN"
+        " | s to 5e-3: voxgi / Mitsuba / +OIDN | s to 1e-3: voxgi / Mitsuba / +OIDN"
+        " | ref noise |"
         + (
             " voxgi+OIDN net relMSE, SSIM, s; Mitsuba+OIDN s to it |"
             if any(r.get("voxgi_oidn") for r in rows)
@@ -261,7 +263,8 @@ def print_table(rows: list[dict]) -> None:
         for key in ("voxgi", str(5e-3), str(1e-3)):
             plain = t.get("mitsuba", {}).get(key)
             den = t.get("mitsuba+oidn", {}).get(key)
-            cells.append(f"{_fmt(plain)} / {_fmt(den)}")
+            own = "" if key == "voxgi" else f"{_fmt(t.get('voxgi', {}).get(key))} / "
+            cells.append(f"{own}{_fmt(plain)} / {_fmt(den)}")
         cells.append(f"{r['reference_noise']:.1e}")
         den = r.get("voxgi_oidn")
         if den is not None:
@@ -290,6 +293,14 @@ def main(argv=None) -> int:
     )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument(
+        "--sweep-tol",
+        type=float,
+        nargs="*",
+        default=list(SWEEP_TOL),
+        help="display tolerances, looser than the default, at which voxgi's solution is "
+        "shown again for its time to each target",
+    )
+    ap.add_argument(
         "--pictures",
         type=Path,
         default=None,
@@ -316,6 +327,7 @@ def main(argv=None) -> int:
             denoise=not args.no_denoise,
             seed=args.seed,
             voxgi_denoise=args.voxgi_denoise,
+            sweep_tol=args.sweep_tol,
         )
         print(res.table(), flush=True)
         rows.append(summary(name, scene, res) | {"reference_spp": info["spp"]})

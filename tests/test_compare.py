@@ -11,7 +11,7 @@ import trimesh
 
 import voxgi
 from voxgi import cli
-from voxgi.compare import _non_emitter_mask, _seconds_to, compare
+from voxgi.compare import _comparison, _non_emitter_mask, _seconds_to, compare
 
 
 def test_seconds_to_an_error_interpolates_in_log_log():
@@ -22,6 +22,37 @@ def test_seconds_to_an_error_interpolates_in_log_log():
     assert _seconds_to(0.1, sweep) == 1.0  # reached by the first render
     # a render whose error, less the reference's noise, is nil: its time bounds it
     assert _seconds_to(1e-4, [(1, 1.0, 1e-2), (2, 10.0, 0.0)]) == 10.0
+
+
+def test_voxgis_time_to_a_target_is_interpolated_over_its_tolerances():
+    # voxgi's default run (tol 1e-3) takes 10 s to relMSE 1e-3; shown at tol
+    # 1e-2 the same solution took 2 s to 8e-3: the time to 5e-3 lies between
+    # them in log-log, as Mitsuba's does between two sample counts, not the
+    # whole run's 10 s
+    row = {"method": "voxgi", "rel_mse_net": 1e-3, "seconds": 10.0}
+    sweeps = {"voxgi": [(1e-2, 2.0, 8e-3), (1e-3, 10.0, 1e-3)], "mitsuba": []}
+    res = _comparison([row], None, None, 0.0, sweeps)
+    f = np.log(8e-3 / 5e-3) / np.log(8e-3 / 1e-3)
+    assert res.time_to["voxgi"][5e-3] == pytest.approx(2.0 * 5.0**f)
+    assert res.time_to["voxgi"][5e-3] < 4.0
+    assert res.time_to["voxgi"][1e-3] == pytest.approx(10.0)
+    assert res.sweep_voxgi == sweeps["voxgi"]
+
+
+def test_voxgis_looser_tolerances_show_the_same_solution_sooner():
+    pytest.importorskip("mitsuba")
+    scene = voxgi.scenes.cornell_box(48)
+    res = compare(scene, spp=16, sweep_spp=(4,), resolution=16, denoise=False, sweep_tol=(3e-2,))
+    default, loose = (r for r in res.rows if r["method"] == "voxgi")
+    assert (default["tol"], loose["tol"]) == (1e-3, 3e-2)
+    assert loose["frames"] < default["frames"]
+    solved = default["phases"]["voxelize"] + default["phases"]["solve"]
+    assert solved < loose["seconds"] < default["seconds"]
+    assert res.sweep_voxgi == [
+        (3e-2, loose["seconds"], loose["rel_mse_net"]),
+        (1e-3, default["seconds"], default["rel_mse_net"]),
+    ]
+    assert "voxgi to relMSE 5e-03" in res.table()
 
 
 def test_normals_are_turned_to_face_the_camera():

@@ -37,6 +37,11 @@ TARGETS = (5e-3, 1e-3)
 #: Mitsuba's sample counts, in order (the sweep stops once every target is met).
 SWEEP_SPP = (4, 16, 64, 256, 1024)
 
+#: Display tolerances looser than the default at which :func:`compare` shows
+#: voxgi's solution again, so that its time to each target is measured the
+#: way Mitsuba's is (a user who wants 5e-3 sets ``tol``, as one sets ``spp``).
+SWEEP_TOL = (1e-2, 3e-3)
+
 
 @dataclass
 class Comparison:
@@ -60,13 +65,18 @@ class Comparison:
     sweep_denoised : list of (spp, seconds, rel_mse_net)
         Mitsuba's denoised renders (render with AOVs plus OIDN), empty when
         not asked for.
+    sweep_voxgi : list of (tol, seconds, rel_mse_net)
+        voxgi's solution displayed at each of the looser tolerances asked
+        for and at the default (last); each one's seconds are its display's
+        plus the voxelize and solve of the default run.
     time_to : dict
         ``{method: {target: seconds or None}}`` for ``"mitsuba"`` and
         ``"mitsuba+oidn"``, targets ``"voxgi"`` (voxgi's own net relMSE; and
         ``"voxgi+oidn"``'s with ``voxgi_denoise``) and each of
         :data:`TARGETS`; None where the sweep did not reach it. ``"voxgi"``
-        (and ``"voxgi+oidn"``) has each of :data:`TARGETS`: its seconds where
-        its net relMSE meets it (an upper bound), else None.
+        has each of :data:`TARGETS`, interpolated alike over ``sweep_voxgi``;
+        ``"voxgi+oidn"`` its run's seconds where its net relMSE meets it (an
+        upper bound), else None.
     reference_noise : float
         The reference's own relMSE: a quarter of the relMSE between its two
         halves.
@@ -81,6 +91,7 @@ class Comparison:
     sweep_denoised: list
     time_to: dict
     reference_noise: float
+    sweep_voxgi: list = field(default_factory=list)
     files: dict = field(default_factory=dict)
 
     @property
@@ -91,16 +102,17 @@ class Comparison:
     def table(self) -> str:
         """The rows as an aligned text table, then the times to each target."""
         head = (
-            f"{'method':<13} {'spp':>6} {'seconds':>9} {'relMSE':>10} {'net':>10} "
+            f"{'method':<13} {'spp/tol':>7} {'seconds':>9} {'relMSE':>10} {'net':>10} "
             f"{'SSIM':>6} {'FLIP':>6}  brightness (R, G, B)"
         )
         lines = [head, "-" * len(head)]
         for r in self.rows:
-            spp = "" if r["spp"] is None else str(r["spp"])
+            spp = f"{r['tol']:.0e}" if r.get("tol") else str(r["spp"] or "")
+
             b = ", ".join(f"{x:.4f}" for x in r["brightness"])
             fl = "" if r["flip"] is None else f"{r['flip']:.4f}"
             lines.append(
-                f"{r['method']:<13} {spp:>6} {r['seconds']:9.2f} {r['rel_mse']:10.3e} "
+                f"{r['method']:<13} {spp:>7} {r['seconds']:9.2f} {r['rel_mse']:10.3e} "
                 f"{r['rel_mse_net']:10.3e} {r['ssim']:6.4f} {fl:>6}  ({b})"
             )
         v = self.rows[0]
@@ -114,7 +126,7 @@ class Comparison:
             for target, t in times.items():
                 what = f"{target}'s relMSE" if isinstance(target, str) else f"relMSE {target:.0e}"
                 parts.append(f"{what}: " + ("not reached" if t is None else f"{t:.3g} s"))
-            how = "(its run)" if method.startswith("voxgi") else "(interpolated)"
+            how = "(its run)" if method == "voxgi+oidn" else "(interpolated)"
             lines.append(f"{method} to " + "; ".join(parts) + " " + how)
         lines.append(
             f"reference noise (estimated relMSE, subtracted as net): {self.reference_noise:.2e}"
@@ -197,6 +209,7 @@ def compare(
     plot: bool = False,
     progress: bool = False,
     variant: str | None = None,
+    sweep_tol=SWEEP_TOL,
     voxgi_denoise: bool = False,
 ) -> Comparison:
     """Render ``scene`` with voxgi's defaults and with Mitsuba 3, and compare.
@@ -230,11 +243,15 @@ def compare(
         (``|voxgi − reference|``, tone-mapped) and, with ``plot``,
         ``time_vs_error.png``.
     plot : bool
-        Also plot relMSE against time (matplotlib); voxgi's curve comes from
-        extra renders at looser tolerances of the same solution.
+        Also plot relMSE against time (matplotlib): voxgi's ``sweep_voxgi``,
+        Mitsuba's sweeps.
     progress : bool
     variant : str or None
         Mitsuba variant (None: ``llvm_ad_rgb`` where it works).
+    sweep_tol : sequence of float
+        Display tolerances, looser than the default, at which voxgi's
+        solution is shown again for its time to each target (``()``: its
+        default run's seconds alone, an upper bound).
     voxgi_denoise : bool
         Also display voxgi's solution denoised (``RenderTuning(denoise=True)``,
         needs ``mitsuba-oidn``): the row ``"voxgi+oidn"``, its seconds those of
@@ -255,6 +272,7 @@ def compare(
     spp, counts, cam, mi = _checked(
         scene, spp, sweep_spp, width, height, variant, denoise or voxgi_denoise
     )
+    tols = _checked_tols(sweep_tol)
     out, t_voxgi = _render_voxgi(scene, cam, resolution, seed, threads, progress)
     plain = mi.load_dict(to_mitsuba(scene, spp=1, camera=cam))
     ref, ref_noise, ref_seconds = _reference(mi, plain, spp, reference, out.image.shape)
@@ -264,29 +282,85 @@ def compare(
         den, t_den = _voxgi_denoised(scene, out, cam, seed, threads, progress)
         rows.append(_voxgi_denoised_row(den, t_den, rows[0]["phases"], ref, ref_noise, mask))
     goal = min(*(r["rel_mse_net"] for r in rows), *TARGETS)
-    sweeps = _sweeps(mi, plain, scene, cam, counts, denoise, goal, ref, ref_noise, mask, rows)
+    sweeps = {
+        "voxgi": _voxgi_sweep(scene, out, cam, seed, threads, tols, ref, ref_noise, mask, rows)
+    }
+    sweeps |= _sweeps(mi, plain, scene, cam, counts, denoise, goal, ref, ref_noise, mask, rows)
     rows.append(_reference_row(spp if reference is None else None, ref_seconds, ref_noise))
-    result = _comparison(rows, out.image, ref, ref_noise, sweeps, t_voxgi)
+    result = _comparison(rows, out.image, ref, ref_noise, sweeps)
     if out_dir is not None:
-        result.files = _write(result, Path(out_dir), out, plot, scene, cam, seed, threads)
+        result.files = _write(result, Path(out_dir), out, plot)
     return result
 
 
-def _comparison(rows, img, ref, ref_noise: float, sweeps: dict, t_voxgi: float) -> Comparison:
+def _comparison(rows, img, ref, ref_noise: float, sweeps: dict) -> Comparison:
     """The :class:`Comparison` of the rows and sweeps, with each method's time to each target."""
-    own = {r["method"]: r["rel_mse_net"] for r in rows if r["method"].startswith("voxgi")}
-    targets = {**own, **{t: t for t in TARGETS}}
-    time_to = {m: {k: _seconds_to(e, sw) for k, e in targets.items()} for m, sw in sweeps.items()}
-    # voxgi's renders as they stand: their time where they meet a target
-    # (an upper bound: fewer frames might do), None where they do not
+    # each voxgi method's own error is that of its run at the defaults (its
+    # first row; the looser tolerances follow it)
+    own = {}
     for r in rows:
         if r["method"].startswith("voxgi"):
+            own.setdefault(r["method"], r["rel_mse_net"])
+    targets = {**own, **{t: t for t in TARGETS}}
+    time_to = {
+        m: {k: _seconds_to(e, sw) for k, e in targets.items()}
+        for m, sw in sweeps.items()
+        if m != "voxgi"
+    }
+    time_to["voxgi"] = {t: _seconds_to(t, sweeps["voxgi"]) for t in TARGETS}
+    # the denoised display as it stands: its time where it meets a target
+    # (an upper bound: fewer frames might do), None where it does not
+    for r in rows:
+        if r["method"] == "voxgi+oidn":
             time_to[r["method"]] = {
                 t: (r["seconds"] if r["rel_mse_net"] <= t else None) for t in TARGETS
             }
     return Comparison(
-        rows, img, ref, sweeps["mitsuba"], sweeps.get("mitsuba+oidn", []), time_to, ref_noise
+        rows,
+        img,
+        ref,
+        sweeps["mitsuba"],
+        sweeps.get("mitsuba+oidn", []),
+        time_to,
+        ref_noise,
+        sweep_voxgi=sweeps["voxgi"],
     )
+
+
+def _checked_tols(sweep_tol) -> tuple[float, ...]:
+    """``sweep_tol`` as positive finite floats, loosest first."""
+    try:
+        tols = [float(t) for t in sweep_tol]
+    except (TypeError, ValueError):
+        raise TypeError(f"sweep_tol: expected a sequence of numbers, got {sweep_tol!r}") from None
+    for t in tols:
+        if not (math.isfinite(t) and t > 0):
+            raise ValueError(f"sweep_tol: each tolerance must be finite and > 0, got {t!r}")
+    return tuple(sorted(set(tols), reverse=True))
+
+
+def _voxgi_sweep(scene, out, cam, seed, threads, tols, ref, ref_noise: float, mask, rows) -> list:
+    """voxgi's solution of ``out`` displayed at each of ``tols`` looser than the
+    default's, then the default run itself: ``[(tol, seconds, rel_mse_net), ...]``.
+
+    Each display's seconds count the default run's voxelize and solve, as a
+    run at that tolerance would; rows of the displays are appended to ``rows``.
+    """
+    v = rows[0]
+    default_tol = float(out.stats["tol"])
+    v["tol"] = default_tol
+    before = v["phases"]["voxelize"] + v["phases"]["solve"]
+    sweep = []
+    for tol in tols:
+        if tol <= default_tol:
+            continue
+        t = time.perf_counter()
+        r = pipeline_render(scene, out.solution, camera=cam, tol=tol, seed=seed, threads=threads)
+        row = _row("voxgi", None, before + time.perf_counter() - t, r.image, ref, ref_noise, mask)
+        row["tol"], row["frames"] = tol, r.frames
+        rows.append(row)
+        sweep.append((tol, row["seconds"], row["rel_mse_net"]))
+    return [*sweep, (default_tol, v["seconds"], v["rel_mse_net"])]
 
 
 def _checked(scene, spp, sweep_spp, width, height, variant, denoise):
@@ -456,7 +530,7 @@ def _row(method: str, spp, seconds: float, img, ref, ref_noise: float, mask) -> 
     }
 
 
-def _write(result: Comparison, out_dir: Path, out, plot, scene, cam, seed, threads) -> dict:
+def _write(result: Comparison, out_dir: Path, out, plot) -> dict:
     """The EXRs, the difference PNG and, with ``plot``, the time-error plot."""
     from .io import write_exr, write_png
 
@@ -469,35 +543,27 @@ def _write(result: Comparison, out_dir: Path, out, plot, scene, cam, seed, threa
         ),
     }
     if plot:
-        files["plot"] = _plot(result, out_dir / "time_vs_error.png", out, scene, cam, seed, threads)
+        files["plot"] = _plot(result, out_dir / "time_vs_error.png")
     return {k: str(v) for k, v in files.items()}
 
 
-def _plot(result: Comparison, path: Path, out, scene, cam, seed, threads) -> Path:
-    """relMSE against seconds: Mitsuba's sweep, and voxgi's solution displayed
-    at a few tolerances (its solve time added to each)."""
+def _plot(result: Comparison, path: Path) -> Path:
+    """relMSE against seconds: voxgi's tolerances and Mitsuba's sweeps."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from .io import atomic_path
-    from .pipeline import render
 
-    secs = out.stats["seconds"]
-    solve_t = secs.get("voxelize", 0.0) + secs.get("solve", 0.0)
-    pts = []
-    for tol in (1e-2, 3e-3, 1e-3, 3e-4):
-        t = time.perf_counter()
-        r = render(
-            scene, out.solution, camera=cam, tol=tol, seed=seed, threads=threads, progress=False
-        )
-        pts.append((solve_t + time.perf_counter() - t, rel_mse(r.image, result.reference)))
     fig, ax = plt.subplots(figsize=(5, 4))
-    ax.loglog(*zip(*pts, strict=True), "o-", label="voxgi (tol 1e-2 .. 3e-4)")
-    for sweep, label in ((result.sweep, "Mitsuba"), (result.sweep_denoised, "Mitsuba + OIDN")):
+    for sweep, label, mark in (
+        (result.sweep_voxgi, "voxgi (display tolerances)", "o-"),
+        (result.sweep, "Mitsuba", "s-"),
+        (result.sweep_denoised, "Mitsuba + OIDN", "s-"),
+    ):
         if sweep:
-            ax.loglog([s[1] for s in sweep], [s[2] for s in sweep], "s-", label=label)
+            ax.loglog([s[1] for s in sweep], [max(s[2], 1e-12) for s in sweep], mark, label=label)
     ax.set_xlabel("seconds")
     ax.set_ylabel("relMSE against the reference")
     ax.legend()
