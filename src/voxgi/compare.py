@@ -189,7 +189,9 @@ def _seconds_to(err: float, sweep: list) -> float | None:
         if e0 >= err and e1 <= 0:
             return t1  # (below the reference's own noise: no slope to follow)
     if sweep and sweep[0][2] <= err:
-        return sweep[0][1]
+        # the first render meets it already: the quickest render that does
+        # (voxgi's looser tolerances may show the same frames as its default)
+        return min(t for _s, t, e in sweep if e <= err)
     return None
 
 
