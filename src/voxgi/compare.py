@@ -108,7 +108,6 @@ class Comparison:
         lines = [head, "-" * len(head)]
         for r in self.rows:
             spp = f"{r['tol']:.0e}" if r.get("tol") else str(r["spp"] or "")
-
             b = ", ".join(f"{x:.4f}" for x in r["brightness"])
             fl = "" if r["flip"] is None else f"{r['flip']:.4f}"
             lines.append(
@@ -291,7 +290,7 @@ def compare(
     rows.append(_reference_row(spp if reference is None else None, ref_seconds, ref_noise))
     result = _comparison(rows, out.image, ref, ref_noise, sweeps)
     if out_dir is not None:
-        result.files = _write(result, Path(out_dir), out, plot)
+        result.files = _write(result, Path(out_dir), plot)
     return result
 
 
@@ -532,7 +531,7 @@ def _row(method: str, spp, seconds: float, img, ref, ref_noise: float, mask) -> 
     }
 
 
-def _write(result: Comparison, out_dir: Path, out, plot) -> dict:
+def _write(result: Comparison, out_dir: Path, plot: bool) -> dict:
     """The EXRs, the difference PNG and, with ``plot``, the time-error plot."""
     from .io import write_exr, write_png
 
