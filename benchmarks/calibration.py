@@ -156,6 +156,7 @@ def main(argv: list[str] | None = None) -> int:
         "pixel_factor": voxgi.display.PIXEL_FACTOR,
         "commit": git_commit(),
         "cores": os.cpu_count(),
+        "threads": args.threads,
         "seeds": args.seeds,
         "small_width": args.small_width,
         "rows": rows,

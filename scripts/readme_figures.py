@@ -118,10 +118,13 @@ def _furnace_pixels() -> list[str]:
 def _calibration() -> list[str]:
     d = _load("calibration.json")
     ratios = [x["ratio"] for r in d["rows"] for x in r["seeds"]]
+    outside = sum(not 0.5 <= x <= 2.0 for x in ratios)
+    sizes = ", ".join(f"{r['scene']} {r['pixels'][0]}x{r['pixels'][1]}" for r in d["rows"])
     return [
         f"the display's own error estimate where it stops, {len(d['rows'])} scenes x "
-        f"{d['seeds']} seeds at {d['size']}x{d['size']}",
-        f"estimated over measured relMSE {min(ratios):.2f}-{max(ratios):.2f}",
+        f"{d['seeds']} seeds ({sizes})",
+        f"estimated over measured relMSE {min(ratios):.2f}-{max(ratios):.2f}, "
+        f"{outside} of {len(ratios)} outside 0.5-2",
         f"`python benchmarks/calibration.py --seeds {d['seeds']}`",
     ]
 
