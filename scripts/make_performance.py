@@ -779,7 +779,7 @@ def calibration() -> list[str]:
                 " ".join(str(s["frames"]) for s in r["seeds"]),
             ]
         )
-        width, height = r.get("pixels", [d["size"], d["size"]])
+        width, height = r["pixels"]
         for s in r["seeds"][:3]:
             first = s["seed"] == r["seeds"][0]["seed"]
             rows.append(
@@ -844,7 +844,7 @@ def calibration() -> list[str]:
             spread,
         ),
         "",
-        f"Where the display's time goes (the reference render on {d.get('threads', 1)} "
+        f"Where the display's time goes (the reference render on {d['threads']} "
         "threads, on a machine shared with other jobs: the milliseconds are not for "
         "comparison): the share of each phase, with rays per pixel and frame in "
         "parentheses. The compiled kernels shade each ray's hit as it is traced, so a "
@@ -863,8 +863,7 @@ def calibration() -> list[str]:
         ),
         "",
         source(
-            f"python benchmarks/calibration.py --seeds {d['seeds']} "
-            f"--threads {d.get('threads', 1)}",
+            f"python benchmarks/calibration.py --seeds {d['seeds']} --threads {d['threads']}",
             "calibration.json",
         ),
         "",

@@ -125,7 +125,7 @@ def _calibration() -> list[str]:
         f"{d['seeds']} seeds ({sizes})",
         f"estimated over measured relMSE {min(ratios):.2f}-{max(ratios):.2f}, "
         f"{outside} of {len(ratios)} outside 0.5-2",
-        f"`python benchmarks/calibration.py --seeds {d['seeds']}`",
+        f"`python benchmarks/calibration.py --seeds {d['seeds']} --threads {d['threads']}`",
     ]
 
 
