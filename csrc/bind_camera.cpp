@@ -158,6 +158,50 @@ py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const 
                           albedo);
 }
 
+py::tuple camera_emission_py(const F64& eye, const F64& right, const F64& up, const F64& forward,
+                             double tan_half_fov, int64_t width, int64_t height, double aperture,
+                             double focus, const I64& pixels, const F64& samples, const F64& tri_v,
+                             const F64& tri_ng, const std::optional<F64>& corner_normals,
+                             const I32& tri_object, const U8& obj_two_sided,
+                             const F32& obj_emission, const voxgi::RayScene& scene, int threads) {
+    const voxgi::PixelCamera cam =
+        make_camera(eye, right, up, forward, tan_half_fov, width, height, aperture, focus);
+    const voxgi::PrimaryScene sc =
+        make_primary_scene(tri_v, tri_ng, corner_normals, tri_object, obj_two_sided, obj_emission);
+    check_scene(scene, tri_v.shape(0));
+    check_1d(pixels, -1, "pixels");
+    check_2d(samples, -1, 4, "samples");
+    const py::ssize_t M = pixels.shape(0), K = samples.shape(0);
+    const int64_t* pp = pixels.data();
+    for (py::ssize_t m = 0; m < M; ++m)
+        if (pp[m] < 0 || pp[m] >= width * height)
+            throw py::value_error("pixels: pixel " + std::to_string(pp[m]) + " outside the " +
+                                  std::to_string(width) + "x" + std::to_string(height) + " image");
+    const double* ps = samples.data();
+    for (py::ssize_t k = 0; k < K; ++k) {
+        const double* s = ps + 4 * k;
+        if (!(s[0] >= 0.0 && s[0] <= 1.0 && s[1] >= 0.0 && s[1] <= 1.0))
+            throw py::value_error("samples: offset " + std::to_string(k) + " outside [0, 1]^2");
+        if (!(s[2] * s[2] + s[3] * s[3] <= 1.0 + 1e-9))
+            throw py::value_error("samples: lens point " + std::to_string(k) +
+                                  " outside the unit disc");
+    }
+    const py::ssize_t N = M * K;
+    F32 le({N, py::ssize_t(3)}), wo({N, py::ssize_t(3)});
+    I32 prim(N);
+    F32 through({scene.has_sheets() ? N : py::ssize_t(0), py::ssize_t(3)});
+    float* pt = scene.has_sheets() ? through.mutable_data() : nullptr;
+    float *pl = le.mutable_data(), *pw = wo.mutable_data();
+    int32_t* pr = prim.mutable_data();
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::camera_emission(cam, pp, M, ps, K, scene, sc, pl, pw, pr, pt, threads, stop);
+    }
+    return py::make_tuple(le, wo, prim,
+                          scene.has_sheets() ? py::object(through) : py::object(py::none()));
+}
+
 }  // namespace
 
 void bind_camera(py::module_& m) {
@@ -191,4 +235,19 @@ sheets the product of their transmittances before the hit (P, 3) float32
 where the textures (tex_texels, a list of (H, W, 3) uint8; tex_info (T, 12)
 float64: filter, wrap, raw, to_uv, factor; obj_texture (O,) int32, -1: none;
 corner_uv (F, 3, 2) float32) give the object one.)doc");
+
+    m.def("camera_emission", &camera_emission_py, "eye"_a.noconvert(), "right"_a.noconvert(),
+          "up"_a.noconvert(), "forward"_a.noconvert(), "tan_half_fov"_a, "width"_a, "height"_a,
+          "aperture"_a, "focus"_a, "pixels"_a.noconvert(), "samples"_a.noconvert(),
+          "tri_v"_a.noconvert(), "tri_ng"_a.noconvert(), "corner_normals"_a.noconvert(),
+          "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "obj_emission"_a.noconvert(),
+          "scene"_a, "threads"_a = 0,
+          R"doc(The emission seen by K camera samples through each of M pixels (pixels
+(M,) int64, row-major indices), the camera as in camera_hits; samples (K, 4)
+float64: the sub-pixel offset in [0, 1]^2 (x right, y down) and the lens
+point on the unit disc. Returns, at index m * K + k: the first hit's
+emission (M * K, 3) float32 (0 on a miss or a one-sided back), wo (the unit
+direction back to the eye) (M * K, 3) float32, the hit triangle (M * K,)
+int32 (-1: none) and, where the scene has sheets, what they let through
+before the hit (M * K, 3) float32 (None otherwise).)doc");
 }

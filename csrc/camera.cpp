@@ -73,4 +73,26 @@ void camera_hits(const PixelCamera& cam, const double offset[2], const double le
     for_each_chunked(cam.width * cam.height, 512, threads, stop, one_pixel);
 }
 
+void camera_emission(const PixelCamera& cam, const int64_t* pixels, int64_t count,
+                     const double* samples, int64_t K, const RayScene& scene,
+                     const PrimaryScene& triangles, float* emission, float* wo, int32_t* prim,
+                     float* through, int threads, const StopCheck& stop) {
+    auto one_sample = [&](int64_t i) {
+        const double* s = samples + 4 * (i % K);
+        double o[3], d[3], x[3];
+        camera_ray(cam, s, s + 2, pixels[i / K], o, d);
+        const float of[3] = {float(o[0]), float(o[1]), float(o[2])};
+        const float df[3] = {float(d[0]), float(d[1]), float(d[2])};
+        const int32_t t =
+            scene.intersect(of, df, nullptr, nullptr, nullptr, through ? through + 3 * i : nullptr);
+        prim[i] = t;
+        float ns[3], ng[3];
+        int32_t material;
+        primary_hit(o, d, t, triangles, x, ns, ng, &material, emission + 3 * i);
+        for (int c = 0; c < 3; ++c) wo[3 * i + c] = float(-d[c]);
+    };
+    // a pixel's samples are consecutive: coherent rays in a task
+    for_each_chunked(count * K, 512, threads, stop, one_sample);
+}
+
 }  // namespace voxgi

@@ -51,4 +51,17 @@ void camera_hits(const PixelCamera& cam, const double offset[2], const double le
                  const SurfaceTextures* textures = nullptr, const float* obj_albedo = nullptr,
                  float* albedo = nullptr);
 
+// The emission seen by camera samples (offset, lens) through chosen pixels,
+// for the display's control variate on emitters seen directly (docs/design.md
+// §6): for pixel pixels[m] and sample k (samples (K, 4): sub-pixel offset in
+// [0, 1)^2, then the lens point on the unit disc), at index m * K + k, the
+// emission of the first hit (primary_hit's; 0 on a miss or a one-sided
+// back), wo (the unit direction back to the eye, which finds the
+// environment on a miss), the hit triangle prim (-1: none) and, where
+// `through` is not null, what the sheets before the hit let through.
+void camera_emission(const PixelCamera& cam, const int64_t* pixels, int64_t count,
+                     const double* samples, int64_t K, const RayScene& scene,
+                     const PrimaryScene& triangles, float* emission, float* wo, int32_t* prim,
+                     float* through, int threads, const StopCheck& stop);
+
 }  // namespace voxgi

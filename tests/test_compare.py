@@ -44,7 +44,9 @@ def test_voxgis_time_to_a_target_is_interpolated_over_its_tolerances():
 
 def test_voxgis_looser_tolerances_show_the_same_solution_sooner():
     pytest.importorskip("mitsuba")
-    scene = voxgi.scenes.cornell_box(48)
+    # the window room's default display needs more than the 8 frames the
+    # looser tolerance stops at (the Cornell box's now meets 1e-3 in 8)
+    scene = voxgi.scenes.window_room(width=48, height=48)
     res = compare(scene, spp=16, sweep_spp=(4,), resolution=16, denoise=False, sweep_tol=(3e-2,))
     default, loose = (r for r in res.rows if r["method"] == "voxgi")
     assert (default["tol"], loose["tol"]) == (1e-3, 3e-2)

@@ -328,6 +328,9 @@ def test_antialiased_edge_matches_supersampled():
     # A tilted white square on black: the progressive frames (one shared
     # sub-pixel offset each, Halton-stratified) must give the box-filtered
     # pixel coverage, i.e. a 16x16 supersampled render averaged per pixel.
+    # The emission a pixel sees is itself integrated over the pixel once
+    # (voxgi.display.seen_emission); switched off here, the frames alone
+    # anti-alias.
     rot = trimesh.transformations.rotation_matrix(0.3, [0, 0, 1])
     sq = np.array([[-0.5, -0.5, 0], [0.5, -0.5, 0], [0.5, 0.5, 0], [-0.5, 0.5, 0]])
     v = (rot[:3, :3] @ sq.T).T
@@ -339,21 +342,32 @@ def test_antialiased_edge_matches_supersampled():
         name="square",
     )
     sol = _emission_solution(s)
-    aa = voxgi.render(s, sol, progress=False, max_frames=64, tol=0.0).image[..., 0]
-    one = voxgi.render(s, sol, progress=False, max_frames=1).image[..., 0]
+    frames_only = _Experiment(control_emission=False)
+    aa = voxgi.render(s, sol, progress=False, max_frames=64, tol=0.0, tuning=frames_only)
+    one = voxgi.render(s, sol, progress=False, max_frames=1, tuning=frames_only).image[..., 0]
     big = voxgi.render(
-        s, sol, progress=False, max_frames=1, camera=cam.replace(width=512, height=512)
+        s,
+        sol,
+        progress=False,
+        max_frames=1,
+        camera=cam.replace(width=512, height=512),
+        tuning=frames_only,
     ).image[..., 0]
     ss = big.reshape(32, 16, 32, 16).mean(axis=(1, 3))
     edge = (ss > 0.02) & (ss < 0.98)
     assert edge.sum() > 40
     # 64 stratified offsets estimate each pixel's coverage against a 32x32
     # supersampled render, itself off by up to ~1/32 at an edge.
+    aa = aa.image[..., 0]
     assert np.abs(aa - ss).max() < 0.08
     assert np.sqrt(np.mean((aa - ss) ** 2)) < 0.01
     # One sample per pixel is a stair-step: 0 or 1 at the edge pixels.
     assert np.abs(one - ss)[edge].max() > 0.3
     assert set(np.unique(one)) <= {0.0, 1.0}
+    # With the seen emission integrated, one frame is as good as 64.
+    ctl = voxgi.render(s, sol, progress=False, max_frames=1).image[..., 0]
+    assert np.abs(ctl - ss).max() < 0.08
+    assert np.sqrt(np.mean((ctl - ss) ** 2)) < 0.01
 
 
 def _gradient_energy(img: np.ndarray) -> float:
@@ -670,7 +684,9 @@ def test_tol_stops_early_and_reports():
     measured = voxgi.metrics.rel_mse(out.image, np.full_like(out.image, 2.0))
     assert measured < min(2 * tol, 3 * out.stats["est_rel_mse"] + 1e-6)
     s = out.stats
-    assert s["primary_rays"] == 16 * 16 * out.frames
+    # the camera sees one uniform emitter: no pixel sees its emission unevenly
+    assert s["seen_emission"]["pixels"] == 0
+    assert s["primary_rays"] == 16 * 16 * out.frames + s["seen_emission"]["rays"]
     k = s["vpls_per_frame"]
     assert s["vpls"] == k * out.frames
     assert 0 < s["shadow_rays"] <= 16 * 16 * k * out.frames

@@ -246,8 +246,14 @@ def test_render_equals_local(cornell_small, local_solution, client):
     # the same order here: equal to float rounding
     np.testing.assert_allclose(out.image, ref.image, rtol=1e-6, atol=1e-7)
     assert out.frames == ref.frames  # the stopping rule saw the same sequence
-    for k in ("primary_rays", "shadow_rays", "gather_rays", "vpls"):
+    for k in ("shadow_rays", "gather_rays", "vpls"):
         assert out.stats[k] == ref.stats[k], k
+    # each worker that shaded frames integrated the seen emission once
+    control = ref.stats["seen_emission"]["rays"]
+    extra = out.stats["primary_rays"] - (ref.stats["primary_rays"] - control)
+    assert control > 0
+    assert extra % control == 0
+    assert 1 <= extra // control <= 2
 
 
 def test_progress_bar_counts_finished_tasks(cornell_small, client, monkeypatch):

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_hits', 'camera_rays', 'direct_light_traced', 'environment_light', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'transport_apply', 'transport_compact', 'voxelize', 'vpl_light']
+__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_emission', 'camera_hits', 'camera_rays', 'direct_light_traced', 'environment_light', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'transport_apply', 'transport_compact', 'voxelize', 'vpl_light']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -172,6 +172,17 @@ def batch_error(batches: numpy.typing.NDArray[numpy.float32], size: typing.Suppo
     single-batch jump where the farthest batch is an outlier beyond `crit`
     (externally studentized; inf: no test). Returns (stderr float64, flagged
     uint8), each of the batches' shape without k.
+    """
+def camera_emission(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.NDArray[numpy.float64], up: numpy.typing.NDArray[numpy.float64], forward: numpy.typing.NDArray[numpy.float64], tan_half_fov: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, aperture: typing.SupportsFloat | typing.SupportsIndex, focus: typing.SupportsFloat | typing.SupportsIndex, pixels: numpy.typing.NDArray[numpy.int64], samples: numpy.typing.NDArray[numpy.float64], tri_v: numpy.typing.NDArray[numpy.float64], tri_ng: numpy.typing.NDArray[numpy.float64], corner_normals: numpy.typing.NDArray[numpy.float64] | None, tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], obj_emission: numpy.typing.NDArray[numpy.float32], scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+    """
+    The emission seen by K camera samples through each of M pixels (pixels
+    (M,) int64, row-major indices), the camera as in camera_hits; samples (K, 4)
+    float64: the sub-pixel offset in [0, 1]^2 (x right, y down) and the lens
+    point on the unit disc. Returns, at index m * K + k: the first hit's
+    emission (M * K, 3) float32 (0 on a miss or a one-sided back), wo (the unit
+    direction back to the eye) (M * K, 3) float32, the hit triangle (M * K,)
+    int32 (-1: none) and, where the scene has sheets, what they let through
+    before the hit (M * K, 3) float32 (None otherwise).
     """
 def camera_hits(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.NDArray[numpy.float64], up: numpy.typing.NDArray[numpy.float64], forward: numpy.typing.NDArray[numpy.float64], tan_half_fov: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, aperture: typing.SupportsFloat | typing.SupportsIndex, focus: typing.SupportsFloat | typing.SupportsIndex, offset: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], lens: tuple[typing.SupportsFloat | typing.SupportsIndex, typing.SupportsFloat | typing.SupportsIndex], tri_v: numpy.typing.NDArray[numpy.float64], tri_ng: numpy.typing.NDArray[numpy.float64], corner_normals: numpy.typing.NDArray[numpy.float64] | None, tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], obj_emission: numpy.typing.NDArray[numpy.float32], scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0, obj_albedo: numpy.typing.NDArray[numpy.float32] | None = None, tex_texels: collections.abc.Sequence[typing.Annotated[numpy.typing.ArrayLike, numpy.uint8]] | None = None, tex_info: numpy.typing.NDArray[numpy.float64] | None = None, obj_texture: numpy.typing.NDArray[numpy.int32] | None = None, corner_uv: numpy.typing.NDArray[numpy.float32] | None = None) -> tuple:
     """

@@ -34,6 +34,10 @@ class FrameShaderSpec:
     indirect_filter : int
         Radius in pixels of the geometry-aware filter of the non-emitting
         records' light (0: none; :attr:`RenderTuning.indirect_filter`).
+    control_emission : bool
+        Replace, at pixels that see emission over part of their footprint,
+        each frame's seen emission by its mean over the pixel
+        (:mod:`voxgi.display.seen_emission`).
     """
 
     scene: Scene
@@ -43,6 +47,7 @@ class FrameShaderSpec:
     gather: int
     seed: int
     indirect_filter: int = 0
+    control_emission: bool = True
 
     @property
     def gather_per_frame(self) -> int:
@@ -71,6 +76,7 @@ class FrameShaderSpec:
             self.gather,
             self.seed,
             self.indirect_filter,
+            self.control_emission,
         )
 
 

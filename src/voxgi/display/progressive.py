@@ -15,6 +15,7 @@ from .budget import _reflects_light, light_spread, ray_budget
 from .estimate import _MIN_BATCHES, _Mean, denoised_estimate
 from .executor import FrameExecutor, FrameShaderSpec
 from .pixel_filter import _FILTER_REACH
+from .seen_emission import skip_reason
 from .settings import RenderTuning, _check_executor, _check_render, _check_solution, _RenderSettings
 from .vpls import VPLSampler
 
@@ -130,7 +131,14 @@ def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
     # Shadow-ray offsets: well above float32 rounding of the coordinates
     # (~1e-7 relative) and well below any feature of a sensible scene.
     return FrameShaderSpec(
-        scene, opt.cam, sampler, 1e-4 * diag, opt.gather, opt.seed, opt.indirect_filter
+        scene,
+        opt.cam,
+        sampler,
+        1e-4 * diag,
+        opt.gather,
+        opt.seed,
+        opt.indirect_filter,
+        opt.control_emission,
     )
 
 
@@ -148,6 +156,15 @@ def _skipped(spec: FrameShaderSpec) -> list[str]:
             f"{sampler.skipped_records} records with zero radiosity or area "
             "(back records) are never VPLs"
         )
+    scene = spec.scene
+    emits = any(np.any(np.asarray(o.material.emission) > 0) for o in scene.objects)
+    why = (
+        skip_reason(spec.camera, emits, scene.environment)
+        if spec.control_emission
+        else "seen emission: the control variate is switched off"
+    )
+    if why is not None:
+        skipped.append(why)
     return skipped
 
 
@@ -277,6 +294,21 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds, 
         "est_rel_mse_denoised": None if rule is None else rule.est,
         "denoise_checks": None if rule is None else rule.checks,
         "threads": opt.threads,
+        "seen_emission": _seen_emission_stats(source),
+    }
+
+
+def _seen_emission_stats(source) -> dict | None:
+    """The emission control's pixels, samples, rays and seconds, where the
+    frames were shaded here and it applied."""
+    ctl = getattr(source, "emission_control", None)
+    if ctl is None:
+        return None
+    return {
+        "pixels": len(ctl.pixels),
+        "samples": ctl.samples,
+        "rays": ctl.rays,
+        "seconds": ctl.seconds,
     }
 
 

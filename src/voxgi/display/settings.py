@@ -83,12 +83,17 @@ class _Experiment(RenderTuning):
         ``se / sqrt(L² + 0.01)`` over ``pixel_factor · sqrt(tol)`` (10;
         ``inf``: the mean relMSE alone decides; ``pixel_share=0``: every
         pixel).
+    control_emission : bool
+        At pixels that see emission over part of their footprint, each
+        frame's seen emission is replaced by its mean over the pixel (default;
+        :mod:`voxgi.display.seen_emission`); False keeps each frame's own.
     """
 
     vpl_pdf: str = "power"
     vpl_on_surface: bool = True
     pixel_factor: float = PIXEL_FACTOR
     pixel_share: float = PIXEL_SHARE
+    control_emission: bool = True
 
 
 @dataclass(frozen=True)
@@ -110,6 +115,7 @@ class _RenderSettings:
     indirect_filter: int = 0
     spread: float = math.nan
     denoise: bool = False
+    control_emission: bool = True
 
 
 def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) -> _RenderSettings:
@@ -160,6 +166,7 @@ def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) ->
         threads=_validate.threads(threads),
         indirect_filter=(0 if denoise else 1) if radius is None else radius,
         denoise=denoise,
+        control_emission=bool(t.control_emission),
     )
 
 

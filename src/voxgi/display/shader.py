@@ -27,6 +27,7 @@ from .aovs import frame_aovs
 from .lighting import _HIT_KEYS, _SceneLights
 from .pixel_filter import gaussian_pixel_filter
 from .samples import frame_samples
+from .seen_emission import SeenEmission, seen_emission, skip_reason
 from .vpls import VPLSampler, place_vpls
 
 __all__ = ["frame_surface"]
@@ -120,6 +121,7 @@ class _FrameShader:
         gather: int = 0,
         seed: int = 0,
         indirect_filter: int = 0,
+        control_emission: bool = True,
     ):
         self.scene, self.cam, self.tracer, self.sampler = scene, cam, tracer, sampler
         # the filter needs the two kinds of light apart; without any light of
@@ -130,6 +132,13 @@ class _FrameShader:
         self.seed = int(seed)
         self._material_tables(scene)
         self.env = scene.environment
+        emits = bool(np.any(self.mat_emission > 0))
+        #: why the seen emission is not controlled (None: it is)
+        self.emission_skipped = (
+            skip_reason(cam, emits, self.env)
+            if control_emission
+            else "seen emission: the control variate is switched off"
+        )
         # environment samples per pixel and frame: as many as the gather rays
         # they are MIS-combined with (docs/design.md §11)
         n_env = max(1, self.gather) if self.env is not None else 0
@@ -220,6 +229,32 @@ class _FrameShader:
         # what the sheets (glass) before each hit let through, None without any
         # and each hit's albedo only where a texture makes it differ from its object's
         return {**hits, "emission": le, "through": through, "albedo": albedo}
+
+    @cached_property
+    def emission_control(self) -> SeenEmission | None:
+        """The pixels whose footprint sees emission unevenly and the mean
+        each sees (:mod:`voxgi.display.seen_emission`), computed at the first
+        frame; None where :attr:`emission_skipped` says why not."""
+        if self.emission_skipped is not None:
+            return None
+        out = seen_emission(
+            self.cam, self.tracer, self._primary_scene, self.env, self.seed, self.threads
+        )
+        self.primary_rays += out.rays
+        self.seconds["primary"] += out.seconds
+        return out
+
+    def _control_emission(self, h: dict, img: np.ndarray) -> None:
+        """At the controlled pixels, the emission this frame's rays saw
+        replaced by its mean over the pixel (same expectation, no spread)."""
+        ctl = self.emission_control
+        if ctl is None or len(ctl.pixels) == 0:
+            return
+        idx = ctl.pixels
+        seen = h["emission"][idx]
+        if h["through"] is not None:
+            seen = seen * h["through"][idx]
+        img[idx] += ctl.mean - seen
 
     @cached_property
     def _gather_textures(self) -> dict:
@@ -419,6 +454,7 @@ class _FrameShader:
         img = self.shade(h, vpls)
         if h["through"] is not None:
             img *= h["through"]  # the pixel sees its hit through the sheets
+        self._control_emission(h, img)
         if self.cam.pixel_filter == "gaussian":
             # the AOVs through the same filter as the image, in the same pass
             both = gaussian_pixel_filter(

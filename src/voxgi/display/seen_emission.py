@@ -1,0 +1,193 @@
+"""The emission a pixel sees directly, integrated over its footprint once: a
+control variate for the frames' camera samples (``docs/design.md`` §6).
+
+Each frame shoots one camera ray per pixel, at a sub-pixel offset that all
+pixels share. A pixel that a lamp's outline crosses sees the lamp in some
+frames and the wall beside it in others: its few frames estimate the lamp's
+share of the pixel badly (one hit in eight frames where the share is one in
+fifty), its error can be a hundred times its level, and every pixel of the
+outline errs with the same offsets. The emission seen is a function of the
+camera ray alone, so its integral over the pixel can be computed once, with
+many rays and no shading: each frame then counts, at those pixels, that
+integral in place of the emission its own ray saw,
+
+.. math:: \\hat L_f = L_f - L_e(\\omega_f) + \\bar L_e, \\qquad
+          \\bar L_e = \\frac{1}{K} \\sum_k L_e(\\omega_k),
+
+which has the same mean as ``L_f`` (``E[L_e(ω_f)] = ∫ L_e``, up to the K
+stratified samples' error in ``\\bar L_e``) and none of the emission's
+spread. The pixels are found by one ray through every pixel corner: those
+whose corners see different emission, and their neighbours.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _core
+from .._qmc import sobol
+
+__all__ = ["SeenEmission", "seen_emission", "skip_reason"]
+
+#: Relative spread of the emission over a pixel's corners beyond which the
+#: pixel is controlled (a smooth environment varies by less across a pixel).
+_SPREAD = 1e-2
+#: Samples per controlled pixel: at most this many, at least
+#: :data:`_FEWEST`, fewer where many pixels are controlled (their rays at
+#: most :data:`_BUDGET` times the image's pixels, or one batch of rays).
+_MOST = 256
+_FEWEST = 64
+_BUDGET = 8
+#: Camera rays per kernel call (bounds the temporary arrays).
+_BATCH = 1 << 18
+
+
+@dataclass
+class SeenEmission:
+    """The pixels whose footprint sees emission unevenly, and the emission
+    each sees on average.
+
+    Attributes
+    ----------
+    pixels : (M,) int64
+        Row-major pixel indices.
+    mean : (M, 3) float32
+        Emitted radiance seen, averaged over the pixel's footprint (times
+        what the sheets before it let through; the environment's radiance
+        where a ray leaves the scene).
+    samples : int
+        Camera rays per controlled pixel.
+    rays : int
+        Camera rays traced in all (the corners' included).
+    seconds : float
+    """
+
+    pixels: np.ndarray
+    mean: np.ndarray
+    samples: int
+    rays: int
+    seconds: float
+
+
+def skip_reason(cam, emits: bool, env) -> str | None:
+    """Why the control variate does not apply to this camera and scene (None: it does)."""
+    if not emits and env is None:
+        return "seen emission: no emitter or environment for the camera to see"
+    if cam.pixel_filter != "box":
+        return (
+            f"seen emission: the {cam.pixel_filter} filter weights each frame's samples "
+            "by their offset, so their emission is kept (its control needs the box filter)"
+        )
+    if cam.aperture > 0:
+        return "seen emission: a lens aperture spreads it over the lens as well (not controlled)"
+    return None
+
+
+def _seen(ctx: dict, pixels: np.ndarray, samples: np.ndarray) -> np.ndarray:
+    """(M, K, 3) float32 emission seen by ``samples`` (K, 4) through ``pixels``
+    (``ctx``: the arguments :func:`seen_emission` gathers)."""
+    le, wo, prim, through = _core.camera_emission(
+        *ctx["camera"], pixels, samples, *ctx["triangles"], ctx["scene"], threads=ctx["threads"]
+    )
+    env = ctx["env"]
+    if env is not None:
+        miss = np.flatnonzero(prim < 0)
+        le[miss] = env.eval(-wo[miss].astype(np.float64))
+    if through is not None:
+        le *= through
+    return le.reshape(len(pixels), len(samples), 3)
+
+
+def _batches(n: int, per: int):
+    step = max(1, _BATCH // per)
+    for a in range(0, n, step):
+        yield slice(a, min(n, a + step))
+
+
+def _uneven_pixels(ctx: dict, width: int, height: int) -> np.ndarray:
+    """(H, W) bool: pixels whose four corners see different emission, and
+    their neighbours (a straight outline that only clips a corner crosses
+    the corners of a pixel next to it)."""
+    P = width * height
+    corner = np.zeros((1, 4))  # every pixel's top-left corner
+    v = np.empty(P, np.float32)
+    every = np.arange(P, dtype=np.int64)
+    for s in _batches(P, 1):
+        v[s] = _seen(ctx, every[s], corner)[:, 0].sum(axis=1)
+    # the corners past the last row and column: the last ones repeated
+    grid = np.pad(v.reshape(height, width), ((0, 1), (0, 1)), mode="edge")
+    quad = (grid[:-1, :-1], grid[:-1, 1:], grid[1:, :-1], grid[1:, 1:])
+    hi, lo = np.maximum.reduce(quad), np.minimum.reduce(quad)
+    uneven = hi - lo > _SPREAD * hi
+    grown = uneven.copy()
+    grown[1:] |= uneven[:-1]
+    grown[:-1] |= uneven[1:]
+    rows = grown.copy()
+    grown[:, 1:] |= rows[:, :-1]
+    grown[:, :-1] |= rows[:, 1:]
+    return grown
+
+
+def _footprint_samples(count: int, seed: int) -> np.ndarray:
+    """(count, 4) sub-pixel offsets of a scrambled (0, 2)-sequence (count a
+    power of two: one in each cell of every elementary grid of that area),
+    the lens at its centre."""
+    rng = np.random.default_rng([int(seed), 0x5EE1])
+    scramble = rng.integers(0, 1 << 32, size=2, dtype=np.uint64).astype(np.uint32)
+    out = np.zeros((count, 4))
+    out[:, :2] = (sobol(np.arange(count), 2) ^ scramble) / 2.0**32
+    return out
+
+
+def seen_emission(cam, tracer, triangles: tuple, env, seed: int, threads: int) -> SeenEmission:
+    """The controlled pixels of ``cam``'s image and their mean seen emission.
+
+    Parameters
+    ----------
+    cam : Camera
+    tracer : voxgi.rays.Tracer
+        The scene's tracer (its Embree scene and centre).
+    triangles : tuple
+        The scene tables of :func:`voxgi._core.camera_hits` (``tri_v`` to
+        ``obj_emission``), in the tracer's frame.
+    env : Environment or None
+        Seen where a ray leaves the scene.
+    seed : int
+        Scrambles the footprint samples.
+    threads : int
+    """
+    t0 = time.perf_counter()
+    right, up, fwd = cam.frame()
+    ctx = {
+        "camera": (
+            np.asarray(cam.eye, dtype=np.float64) - tracer.centre,
+            right,
+            up,
+            fwd,
+            math.tan(math.radians(cam.fov) / 2.0),
+            cam.width,
+            cam.height,
+            float(cam.aperture),
+            float(cam.focus),
+        ),
+        "triangles": triangles,
+        "scene": tracer.native,
+        "env": env,
+        "threads": threads,
+    }
+    P = cam.width * cam.height
+    pixels = np.flatnonzero(_uneven_pixels(ctx, cam.width, cam.height).ravel()).astype(np.int64)
+    M = len(pixels)
+    per = _MOST
+    if M:
+        per = 1 << math.floor(math.log2(max(1.0, max(_BUDGET * P, _BATCH) / M)))
+        per = int(min(_MOST, max(_FEWEST, per)))
+    mean = np.zeros((M, 3), np.float32)
+    samples = _footprint_samples(per, seed)
+    for s in _batches(M, per):
+        mean[s] = _seen(ctx, pixels[s], samples).mean(axis=1, dtype=np.float64)
+    return SeenEmission(pixels, mean, per, P + M * per, time.perf_counter() - t0)
