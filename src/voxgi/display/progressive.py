@@ -306,6 +306,7 @@ def _seen_emission_stats(source) -> dict | None:
         return None
     return {
         "pixels": len(ctl.pixels),
+        "sampled": ctl.sampled,
         "samples": ctl.samples,
         "rays": ctl.rays,
         "seconds": ctl.seconds,

@@ -17,7 +17,10 @@ integral in place of the emission its own ray saw,
 which has the same mean as ``L_f`` (``E[L_e(ω_f)] = ∫ L_e``, up to the K
 stratified samples' error in ``\\bar L_e``) and none of the emission's
 spread. The pixels are found by one ray through every pixel corner: those
-whose corners see different emission, and their neighbours.
+whose corners see different emission, and their neighbours. With the
+Gaussian pixel filter a pixel is made of the samples within its reach,
+each weighted by the frame's offset: the frame's filtered emission is what
+is replaced there, by the mean of the filtered footprint samples.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import numpy as np
 
 from .. import _core
 from .._qmc import sobol
+from .pixel_filter import _FILTER_REACH, GAUSSIAN_TAPS, gaussian_norms, gaussian_weights
 
 __all__ = ["SeenEmission", "seen_emission", "skip_reason"]
 
@@ -53,12 +57,16 @@ class SeenEmission:
 
     Attributes
     ----------
-    pixels : (M,) int64
-        Row-major pixel indices.
-    mean : (M, 3) float32
-        Emitted radiance seen, averaged over the pixel's footprint (times
-        what the sheets before it let through; the environment's radiance
-        where a ray leaves the scene).
+    pixels : (T,) int64
+        Row-major indices of the pixels controlled.
+    mean : (T, 3) float32
+        Their mean seen emission: emitted radiance (times what the sheets
+        before it let through; the environment's radiance where a ray leaves
+        the scene) over their footprints, through the camera's pixel filter
+        (the mean of the filtered frames, which take samples from the pixels
+        within its reach).
+    sampled : int
+        Pixels whose footprints were sampled (``T`` with the box filter).
     samples : int
         Camera rays per controlled pixel.
     rays : int
@@ -68,6 +76,7 @@ class SeenEmission:
 
     pixels: np.ndarray
     mean: np.ndarray
+    sampled: int
     samples: int
     rays: int
     seconds: float
@@ -77,11 +86,6 @@ def skip_reason(cam, emits: bool, env) -> str | None:
     """Why the control variate does not apply to this camera and scene (None: it does)."""
     if not emits and env is None:
         return "seen emission: no emitter or environment for the camera to see"
-    if cam.pixel_filter != "box":
-        return (
-            f"seen emission: the {cam.pixel_filter} filter weights each frame's samples "
-            "by their offset, so their emission is kept (its control needs the box filter)"
-        )
     if cam.aperture > 0:
         return "seen emission: a lens aperture spreads it over the lens as well (not controlled)"
     return None
@@ -108,6 +112,19 @@ def _batches(n: int, per: int):
         yield slice(a, min(n, a + step))
 
 
+def _grow(mask: np.ndarray, r: int) -> np.ndarray:
+    """``mask`` (H, W) grown by ``r`` pixels (a square neighbourhood)."""
+    for _ in range(r):
+        step = mask.copy()
+        step[1:] |= mask[:-1]
+        step[:-1] |= mask[1:]
+        rows = step.copy()
+        step[:, 1:] |= rows[:, :-1]
+        step[:, :-1] |= rows[:, 1:]
+        mask = step
+    return mask
+
+
 def _uneven_pixels(ctx: dict, width: int, height: int) -> np.ndarray:
     """(H, W) bool: pixels whose four corners see different emission, and
     their neighbours (a straight outline that only clips a corner crosses
@@ -122,14 +139,7 @@ def _uneven_pixels(ctx: dict, width: int, height: int) -> np.ndarray:
     grid = np.pad(v.reshape(height, width), ((0, 1), (0, 1)), mode="edge")
     quad = (grid[:-1, :-1], grid[:-1, 1:], grid[1:, :-1], grid[1:, 1:])
     hi, lo = np.maximum.reduce(quad), np.minimum.reduce(quad)
-    uneven = hi - lo > _SPREAD * hi
-    grown = uneven.copy()
-    grown[1:] |= uneven[:-1]
-    grown[:-1] |= uneven[1:]
-    rows = grown.copy()
-    grown[:, 1:] |= rows[:, :-1]
-    grown[:, :-1] |= rows[:, 1:]
-    return grown
+    return _grow(hi - lo > _SPREAD * hi, 1)
 
 
 def _footprint_samples(count: int, seed: int) -> np.ndarray:
@@ -180,14 +190,54 @@ def seen_emission(cam, tracer, triangles: tuple, env, seed: int, threads: int) -
         "threads": threads,
     }
     P = cam.width * cam.height
-    pixels = np.flatnonzero(_uneven_pixels(ctx, cam.width, cam.height).ravel()).astype(np.int64)
-    M = len(pixels)
+    # Through a filter of reach r a pixel is made of the samples within r of
+    # it, each weighted by the frame's offset: the pixels within r of an
+    # uneven one are controlled, from the samples within 2r.
+    reach = _FILTER_REACH[cam.pixel_filter]
+    uneven = _uneven_pixels(ctx, cam.width, cam.height)
+    target = np.flatnonzero(_grow(uneven, reach).ravel()).astype(np.int64)
+    sampled = np.flatnonzero(_grow(uneven, 2 * reach).ravel()).astype(np.int64)
+    M = len(sampled)
     per = _MOST
     if M:
         per = 1 << math.floor(math.log2(max(1.0, max(_BUDGET * P, _BATCH) / M)))
         per = int(min(_MOST, max(_FEWEST, per)))
-    mean = np.zeros((M, 3), np.float32)
     samples = _footprint_samples(per, seed)
-    for s in _batches(M, per):
-        mean[s] = _seen(ctx, pixels[s], samples).mean(axis=1, dtype=np.float64)
-    return SeenEmission(pixels, mean, per, P + M * per, time.perf_counter() - t0)
+    if reach:
+        mean = _gaussian_mean(ctx, cam, sampled, target, samples)
+    else:
+        mean = np.zeros((M, 3), np.float32)
+        for s in _batches(M, per):
+            mean[s] = _seen(ctx, sampled[s], samples).mean(axis=1, dtype=np.float64)
+    return SeenEmission(target, mean, M, per, P + M * per, time.perf_counter() - t0)
+
+
+def _gaussian_mean(ctx: dict, cam, sampled: np.ndarray, target: np.ndarray, samples):
+    """(T, 3) float32: the Gaussian-filtered seen emission of the ``target``
+    pixels, averaged over the footprint samples; each frame weights a sample
+    at its offset into the pixels around it and divides each pixel by the
+    weights it received (:func:`~voxgi.display.pixel_filter.gaussian_pixel_filter`),
+    so the mean is taken over filtered frames. ``sampled`` holds every
+    pixel within the filter's reach of a target pixel."""
+    W, H = cam.width, cam.height
+    K = len(samples)
+    wx = np.array([gaussian_weights(o) for o in samples[:, 0]])  # (K, taps)
+    wy = np.array([gaussian_weights(o) for o in samples[:, 1]])
+    nx = np.array([gaussian_norms(o, W) for o in samples[:, 0]])  # (K, W)
+    ny = np.array([gaussian_norms(o, H) for o in samples[:, 1]])
+    out = np.zeros((H * W, 3))
+    for s in _batches(len(sampled), K):
+        q = sampled[s]
+        le = _seen(ctx, q, samples).astype(np.float64)  # (m, K, 3)
+        qi, qj = q // W, q % W
+        for a, ty in enumerate(GAUSSIAN_TAPS):
+            for b, tx in enumerate(GAUSSIAN_TAPS):
+                # the output pixel p = q - t takes the sample of pixel q
+                pi, pj = qi - ty, qj - tx
+                inside = (pi >= 0) & (pi < H) & (pj >= 0) & (pj < W)
+                if not inside.any():
+                    continue
+                pi, pj = pi[inside], pj[inside]
+                coef = (wy[:, a] * wx[:, b])[None, :] / (ny[:, pi].T * nx[:, pj].T)
+                np.add.at(out, pi * W + pj, np.einsum("mk,mkc->mc", coef, le[inside]) / K)
+    return out[target].astype(np.float32)

@@ -244,17 +244,13 @@ class _FrameShader:
         self.seconds["primary"] += out.seconds
         return out
 
-    def _control_emission(self, h: dict, img: np.ndarray) -> None:
-        """At the controlled pixels, the emission this frame's rays saw
-        replaced by its mean over the pixel (same expectation, no spread)."""
-        ctl = self.emission_control
-        if ctl is None or len(ctl.pixels) == 0:
-            return
-        idx = ctl.pixels
+    def _seen_emission(self, h: dict, idx=slice(None)) -> np.ndarray:
+        """The emission this frame's rays saw at pixels ``idx``, as the frame
+        counts it (through the sheets before it)."""
         seen = h["emission"][idx]
         if h["through"] is not None:
             seen = seen * h["through"][idx]
-        img[idx] += ctl.mean - seen
+        return seen
 
     @cached_property
     def _gather_textures(self) -> dict:
@@ -454,13 +450,23 @@ class _FrameShader:
         img = self.shade(h, vpls)
         if h["through"] is not None:
             img *= h["through"]  # the pixel sees its hit through the sheets
-        self._control_emission(h, img)
+        ctl = self.emission_control
+        if ctl is not None and len(ctl.pixels) == 0:
+            ctl = None
         if self.cam.pixel_filter == "gaussian":
-            # the AOVs through the same filter as the image, in the same pass
+            # the AOVs, and the emission seen where it is controlled, through
+            # the same filter as the image, in the same pass
+            parts = [img, self.aovs] + ([self._seen_emission(h)] if ctl else [])
             both = gaussian_pixel_filter(
-                np.concatenate([img, self.aovs], axis=1), self.cam.width, self.cam.height, offset
+                np.concatenate(parts, axis=1), self.cam.width, self.cam.height, offset
             )
-            img, self.aovs = np.ascontiguousarray(both[:, :3]), both[:, 3:]
+            img = np.ascontiguousarray(both[:, :3])
+            self.aovs = both[:, 3 : 3 + self.aovs.shape[1]]
+            if ctl:
+                img[ctl.pixels] += ctl.mean - both[ctl.pixels, -3:]
+        elif ctl:
+            # the frame's seen emission at the controlled pixels, for its mean
+            img[ctl.pixels] += ctl.mean - self._seen_emission(h, ctl.pixels)
         return img
 
     @classmethod
