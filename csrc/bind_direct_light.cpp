@@ -1,8 +1,10 @@
 // Bindings of the direct-light kernels (direct_light.h).
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
 
 #include <cmath>
+#include <optional>
 
 #include "bind_common.h"
 #include "direct_light.h"
@@ -71,10 +73,20 @@ voxgi::DirectLightQuery query(const F64& point, const F64& normal, const F64& sh
 
 py::tuple traced(const py::tuple& emit, const F64& point, const F64& normal, const F64& shift,
                  const F64& sequence, double offset, const I32& emitter_of,
-                 const voxgi::RayScene& scene, const voxgi::RayScene* emitter_scene, int threads) {
+                 const voxgi::RayScene& scene, const voxgi::RayScene* emitter_scene, int threads,
+                 const std::optional<F64>& hemisphere_scale, bool strategies) {
     const Emitters held = emitters(emit);
     const voxgi::EmitterTriangles& em = held.em;
-    const voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
+    voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
+    if (hemisphere_scale) {
+        check_1d(*hemisphere_scale, q.records, "hemisphere_scale");
+        const double* hs = hemisphere_scale->data();
+        for (py::ssize_t r = 0; r < q.records; ++r)
+            if (!(hs[r] > 0.0) || !std::isfinite(hs[r]))
+                throw py::value_error("hemisphere_scale: record " + std::to_string(r) + " has " +
+                                      std::to_string(hs[r]) + ", not finite and > 0");
+        q.hemisphere_scale = hs;
+    }
     check_1d(emitter_of, scene.triangle_count(), "emitter_of");
     const int32_t* eo = emitter_of.data();
     for (py::ssize_t t = 0; t < emitter_of.shape(0); ++t)
@@ -83,13 +95,16 @@ py::tuple traced(const py::tuple& emit, const F64& point, const F64& normal, con
         throw py::value_error("emitter_scene: " + std::to_string(emitter_scene->triangle_count()) +
                               " triangles for " + std::to_string(em.count) + " emitters");
     F64 out({q.records, py::ssize_t(3)}), sq({q.records});
+    F64 var({strategies ? q.records : py::ssize_t(0), py::ssize_t(2)});
     double *po = out.mutable_data(), *ps = sq.mutable_data();
+    double* pv = strategies ? var.mutable_data() : nullptr;
     const voxgi::StopCheck stop = make_stop_check();
     {
         py::gil_scoped_release release;
-        voxgi::direct_light_traced(em, q, eo, scene, emitter_scene, po, ps,
+        voxgi::direct_light_traced(em, q, eo, scene, emitter_scene, po, ps, pv,
                                    voxgi::resolve_threads(threads), stop);
     }
+    if (strategies) return py::make_tuple(out, sq, var);
     return py::make_tuple(out, sq);
 }
 
@@ -99,6 +114,7 @@ void bind_direct_light(py::module_& m) {
     m.def("direct_light_traced", &traced, "emitters"_a, "point"_a.noconvert(),
           "normal"_a.noconvert(), "shift"_a.noconvert(), "sequence"_a.noconvert(), "offset"_a,
           "emitter_of"_a.noconvert(), "scene"_a, "emitter_scene"_a = nullptr, "threads"_a = 0,
+          "hemisphere_scale"_a.noconvert() = py::none(), "strategies"_a = false,
           R"doc(Direct light on records from emitting triangles: light and hemisphere
 samples (samples each) combined by the power heuristic, traced in scene (a
 RayScene of the triangles emitter_of (F,) int32 indexes) record by record.
@@ -110,5 +126,10 @@ the mean square of the luminance of each light + hemisphere sample pair (N,),
 float64.
 emitter_scene (a RayScene of the emitters' corners alone, in their order;
 None: not used): a hemisphere ray is traced against the emitters, and
-against scene only up to the nearest emitter it meets.)doc");
+against scene only up to the nearest emitter it meets.
+hemisphere_scale (N,) float64, each > 0 (None: 1): the factor on the
+hemisphere samples' density in each record's power heuristic (unbiased
+for any). With strategies=True a third array (N,2): the variance of the
+luminance of the light samples' and of the hemisphere samples' own
+estimates, each alone.)doc");
 }

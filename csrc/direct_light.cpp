@@ -54,8 +54,11 @@ inline void cosine_direction(const double n[3], double u1, double u2, double w[3
     for (int i = 0; i < 3; ++i) w[i] = x * t[i] + y * bt[i] + z * n[i];
 }
 
+// The light sample's ray and its contribution c, weighted by the power
+// heuristic with the hemisphere density scaled by sqrt(s2); raw: its own
+// estimate f / p, unweighted.
 void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r, const double u[5],
-               float* o, float* w, float* len, float* c) {
+               double s2, float* o, float* w, float* len, float* c, float* raw) {
     const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
     double y[3], d[3];
     const int64_t k = draw_light(em, u, y);
@@ -68,7 +71,8 @@ void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
         cos_y = emitter_cosine(em, k, wd);
     }
     if (cos_x <= 0.0 || cos_y <= 0.0) {
-        for (int i = 0; i < 3; ++i) o[i] = float(x[i]), w[i] = float(nx[i]), c[i] = 0.f;
+        for (int i = 0; i < 3; ++i)
+            o[i] = float(x[i]), w[i] = float(nx[i]), c[i] = 0.f, raw[i] = 0.f;
         *len = 0.f;
         return;
     }
@@ -79,23 +83,28 @@ void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
     const double sl = std::sqrt(dot(seg, seg));
     for (int i = 0; i < 3; ++i) o[i] = float(org[i]), w[i] = float(seg[i] / sl);
     *len = float(std::max(0.0, sl - q.offset));
-    // power heuristic, area measure: f p_light / (p_light^2 + p_hemisphere^2)
+    // power heuristic, area measure: f p_light / (p_light^2 + s2 p_hemisphere^2)
     const double g = cos_x * cos_y / r2, pl = em.density[k], ph = g / kPi;
-    const double weight = g * pl / (pl * pl + ph * ph);
-    for (int i = 0; i < 3; ++i) c[i] = float(weight * em.radiance[3 * k + i]);
+    const double weight = g * pl / (pl * pl + s2 * ph * ph);
+    for (int i = 0; i < 3; ++i) {
+        c[i] = float(weight * em.radiance[3 * k + i]);
+        raw[i] = float(g / pl * em.radiance[3 * k + i]);
+    }
 }
 
 // What sample `ray` of record r brings, light and hemisphere sample together:
 // the light sample's contribution times what passes its ray (0: blocked, the
 // sheets' transmittance), and the power-heuristic share of emitter k, which
 // its hemisphere ray met first at barycentrics u, v (-1: no emitter first),
-// times what passes that ray.
-inline void sample_pair(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
+// times what passes that ray (its density scaled by sqrt(s2) in the
+// heuristic); hemi: the hemisphere sample's own estimate, pi L_e through it.
+inline void sample_pair(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r, double s2,
                         const float* contribution, const float* light_through,
                         const float* hemi_direction, int32_t k, float hu, float hv,
-                        const float* hemi_through, double pair[3]) {
+                        const float* hemi_through, double pair[3], double hemi[3]) {
     const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
-    for (int i = 0; i < 3; ++i) pair[i] = double(contribution[i]) * double(light_through[i]);
+    for (int i = 0; i < 3; ++i)
+        pair[i] = double(contribution[i]) * double(light_through[i]), hemi[i] = 0.0;
     if (k < 0) return;
     // the hit point from its barycentrics, in double
     const double* c = em.corners + 9 * k;
@@ -108,18 +117,23 @@ inline void sample_pair(const EmitterTriangles& em, const DirectLightQuery& q, i
     if (cos_y > 0.0 && r2 > 0.0) {
         // power heuristic, solid-angle measure
         const double pl = em.density[k] * r2 / cos_y, ph = cos_x / kPi;
-        const double weight = cos_x * ph / (pl * pl + ph * ph);
-        for (int i = 0; i < 3; ++i) pair[i] += weight * em.radiance[3 * k + i] * hemi_through[i];
+        const double weight = cos_x * s2 * ph / (pl * pl + s2 * ph * ph);
+        for (int i = 0; i < 3; ++i) {
+            const double seen = em.radiance[3 * k + i] * hemi_through[i];
+            pair[i] += weight * seen;
+            if (cos_x > 0.0) hemi[i] = kPi * seen;
+        }
     }
 }
 
 // Record r's light and hemisphere rays of sample s.
 inline void sample_rays(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r, int64_t s,
-                        float* lo, float* ld, float* ll, float* con, float* ho, float* hd) {
+                        double s2, float* lo, float* ld, float* ll, float* con, float* raw,
+                        float* ho, float* hd) {
     const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
     double u[5], w[3];
     sample_point(q, r, s, u);
-    light_ray(em, q, r, u, lo, ld, ll, con);
+    light_ray(em, q, r, u, s2, lo, ld, ll, con, raw);
     cosine_direction(nx, u[3], u[4], w);
     for (int i = 0; i < 3; ++i) {
         ho[i] = float(x[i] + q.offset * nx[i]);
@@ -132,17 +146,21 @@ inline void sample_rays(const EmitterTriangles& em, const DirectLightQuery& q, i
 void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
                          const int32_t* emitter_of, const RayScene& scene,
                          const RayScene* emitter_scene, double* irradiance, double* mean_square,
-                         int threads, const StopCheck& stop) {
+                         double* strategy_variance, int threads, const StopCheck& stop) {
     const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
     const int64_t nt = scene.triangle_count();
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
         const int64_t r1 = std::min(q.records, (task + 1) * kRecordsPerTask);
         for (int64_t r = task * kRecordsPerTask; r < r1; ++r) {
+            const double scale = q.hemisphere_scale ? q.hemisphere_scale[r] : 1.0;
+            const double s2 = scale * scale;
             double sum[3] = {0.0, 0.0, 0.0}, sq = 0.0;
+            // the luminance of each strategy's own estimates: sums, squares
+            double own[2] = {0.0, 0.0}, own_sq[2] = {0.0, 0.0};
             for (int64_t s = 0; s < q.samples; ++s) {
-                float lo[3], ld[3], ll, con[3], ho[3], hd[3], hu, hv, te;
+                float lo[3], ld[3], ll, con[3], raw[3], ho[3], hd[3], hu, hv, te;
                 float light_through[3] = {0.f, 0.f, 0.f}, hemi_through[3] = {1.f, 1.f, 1.f};
-                sample_rays(em, q, r, s, lo, ld, &ll, con, ho, hd);
+                sample_rays(em, q, r, s, s2, lo, ld, &ll, con, raw, ho, hd);
                 // light rays that cannot contribute have length 0 (and no
                 // contribution) and are not traced
                 if (ll > 0.f) scene.occluded(lo, ld, ll, light_through);
@@ -160,14 +178,28 @@ void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
                     const int32_t t = scene.intersect(ho, hd, &hu, &hv, nullptr, hemi_through);
                     k = (t >= 0 && t < nt) ? emitter_of[t] : -1;
                 }
-                double pair[3];
-                sample_pair(em, q, r, con, light_through, hd, k, hu, hv, hemi_through, pair);
-                double lum = 0.0;
-                for (int i = 0; i < 3; ++i) sum[i] += pair[i], lum += kLuminance[i] * pair[i];
+                double pair[3], hemi[3];
+                sample_pair(em, q, r, s2, con, light_through, hd, k, hu, hv, hemi_through, pair,
+                            hemi);
+                double lum = 0.0, lum_light = 0.0, lum_hemi = 0.0;
+                for (int i = 0; i < 3; ++i) {
+                    sum[i] += pair[i];
+                    lum += kLuminance[i] * pair[i];
+                    lum_light += kLuminance[i] * double(raw[i]) * double(light_through[i]);
+                    lum_hemi += kLuminance[i] * hemi[i];
+                }
                 sq += lum * lum;
+                own[0] += lum_light, own_sq[0] += lum_light * lum_light;
+                own[1] += lum_hemi, own_sq[1] += lum_hemi * lum_hemi;
             }
-            for (int i = 0; i < 3; ++i) irradiance[3 * r + i] = sum[i] / double(q.samples);
-            mean_square[r] = sq / double(q.samples);
+            const double n = double(q.samples);
+            for (int i = 0; i < 3; ++i) irradiance[3 * r + i] = sum[i] / n;
+            mean_square[r] = sq / n;
+            if (strategy_variance)
+                for (int j = 0; j < 2; ++j) {
+                    const double m = own[j] / n;
+                    strategy_variance[2 * r + j] = std::max(0.0, own_sq[j] / n - m * m);
+                }
         }
     });
 }

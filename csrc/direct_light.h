@@ -37,11 +37,22 @@ struct DirectLightQuery {
     int64_t samples = 0;
     const double* sequence = nullptr;  // (samples, 5) points of [0, 1)^5
     double offset = 0.0;               // ray offset from the surfaces, scene units
+    // (records,) or null (all 1): the factor on the hemisphere sampling's
+    // density in the power heuristic, each record's own. Any positive
+    // factors keep the estimate unbiased (the two weights of a direction
+    // still sum to 1); the one that minimises the variance weighs each
+    // strategy by the inverse of its variance (Grittmann et al. 2019), so
+    // that in an enclosure of emitters, where a cosine-distributed ray
+    // always finds the same radiance, the hemisphere samples carry it.
+    const double* hemisphere_scale = nullptr;
 };
 
 // Per record: the direct irradiance (the mean over its samples of the pair
 // light + hemisphere sample) and the mean square of that pair's luminance
-// (for its variance), the rays traced in `scene` (built from the scene's
+// (for its variance); with `strategy_variance` (records, 2; nullable) also
+// the variance of the luminance of the light samples' and the hemisphere
+// samples' own estimates (each alone, unweighted), the rays traced in
+// `scene` (built from the scene's
 // triangles, which emitter_of indexes: the emitter index of each scene
 // triangle, or -1). A light ray ends an offset short of its emitter point
 // and brings the sample's weighted light unless occluded; one that cannot
@@ -57,6 +68,6 @@ struct DirectLightQuery {
 void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
                          const int32_t* emitter_of, const RayScene& scene,
                          const RayScene* emitter_scene, double* irradiance, double* mean_square,
-                         int threads, const StopCheck& stop);
+                         double* strategy_variance, int threads, const StopCheck& stop);
 
 }  // namespace voxgi

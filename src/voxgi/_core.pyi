@@ -208,7 +208,7 @@ def camera_rays(eye: numpy.typing.NDArray[numpy.float64], right: numpy.typing.ND
     pixel; right, up, forward the camera's unit frame (Camera.frame), a pinhole
     for aperture 0, else a thin lens focused at distance focus along forward.
     """
-def direct_light_traced(emitters: tuple, point: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float64], shift: numpy.typing.NDArray[numpy.float64], sequence: numpy.typing.NDArray[numpy.float64], offset: typing.SupportsFloat | typing.SupportsIndex, emitter_of: numpy.typing.NDArray[numpy.int32], scene: ..., emitter_scene: ... = None, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+def direct_light_traced(emitters: tuple, point: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float64], shift: numpy.typing.NDArray[numpy.float64], sequence: numpy.typing.NDArray[numpy.float64], offset: typing.SupportsFloat | typing.SupportsIndex, emitter_of: numpy.typing.NDArray[numpy.int32], scene: ..., emitter_scene: ... = None, threads: typing.SupportsInt | typing.SupportsIndex = 0, hemisphere_scale: numpy.typing.NDArray[numpy.float64] | None = None, strategies: bool = False) -> tuple:
     """
     Direct light on records from emitting triangles: light and hemisphere
     samples (samples each) combined by the power heuristic, traced in scene (a
@@ -222,6 +222,11 @@ def direct_light_traced(emitters: tuple, point: numpy.typing.NDArray[numpy.float
     emitter_scene (a RayScene of the emitters' corners alone, in their order;
     None: not used): a hemisphere ray is traced against the emitters, and
     against scene only up to the nearest emitter it meets.
+    hemisphere_scale (N,) float64, each > 0 (None: 1): the factor on the
+    hemisphere samples' density in each record's power heuristic (unbiased
+    for any). With strategies=True a third array (N,2): the variance of the
+    luminance of the light samples' and of the hemisphere samples' own
+    estimates, each alone.
     """
 def environment_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], env_radiance: numpy.typing.NDArray[numpy.float64], env_to_world: numpy.typing.NDArray[numpy.float64], env_texel_pdf: numpy.typing.NDArray[numpy.float64], env_row_solid_angle: numpy.typing.NDArray[numpy.float64], env_texel_cdf: numpy.typing.NDArray[numpy.float64], env_row_cos: numpy.typing.NDArray[numpy.float64], env_samples: typing.SupportsInt | typing.SupportsIndex, n_gather: typing.SupportsFloat | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, mat_lobe: numpy.typing.NDArray[numpy.float32] | None = None) -> int:
     """

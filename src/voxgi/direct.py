@@ -232,8 +232,9 @@ def direct_irradiance(
             pilot = _Estimate(len(vox))
             per = max(_PILOT_SAMPLES, samples // 4)
             stats["rays"] += rays.estimate(pilot, lit, per, rng, max_rays)
+            scale = _hemisphere_scale(pilot, lit, np.asarray(vox.object_id))
             for todo, per in _sample_counts(pilot, lit, rel_error, samples):
-                stats["rays"] += rays.estimate(est, todo, per, rng, max_rays)
+                stats["rays"] += rays.estimate(est, todo, per, rng, max_rays, scale)
     stats["refined_records"] = int(np.count_nonzero(est.counts > samples))
     stats["max_samples"] = int(est.counts.max(initial=0))
     stats["seconds"] = time.perf_counter() - t0
@@ -284,12 +285,19 @@ class _Estimate:
         self.irradiance = np.zeros((n, 3))
         self.mean_sq = np.zeros(n)
         self.counts = np.zeros(n, np.int64)
+        #: (N, 2): the variance of the light and of the hemisphere samples'
+        #: own estimates (the pilot's, :func:`_hemisphere_scale`)
+        self.strategy_var = np.zeros((n, 2))
 
-    def add(self, rec: np.ndarray, mean: np.ndarray, sq: np.ndarray, per: int) -> None:
+    def add(self, rec: np.ndarray, mean: np.ndarray, sq: np.ndarray, per: int, var=None) -> None:
         """Fold the means of ``per`` more samples of records ``rec`` in."""
         w_old = self.counts[rec] / (self.counts[rec] + per)
         self.irradiance[rec] = w_old[:, None] * self.irradiance[rec] + (1 - w_old)[:, None] * mean
         self.mean_sq[rec] = w_old * self.mean_sq[rec] + (1 - w_old) * sq
+        if var is not None:
+            self.strategy_var[rec] = (
+                w_old[:, None] * self.strategy_var[rec] + (1 - w_old)[:, None] * var
+            )
         self.counts[rec] += per
 
 
@@ -322,9 +330,14 @@ class _Rays:
     def __exit__(self, *exc) -> None:
         self.tracer.close()
 
-    def estimate(self, est: _Estimate, todo: np.ndarray, per: int, rng, max_rays: int) -> int:
+    def estimate(
+        self, est: _Estimate, todo: np.ndarray, per: int, rng, max_rays: int, scale=None
+    ) -> int:
         """``per`` more samples for each record of ``todo``, in batches of at
-        most ``max_rays`` rays; returns the sample pairs taken."""
+        most ``max_rays`` rays; returns the sample pairs taken. With
+        ``scale`` (one per record of the scene) each record's hemisphere
+        samples weigh that much more in its power heuristic; without, each
+        strategy's own variance is measured."""
         base = _sequence(per, int(rng.integers(1 << 31)))
         shifts = rng.random((len(todo), 5))
         step = max(1, max_rays // per)
@@ -338,7 +351,9 @@ class _Rays:
                 base,
                 self.offset,
             )
-            est.add(rec, *_batch(args, self), per)
+            hs = None if scale is None else np.ascontiguousarray(scale[rec])
+            out = _batch(args, self, hs)
+            est.add(rec, out[0], out[1], per, out[2] if len(out) > 2 else None)
         return len(todo) * per
 
 
@@ -365,17 +380,54 @@ def _sample_counts(
     return [(lit[size == k], int(k)) for k in np.unique(size)]
 
 
-def _batch(args: tuple, rays: _Rays) -> tuple[np.ndarray, np.ndarray]:
+def _batch(args: tuple, rays: _Rays, scale=None) -> tuple:
     """Trace one batch: ``args`` are the kernels' (emitters, points, normals,
-    shifts, sequence, offset) for R records and S samples.
+    shifts, sequence, offset) for R records and S samples; ``scale`` (R,)
+    the hemisphere samples' weights, or None for the default heuristic and
+    each strategy's variance.
 
     Returns the mean RGB irradiance (R, 3) and the mean square of its
-    luminance (R,), from which the caller judges each record's noise.
+    luminance (R,), from which the caller judges each record's noise, and
+    without ``scale`` the two strategies' variances (R, 2).
     """
     tracer, nthreads, emitter_of = rays.tracer, rays.threads, rays.emitter_of
     return _core.direct_light_traced(
-        *args, emitter_of, tracer.native, rays.emitter_scene, threads=nthreads
+        *args,
+        emitter_of,
+        tracer.native,
+        rays.emitter_scene,
+        threads=nthreads,
+        hemisphere_scale=scale,
+        strategies=scale is None,
     )
+
+
+#: The hemisphere samples' weight, relative to the light samples', stays
+#: within these bounds (any positive weight keeps the estimate unbiased).
+_SCALE_RANGE = (1e-2, 1e2)
+
+
+def _hemisphere_scale(pilot: _Estimate, lit: np.ndarray, object_id: np.ndarray) -> np.ndarray:
+    """(N,) each record's weight on its hemisphere samples, relative to its
+    light samples, in the power heuristic: the ratio of the light samples'
+    to the hemisphere samples' variance (Grittmann et al. 2019), each
+    relative to the record's irradiance, pooled over the records of an
+    object (a pilot of a few samples per record cannot tell a hemisphere
+    that never met the lamp from one that always sees the same light)."""
+    scale = np.ones(len(pilot.counts))
+    lum = pilot.irradiance[lit] @ LUMINANCE
+    ok = lum > 0
+    rec = lit[ok]
+    rel = pilot.strategy_var[rec] / (lum[ok] ** 2)[:, None]
+    obj = object_id[rec]
+    n_obj = int(object_id.max(initial=-1)) + 1
+    light = np.bincount(obj, weights=rel[:, 0], minlength=n_obj)
+    hemi = np.bincount(obj, weights=rel[:, 1], minlength=n_obj)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(hemi > 0, light / hemi, _SCALE_RANGE[1])
+    ratio = np.where(light > 0, ratio, 1.0)
+    scale[rec] = np.clip(ratio, *_SCALE_RANGE)[obj]
+    return scale
 
 
 def light_irradiance(
