@@ -10,6 +10,7 @@ import trimesh
 
 import voxgi
 from voxgi import _core
+from voxgi.display.samples import camera_arguments
 from voxgi.display.settings import _Experiment
 from voxgi.display.shader import _Tracer
 
@@ -168,18 +169,7 @@ def test_the_kernel_sees_what_the_camera_hits_see():
     tables = list(_triangles(scene, tr))
     tables[4] = (np.arange(n_obj) % 2).astype(np.uint8)
     tables[5] = np.arange(1, 3 * n_obj + 1, dtype=np.float32).reshape(n_obj, 3)
-    right, up, fwd = cam.frame()
-    camera = (
-        np.asarray(cam.eye, np.float64) - tr.centre,
-        right,
-        up,
-        fwd,
-        math.tan(math.radians(cam.fov) / 2),
-        cam.width,
-        cam.height,
-        cam.aperture,
-        cam.focus,
-    )
+    camera = camera_arguments(cam, tr.centre)
     pixels = np.array([0, 7, 150, 299], np.int64)
     samples = np.array([[0.3, 0.8, 0.6, -0.5], [0.0, 0.999, 0.0, 0.0]])
     try:

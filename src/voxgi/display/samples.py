@@ -11,7 +11,7 @@ from .. import _core
 from .._qmc import sobol
 from ..scene import Camera
 
-__all__ = ["camera_rays", "frame_samples"]
+__all__ = ["camera_arguments", "camera_rays", "frame_samples"]
 
 
 def _radical_inverse(i: int, base: int) -> float:
@@ -57,6 +57,25 @@ def frame_samples(frame: int, seed: int = 0) -> tuple[tuple[float, float], tuple
     return off, _concentric_disc(lu, lv)
 
 
+def camera_arguments(cam: Camera, centre=(0.0, 0.0, 0.0)) -> tuple:
+    """The camera arguments of the compiled camera kernels (``camera_rays``,
+    ``camera_hits``, ``camera_emission``), before the sample: the eye moved
+    by ``-centre`` (into a tracer's scene-centred frame), the unit frame,
+    ``tan(fov / 2)``, the image size, the aperture and the focus distance."""
+    right, up, fwd = cam.frame()
+    return (
+        np.asarray(cam.eye, dtype=np.float64) - np.asarray(centre, dtype=np.float64),
+        np.asarray(right, dtype=np.float64),
+        np.asarray(up, dtype=np.float64),
+        np.asarray(fwd, dtype=np.float64),
+        math.tan(math.radians(cam.fov) / 2.0),
+        cam.width,
+        cam.height,
+        float(cam.aperture),
+        float(cam.focus),
+    )
+
+
 def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
     """Primary rays of every pixel, row-major from the top-left pixel.
 
@@ -78,17 +97,8 @@ def camera_rays(cam: Camera, offset=(0.5, 0.5), lens=(0.0, 0.0)) -> tuple[np.nda
         column) sees ``right = forward x up`` to its right; the rays of all
         lens points through one pixel meet on the plane in focus.
     """
-    right, up, fwd = cam.frame()
     return _core.camera_rays(
-        np.asarray(cam.eye, dtype=np.float64),
-        np.asarray(right, dtype=np.float64),
-        np.asarray(up, dtype=np.float64),
-        np.asarray(fwd, dtype=np.float64),
-        math.tan(math.radians(cam.fov) / 2.0),
-        cam.width,
-        cam.height,
-        float(cam.aperture),
-        float(cam.focus),
+        *camera_arguments(cam),
         (float(offset[0]), float(offset[1])),
         (float(lens[0]), float(lens[1])),
     )

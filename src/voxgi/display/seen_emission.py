@@ -34,6 +34,7 @@ import numpy as np
 from .. import _core
 from .._qmc import sobol
 from .pixel_filter import _FILTER_REACH, GAUSSIAN_TAPS, gaussian_norms, gaussian_weights
+from .samples import camera_arguments
 
 __all__ = ["SeenEmission", "seen_emission", "skip_reason"]
 
@@ -171,19 +172,8 @@ def seen_emission(cam, tracer, triangles: tuple, env, seed: int, threads: int) -
     threads : int
     """
     t0 = time.perf_counter()
-    right, up, fwd = cam.frame()
     ctx = {
-        "camera": (
-            np.asarray(cam.eye, dtype=np.float64) - tracer.centre,
-            right,
-            up,
-            fwd,
-            math.tan(math.radians(cam.fov) / 2.0),
-            cam.width,
-            cam.height,
-            float(cam.aperture),
-            float(cam.focus),
-        ),
+        "camera": camera_arguments(cam, tracer.centre),
         "triangles": triangles,
         "scene": tracer.native,
         "env": env,

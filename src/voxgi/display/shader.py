@@ -26,7 +26,7 @@ from ..traced import record_grid
 from .aovs import frame_aovs
 from .lighting import _HIT_KEYS, _SceneLights
 from .pixel_filter import gaussian_pixel_filter
-from .samples import frame_samples
+from .samples import camera_arguments, frame_samples
 from .seen_emission import SeenEmission, seen_emission, skip_reason
 from .vpls import VPLSampler, place_vpls
 
@@ -202,18 +202,9 @@ class _FrameShader:
         miss or a one-sided back), the emission seen (the environment's
         radiance for a ray that leaves the scene), and ``through``: what the
         sheets before the hit let through (None in a scene without)."""
-        tr, cam = self.tracer, self.cam
-        right, up, fwd = cam.frame()
+        tr = self.tracer
         pos, n_out, ng_out, wo, mat, le, prim, through, albedo = _core.camera_hits(
-            np.asarray(cam.eye, dtype=np.float64) - tr.centre,
-            right,
-            up,
-            fwd,
-            math.tan(math.radians(cam.fov) / 2.0),
-            cam.width,
-            cam.height,
-            float(cam.aperture),
-            float(cam.focus),
+            *camera_arguments(self.cam, tr.centre),
             (float(offset[0]), float(offset[1])),
             (float(lens[0]), float(lens[1])),
             *self._primary_scene,
