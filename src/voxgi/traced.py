@@ -148,6 +148,11 @@ class TracedGather:
     offset : float or None
         Ray offset from the surface, scene units (None: 1e-4 of the scene's
         diagonal).
+    source : VoxelSet or None
+        The records the rays read where they land (None: ``vox``'s own):
+        another voxelization of the same scene, so that two solutions are
+        gathered with the same rays (:mod:`voxgi.resolution`). Each pass's
+        ``values`` are then per record of ``source``.
     """
 
     def __init__(
@@ -157,8 +162,13 @@ class TracedGather:
         *,
         threads: int | None = None,
         offset: float | None = None,
+        source: VoxelSet | None = None,
     ):
         check_scene_and_records(scene, vox)
+        if source is None:
+            source = vox
+        else:
+            check_scene_and_records(scene, source)
         self.threads = _validate.threads(threads)
         if offset is None:
             offset = 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
@@ -166,7 +176,6 @@ class TracedGather:
         self.vox = vox
         self.tracer = Tracer(scene, self.threads)
         c = self.tracer.centre
-        n = len(vox)
         normal = np.ascontiguousarray(vox.normal, np.float32)
         reflecting = (np.asarray(vox.area) > 0) & np.any(np.asarray(vox.albedo) > 0, axis=1)
         # Each record is a "pixel" of the display's gather kernels with one
@@ -190,9 +199,12 @@ class TracedGather:
             "tri_object": np.ascontiguousarray(scene.triangles()["object"], np.int32),
             "obj_two_sided": np.array([o.two_sided for o in scene.objects], np.uint8),
         }
-        voxel_order = _voxel_order(vox)
+        self.source = source
+        voxel_order = _voxel_order(source)
         self._order = voxel_order[3]  # puts each pass's values in the grid's order
-        self._grid = _record_grid(vox, c, np.zeros((n, 3), np.float32), None, voxel_order)
+        self._grid = _record_grid(
+            source, c, np.zeros((len(source), 3), np.float32), None, voxel_order
+        )
         self.rays = 0
         #: The rays of the pass called with ``keep=True``, as a sparse matrix
         #: (``row_ptr``, ``column``, ``weight``; :meth:`apply`), or None.
@@ -221,10 +233,10 @@ class TracedGather:
         so that :meth:`apply` gives the same pass for other values without
         tracing the rays again.
         """
-        n = len(self.vox)
+        n, m = len(self.vox), len(self.source)
         values = np.asarray(values)
-        if values.shape != (n, 3):
-            raise ValueError(f"values: expected shape ({n}, 3), got {values.shape}")
+        if values.shape != (m, 3):
+            raise ValueError(f"values: expected shape ({m}, 3), got {values.shape}")
         self._grid["rec_packed"][:, _RADIANCE] = values[self._order]
         out = np.zeros((n, 3), np.float32)
         kept = {}
@@ -258,15 +270,15 @@ class TracedGather:
         return out.astype(np.float64)
 
     def apply(self, values: np.ndarray) -> np.ndarray:
-        """The pass kept by ``keep=True``, applied to ``values`` (N, 3): the
-        (N, 3) float64 mean of ``values`` under the same rays, to rounding,
-        without tracing them."""
+        """The pass kept by ``keep=True``, applied to ``values`` (one row per
+        record of ``source``): the (N, 3) float64 mean of ``values`` under the
+        same rays, to rounding, without tracing them."""
         if self.matrix is None:
             raise RuntimeError("no pass was kept: call with keep=True first")
-        n = len(self.vox)
+        n, m = len(self.vox), len(self.source)
         values = np.ascontiguousarray(values, np.float64)
-        if values.shape != (n, 3):
-            raise ValueError(f"values: expected shape ({n}, 3), got {values.shape}")
+        if values.shape != (m, 3):
+            raise ValueError(f"values: expected shape ({m}, 3), got {values.shape}")
         out = np.empty((n, 3), np.float64)
         _core.transport_apply(*self.matrix, values, out, self.threads)
         return out
