@@ -230,7 +230,7 @@ def test_help_shows_the_defaults(capsys):
     from voxgi.voxels import DEFAULT_RESOLUTION
 
     for want in (
-        f"(default: {DEFAULT_RESOLUTION})",
+        f"(default: the coarsest of 16, 32 and {DEFAULT_RESOLUTION} whose solution",
         f"(default: {TRACED_RADIUS})",
         "(default: 256)",
         "(default: 0.001)",

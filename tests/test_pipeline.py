@@ -21,11 +21,14 @@ def _area_l1(vox, x) -> float:
 
 def test_render_solves_as_solve_does():
     # render(scene) voxelizes and solves with the defaults of voxelize and
-    # solve: solving first gives the same picture, bit for bit. (Objects
-    # under a sky: a fifth of the Cornell box's records at the defaults.)
+    # solve, at the resolution voxgi.resolution.solve_scene picks (here the
+    # largest, 64: resolution 32 differs from 16): solving first gives the
+    # same picture, bit for bit. (Objects under a sky: a fifth of the Cornell
+    # box's records at 64.)
     scene = voxgi.scenes.sky_objects(width=24, height=24)
     kw = dict(max_frames=4, tol=0.0, seed=5, progress=False)
     one_call = voxgi.render(scene, **kw)
+    assert one_call.solution.stats["resolution"]["chosen"] == 64
     vox = voxgi.voxelize(scene)
     sol = voxgi.solve(vox, progress=False)
     assert np.array_equal(sol.radiosity, one_call.solution.radiosity)

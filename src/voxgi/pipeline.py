@@ -4,9 +4,11 @@ This module sits above the stages (:mod:`voxgi.voxels`, :mod:`voxgi.radiosity`,
 :mod:`voxgi.display`) and only calls their public functions. :func:`solve`
 is :func:`voxgi.radiosity.solve` with ``client=``, a
 ``dask.distributed.Client`` or an executor (:func:`voxgi.distributed.executor`);
-:func:`render` displays a solution, and with ``sol=None`` voxelizes and
-solves the scene first with the same defaults, so that
-``render(scene, solve(voxelize(scene)))`` is ``render(scene)``.
+:func:`render` displays a solution, and with ``sol=None`` first solves the
+scene at the resolution its picture needs (:func:`voxgi.resolution.solve_scene`,
+with :func:`solve`'s defaults), so that
+``render(scene, voxgi.resolution.solve_scene(scene, tol=tol))`` is
+``render(scene, tol=tol)``.
 """
 
 from __future__ import annotations
@@ -16,10 +18,12 @@ import time
 from . import distributed
 from .display import RenderResult, RenderTuning
 from .display import render as display_render
+from .display.settings import DEFAULT_TOL
 from .radiosity import Solution, SolveTuning
 from .radiosity import solve as radiosity_solve
+from .resolution import solve_scene
 from .scene import Camera, Scene
-from .voxels import VoxelSet, voxelize
+from .voxels import VoxelSet
 
 __all__ = ["render", "solve"]
 
@@ -122,11 +126,16 @@ def render(
     Each pixel sees the scene's surfaces lit by the records of the solution,
     each a virtual point light, in progressive frames averaged until the
     estimated noise falls under ``tol`` (:func:`voxgi.display.render`,
-    ``docs/design.md`` §6). Without a solution the scene is voxelized at
-    :data:`voxgi.voxels.DEFAULT_RESOLUTION` (64) and solved with
-    :func:`solve`'s defaults, so that ``render(scene, solve(voxelize(scene)))``
-    gives the same picture; for another resolution, radius or solve tuning,
-    call :func:`voxgi.voxelize` and :func:`solve` and pass ``sol``.
+    ``docs/design.md`` §6). Without a solution the scene is solved at the
+    coarsest resolution the picture needs, 16, 32 or
+    :data:`voxgi.voxels.DEFAULT_RESOLUTION` (64), with :func:`solve`'s
+    defaults (:func:`voxgi.resolution.solve_scene` with this ``tol``), so
+    that ``render(scene, voxgi.resolution.solve_scene(scene, tol=tol))``
+    gives the same picture; ``out.solution.stats["resolution"]`` says which
+    and why. For a resolution of your choice, a radius or a solve tuning,
+    call :func:`voxgi.voxelize` and :func:`solve` and pass ``sol``; do so
+    too where two variants of a scene are compared record by record, as
+    each would otherwise get the grid it needs.
 
     Parameters
     ----------
@@ -161,7 +170,8 @@ def render(
     RenderResult
         ``image`` (H, W, 3) float32 linear radiance, ``stderr``, ``frames``,
         ``solution`` (the one displayed) and ``stats``, whose ``seconds``
-        include ``voxelize`` and ``solve`` when they ran here.
+        include ``voxelize`` and ``solve`` when they ran here (every
+        resolution tried).
 
     Raises
     ------
@@ -174,11 +184,16 @@ def render(
     seconds = {}
     if sol is None:
         t0 = time.perf_counter()
-        vox = voxelize(scene, threads=threads)
-        seconds["voxelize"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        sol = solve(vox, threads=threads, progress=progress, client=ex)
-        seconds["solve"] = time.perf_counter() - t0
+        sol = solve_scene(
+            scene,
+            tol=DEFAULT_TOL if not tol else tol,
+            threads=threads,
+            progress=progress,
+            executor=ex,
+        )
+        levels = sol.stats["resolution"]["levels"]
+        seconds["voxelize"] = sum(level["voxelize_seconds"] for level in levels)
+        seconds["solve"] = time.perf_counter() - t0 - seconds["voxelize"]
     out = display_render(
         scene,
         sol,

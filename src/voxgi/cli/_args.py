@@ -132,8 +132,10 @@ def _add_render_arguments(r: argparse.ArgumentParser) -> None:
         "--resolution",
         metavar="N",
         type=_at_least(2),
-        default=DEFAULT_RESOLUTION,
-        help="voxels along the scene's longest side",
+        default=None,
+        help="voxels along the scene's longest side (default: the coarsest of 16, 32 and "
+        f"{DEFAULT_RESOLUTION} whose solution the next one's agrees with at the tolerance, "
+        "voxgi.resolution.solve_scene)",
     )
     r.add_argument(
         "--radius",

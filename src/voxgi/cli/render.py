@@ -65,6 +65,38 @@ def _run_solve(args, vox):
     return sol, t_sol
 
 
+def _run_solve_scene(args, scene):
+    """Solve at the coarsest resolution the picture needs and report each one
+    tried; returns ``(sol, voxelize seconds, solve seconds)``."""
+    from ..display.settings import DEFAULT_TOL
+    from ..resolution import solve_scene
+
+    t0 = time.perf_counter()
+    sol = solve_scene(
+        scene,
+        tol=args.tol if args.tol > 0 else DEFAULT_TOL,
+        radius=args.radius,
+        threads=args.threads,
+        progress=not args.quiet,
+    )
+    r = sol.stats["resolution"]
+    for level in r["levels"]:
+        agree = (
+            f", differs from the last by relMSE {level['difference']:.2e}"
+            if "difference" in level
+            else ""
+        )
+        _say(
+            f"resolution {level['resolution']}: {level['records']} records, solved in "
+            f"{level['solve_seconds']:.2f} s{agree}"
+        )
+    _say(f"kept {r['reason']}")
+    for what, why in sol.stats.get("skipped", {}).items():
+        _note(args, f"solve skipped {what}: {why}")
+    t_vox = r["voxelize_seconds"]
+    return sol, t_vox, time.perf_counter() - t0 - t_vox
+
+
 def _run_display(args, scene, sol):
     """Render the image by progressive display frames."""
     from ..display import RenderTuning, render
@@ -151,9 +183,14 @@ def run_render(args) -> int:
     )
     phase = "voxelize"
     try:
-        vox, t_vox = _run_voxelize(args, scene)
-        phase = "solve"
-        sol, t_sol = _run_solve(args, vox)
+        if args.resolution is None:
+            phase = "voxelize and solve"
+            sol, t_vox, t_sol = _run_solve_scene(args, scene)
+            vox = sol.vox
+        else:
+            vox, t_vox = _run_voxelize(args, scene)
+            phase = "solve"
+            sol, t_sol = _run_solve(args, vox)
         phase = "display"
         res = _run_display(args, scene, sol)
     except KeyboardInterrupt:

@@ -15,7 +15,11 @@ from ..voxels import available_memory
 from .estimate import PIXEL_FACTOR, PIXEL_SHARE
 from .executor import FrameExecutor, LocalFrames
 
-__all__ = ["RenderTuning"]
+__all__ = ["DEFAULT_TOL", "RenderTuning"]
+
+#: The display's tolerance when none is given: the estimated relMSE of the
+#: picture's remaining noise.
+DEFAULT_TOL = 1e-3
 
 
 @dataclass(frozen=True)
@@ -149,7 +153,7 @@ def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) ->
             t.vpls_per_frame, "vpls_per_frame", low=1, high=1 << 16, allow_none=True
         ),
         max_frames=_validate.integer(max_frames, "max_frames", low=1, allow_none=True) or 256,
-        tol=1e-3 if tol is None else tol,
+        tol=DEFAULT_TOL if tol is None else tol,
         seed=_validate.integer(seed, "seed"),
         pixel_factor=(
             math.inf
