@@ -4,12 +4,13 @@ Per scene (by default the Cornell box with its box filter, ``window_room`` and
 ``door_room`` at ``--size`` pixels square, and Bitterli's wooden staircase,
 which the estimate was not tuned on, ``--small-width`` pixels wide, when
 ``--scenes-dir`` holds it; ``shadow``, ``geometric`` and the furnace sphere at
-albedo 0.9 on request): one voxelize + solve with the defaults of
-``voxgi.render(scene)``; a reference render of that same solution with
+albedo 0.9 on request): one voxelize + solve as ``voxgi.render(scene)`` does
+(``voxgi.resolution.solve_scene``); a reference render of that same solution with
 ``--ref-frames`` frames (``tol=0``, seed 1000; twice as many for the door
 room, whose light arrives through a gap and is the noisiest, four times for
 the staircase, whose renders run longest); then
-``voxgi.render`` with its defaults at seeds 0 .. N-1. The estimate is of the
+``voxgi.render`` with its defaults (``--tol``: another tolerance) at seeds
+0 .. N-1. The estimate is of the
 display's noise only, so the reference is the long render of the same
 solution, not a path-traced image (whose difference would add the voxel
 solution's bias):
@@ -25,7 +26,8 @@ solution's bias):
   shading) of the reference render.
 
 The summary per scene: the least and largest ratio over the seeds, and
-whether every one lies within [0.5, 2]. Writes ``results/calibration.json``.
+whether every one lies within [0.5, 2]. Writes ``results/calibration.json``
+(``--json``: elsewhere).
 
 Usage::
 
@@ -46,6 +48,7 @@ from time_vs_error import RESULTS, git_commit
 
 import voxgi
 from voxgi.metrics import rel_mse
+from voxgi.resolution import solve_scene
 
 SCENES = ("cornell_box", "window_room", "door_room", "staircase")
 OTHER = ("shadow", "geometric", "furnace_sphere")
@@ -72,10 +75,12 @@ def make_scene(name: str, size: int, small_width: int, scenes_dir: Path) -> voxg
     return voxgi.scenes.get(name, width=size, height=size)
 
 
-def measure(scene: voxgi.Scene, name: str, ref_frames: int, seeds: int, threads: int) -> dict:
+def measure(
+    scene: voxgi.Scene, name: str, ref_frames: int, seeds: int, threads: int, tol: float = 1e-3
+) -> dict:
     t0 = time.perf_counter()
-    vox = voxgi.voxelize(scene, threads=threads)
-    sol = voxgi.solve(vox, progress=False, threads=threads)
+    sol = solve_scene(scene, tol=tol, progress=False, threads=threads)
+    vox = sol.vox
     solve_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     ref = voxgi.render(
@@ -85,6 +90,7 @@ def measure(scene: voxgi.Scene, name: str, ref_frames: int, seeds: int, threads:
         "scene": name,
         "pixels": [scene.camera.width, scene.camera.height],
         "records": len(vox),
+        "resolution": vox.resolution,
         "solve_s": solve_s,
         "reference": {
             "frames": ref.frames,
@@ -100,7 +106,7 @@ def measure(scene: voxgi.Scene, name: str, ref_frames: int, seeds: int, threads:
     r = ref.image.astype(np.float64)
     for seed in range(seeds):
         t0 = time.perf_counter()
-        out = voxgi.render(scene, sol, seed=seed, progress=False, threads=threads)
+        out = voxgi.render(scene, sol, tol=tol, seed=seed, progress=False, threads=threads)
         secs = time.perf_counter() - t0
         measured = rel_mse(out.image, ref.image) - ref.stats["est_rel_mse"]
         worst = float(np.max(np.abs(out.image - r) / np.sqrt(r * r + 0.01)))
@@ -146,6 +152,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--small-width", type=int, default=96, help="width of the interiors")
     ap.add_argument("--scenes-dir", type=Path, default=Path("/work/scenes"))
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--tol", type=float, default=1e-3, help="the renders' tolerance")
+    ap.add_argument("--json", type=Path, default=RESULTS / "calibration.json")
     args = ap.parse_args(argv)
     names = [
         n for n in args.scenes if n not in INTERIORS or (args.scenes_dir / n / "diffuse").is_dir()
@@ -154,11 +162,11 @@ def main(argv: list[str] | None = None) -> int:
     for name in names:
         scene = make_scene(name, args.size, args.small_width, args.scenes_dir)
         frames = args.ref_frames * REF_SCALE.get(name, 1)
-        rows.append(measure(scene, name, frames, args.seeds, args.threads))
+        rows.append(measure(scene, name, frames, args.seeds, args.threads, args.tol))
     res = {
         "size": args.size,
         "ref_frames": args.ref_frames,
-        "tol": 1e-3,
+        "tol": args.tol,
         "pixel_factor": voxgi.display.PIXEL_FACTOR,
         "commit": git_commit(),
         "cores": os.cpu_count(),
@@ -167,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
         "small_width": args.small_width,
         "rows": rows,
     }
-    (RESULTS / "calibration.json").write_text(json.dumps(res, indent=2, default=float))
+    args.json.write_text(json.dumps(res, indent=2, default=float))
     return 0
 
 

@@ -29,12 +29,14 @@ PIXEL_SHARE = 1e-3
 #: batch size), so the error estimate always rests on at least 16 batches.
 _BATCH_SLOTS = 32
 
-#: Batches before the stopping rule is trusted: two blocks of
-#: :data:`_STRATUM_FRAMES` frames for the relMSE estimate, and a per-pixel
-#: variance known to a relative standard deviation of sqrt(2 / (k - 1)) =
-#: 0.53 (normal batches). A ninth frame, which opens a third block, measured
-#: no lower error than eight (``docs/design.md`` §6).
-_MIN_BATCHES = 8
+#: Batches before the stopping rule is trusted: one block of
+#: :data:`_STRATUM_FRAMES` frames, so that every pixel's offsets have
+#: visited each quarter of it, and the heavy-tail test's least number of
+#: batches. Each pixel's variance is then known only to a relative standard
+#: deviation of sqrt(2 / 3) = 0.82 (normal batches), but the relMSE is the
+#: mean over the pixels; before two blocks an edge pixel's error comes from
+#: the single frames, which overstates it (``docs/design.md`` §6).
+_MIN_BATCHES = 4
 
 #: Frames per block of the mean relMSE's estimate. The sub-pixel offsets
 #: follow a (0, 2)-sequence, so any 4 frames from a multiple of 4 put one
