@@ -764,6 +764,42 @@ def test_traced_passes_sum_a_closed_furnaces_series_from_nothing(monkeypatch):
     np.testing.assert_allclose(mean * (1 - rho), 1.0, rtol=2e-4)
 
 
+def test_fresh_passes_stop_where_the_cap_could_not_halve_the_rest(monkeypatch):
+    # At rho 0.99 the changes fade by 0.99 a pass: the 32 passes of fresh
+    # rays would leave 72% of the change, so they stop once two passes in a
+    # row measure so slow a ratio, and the tail d rho / (1 - rho) completes
+    # the series as it does at the cap: the closed furnace's radiance is
+    # Le / (1 - rho) either way (every ray lands on one value, so the fresh
+    # rays add no noise). Measured: 4 passes and the cap's answer.
+    from voxgi.radiosity import solver, traced_passes
+
+    def from_nothing(p, Hd, R, mode):
+        return traced_passes.traced_bounces(p, Hd, np.zeros_like(R), mode)
+
+    monkeypatch.setattr(solver, "traced_bounces", from_nothing)
+    rho = 0.99
+    vox = voxgi.voxelize(voxgi.scenes.furnace_box(albedo=rho, emission=1.0), 8, progress=False)
+    fresh = voxgi.SolveTuning(traced_cache=False)
+    front = (vox.area > 0) & ~vox.back
+
+    def solve():
+        sol = voxgi.solve(vox, progress=False, tuning=fresh)
+        mean = (sol.radiance[front] * vox.area[front, None]).sum(0) / vox.area[front].sum()
+        return mean * (1 - rho), sol.stats["traced"]
+
+    quick, st = solve()
+    assert st["stalled"]
+    assert not st["kept"]
+    assert st["passes"] <= 5
+    np.testing.assert_allclose(quick, 1.0, rtol=1e-3)
+    # the same solve run to the cap: 32 passes for the same answer
+    monkeypatch.setattr(traced_passes, "_FUTILE_SHARE", 2.0)
+    capped, st = solve()
+    assert st["passes"] == traced_passes._TRACED_PASSES
+    assert not st["stalled"]
+    np.testing.assert_allclose(quick, capped, rtol=1e-3)
+
+
 def _furnace_from_exact_direct_light(monkeypatch, rho=0.8, spoil=None):
     """The closed furnace box (every surface emits radiosity E, albedo rho)
     solved by the traced passes alone, from no reflected light, with its

@@ -18,6 +18,12 @@ __all__ = ["traced_bounces"]
 #: about the albedo, so 32 leave 0.8^32 ≈ 8e-4 of it at ρ = 0.8 before the tail.
 _TRACED_PASSES = 32
 
+#: The share of the remaining change that the passes left before the cap
+#: would keep, from which they are not run: they would change the answer by
+#: less than what is left, and the tail (:func:`_tail`) extrapolates the
+#: rest in any case (``docs/design.md`` §5).
+_FUTILE_SHARE = 0.5
+
 #: At most this many passes through the kept rays (a product with a sparse
 #: matrix each, milliseconds): 1024 leave 0.99^1024 ≈ 3e-5 of the change of a
 #: mode of ratio 0.99 (a room of white walls) before the tail.
@@ -234,6 +240,7 @@ def traced_bounces(
         lam = lam_mode
         size = None
         done = False
+        stalls = 0
         while Btot > 0:
             size, previous = np.sum(area * np.abs(d), axis=0), size
             residuals.append(float(size.sum()) / Btot)
@@ -246,7 +253,14 @@ def traced_bounces(
             # slit, a junction) and noisy, and its tail would amplify both.
             remaining = float(np.sum(size * lam / (1 - lam))) / Btot
             done = len(residuals) >= 2 and remaining < opt.tol
-            if done or len(residuals) >= cap:
+            # Passes that cannot halve what remains before the cap ends them
+            # anyway are not run: a mode fading by 0.97 a pass or slower (the
+            # light passed round the crevices of a sofa of albedo 1) keeps
+            # over half of its change through 20 more. Two passes in a row
+            # must say so, as the measured ratio is noisy.
+            futile = float(np.max(lam)) ** (cap - len(residuals)) > _FUTILE_SHARE
+            stalls = stalls + 1 if futile and len(residuals) >= 3 else 0
+            if done or stalls >= 2 or len(residuals) >= cap:
                 break
             if keep:
                 d = p.rho * trace.apply(d)
@@ -281,6 +295,9 @@ def traced_bounces(
         "kept": bool(keep),
         **matrix,
         "converged": bool(done),
+        # stopped before the cap because the passes left could not halve
+        # the remaining change (_FUTILE_SHARE)
+        "stalled": bool(not done and stalls >= 2),
         "seconds": {"first": t_first, "later": t_later},
         "samples": [opt.traced_samples, 0 if keep else later],
         "residuals": residuals,
