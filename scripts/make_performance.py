@@ -867,6 +867,41 @@ def calibration() -> list[str]:
             "calibration.json",
         ),
         "",
+        *_calibration_at("calibration_tol5e-3.json"),
+    ]
+
+
+def _calibration_at(name: str) -> list[str]:
+    """The same calibration at another tolerance: its spread per scene."""
+    d = load(name)
+    if d is None:
+        return []
+    spread = []
+    for r in d["rows"]:
+        ratios = [s["ratio"] for s in r["seeds"]]
+        measured = [s["rel_mse"] for s in r["seeds"]]
+        frames = sorted({s["frames"] for s in r["seeds"]})
+        spread.append(
+            [
+                r["scene"],
+                r.get("resolution", ""),
+                len(ratios),
+                f"{min(ratios):.2f}-{max(ratios):.2f}",
+                f"{sci(min(measured))}-{sci(max(measured))}",
+                f"{frames[0]}-{frames[-1]}" if len(frames) > 1 else str(frames[0]),
+            ]
+        )
+    return [
+        f"At tol {d['tol']:.0e}, where a render may stop at the floor of 4 frames:",
+        "",
+        table(["scene", "resolution", "seeds", "ratio", "measured relMSE", "frames"], spread),
+        "",
+        source(
+            f"python benchmarks/calibration.py --seeds {d['seeds']} --threads {d['threads']} "
+            f"--tol {d['tol']:g} --json benchmarks/results/{name}",
+            name,
+        ),
+        "",
     ]
 
 
