@@ -52,12 +52,13 @@ import numpy as np
 
 import voxgi
 from voxgi.metrics import rel_mse
+from voxgi.resolution import solve_scene
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
 # (label, voxelize resolution, solve directions, render kwargs); None = library default.
 _RES, _R = voxgi.voxels.DEFAULT_RESOLUTION, voxgi.radiosity.tuning.TRACED_RADIUS
-#: what voxgi.render(scene) runs
+#: the largest grid voxgi.render(scene) tries, with its other defaults
 MAIN = f"res{_RES} R{_R} tol1e-3"
 VOXGI_SETTINGS = [
     (f"res32 R{_R} f8", 32, _R, {"max_frames": 8, "tol": 0.0}),
@@ -70,8 +71,8 @@ VOXGI_SETTINGS = [
     (f"res96 R{_R} tol1e-3", 96, _R, {}),
     ("res64 R12 tol1e-3", 64, 12, {}),
 ]
-#: voxelize + solve + render with every default (the MAIN setting, each
-#: default taken from the library): run with --defaults.
+#: voxelize + solve + render with every default, as voxgi.render(scene):
+#: the resolution it chooses (voxgi.resolution.solve_scene).
 DEFAULTS = ("defaults", None, None, {})
 #: one finer voxelization, run with --high (minutes on 2 cores).
 HIGH = (f"res128 R{_R} tol1e-3", 128, _R, {})
@@ -127,10 +128,16 @@ def run_voxgi(
 ):
     scene = make_scene(name, size)
     t0 = time.perf_counter()
-    vox = voxgi.voxelize(scene, **({} if resolution is None else {"resolution": resolution}))
-    t1 = time.perf_counter()
-    # solved as voxgi.render(scene) solves, at the radius asked for
-    sol = voxgi.solve(vox, **({} if directions is None else {"radius": directions}), progress=False)
+    if resolution is None:
+        # every default: the resolution voxgi.render(scene) chooses
+        sol = solve_scene(scene, progress=False, **render_kw)
+        t1 = t0 + sol.stats["resolution"]["voxelize_seconds"]
+    else:
+        vox = voxgi.voxelize(scene, resolution)
+        t1 = time.perf_counter()
+        # solved as voxgi.render(scene) solves, at the radius asked for
+        radius = {} if directions is None else {"radius": directions}
+        sol = voxgi.solve(vox, **radius, progress=False)
     t2 = time.perf_counter()
     out = voxgi.render(scene, sol, progress=False, seed=seed, **render_kw)
     t3 = time.perf_counter()
@@ -306,11 +313,6 @@ def main(argv=None) -> int:
     ap.add_argument("--variant", default=None)
     ap.add_argument("--split", action="store_true", help="also split voxgi's error")
     ap.add_argument(
-        "--defaults",
-        action="store_true",
-        help="also run voxgi with all its defaults (slow with the current solver)",
-    )
-    ap.add_argument(
         "--high", action="store_true", help=f"also run voxgi at resolution 128, R {_R}, tol 1e-3"
     )
     ap.add_argument(
@@ -335,9 +337,7 @@ def main(argv=None) -> int:
         load_start = os.getloadavg()
         vrows = []
         default = None
-        settings = (
-            VOXGI_SETTINGS + ([HIGH] if args.high else []) + ([DEFAULTS] if args.defaults else [])
-        )
+        settings = VOXGI_SETTINGS + ([HIGH] if args.high else []) + [DEFAULTS]
         scene_s = make_scene(name, size)  # the extra seeds' displays
         for label, res, dirs, kw in settings:
             out, sol, secs, phases = run_voxgi(size, res, dirs, kw, name=name)
