@@ -9,7 +9,9 @@ import voxgi
 from voxgi.metrics import rel_mse
 from voxgi.resolution import (
     AGREEMENT_SHARE,
+    CROWDED_SHARE,
     RESOLVED_GROWTH,
+    crowded_share,
     resolutions,
     solution_difference,
     solve_scene,
@@ -165,6 +167,30 @@ def test_clutter_finer_than_the_voxels_goes_straight_to_the_finest():
     assert [lv["resolution"] for lv in r["levels"]] == [32]
     assert "16 not solved" in sol.stats["skipped"]["resolutions"]
     assert "surfaces finer" in r["reason"]
+
+
+def test_a_crowded_finest_grid_is_the_only_one_voxelized():
+    # 1728 cubes smaller than a voxel, as one closed object: each voxel that
+    # holds one holds its six faces' records, and those voxels hold 15% of
+    # the finest grid's surface, so no coarser grid is even voxelized
+    scene = voxgi.scenes.furnace_box(albedo=0.5, width=8, height=8)
+    cubes = []
+    for i in range(12):
+        for j in range(12):
+            for k in range(12):
+                cube = trimesh.creation.box(extents=[0.01] * 3)
+                cube.apply_translation((np.array([i, j, k]) - 5.5) * 0.075)
+                cubes.append(cube)
+    scene.add(trimesh.util.concatenate(cubes), voxgi.Material(albedo=0.5))
+    sol = solve_scene(scene, max_resolution=32, progress=False, threads=2)
+    r = sol.stats["resolution"]
+    assert r["crowded_share"] > CROWDED_SHARE
+    assert r["growth"] == []
+    assert [lv["resolution"] for lv in r["levels"]] == [32]
+    assert "were not voxelized" in r["reason"]
+    # the Cornell box's finest grid is not crowded
+    box = voxgi.scenes.cornell_box(width=8, height=8)
+    assert crowded_share(voxgi.voxelize(box, 32, progress=False)) < 0.05
 
 
 def test_render_solves_as_solve_scene_does():

@@ -191,8 +191,7 @@ def render(
             progress=progress,
             executor=ex,
         )
-        levels = sol.stats["resolution"]["levels"]
-        seconds["voxelize"] = sum(level["voxelize_seconds"] for level in levels)
+        seconds["voxelize"] = sol.stats["resolution"]["voxelize_seconds"]
         seconds["solve"] = time.perf_counter() - t0 - seconds["voxelize"]
     out = display_render(
         scene,

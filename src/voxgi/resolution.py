@@ -28,9 +28,12 @@ from .voxels import DEFAULT_RESOLUTION, voxelize
 
 __all__ = [
     "AGREEMENT_SHARE",
+    "CROWDED_RECORDS",
+    "CROWDED_SHARE",
     "PROBE_SAMPLES",
     "RESOLVED_GROWTH",
     "START_RESOLUTION",
+    "crowded_share",
     "resolutions",
     "solution_difference",
     "solve_scene",
@@ -54,6 +57,18 @@ PROBE_SAMPLES = 16
 #: such a coarse solve is costly (its traced passes converge slowly) and
 #: rarely agrees with the finer one.
 RESOLVED_GROWTH = 0.75
+
+#: Records in a voxel from which it counts as crowded (a flat wall gives 1-2
+#: a voxel, a corner 3, clutter tens to hundreds).
+CROWDED_RECORDS = 4
+
+#: Share of the finest grid's surface in crowded voxels above which the
+#: coarser grids are not even voxelized: the clutter that crowds them is
+#: finer still than their voxels (0.5-5% in the built-in rooms, 14-41% in
+#: Bitterli's staircases and living room, 24% in the Sponza-like atrium),
+#: and a voxelization of such a scene has a fixed cost (its closed objects'
+#: solids) of seconds.
+CROWDED_SHARE = 0.1
 
 #: Share of the display's tolerance that two successive solutions may differ
 #: by (:func:`solution_difference`) for the finer one to be kept. The
@@ -159,6 +174,22 @@ def solution_difference(
     }
 
 
+def crowded_share(vox) -> float:
+    """The share of the records' area that lies in voxels holding more than
+    :data:`CROWDED_RECORDS` records."""
+    ijk = np.asarray(vox.ijk, np.int64)
+    if not len(ijk):
+        return 0.0
+    ijk = ijk - ijk.min(axis=0)
+    dims = ijk.max(axis=0) + 1
+    key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
+    _, inverse, count = np.unique(key, return_inverse=True, return_counts=True)
+    area = np.asarray(vox.area, np.float64)
+    total = float(area.sum())
+    crowded = count[inverse.reshape(-1)] > CROWDED_RECORDS
+    return float(area[crowded].sum()) / total if total > 0 else 0.0
+
+
 def resolutions(max_resolution: int, start: int = START_RESOLUTION) -> list[int]:
     """The resolutions :func:`solve_scene` tries: ``start``, twice it, ...,
     below ``max_resolution``, then ``max_resolution`` itself.
@@ -187,8 +218,10 @@ def solve_scene(
 ) -> Solution:
     """Voxelize and solve ``scene`` at the coarsest resolution its picture needs.
 
-    Voxelizes at each of :func:`resolutions` (16, 32, ...,
-    ``max_resolution``). From the coarsest resolution on which the records
+    Voxelizes at ``max_resolution`` and, unless more than
+    :data:`CROWDED_SHARE` of that grid's surface lies in crowded voxels, at
+    each coarser one of :func:`resolutions` (16, 32, ...). From the coarsest
+    resolution on which the records
     grow about as the square of the resolution (:data:`RESOLVED_GROWTH`:
     the surfaces are larger than its voxels), it solves each in turn with
     :func:`voxgi.solve`'s defaults and stops at the first solution whose
@@ -213,8 +246,10 @@ def solve_scene(
     -------
     Solution
         The solution kept. Its ``stats["resolution"]`` holds ``chosen``,
-        ``max_resolution``, ``tol``, ``growth`` (the record count's growth
-        from each resolution to the next, over the square of their ratio),
+        ``max_resolution``, ``tol``, ``crowded_share`` (of the finest grid,
+        :func:`crowded_share`), ``growth`` (the record count's growth from
+        each resolution to the next, over the square of their ratio; empty
+        where the finest grid is crowded and no other was voxelized),
         ``levels`` (per resolution solved: ``resolution``, ``records``,
         ``voxelize_seconds``, ``solve_seconds`` and, from the second on,
         ``difference`` from the one before, its ``brightness`` and
@@ -227,19 +262,27 @@ def solve_scene(
     max_resolution = _validate.integer(max_resolution, "max_resolution", low=2)
     tried = resolutions(max_resolution)
     limit = AGREEMENT_SHARE * tol
-    # Every grid first (a fraction of the solves' time): the record counts
-    # say from which resolution on the surfaces are resolved.
-    grids, voxelize_seconds = [], []
-    for r in tried:
+    # The finest grid first, then, unless it is crowded, the coarser ones:
+    # their record counts say from which resolution on the surfaces are
+    # resolved (a fraction of the solves' time where they are; a scene's
+    # fixed cost per voxelization, such as its closed objects' solids, where
+    # the finest grid already says they are not).
+    grids, voxelize_seconds = [None] * len(tried), [0.0] * len(tried)
+    for i in reversed(range(len(tried))):
         t0 = time.perf_counter()
-        grids.append(voxelize(scene, r, threads=threads, progress=progress))
-        voxelize_seconds.append(time.perf_counter() - t0)
+        grids[i] = voxelize(scene, tried[i], threads=threads, progress=progress)
+        voxelize_seconds[i] = time.perf_counter() - t0
+        if i == len(tried) - 1:
+            crowded = crowded_share(grids[i])
+            if crowded > CROWDED_SHARE:
+                break
     growth = [
         len(b) / max(len(a), 1) / (rb / ra) ** 2
         for a, b, ra, rb in zip(grids[:-1], grids[1:], tried[:-1], tried[1:], strict=True)
+        if a is not None
     ]
     first = len(tried) - 1
-    while first > 0 and growth[first - 1] >= RESOLVED_GROWTH:
+    while first > 0 and growth and growth[first - 1] >= RESOLVED_GROWTH:
         first -= 1
     levels, prev, sol, agreed = [], None, None, False
     for i in range(first, len(tried)):
@@ -271,6 +314,12 @@ def solve_scene(
     chosen = levels[-1]["resolution"]
     if len(tried) == 1:
         reason = f"resolution {chosen}: the only one allowed (max_resolution {max_resolution})"
+    elif not growth:
+        reason = (
+            f"resolution {chosen}: {crowded:.0%} of its surface lies in voxels of more than "
+            f"{CROWDED_RECORDS} records (over {CROWDED_SHARE:.0%}): clutter finer than the "
+            "coarser voxels, which were not voxelized"
+        )
     elif len(levels) == 1:
         reason = (
             f"resolution {chosen}: from resolution {tried[-2]} the records grow "
@@ -289,6 +338,7 @@ def solve_scene(
         "max_resolution": max_resolution,
         "tol": tol,
         "growth": growth,
+        "crowded_share": crowded,
         "levels": levels,
         "voxelize_seconds": float(sum(voxelize_seconds)),
         "reason": reason,
