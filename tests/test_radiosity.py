@@ -742,6 +742,26 @@ def test_traced_bounces_that_go_wrong_leave_the_lines_answer(monkeypatch):
     assert sol.stats["skipped"]["traced_bounces"] == "their answer was not finite"
 
 
+def _traced_from_nothing(monkeypatch, rho: float, resolution: int):
+    """The closed furnace box's records (albedo rho, Le 1), with the solve's
+    traced passes started from no reflected light at all (the lines' answer
+    thrown away), so that they must carry the whole series themselves."""
+    from voxgi.radiosity import solver, traced_passes
+
+    def from_nothing(p, Hd, R, mode):
+        return traced_passes.traced_bounces(p, Hd, np.zeros_like(R), mode)
+
+    monkeypatch.setattr(solver, "traced_bounces", from_nothing)
+    scene = voxgi.scenes.furnace_box(albedo=rho, emission=1.0)
+    return voxgi.voxelize(scene, resolution, progress=False)
+
+
+def _front_mean(vox, sol) -> np.ndarray:
+    """(3,) area-weighted mean radiance of the front records."""
+    front = (vox.area > 0) & ~vox.back
+    return (sol.radiance[front] * vox.area[front, None]).sum(0) / vox.area[front].sum()
+
+
 def test_traced_passes_sum_a_closed_furnaces_series_from_nothing(monkeypatch):
     # In a closed room of one albedo every traced ray lands on rho, so the
     # ratio by which the slowest mode fades a pass is rho exactly (design §5).
@@ -749,19 +769,11 @@ def test_traced_passes_sum_a_closed_furnaces_series_from_nothing(monkeypatch):
     # whole series, and the tail d rho / (1 - rho) completes it: the mean
     # radiance is Le / (1 - rho). Measured at rho 0.5, resolution 16: 10
     # passes, mean error 5e-5; without the tail 5.4e-4.
-    from voxgi.radiosity import solver, traced_passes
-
-    def from_nothing(p, Hd, R, mode):
-        return traced_passes.traced_bounces(p, Hd, np.zeros_like(R), mode)
-
-    monkeypatch.setattr(solver, "traced_bounces", from_nothing)
     rho = 0.5
-    vox = voxgi.voxelize(voxgi.scenes.furnace_box(albedo=rho, emission=1.0), 16, progress=False)
+    vox = _traced_from_nothing(monkeypatch, rho, 16)
     sol = voxgi.solve(vox, progress=False)
     np.testing.assert_allclose(sol.stats["traced"]["mode_ratios"], [rho] * 3, rtol=1e-6)
-    front = (vox.area > 0) & ~vox.back
-    mean = (sol.radiance[front] * vox.area[front, None]).sum(0) / vox.area[front].sum()
-    np.testing.assert_allclose(mean * (1 - rho), 1.0, rtol=2e-4)
+    np.testing.assert_allclose(_front_mean(vox, sol) * (1 - rho), 1.0, rtol=2e-4)
 
 
 def test_fresh_passes_stop_where_the_cap_could_not_halve_the_rest(monkeypatch):
@@ -771,21 +783,15 @@ def test_fresh_passes_stop_where_the_cap_could_not_halve_the_rest(monkeypatch):
     # the series as it does at the cap: the closed furnace's radiance is
     # Le / (1 - rho) either way (every ray lands on one value, so the fresh
     # rays add no noise). Measured: 4 passes and the cap's answer.
-    from voxgi.radiosity import solver, traced_passes
+    from voxgi.radiosity import traced_passes
 
-    def from_nothing(p, Hd, R, mode):
-        return traced_passes.traced_bounces(p, Hd, np.zeros_like(R), mode)
-
-    monkeypatch.setattr(solver, "traced_bounces", from_nothing)
     rho = 0.99
-    vox = voxgi.voxelize(voxgi.scenes.furnace_box(albedo=rho, emission=1.0), 8, progress=False)
+    vox = _traced_from_nothing(monkeypatch, rho, 8)
     fresh = voxgi.SolveTuning(traced_cache=False)
-    front = (vox.area > 0) & ~vox.back
 
     def solve():
         sol = voxgi.solve(vox, progress=False, tuning=fresh)
-        mean = (sol.radiance[front] * vox.area[front, None]).sum(0) / vox.area[front].sum()
-        return mean * (1 - rho), sol.stats["traced"]
+        return _front_mean(vox, sol) * (1 - rho), sol.stats["traced"]
 
     quick, st = solve()
     assert st["stalled"]
