@@ -32,7 +32,10 @@ inline void cell_records(const RecordGrid& g, int64_t i, int64_t j, int64_t k, i
 // the side of normal n) by the records [q0, q1) of a voxel: 2 when
 // - it lies off the hit's own sheet: some record o whose plane holds y,
 //   facing n's side, has r's centroid strictly in front of or behind it
-//   (the other face of a slab thinner than a voxel, or its black back);
+//   (the other face of a slab thinner than a voxel, or its black back),
+//   unless r is of o's object and orientation and another plane of the
+//   voxel sets o apart from y (a sliver of the hit's face beyond another
+//   surface);
 // - or across another surface: some record o of another object, or of an
 //   orientation more than 60° away (another cluster of the voxelization),
 //   has y strictly on one side of its plane and r's centroid not on that
@@ -41,37 +44,65 @@ inline void cell_records(const RecordGrid& g, int64_t i, int64_t j, int64_t k, i
 //   the other;
 // 1 when it is apart only by the signs of y's distances within rounding of
 // such a plane (the best guess there); 0 otherwise.
+// Record o's plane at y: y's signed distance to it, r's centroid's, and
+// whether it holds y facing n's side (within rounding of its float centroid:
+// a few units in the last place of its coordinates).
+struct Side {
+    double tol, sy, sr, behind;
+    bool holds;
+};
+Side side_of(const RecordGrid& g, const PackedRecord& o, const double y[3], const float n[3],
+             const PackedRecord& r) {
+    Side s{1e-6 * g.pitch + 3e-7 * std::max({std::fabs(o.centroid[0]), std::fabs(o.centroid[1]),
+                                             std::fabs(o.centroid[2])}),
+           0.0, 0.0, 0.0, false};
+    for (int a = 0; a < 3; ++a) {
+        const double rc = double(r.centroid[a]) - o.centroid[a];
+        s.sy += (y[a] - o.centroid[a]) * o.normal[a];
+        s.sr += rc * o.normal[a];
+        s.behind += rc * n[a];
+    }
+    s.holds = std::fabs(s.sy) <= s.tol && dot3(o.normal, n) > 0.5f;
+    return s;
+}
+
+// r apart from y across o's plane: 2, 1 or 0 (the second rule below).
+int across(const PackedRecord& o, const Side& s, const PackedRecord& r) {
+    const float along = dot3(o.normal, r.normal);
+    // r's own sheet: its orientation, or its other side through r's
+    // centroid (a curved sheet's y lies off that plane on either side).
+    if (o.object == r.object && (along > 0.5f || (along < -0.5f && std::fabs(s.sr) <= s.tol)))
+        return 0;
+    // A centroid on that plane (a sliver cut off at a junction) is on
+    // neither side: it does not stand for a point off the plane.
+    if ((s.sy > s.tol && s.sr < s.tol) || (s.sy < -s.tol && s.sr > -s.tol)) return 2;
+    return (s.sy > 0.0 && s.sr < 0.0) || (s.sy < 0.0 && s.sr > 0.0) ? 1 : 0;
+}
+
 int separation(const RecordGrid& g, const double y[3], const float n[3], const PackedRecord& r,
                int64_t q0, int64_t q1) {
     int level = 0;
     for (int64_t q = q0; q < q1; ++q) {
         const PackedRecord& o = g.rec[q];
         if (&o == &r) continue;
-        // o's plane is as good as its float centroid: a few units in the
-        // last place of its coordinates.
-        const double tol =
-            1e-6 * g.pitch + 3e-7 * std::max({std::fabs(o.centroid[0]), std::fabs(o.centroid[1]),
-                                              std::fabs(o.centroid[2])});
-        double sy = 0.0, sr = 0.0, behind = 0.0;
-        for (int a = 0; a < 3; ++a) {
-            const double rc = double(r.centroid[a]) - o.centroid[a];
-            sy += (y[a] - o.centroid[a]) * o.normal[a];
-            sr += rc * o.normal[a];
-            behind += rc * n[a];
+        const Side s = side_of(g, o, y, n, r);
+        if (s.holds) {
+            if (!(std::fabs(s.behind) > s.tol)) continue;
+            // a sliver of the hit's face across another surface from y does
+            // not set its own surface's neighbouring clusters apart
+            bool cut = false;
+            if (o.object == r.object && dot3(o.normal, r.normal) > 0.5f)
+                for (int64_t k = q0; k < q1 && !cut; ++k) {
+                    if (k == q) continue;
+                    const Side t = side_of(g, g.rec[k], y, n, o);
+                    cut = !t.holds && across(g.rec[k], t, o) == 2;
+                }
+            if (cut) continue;
+            return 2;
         }
-        if (std::fabs(sy) <= tol && dot3(o.normal, n) > 0.5f) {
-            if (std::fabs(behind) > tol) return 2;
-            continue;
-        }
-        const float along = dot3(o.normal, r.normal);
-        // r's own sheet: its orientation, or its other side through r's
-        // centroid (a curved sheet's y lies off that plane on either side).
-        if (o.object == r.object && (along > 0.5f || (along < -0.5f && std::fabs(sr) <= tol)))
-            continue;
-        // A centroid on that plane (a sliver cut off at a junction) is on
-        // neither side: it does not stand for a point off the plane.
-        if ((sy > tol && sr < tol) || (sy < -tol && sr > -tol)) return 2;
-        if ((sy > 0.0 && sr < 0.0) || (sy < 0.0 && sr > 0.0)) level = 1;
+        const int apart = across(o, s, r);
+        if (apart == 2) return 2;
+        level = std::max(level, apart);
     }
     return level;
 }

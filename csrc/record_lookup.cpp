@@ -49,33 +49,21 @@ inline Plane plane_at_hit(const RecordGrid& g, const PackedRecord& o, const doub
     for (int a = 0; a < 3; ++a) sy += (y[a] - o.centroid[a]) * o.normal[a];
     p.sy = sy;
     p.holds = std::fabs(sy) <= p.tol && dot3(o.normal, n) > 0.5f;
+    p.cut = -1;
     return p;
 }
 
-// How far record r stands apart from the hit point y (on a surface seen from
-// the side of normal n) by another record o of a voxel, whose plane meets y
-// as p says: 2 when
-// - it lies off the hit's own sheet: o's plane holds y, facing n's side, and
-//   has r's centroid strictly in front of or behind it (the other face of a
-//   slab thinner than a voxel, or its black back);
-// - or across another surface: o is of another object, or of an orientation
-//   more than 60° away (another cluster of the voxelization), has y strictly
-//   on one side of its plane and r's centroid not on that side. Those are the
-//   planes junction cutting split r's surface by, so this keeps a hit on one
-//   side of a thin wall from reading the record on the other;
-// 1 when it is apart only by the signs of y's distances within rounding of
-// such a plane (the best guess there); 0 otherwise.
-inline int apart_by(const PackedRecord& o, const Plane& p, const PackedRecord& r,
-                    const float n[3]) {
-    double rc[3];
-    for (int a = 0; a < 3; ++a) rc[a] = double(r.centroid[a]) - o.centroid[a];
-    if (p.holds) {
-        double behind = 0.0;
-        for (int a = 0; a < 3; ++a) behind += rc[a] * n[a];
-        return std::fabs(behind) > p.tol ? 2 : 0;
-    }
+// How far record r stands apart from the hit point y across record o's
+// plane, which meets y as p says without holding it: 2 when o is of another
+// object, or of an orientation more than 60° away (another cluster of the
+// voxelization), has y strictly on one side of its plane and r's centroid
+// not on that side. Those are the planes junction cutting split r's surface
+// by, so this keeps a hit on one side of a thin wall from reading the record
+// on the other. 1 when it is apart only by the signs of y's distances within
+// rounding of such a plane (the best guess there); 0 otherwise.
+inline int apart_across(const PackedRecord& o, const Plane& p, const PackedRecord& r) {
     double sr = 0.0;
-    for (int a = 0; a < 3; ++a) sr += rc[a] * o.normal[a];
+    for (int a = 0; a < 3; ++a) sr += (double(r.centroid[a]) - o.centroid[a]) * o.normal[a];
     const float along = dot3(o.normal, r.normal);
     // r's own sheet: its orientation, or its other side through r's
     // centroid (a curved sheet's y lies off that plane on either side).
@@ -88,6 +76,47 @@ inline int apart_by(const PackedRecord& o, const Plane& p, const PackedRecord& r
     return (sy > 0.0 && sr < 0.0) || (sy < 0.0 && sr > 0.0) ? 1 : 0;
 }
 
+// Whether the record h, whose plane holds y, lies across another surface
+// of the voxel [q0, q1) from y (planes[q - q0] is record q's plane at y).
+// Such a record is a sliver of the hit's face beyond that surface (the top
+// of a moulding poking a hair through a ceiling, cut off by it), not the
+// hit's own sheet: its plane then sets no record apart.
+template <class PlaneAt>
+bool holding_record_cut(const RecordGrid& g, int64_t h, int64_t q0, int64_t q1, PlaneAt plane_of) {
+    for (int64_t q = q0; q < q1; ++q) {
+        if (q == h) continue;
+        const Plane p = plane_of(q);
+        if (!p.holds && apart_across(g.rec[q], p, g.rec[h]) == 2) return true;
+    }
+    return false;
+}
+
+// How far record r stands apart from the hit point y (on a surface seen from
+// the side of normal n) by another record o of a voxel, whose plane meets y
+// as p says: 2 when
+// - it lies off the hit's own sheet: o's plane holds y, facing n's side, and
+//   has r's centroid strictly in front of or behind it (the other face of a
+//   slab thinner than a voxel, or its black back); unless r is of o's object
+//   and orientation (a bent sheet's neighbouring cluster) and o itself lies
+//   across another surface from y (`cut_off(o)`, holding_record_cut): a
+//   sliver of the hit's face beyond that surface does not stand for the
+//   hit's sheet;
+// - or across another surface (apart_across);
+// 1 when it is apart only by the signs of y's distances within rounding of
+// such a plane (the best guess there); 0 otherwise.
+template <class CutOff>
+inline int apart_by(const PackedRecord& o, const Plane& p, const PackedRecord& r, const float n[3],
+                    CutOff cut_off) {
+    if (p.holds) {
+        double behind = 0.0;
+        for (int a = 0; a < 3; ++a) behind += (double(r.centroid[a]) - o.centroid[a]) * n[a];
+        if (!(std::fabs(behind) > p.tol)) return 0;
+        if (o.object == r.object && dot3(o.normal, r.normal) > 0.5f && cut_off()) return 0;
+        return 2;
+    }
+    return apart_across(o, p, r);
+}
+
 // The most any other record of the voxel [q0, q1) sets r apart from the hit
 // point (apart_by), each one's plane at the hit worked out here.
 int separation(const RecordGrid& g, const double y[3], const float n[3], const PackedRecord& r,
@@ -96,7 +125,11 @@ int separation(const RecordGrid& g, const double y[3], const float n[3], const P
     for (int64_t q = q0; q < q1; ++q) {
         const PackedRecord& o = g.rec[q];
         if (&o == &r) continue;
-        const int apart = apart_by(o, plane_at_hit(g, o, y, n), r, n);
+        const Plane p = plane_at_hit(g, o, y, n);
+        const int apart = apart_by(o, p, r, n, [&] {
+            return holding_record_cut(g, q, q0, q1,
+                                      [&](int64_t k) { return plane_at_hit(g, g.rec[k], y, n); });
+        });
         if (apart == 2) return 2;
         level = std::max(level, apart);
     }
@@ -111,10 +144,21 @@ int separation(const RecordGrid& g, const double y[3], const float n[3], const P
 // record off the hit's own sheet is apart by them).
 int separation_own(const RecordGrid& g, const float n[3], const PackedRecord& r, int64_t h0,
                    LookupScratch& S) {
+    const int64_t h1 = h0 + int64_t(S.own.size());
+    // Whether a holding plane's record is cut off is asked at most once per
+    // lookup, and only where the answer matters.
+    auto cut_off = [&](int32_t i) {
+        Plane& p = S.own[size_t(i)];
+        if (p.cut < 0)
+            p.cut = holding_record_cut(g, h0 + i, h0, h1,
+                                       [&](int64_t k) { return S.own[size_t(k - h0)]; });
+        return p.cut == 1;
+    };
     int level = 0;
     const int32_t last = S.last_apart;
     if (last >= 0 && &g.rec[h0 + last] != &r) {
-        level = apart_by(g.rec[h0 + last], S.own[size_t(last)], r, n);
+        level =
+            apart_by(g.rec[h0 + last], S.own[size_t(last)], r, n, [&] { return cut_off(last); });
         if (level == 2) return 2;
     }
     const int32_t count = int32_t(S.own.size());
@@ -123,7 +167,7 @@ int separation_own(const RecordGrid& g, const float n[3], const PackedRecord& r,
         const int32_t i = ordered ? S.own_order[size_t(j)] : j;
         const PackedRecord& o = g.rec[h0 + i];
         if (i == last || &o == &r) continue;
-        const int apart = apart_by(o, S.own[size_t(i)], r, n);
+        const int apart = apart_by(o, S.own[size_t(i)], r, n, [&] { return cut_off(i); });
         if (apart == 2) {
             S.last_apart = i;
             return 2;

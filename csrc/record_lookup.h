@@ -55,6 +55,8 @@ struct LookupScratch {
         double sy;   // the hit's signed distance to the record's plane
         double tol;  // within rounding of that plane
         bool holds;  // the plane holds the hit, facing its side: the hit's own sheet
+        int8_t cut;  // for a plane that holds the hit: 1 when its record lies across
+                     // another surface from the hit, 0 when not, -1 not yet known
     };
     struct Candidate {  // a record facing the hit's side
         double score;   // squared distance to its centroid plus the penalty, pitch² units
