@@ -20,12 +20,14 @@ struct FilterPixels {
     double pixel_angle = 0.0;         // a pixel's width over its distance, at the axis
 };
 
-// Adds into out (P, 3), for every pixel p, the mean of in (P, 3) over the
-// pixels q of the (2 radius + 1)² square around it that hit the same
-// material with normals within about 25 degrees (n_p . n_q > 0.9) and lie
-// within two pixel footprints of p's tangent plane and within
-// 3 (radius + 1) footprints of p, p itself always among them. A pixel of a
-// glossy material, or with nothing shaded, adds its own value unchanged.
+// Adds into out (P, 3), for every pixel p, the mean of in (P, 3) over p and
+// the pairs of pixels q, q' of the (2 radius + 1)² square around it that lie
+// point-symmetric about p (q' = 2p - q) and both see p's surface: the same
+// material, normals within about 25 degrees (n_p . n_q > 0.9), within two
+// pixel footprints of p's tangent plane and within 3 (radius + 1) footprints
+// of p. Pairs keep a linear gradient of the light unchanged beside an
+// outline or the image border. A pixel of a glossy material, or with nothing
+// shaded, adds its own value unchanged.
 void geometry_filter(const FilterPixels& px, int radius, const float* in, float* out, int threads,
                      const StopCheck& stop);
 

@@ -371,9 +371,11 @@ def _filter(pos, normal, material, values, width, height, glossy=(0,), radius=1,
     return out
 
 
-def test_geometry_filter_is_the_box_mean_on_one_plane():
-    # Every pixel sees the same plane: each gets the plain mean of the pixels
-    # of its (2r + 1)² square that lie inside the image.
+def test_geometry_filter_is_the_symmetric_box_mean_on_one_plane():
+    # Every pixel sees the same plane: each gets the plain mean of the
+    # largest square around it, up to (2r + 1)², whose rows and columns the
+    # image holds on both sides of it (a pixel at the border keeps only the
+    # neighbours whose mirror images through it lie inside the image).
     w, h = 7, 5
     pos, normal, mat = _plane_pixels(w, h)
     vals = np.random.default_rng(3).random((w * h, 3)).astype(np.float32)
@@ -382,8 +384,26 @@ def test_geometry_filter_is_the_box_mean_on_one_plane():
         img = vals.reshape(h, w, 3).astype(np.float64)
         for r in range(h):
             for c in range(w):
-                box = img[max(0, r - radius) : r + radius + 1, max(0, c - radius) : c + radius + 1]
+                kr, kc = min(radius, r, h - 1 - r), min(radius, c, w - 1 - c)
+                box = img[r - kr : r + kr + 1, c - kc : c + kc + 1]
                 np.testing.assert_allclose(got[r, c], box.mean(axis=(0, 1)), rtol=1e-6)
+
+
+def test_geometry_filter_keeps_a_gradient_beside_an_outline():
+    # Light that grows linearly across a plane is left as it is by the
+    # filter, also on the pixels beside another surface (the right third of
+    # the image is another material) and at the image's border, where only
+    # part of the square is the plane's: a mean over neighbours on one side
+    # would shift those pixels by the gradient times a pixel.
+    w, h = 9, 6
+    pos, normal, mat = _plane_pixels(w, h)
+    rows, cols = np.divmod(np.arange(w * h), w)
+    mat = np.where(cols >= 6, 1, 0).astype(np.int32)
+    ramp = (1.0 + 0.5 * cols + 0.25 * rows).astype(np.float32)
+    vals = np.repeat(ramp[:, None], 3, axis=1)
+    for radius in (1, 2):
+        got = _filter(pos, normal, mat, vals, w, h, glossy=(0, 0), radius=radius)
+        np.testing.assert_allclose(got, vals, rtol=1e-6)
 
 
 def test_geometry_filter_keeps_other_surfaces_out():
