@@ -18,11 +18,11 @@ __all__ = ["FILTERED_BUDGET", "RAY_BUDGETS", "SPREAD_EVEN", "light_spread", "ray
 RAY_BUDGETS = ((16, 9), (8, 25))
 
 #: The budget for concentrated light where the indirect light is filtered
-#: (:attr:`RenderTuning.indirect_filter`): the filter takes most of the
-#: indirect light's noise, and what is left, the direct light's, needs fewer
-#: rays; where the stopping rule's floor of frames ends a render, cheaper
-#: frames are what saves time (``docs/design.md`` §6; the measurements in
-#: ``docs/performance.md``).
+#: (:attr:`RenderTuning.indirect_filter`) or the image denoised
+#: (:attr:`RenderTuning.denoise`): the filter or the denoiser takes most of
+#: the noise, and what is left needs fewer rays; where the stopping rule's
+#: floor of frames ends a render, cheaper frames are what saves time
+#: (``docs/design.md`` §6; the measurements in ``docs/performance.md``).
 FILTERED_BUDGET = (8, 4)
 
 #: :func:`light_spread` from which the light counts as spread evenly. The
@@ -71,7 +71,7 @@ def ray_budget(
     comes evenly from everywhere the second (``docs/design.md`` §6). Under a
     spread of :data:`SPREAD_EVEN` the budget is the first of
     :data:`RAY_BUDGETS`, or :data:`FILTERED_BUDGET` where the indirect light
-    is filtered; from it on the second. A number given is kept.
+    is filtered or the image denoised; from it on the second. A number given is kept.
 
     Parameters
     ----------
@@ -80,7 +80,8 @@ def ray_budget(
     vpls, gather : int or None
         Chosen counts (None: from the spread).
     filtered : bool
-        The render filters the indirect light (:attr:`RenderTuning.indirect_filter`).
+        The render filters the indirect light (:attr:`RenderTuning.indirect_filter`)
+        or denoises the image (:attr:`RenderTuning.denoise`).
 
     Returns
     -------

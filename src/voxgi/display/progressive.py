@@ -111,7 +111,9 @@ def _with_budget(opt: _RenderSettings, sol) -> _RenderSettings:
     """``opt`` with its VPL and gather counts fixed from the solution's light."""
     spread = light_spread(sol)
     filtered = opt.indirect_filter > 0 and _reflects_light(sol)
-    k, g = ray_budget(spread, opt.K, opt.gather, filtered=filtered)
+    # A denoised render's frames are cut down afterwards as a filtered
+    # one's are, so it takes the same cheaper frames (docs/design.md §6).
+    k, g = ray_budget(spread, opt.K, opt.gather, filtered=filtered or opt.denoise)
     radius = opt.indirect_filter if filtered else 0
     return replace(opt, K=k, gather=g, spread=spread, indirect_filter=radius)
 

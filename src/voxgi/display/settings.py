@@ -54,7 +54,8 @@ class RenderTuning:
         estimated relMSE of the denoised image, the picture delivered
         (``stats["est_rel_mse_denoised"]``, ``docs/design.md`` §6); the
         result keeps the undenoised image (``undenoised``) with its
-        ``stderr`` and ``stats["est_rel_mse"]``.
+        ``stderr`` and ``stats["est_rel_mse"]``. Its frames take the
+        filtered render's cheaper ray budget (:func:`ray_budget`).
 
     >>> RenderTuning(gather=0).indirect_filter is None
     True
