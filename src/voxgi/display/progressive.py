@@ -35,7 +35,11 @@ class RenderResult:
     stderr : (H, W, 3) float32 or None
         Per-pixel standard error estimate of ``image`` (radiance units), from
         batch means of the frames with a heavy-tail guard (``docs/design.md``
-        §6); None with fewer than two frames.
+        §6); None with fewer than two frames. It is the display's noise
+        only: the voxel solution's own bias, what the image would keep
+        after infinitely many frames, is in neither ``stderr`` nor
+        ``stats["est_rel_mse"]`` (``docs/design.md`` §6, "What the estimate
+        leaves out").
     stats : dict
         ``seconds`` per phase, ray counts, VPLs used, what was skipped. The
         phases: ``setup``; ``primary`` (camera rays and their hits);
