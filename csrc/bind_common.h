@@ -5,9 +5,11 @@
 #include <pybind11/pybind11.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <string>
 
+#include "incidence_response.h"
 #include "util/parallel.h"
 
 namespace voxgi::py_helpers {
@@ -75,6 +77,21 @@ void check_1d(const A& a, py::ssize_t n, const char* name) {
     if (a.ndim() != 1 || (n >= 0 && a.shape(0) != n))
         throw py::value_error(std::string(name) + " must have shape (" +
                               (n >= 0 ? std::to_string(n) : std::string("N")) + ",)");
+}
+
+// A table of incidence responses (T, kIncidenceNodes, 3), every entry
+// finite and >= 0; returns T.
+template <class A>
+py::ssize_t check_incidence_table(const A& a, const char* name) {
+    if (a.ndim() != 3 || a.shape(1) != kIncidenceNodes || a.shape(2) != 3)
+        throw py::value_error(std::string(name) + " must have shape (T, " +
+                              std::to_string(kIncidenceNodes) + ", 3)");
+    const auto* v = a.data();
+    for (py::ssize_t i = 0; i < a.size(); ++i)
+        if (!(v[i] >= 0) || !std::isfinite(double(v[i])))
+            throw py::value_error(std::string(name) + ": entry " + std::to_string(i) + " is " +
+                                  std::to_string(double(v[i])) + ", not finite and >= 0");
+    return a.shape(0);
 }
 
 }  // namespace voxgi::py_helpers

@@ -71,10 +71,27 @@ voxgi::DirectLightQuery query(const F64& point, const F64& normal, const F64& sh
     return q;
 }
 
+void set_incidence_response(voxgi::DirectLightQuery& q, const std::optional<F32>& response,
+                            const std::optional<I32>& response_row) {
+    if (response.has_value() != response_row.has_value())
+        throw py::value_error("response and response_row go together");
+    if (!response) return;
+    const py::ssize_t rows = check_incidence_table(*response, "response");
+    check_1d(*response_row, q.records, "response_row");
+    const int32_t* rr = response_row->data();
+    for (py::ssize_t r = 0; r < q.records; ++r)
+        if (rr[r] >= rows)
+            throw py::value_error("response_row: record " + std::to_string(r) + " names row " +
+                                  std::to_string(rr[r]) + " of " + std::to_string(rows));
+    q.response = response->data();
+    q.response_row = rr;
+}
+
 py::tuple traced(const py::tuple& emit, const F64& point, const F64& normal, const F64& shift,
                  const F64& sequence, double offset, const I32& emitter_of,
                  const voxgi::RayScene& scene, const voxgi::RayScene* emitter_scene, int threads,
-                 const std::optional<F64>& hemisphere_scale, bool strategies) {
+                 const std::optional<F64>& hemisphere_scale, bool strategies,
+                 const std::optional<F32>& response, const std::optional<I32>& response_row) {
     const Emitters held = emitters(emit);
     const voxgi::EmitterTriangles& em = held.em;
     voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
@@ -87,6 +104,7 @@ py::tuple traced(const py::tuple& emit, const F64& point, const F64& normal, con
                                       std::to_string(hs[r]) + ", not finite and > 0");
         q.hemisphere_scale = hs;
     }
+    set_incidence_response(q, response, response_row);
     check_1d(emitter_of, scene.triangle_count(), "emitter_of");
     const int32_t* eo = emitter_of.data();
     for (py::ssize_t t = 0; t < emitter_of.shape(0); ++t)
@@ -115,6 +133,7 @@ void bind_direct_light(py::module_& m) {
           "normal"_a.noconvert(), "shift"_a.noconvert(), "sequence"_a.noconvert(), "offset"_a,
           "emitter_of"_a.noconvert(), "scene"_a, "emitter_scene"_a = nullptr, "threads"_a = 0,
           "hemisphere_scale"_a.noconvert() = py::none(), "strategies"_a = false,
+          "response"_a.noconvert() = py::none(), "response_row"_a.noconvert() = py::none(),
           R"doc(Direct light on records from emitting triangles: light and hemisphere
 samples (samples each) combined by the power heuristic, traced in scene (a
 RayScene of the triangles emitter_of (F,) int32 indexes) record by record.
@@ -131,5 +150,7 @@ hemisphere_scale (N,) float64, each > 0 (None: 1): the factor on the
 hemisphere samples' density in each record's power heuristic (unbiased
 for any). With strategies=True a third array (N,2): the variance of the
 luminance of the light samples' and of the hemisphere samples' own
-estimates, each alone.)doc");
+estimates, each alone. response (T, 33, 3) float32 and response_row (N,)
+int32 (-1: none): each sample's light weighed by its record's row of R / A
+at the sample's cosine (voxgi.incidence).)doc");
 }

@@ -95,9 +95,15 @@ int64_t gather_light_py(
     const std::optional<F32>& hit_albedo, const std::optional<std::vector<U8>>& tex_texels,
     const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
     const std::optional<F32>& corner_uv, const std::optional<F32>& mat_lobe,
-    std::optional<I32Out> transport_record, std::optional<F32Out> transport_weight) {
+    std::optional<I32Out> transport_record, std::optional<F32Out> transport_weight,
+    const std::optional<F32>& mat_response) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
+    if (mat_response) {
+        if (check_incidence_table(*mat_response, "mat_response") != mats.count)
+            throw py::value_error("mat_response: one row per material");
+        mats.response = mat_response->data();
+    }
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
     set_hit_albedo(hits, hit_albedo);
@@ -156,7 +162,7 @@ void bind_gather_light(py::module_& m) {
           "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
           "corner_uv"_a.noconvert() = py::none(), "mat_lobe"_a.noconvert() = py::none(),
           "transport_record"_a.noconvert() = py::none(),
-          "transport_weight"_a.noconvert() = py::none(),
+          "transport_weight"_a.noconvert() = py::none(), "mat_response"_a.noconvert() = py::none(),
           R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit
@@ -173,5 +179,7 @@ packed row's albedo). With transport_record (P * n_gather,) int32 and
 transport_weight (P * n_gather, 3) float32, ray k of shaded pixel p writes at
 p * n_gather + k the record it read (position in rec_packed, -1: none) and
 the factor the record's radiance was multiplied by (transport_compact).
-Returns the number of gather rays.)doc");
+With mat_response (M, 33, 3) float32 (the solve's records as pixels), a
+ray's f is multiplied by its material's row of R / A at the ray's cosine
+(voxgi.incidence). Returns the number of gather rays.)doc");
 }

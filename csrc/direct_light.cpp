@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "incidence_response.h"
+
 namespace voxgi {
 namespace {
 
@@ -86,9 +88,11 @@ void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
     // power heuristic, area measure: f p_light / (p_light^2 + s2 p_hemisphere^2)
     const double g = cos_x * cos_y / r2, pl = em.density[k], ph = g / kPi;
     const double weight = g * pl / (pl * pl + s2 * ph * ph);
+    double resp[3];
+    incidence_response(incidence_row(q.response, q.response_row, r), cos_x, resp);
     for (int i = 0; i < 3; ++i) {
-        c[i] = float(weight * em.radiance[3 * k + i]);
-        raw[i] = float(g / pl * em.radiance[3 * k + i]);
+        c[i] = float(weight * em.radiance[3 * k + i] * resp[i]);
+        raw[i] = float(g / pl * em.radiance[3 * k + i] * resp[i]);
     }
 }
 
@@ -118,8 +122,10 @@ inline void sample_pair(const EmitterTriangles& em, const DirectLightQuery& q, i
         // power heuristic, solid-angle measure
         const double pl = em.density[k] * r2 / cos_y, ph = cos_x / kPi;
         const double weight = cos_x * s2 * ph / (pl * pl + s2 * ph * ph);
+        double resp[3];
+        incidence_response(incidence_row(q.response, q.response_row, r), cos_x, resp);
         for (int i = 0; i < 3; ++i) {
-            const double seen = em.radiance[3 * k + i] * hemi_through[i];
+            const double seen = em.radiance[3 * k + i] * hemi_through[i] * resp[i];
             pair[i] += weight * seen;
             if (cos_x > 0.0) hemi[i] = kPi * seen;
         }

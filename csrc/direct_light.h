@@ -45,6 +45,12 @@ struct DirectLightQuery {
     // that in an enclosure of emitters, where a cosine-distributed ray
     // always finds the same radiance, the hemisphere samples carry it.
     const double* hemisphere_scale = nullptr;
+    // (T, kIncidenceNodes, 3) and (records,), or null: each sample's light
+    // weighed by its record's incidence response at the sample's cosine
+    // (incidence_response.h), so that the sum is the light the record
+    // reflects over its mean albedo.
+    const float* response = nullptr;
+    const int32_t* response_row = nullptr;
 };
 
 // Per record: the direct irradiance (the mean over its samples of the pair

@@ -384,6 +384,11 @@ static bool gather_hit_factors(const ShadeHits& hits, const ShadeMaterials& mats
     if (!(denom > 0.0)) return false;
     shade_brdf(mats, m, hit_albedo(hits, mats, p, m), hits.normal + 3 * p, h.wi, hits.wo + 3 * p,
                f);
+    if (mats.response) {
+        double resp[3];
+        incidence_response(mats.response + int64_t(3) * kIncidenceNodes * m, h.cos_x, resp);
+        for (int ch = 0; ch < 3; ++ch) f[ch] = float(f[ch] * resp[ch]);
+    }
     ratio[0] = ratio[1] = ratio[2] = 1.f;
     if (h.textured) {
         // the record's albedo is the solve's (a plastic's: its coat's too)

@@ -10,6 +10,7 @@
 #include <cstdint>
 
 #include "environment.h"
+#include "incidence_response.h"
 #include "microfacet.h"
 #include "ray_scene.h"
 #include "record_lookup.h"
@@ -29,6 +30,10 @@ struct ShadeMaterials {
     // (M,) microfacet lobes (kind 0: the Ashikhmin-Shirley layer or none), or
     // null: no material has one (and no pixel pays for them)
     const MicrofacetLobe* lobe = nullptr;
+    // (M, kIncidenceNodes, 3) or null: the solve's records as "pixels" of
+    // gather_light, where f is multiplied by the material's incidence
+    // response at the gather ray's cosine (incidence_response.h)
+    const float* response = nullptr;
 };
 
 // Hit points of one frame (P pixels).

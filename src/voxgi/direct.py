@@ -24,6 +24,7 @@ import numpy as np
 
 from . import _core, _validate
 from ._qmc import sobol
+from .incidence import IncidenceResponse
 from .lights import LUMINANCE
 from .rays import Tracer, ray_scene
 from .scene import Scene
@@ -162,6 +163,7 @@ def direct_irradiance(
     rel_error: float = 0.1,
     receivers: str = "reflecting",
     max_rays: int = 1 << 21,
+    response: IncidenceResponse | None = None,
 ) -> tuple[np.ndarray, dict]:
     """Irradiance from the emitters at every record's surface point, by shadow rays.
 
@@ -191,6 +193,10 @@ def direct_irradiance(
         too), which an energy balance needs.
     max_rays : int, optional
         Rays traced per batch (bounds the temporary memory).
+    response : IncidenceResponse or None, optional
+        Each sample's light weighed by its record's R(μ) / A at the
+        sample's cosine (:mod:`voxgi.incidence`): the irradiance times what
+        the record reflects of it over its mean albedo. None: plain irradiance.
 
     Returns
     -------
@@ -222,7 +228,7 @@ def direct_irradiance(
     if len(emit) and len(lit):
         if offset is None:
             offset = 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
-        with _Rays(scene, vox, emit, float(offset), nthreads) as rays:
+        with _Rays(scene, vox, emit, float(offset), nthreads, response) as rays:
             rng = np.random.default_rng([seed, 1])
             # A pilot decides how many samples each record takes; the
             # estimate is made of fresh samples alone, so that a record's
@@ -306,8 +312,15 @@ class _Rays:
     on the scene (:mod:`voxgi.rays`), and the tracer."""
 
     def __init__(
-        self, scene: Scene, vox: VoxelSet, emit: EmitterSampler, offset: float, threads: int
+        self,
+        scene: Scene,
+        vox: VoxelSet,
+        emit: EmitterSampler,
+        offset: float,
+        threads: int,
+        response: IncidenceResponse | None = None,
     ):
+        self.response = response
         self.tracer = Tracer(scene, threads)
         centre = self.tracer.centre
         self.emitters = (emit.arrays[0] - centre, *emit.arrays[1:])
@@ -352,7 +365,7 @@ class _Rays:
                 self.offset,
             )
             hs = None if scale is None else np.ascontiguousarray(scale[rec])
-            out = _batch(args, self, hs)
+            out = _batch(args, self, hs, rec)
             est.add(rec, out[0], out[1], per, out[2] if len(out) > 2 else None)
         return len(todo) * per
 
@@ -380,17 +393,24 @@ def _sample_counts(
     return [(lit[size == k], int(k)) for k in np.unique(size)]
 
 
-def _batch(args: tuple, rays: _Rays, scale=None) -> tuple:
+def _batch(args: tuple, rays: _Rays, scale=None, rec=None) -> tuple:
     """Trace one batch: ``args`` are the kernels' (emitters, points, normals,
     shifts, sequence, offset) for R records and S samples; ``scale`` (R,)
     the hemisphere samples' weights, or None for the default heuristic and
-    each strategy's variance.
+    each strategy's variance; ``rec`` (R,) the records (for their incidence
+    response, if ``rays`` has one).
 
     Returns the mean RGB irradiance (R, 3) and the mean square of its
     luminance (R,), from which the caller judges each record's noise, and
     without ``scale`` the two strategies' variances (R, 2).
     """
     tracer, nthreads, emitter_of = rays.tracer, rays.threads, rays.emitter_of
+    resp = {}
+    if rays.response is not None:
+        resp = {
+            "response": rays.response.table,
+            "response_row": np.ascontiguousarray(rays.response.row[rec]),
+        }
     return _core.direct_light_traced(
         *args,
         emitter_of,
@@ -399,6 +419,7 @@ def _batch(args: tuple, rays: _Rays, scale=None) -> tuple:
         threads=nthreads,
         hemisphere_scale=scale,
         strategies=scale is None,
+        **resp,
     )
 
 
@@ -440,6 +461,7 @@ def light_irradiance(
     offset: float | None = None,
     receivers: str = "reflecting",
     max_rays: int = 1 << 21,
+    response: IncidenceResponse | None = None,
 ) -> tuple[np.ndarray, dict]:
     """Irradiance from the scene's lights and environment at every record's surface point.
 
@@ -453,7 +475,7 @@ def light_irradiance(
         Environment samples per record (and as many cosine-distributed
         rays); the delta lights take one shadow ray each.
     seed : int, optional
-    threads, offset, receivers, max_rays
+    threads, offset, receivers, max_rays, response
         As for :func:`direct_irradiance`.
 
     Returns
@@ -495,7 +517,9 @@ def light_irradiance(
             step = max(1, max_rays // max(per, 1))
             for a in range(0, len(lit), step):
                 rec = lit[a : a + step]
-                e, rays = _light_batch(scene, tracer, x[rec], nrm[rec], samples, rng, offset)
+                e, rays = _light_batch(
+                    scene, tracer, x[rec], nrm[rec], samples, rng, offset, response, rec
+                )
                 out[rec] = e
                 stats["rays"] += rays
     stats["seconds"] = time.perf_counter() - t0
@@ -510,10 +534,18 @@ def _through(tracer: Tracer, org: np.ndarray, dirs: np.ndarray, length: np.ndarr
     return tracer.transmittance(org, dirs, length).astype(np.float64)
 
 
-def _light_batch(scene, tracer, x, nrm, samples, rng, offset) -> tuple[np.ndarray, int]:
+def _light_batch(
+    scene, tracer, x, nrm, samples, rng, offset, response=None, rec=None
+) -> tuple[np.ndarray, int]:
     """Irradiance (R, 3) at points ``x`` with normals ``nrm`` from the lights
-    and the environment, and the rays traced."""
+    and the environment (each sample weighed by ``response`` of records
+    ``rec``, if given), and the rays traced."""
     r = len(x)
+
+    def weigh(i, cos):
+        # R(μ) / A of the samples' records (i: their rows in the batch)
+        return 1.0 if response is None else response.at(rec[i], cos)
+
     e = np.zeros((r, 3))
     rays = 0
     org = x + offset * nrm - tracer.centre
@@ -523,7 +555,7 @@ def _light_batch(scene, tracer, x, nrm, samples, rng, offset) -> tuple[np.ndarra
         live = np.flatnonzero((cos > 0) & np.any(eperp > 0, axis=1))
         length = np.where(np.isfinite(dist[live]), np.maximum(dist[live] - 2 * offset, 0.0), np.inf)
         through = _through(tracer, org[live], w[live], length)
-        e[live] += eperp[live] * cos[live, None] * through
+        e[live] += eperp[live] * cos[live, None] * through * weigh(live, cos[live])
         rays += len(live)
     env = scene.environment
     if env is None:
@@ -541,7 +573,9 @@ def _light_batch(scene, tracer, x, nrm, samples, rng, offset) -> tuple[np.ndarra
     pc = cos_e[live] / np.pi
     wgt = pe[live] / (pe[live] ** 2 + pc**2)
     contrib = np.zeros((r * s, 3))
-    contrib[live] = env.eval(we[live]) * (cos_e[live] * wgt)[:, None] * through
+    contrib[live] = (
+        env.eval(we[live]) * (cos_e[live] * wgt)[:, None] * through * weigh(live // s, cos_e[live])
+    )
     wc = _cosine_dirs(nn, rng.random((r * s, 2)))
     hit, hit_through = tracer.intersect(
         np.ascontiguousarray(oo, np.float32), np.ascontiguousarray(wc, np.float32), through=True
@@ -553,7 +587,9 @@ def _light_batch(scene, tracer, x, nrm, samples, rng, offset) -> tuple[np.ndarra
     pe = env.pdf(wc[esc])
     with np.errstate(divide="ignore", invalid="ignore"):
         wgt = np.where(pc > 0, pc / (pe**2 + pc**2), 0.0)
-    contrib[esc] += env.eval(wc[esc]) * (cos_c * wgt)[:, None] * hit_through[esc]
+    contrib[esc] += (
+        env.eval(wc[esc]) * (cos_c * wgt)[:, None] * hit_through[esc] * weigh(esc // s, cos_c)
+    )
     e += contrib.reshape(r, s, 3).mean(axis=1)
     return e, rays
 

@@ -194,6 +194,32 @@ class Microfacet:
         g = base / (1.0 - f * base) if self.nonlinear else base / (1.0 - f)
         return s + c * g
 
+    def directional_albedo(self, base, mu) -> np.ndarray:
+        """(len(mu), 3) the share of light arriving at cos θ = ``mu`` that the
+        material reflects, its coat's and (a plastic of diffuse base ``base``
+        (3,)) its base's through the coat, R(μ) = r(μ) + g(base) t(μ) τ̄ / η²:
+        the directional albedo, whose mean 2 ∫ R(μ) μ dμ under uniform light
+        is :meth:`solve_albedo` (``docs/design.md`` §14)."""
+        mu = np.clip(np.atleast_1d(np.asarray(mu, np.float64)), 1e-6, 1.0)
+        if self.kind == "conductor":
+            out = np.empty((len(mu), 3))
+            for c in range(3):
+                fres = ("conductor", self.eta[c], self.k[c])
+                r = _reflectance(self.distribution, self.alpha, mu, fres)
+                out[:, c] = r * self.specular_reflectance[c]
+            return out
+        spec = _reflectance(self.distribution, self.alpha, mu, ("dielectric", self.ior))
+        t = np.interp(mu, np.linspace(0.0, 1.0, _COAT_SAMPLES), _coat_transmittance(self))
+        base = np.asarray(base, np.float64)
+        f = self.internal_reflectance()
+        g = base / (1.0 - f * base) if self.nonlinear else base / (1.0 - f)
+        _, c = self._plastic_albedo_terms()
+        tau = np.sqrt(c) * self.ior  # c = τ̄² / η²
+        return (
+            spec[:, None] * np.asarray(self.specular_reflectance)
+            + g * (t * tau / self.ior**2)[:, None]
+        )
+
     def albedo(self) -> tuple[float, float, float]:
         """The specular term's hemispherical reflectance under uniform
         light, per channel (the albedo a conductor's records carry in the

@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from . import _validate
+from .incidence import incidence_response
 from .radiosity import Solution, SolveTuning
 from .radiosity import solve as radiosity_solve
 from .scene import Scene
@@ -147,10 +148,11 @@ def solution_difference(
     threads = _validate.threads(threads)
     t0 = time.perf_counter()
     vox = fine.vox
-    with TracedGather(scene, vox, threads=threads) as own:
+    response = incidence_response(scene, vox)
+    with TracedGather(scene, vox, threads=threads, response=response) as own:
         h_fine = own(_reflected(fine), samples, seed)
         rays = own.rays
-    with TracedGather(scene, vox, threads=threads, source=coarse.vox) as other:
+    with TracedGather(scene, vox, threads=threads, source=coarse.vox, response=response) as other:
         h_coarse = other(_reflected(coarse), samples, seed)
         rays += other.rays
     area = np.asarray(vox.area, np.float64)

@@ -24,6 +24,7 @@ import numpy as np
 
 from . import _core, _validate
 from .direct import check_scene_and_records
+from .incidence import IncidenceResponse
 from .rays import Tracer
 from .scene import Scene
 from .voxels import VoxelSet
@@ -153,6 +154,10 @@ class TracedGather:
         another voxelization of the same scene, so that two solutions are
         gathered with the same rays (:mod:`voxgi.resolution`). Each pass's
         ``values`` are then per record of ``source``.
+    response : IncidenceResponse or None
+        Weighs each ray by its record's R(μ) / A at the ray's cosine
+        (:mod:`voxgi.incidence`), so that a pass gives what a glossy record
+        reflects over its mean albedo. None: the plain mean.
     """
 
     def __init__(
@@ -163,6 +168,7 @@ class TracedGather:
         threads: int | None = None,
         offset: float | None = None,
         source: VoxelSet | None = None,
+        response: IncidenceResponse | None = None,
     ):
         check_scene_and_records(scene, vox)
         if source is None:
@@ -178,21 +184,32 @@ class TracedGather:
         c = self.tracer.centre
         normal = np.ascontiguousarray(vox.normal, np.float32)
         reflecting = (np.asarray(vox.area) > 0) & np.any(np.asarray(vox.albedo) > 0, axis=1)
-        # Each record is a "pixel" of the display's gather kernels with one
-        # white Lambertian material (index 0), or -1: no rays.
+        # Each record is a "pixel" of the display's gather kernels with a
+        # white Lambertian material: index 0, or 1 + its row of the incidence
+        # response, which weighs each ray by R(μ) / A; -1: no rays.
+        material = np.zeros(len(vox), np.int32)
+        m = 1
+        self._response = {}
+        if response is not None:
+            material = response.row + 1
+            m += len(response.table)
+            ones = np.ones((1, *response.table.shape[1:]), np.float32)
+            self._response = {
+                "mat_response": np.ascontiguousarray(np.concatenate([ones, response.table]))
+            }
         self._hits = (
             np.ascontiguousarray(np.asarray(vox.centroid, np.float64) - c),
             normal,
             normal,
             normal,
-            np.where(reflecting, 0, -1).astype(np.int32),
+            np.where(reflecting, material, -1).astype(np.int32),
         )
         self._materials = (
-            np.ones((1, 3), np.float32),
-            np.zeros((1, 3), np.float32),
-            np.ones(1, np.float32),
-            np.ones(1, np.float32),
-            np.zeros(1, np.uint8),
+            np.ones((m, 3), np.float32),
+            np.zeros((m, 3), np.float32),
+            np.ones(m, np.float32),
+            np.ones(m, np.float32),
+            np.zeros(m, np.uint8),
         )
         self._tri = {
             "tri_v": self.tracer.tris,
@@ -258,6 +275,7 @@ class TracedGather:
             out=out,
             threads=self.threads,
             **kept,
+            **self._response,
         )
         if keep:
             record, weight = kept["transport_record"], kept["transport_weight"]

@@ -95,7 +95,12 @@ def _exact_direct_light(p: Problem):
     of a solve with diagnostics."""
     t = time.perf_counter()
     receivers = "all" if p.opt.diagnostics else "reflecting"
-    kw = dict(samples=p.opt.direct_samples, threads=p.opt.threads, receivers=receivers)
+    kw = dict(
+        samples=p.opt.direct_samples,
+        threads=p.opt.threads,
+        receivers=receivers,
+        response=p.response,
+    )
     Hd, st = direct_irradiance(p.vox.scene, p.vox, **kw)
     p.stats["direct_light"] = {"method": "exact", "receivers": receivers, **st}
     # what the records receive of the emitting triangles' power (the rest escapes)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -10,6 +11,7 @@ import numpy as np
 
 from .. import _validate
 from ..directions import DirectionSet, direction_set
+from ..incidence import incidence_response
 from ..solution import Solution
 from ..voxels import VoxelSet, available_memory
 from .linesystem import Gatherer, LineRecords
@@ -109,6 +111,16 @@ class Problem:
         """The records' scene has point, spot or directional lights or an environment."""
         scene = getattr(self.vox, "scene", None)
         return scene is not None and scene.has_lights
+
+    @functools.cached_property
+    def response(self):
+        """The records' :class:`voxgi.incidence.IncidenceResponse`, or None
+        (no glossy record, no scene to read the materials from, or
+        switched off by the study tuning's ``incidence``)."""
+        scene = getattr(self.vox, "scene", None)
+        if scene is None or not self.opt.incidence:
+            return None
+        return incidence_response(scene, self.vox)
 
     @property
     def shoots(self) -> bool:

@@ -211,7 +211,7 @@ def traced_bounces(
         p.stats["skipped"]["traced_cache"] = why_fresh
     cap = _KEPT_PASSES if keep else _TRACED_PASSES
     matrix = {}
-    with TracedGather(p.vox.scene, p.vox, threads=opt.threads) as trace:
+    with TracedGather(p.vox.scene, p.vox, threads=opt.threads, response=p.response) as trace:
         seen_albedo = trace(np.asarray(p.rho, np.float64), _ALBEDO_SAMPLES, seed=0)
         lam_mode = np.minimum(_dominant_ratio(p, seen_albedo, mode), lam_bound)
         t_first = time.perf_counter()

@@ -193,6 +193,10 @@ class _StudyTuning(SolveTuning):
     diagnostics : bool
         Run the extra gathering pass behind ``stats["back_fraction"]`` and
         light the black records too, for the energy balance.
+    incidence : bool
+        Weigh the light a glossy record gathers by its material's
+        directional albedo over its mean (:mod:`voxgi.incidence`); False:
+        every record reflects its light by its mean albedo.
 
     >>> _StudyTuning(later_radius=8).later_after
     2
@@ -206,6 +210,7 @@ class _StudyTuning(SolveTuning):
     lines_tol: float | None = None
     closed: bool | Sequence[int] | None = None
     diagnostics: bool = False
+    incidence: bool = True
 
 
 _NO_STUDY = _StudyTuning()
@@ -235,6 +240,7 @@ class Settings:
     traced_samples: int = 64
     traced_cache: bool | None = None
     lines_tol: float | None = None
+    incidence: bool = True
 
 
 def _checked_tuning(tuning) -> SolveTuning:
@@ -288,6 +294,7 @@ def settings(radius, max_bounces, tol, threads, tuning) -> Settings:
         history=_validate.integer(s.history, "history", low=1, high=32),
         closed=s.closed,
         diagnostics=bool(s.diagnostics),
+        incidence=bool(s.incidence),
         pair_cache=t.pair_cache,
         cache_cap=_validate.integer(t.max_cache_bytes, "max_cache_bytes", low=0, allow_none=True),
         direct_light=t.direct_light,
