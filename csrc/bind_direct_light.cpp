@@ -91,7 +91,8 @@ py::tuple traced(const py::tuple& emit, const F64& point, const F64& normal, con
                  const F64& sequence, double offset, const I32& emitter_of,
                  const voxgi::RayScene& scene, const voxgi::RayScene* emitter_scene, int threads,
                  const std::optional<F64>& hemisphere_scale, bool strategies,
-                 const std::optional<F32>& response, const std::optional<I32>& response_row) {
+                 const std::optional<F32>& response, const std::optional<I32>& response_row,
+                 const std::optional<F32>& response_base) {
     const Emitters held = emitters(emit);
     const voxgi::EmitterTriangles& em = held.em;
     voxgi::DirectLightQuery q = query(point, normal, shift, sequence, offset);
@@ -105,6 +106,12 @@ py::tuple traced(const py::tuple& emit, const F64& point, const F64& normal, con
         q.hemisphere_scale = hs;
     }
     set_incidence_response(q, response, response_row);
+    if (response_base) {
+        if (!response) throw py::value_error("response_base needs response");
+        if (check_incidence_table(*response_base, "response_base") != response->shape(0))
+            throw py::value_error("response_base: as many rows as response");
+        q.response_base = response_base->data();
+    }
     check_1d(emitter_of, scene.triangle_count(), "emitter_of");
     const int32_t* eo = emitter_of.data();
     for (py::ssize_t t = 0; t < emitter_of.shape(0); ++t)
@@ -116,12 +123,16 @@ py::tuple traced(const py::tuple& emit, const F64& point, const F64& normal, con
     F64 var({strategies ? q.records : py::ssize_t(0), py::ssize_t(2)});
     double *po = out.mutable_data(), *ps = sq.mutable_data();
     double* pv = strategies ? var.mutable_data() : nullptr;
+    F64 base({response_base ? q.records : py::ssize_t(0), py::ssize_t(3)});
+    double* pb = response_base ? base.mutable_data() : nullptr;
     const voxgi::StopCheck stop = make_stop_check();
     {
         py::gil_scoped_release release;
-        voxgi::direct_light_traced(em, q, eo, scene, emitter_scene, po, ps, pv,
+        voxgi::direct_light_traced(em, q, eo, scene, emitter_scene, po, ps, pv, pb,
                                    voxgi::resolve_threads(threads), stop);
     }
+    if (response_base && strategies) return py::make_tuple(out, sq, var, base);
+    if (response_base) return py::make_tuple(out, sq, py::none(), base);
     if (strategies) return py::make_tuple(out, sq, var);
     return py::make_tuple(out, sq);
 }
@@ -134,6 +145,7 @@ void bind_direct_light(py::module_& m) {
           "emitter_of"_a.noconvert(), "scene"_a, "emitter_scene"_a = nullptr, "threads"_a = 0,
           "hemisphere_scale"_a.noconvert() = py::none(), "strategies"_a = false,
           "response"_a.noconvert() = py::none(), "response_row"_a.noconvert() = py::none(),
+          "response_base"_a.noconvert() = py::none(),
           R"doc(Direct light on records from emitting triangles: light and hemisphere
 samples (samples each) combined by the power heuristic, traced in scene (a
 RayScene of the triangles emitter_of (F,) int32 indexes) record by record.
@@ -152,5 +164,7 @@ for any). With strategies=True a third array (N,2): the variance of the
 luminance of the light samples' and of the hemisphere samples' own
 estimates, each alone. response (T, 33, 3) float32 and response_row (N,)
 int32 (-1: none): each sample's light weighed by its record's row of R / A
-at the sample's cosine (voxgi.incidence).)doc");
+at the sample's cosine (voxgi.incidence). With response_base (T, 33, 3) the
+tuple's fourth item (N, 3): the same samples weighed by its rows (the
+base's share; the third item is then None without strategies).)doc");
 }

@@ -96,13 +96,18 @@ int64_t gather_light_py(
     const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
     const std::optional<F32>& corner_uv, const std::optional<F32>& mat_lobe,
     std::optional<I32Out> transport_record, std::optional<F32Out> transport_weight,
-    const std::optional<F32>& mat_response) {
+    const std::optional<F32>& mat_response, const std::optional<U8>& mat_continue,
+    const std::optional<F32>& rec_share) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     if (mat_response) {
         if (check_incidence_table(*mat_response, "mat_response") != mats.count)
             throw py::value_error("mat_response: one row per material");
         mats.response = mat_response->data();
+    }
+    if (mat_continue) {
+        check_1d(*mat_continue, mats.count, "mat_continue");
+        mats.continue_lobe = mat_continue->data();
     }
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
@@ -117,6 +122,10 @@ int64_t gather_light_py(
     if (tex) tris.textures = &tex->surface;
     voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
                                        grid_lo, grid_origin, pitch);
+    if (rec_share) {
+        check_2d(*rec_share, grid.count, 3, "rec_share");
+        grid.share = rec_share->data();
+    }
     const std::optional<voxgi::EnvironmentMap> env = make_environment(
         env_radiance, env_to_world, env_texel_pdf, env_row_solid_angle, env_samples);
     check_2d(out, hits.count, 3, "out");
@@ -163,6 +172,7 @@ void bind_gather_light(py::module_& m) {
           "corner_uv"_a.noconvert() = py::none(), "mat_lobe"_a.noconvert() = py::none(),
           "transport_record"_a.noconvert() = py::none(),
           "transport_weight"_a.noconvert() = py::none(), "mat_response"_a.noconvert() = py::none(),
+          "mat_continue"_a.noconvert() = py::none(), "rec_share"_a.noconvert() = py::none(),
           R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit
@@ -181,5 +191,10 @@ p * n_gather + k the record it read (position in rec_packed, -1: none) and
 the factor the record's radiance was multiplied by (transport_compact).
 With mat_response (M, 33, 3) float32 (the solve's records as pixels), a
 ray's f is multiplied by its material's row of R / A at the ray's cosine
-(voxgi.incidence). Returns the number of gather rays.)doc");
+(voxgi.incidence). With mat_continue (M,) uint8 and mat_lobe, a ray that
+lands on a material marked 1 reads its record's base share and follows the
+lobe's specular reflection one bounce further (not with the transport); with
+rec_share (N, 3) float32 in rec_packed's order, the base's share it reads
+(else 1 - S / A, the share under uniform light).
+Returns the number of gather rays.)doc");
 }

@@ -41,7 +41,8 @@ py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 
                        F64 vpl_pos, F32 vpl_normal, F32 vpl_weight, F32 vpl_area, F32 vpl_pa,
                        double n_gather, double eps, const voxgi::RayScene& scene,
                        std::optional<I32> pixel_set, std::optional<I64> set_start, int threads,
-                       const std::optional<F32>& hit_albedo, const std::optional<F32>& mat_lobe) {
+                       const std::optional<F32>& hit_albedo, const std::optional<F32>& mat_lobe,
+                       const std::optional<U8>& mat_continue, const std::optional<F32>& vpl_share) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     voxgi::ShadeHits hits =
@@ -50,6 +51,14 @@ py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 
     if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
     voxgi::ShadeMIS mis = make_mis(n_gather);
     voxgi::ShadeVPLs vpls = make_vpls(vpl_pos, vpl_normal, vpl_weight, vpl_area, vpl_pa, n_gather);
+    if (mat_continue.has_value() != vpl_share.has_value())
+        throw py::value_error("mat_continue and vpl_share go together");
+    if (mat_continue) {
+        check_1d(*mat_continue, mats.count, "mat_continue");
+        check_2d(*vpl_share, vpls.count, 3, "vpl_share");
+        mats.continue_lobe = mat_continue->data();
+        vpls.share = vpl_share->data();
+    }
     if (pixel_set.has_value() != set_start.has_value())
         throw py::value_error("pixel_set and set_start go together");
     const int32_t* ps = nullptr;
@@ -192,7 +201,8 @@ out (P, 3) float32. Returns the number of rays traced.)doc");
           "vpl_pa"_a.noconvert(), "n_gather"_a, "eps"_a, "scene"_a,
           "pixel_set"_a.noconvert() = py::none(), "set_start"_a.noconvert() = py::none(),
           "threads"_a = 0, "hit_albedo"_a.noconvert() = py::none(),
-          "mat_lobe"_a.noconvert() = py::none(),
+          "mat_lobe"_a.noconvert() = py::none(), "mat_continue"_a.noconvert() = py::none(),
+          "vpl_share"_a.noconvert() = py::none(),
           R"doc(The VPLs' light at the hits: per (pixel, VPL) pair the unoccluded term and
 its shadow ray, traced in scene (a RayScene) as it is made; returns each
 pixel's sum over its free rays in VPL order (P, 3) float32 and the number of
@@ -205,7 +215,10 @@ mat_nv (M,) float32, mat_glossy (M,) uint8; vpl_pos (K, 3) float64,
 vpl_normal (K, 3), vpl_weight (K, 3) = (TA/n) B/pi, vpl_area (K,) float32,
 vpl_pa (K,) float32: n_v times the area pdf of VPLs combined with gather rays
 (their weight is B/pi; n_gather rays per pixel), 0 for the others. With pixel_set (P,) int32 and set_start (S+1,)
-int64, pixel p sees only the VPLs of set pixel_set[p].)doc");
+int64, pixel p sees only the VPLs of set pixel_set[p]. With mat_continue
+(M,) uint8 and vpl_share (K, 3) float32, a pixel with a lobe (whose gather
+rays follow the lobes of the materials marked 1) takes vpl_share of each
+VPL's light.)doc");
 
     m.def("light_accumulate", &light_accumulate_py, "hit_pos"_a.noconvert(),
           "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(),

@@ -60,7 +60,7 @@ inline void cosine_direction(const double n[3], double u1, double u2, double w[3
 // heuristic with the hemisphere density scaled by sqrt(s2); raw: its own
 // estimate f / p, unweighted.
 void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r, const double u[5],
-               double s2, float* o, float* w, float* len, float* c, float* raw) {
+               double s2, float* o, float* w, float* len, float* c, float* raw, float* cb) {
     const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
     double y[3], d[3];
     const int64_t k = draw_light(em, u, y);
@@ -74,7 +74,7 @@ void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
     }
     if (cos_x <= 0.0 || cos_y <= 0.0) {
         for (int i = 0; i < 3; ++i)
-            o[i] = float(x[i]), w[i] = float(nx[i]), c[i] = 0.f, raw[i] = 0.f;
+            o[i] = float(x[i]), w[i] = float(nx[i]), c[i] = 0.f, raw[i] = 0.f, cb[i] = 0.f;
         *len = 0.f;
         return;
     }
@@ -88,11 +88,13 @@ void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
     // power heuristic, area measure: f p_light / (p_light^2 + s2 p_hemisphere^2)
     const double g = cos_x * cos_y / r2, pl = em.density[k], ph = g / kPi;
     const double weight = g * pl / (pl * pl + s2 * ph * ph);
-    double resp[3];
+    double resp[3], base[3];
     incidence_response(incidence_row(q.response, q.response_row, r), cos_x, resp);
+    incidence_response(incidence_row(q.response_base, q.response_row, r), cos_x, base);
     for (int i = 0; i < 3; ++i) {
         c[i] = float(weight * em.radiance[3 * k + i] * resp[i]);
         raw[i] = float(g / pl * em.radiance[3 * k + i] * resp[i]);
+        cb[i] = float(weight * em.radiance[3 * k + i] * base[i]);
     }
 }
 
@@ -101,14 +103,19 @@ void light_ray(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r,
 // sheets' transmittance), and the power-heuristic share of emitter k, which
 // its hemisphere ray met first at barycentrics u, v (-1: no emitter first),
 // times what passes that ray (its density scaled by sqrt(s2) in the
-// heuristic); hemi: the hemisphere sample's own estimate, pi L_e through it.
+// heuristic); hemi: the hemisphere sample's own estimate, pi L_e through it;
+// pair_base: the pair weighed by the base response (contribution_base the
+// light sample's).
 inline void sample_pair(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r, double s2,
-                        const float* contribution, const float* light_through,
-                        const float* hemi_direction, int32_t k, float hu, float hv,
-                        const float* hemi_through, double pair[3], double hemi[3]) {
+                        const float* contribution, const float* contribution_base,
+                        const float* light_through, const float* hemi_direction, int32_t k,
+                        float hu, float hv, const float* hemi_through, double pair[3],
+                        double hemi[3], double pair_base[3]) {
     const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
-    for (int i = 0; i < 3; ++i)
+    for (int i = 0; i < 3; ++i) {
         pair[i] = double(contribution[i]) * double(light_through[i]), hemi[i] = 0.0;
+        pair_base[i] = double(contribution_base[i]) * double(light_through[i]);
+    }
     if (k < 0) return;
     // the hit point from its barycentrics, in double
     const double* c = em.corners + 9 * k;
@@ -122,12 +129,14 @@ inline void sample_pair(const EmitterTriangles& em, const DirectLightQuery& q, i
         // power heuristic, solid-angle measure
         const double pl = em.density[k] * r2 / cos_y, ph = cos_x / kPi;
         const double weight = cos_x * s2 * ph / (pl * pl + s2 * ph * ph);
-        double resp[3];
+        double resp[3], base[3];
         incidence_response(incidence_row(q.response, q.response_row, r), cos_x, resp);
+        incidence_response(incidence_row(q.response_base, q.response_row, r), cos_x, base);
         for (int i = 0; i < 3; ++i) {
-            const double seen = em.radiance[3 * k + i] * hemi_through[i] * resp[i];
-            pair[i] += weight * seen;
-            if (cos_x > 0.0) hemi[i] = kPi * seen;
+            const double seen = em.radiance[3 * k + i] * hemi_through[i];
+            pair[i] += weight * seen * resp[i];
+            pair_base[i] += weight * seen * base[i];
+            if (cos_x > 0.0) hemi[i] = kPi * seen * resp[i];
         }
     }
 }
@@ -135,11 +144,11 @@ inline void sample_pair(const EmitterTriangles& em, const DirectLightQuery& q, i
 // Record r's light and hemisphere rays of sample s.
 inline void sample_rays(const EmitterTriangles& em, const DirectLightQuery& q, int64_t r, int64_t s,
                         double s2, float* lo, float* ld, float* ll, float* con, float* raw,
-                        float* ho, float* hd) {
+                        float* cb, float* ho, float* hd) {
     const double *x = q.point + 3 * r, *nx = q.normal + 3 * r;
     double u[5], w[3];
     sample_point(q, r, s, u);
-    light_ray(em, q, r, u, s2, lo, ld, ll, con, raw);
+    light_ray(em, q, r, u, s2, lo, ld, ll, con, raw, cb);
     cosine_direction(nx, u[3], u[4], w);
     for (int i = 0; i < 3; ++i) {
         ho[i] = float(x[i] + q.offset * nx[i]);
@@ -152,7 +161,8 @@ inline void sample_rays(const EmitterTriangles& em, const DirectLightQuery& q, i
 void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
                          const int32_t* emitter_of, const RayScene& scene,
                          const RayScene* emitter_scene, double* irradiance, double* mean_square,
-                         double* strategy_variance, int threads, const StopCheck& stop) {
+                         double* strategy_variance, double* base_irradiance, int threads,
+                         const StopCheck& stop) {
     const int64_t tasks = (q.records + kRecordsPerTask - 1) / kRecordsPerTask;
     const int64_t nt = scene.triangle_count();
     parallel_for(tasks, threads, stop, [&](int64_t task, int) {
@@ -160,13 +170,13 @@ void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
         for (int64_t r = task * kRecordsPerTask; r < r1; ++r) {
             const double scale = q.hemisphere_scale ? q.hemisphere_scale[r] : 1.0;
             const double s2 = scale * scale;
-            double sum[3] = {0.0, 0.0, 0.0}, sq = 0.0;
+            double sum[3] = {0.0, 0.0, 0.0}, sum_base[3] = {0.0, 0.0, 0.0}, sq = 0.0;
             // the luminance of each strategy's own estimates: sums, squares
             double own[2] = {0.0, 0.0}, own_sq[2] = {0.0, 0.0};
             for (int64_t s = 0; s < q.samples; ++s) {
-                float lo[3], ld[3], ll, con[3], raw[3], ho[3], hd[3], hu, hv, te;
+                float lo[3], ld[3], ll, con[3], raw[3], cb[3], ho[3], hd[3], hu, hv, te;
                 float light_through[3] = {0.f, 0.f, 0.f}, hemi_through[3] = {1.f, 1.f, 1.f};
-                sample_rays(em, q, r, s, s2, lo, ld, &ll, con, raw, ho, hd);
+                sample_rays(em, q, r, s, s2, lo, ld, &ll, con, raw, cb, ho, hd);
                 // light rays that cannot contribute have length 0 (and no
                 // contribution) and are not traced
                 if (ll > 0.f) scene.occluded(lo, ld, ll, light_through);
@@ -184,12 +194,13 @@ void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
                     const int32_t t = scene.intersect(ho, hd, &hu, &hv, nullptr, hemi_through);
                     k = (t >= 0 && t < nt) ? emitter_of[t] : -1;
                 }
-                double pair[3], hemi[3];
-                sample_pair(em, q, r, s2, con, light_through, hd, k, hu, hv, hemi_through, pair,
-                            hemi);
+                double pair[3], hemi[3], pair_base[3];
+                sample_pair(em, q, r, s2, con, cb, light_through, hd, k, hu, hv, hemi_through, pair,
+                            hemi, pair_base);
                 double lum = 0.0, lum_light = 0.0, lum_hemi = 0.0;
                 for (int i = 0; i < 3; ++i) {
                     sum[i] += pair[i];
+                    sum_base[i] += pair_base[i];
                     lum += kLuminance[i] * pair[i];
                     lum_light += kLuminance[i] * double(raw[i]) * double(light_through[i]);
                     lum_hemi += kLuminance[i] * hemi[i];
@@ -199,7 +210,10 @@ void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
                 own[1] += lum_hemi, own_sq[1] += lum_hemi * lum_hemi;
             }
             const double n = double(q.samples);
-            for (int i = 0; i < 3; ++i) irradiance[3 * r + i] = sum[i] / n;
+            for (int i = 0; i < 3; ++i) {
+                irradiance[3 * r + i] = sum[i] / n;
+                if (base_irradiance) base_irradiance[3 * r + i] = sum_base[i] / n;
+            }
             mean_square[r] = sq / n;
             if (strategy_variance)
                 for (int j = 0; j < 2; ++j) {

@@ -51,6 +51,9 @@ struct DirectLightQuery {
     // reflects over its mean albedo.
     const float* response = nullptr;
     const int32_t* response_row = nullptr;
+    // (T, kIncidenceNodes, 3) or null: the same rows for the light the
+    // record's diffuse base reflects, over its mean albedo (base_irradiance)
+    const float* response_base = nullptr;
 };
 
 // Per record: the direct irradiance (the mean over its samples of the pair
@@ -71,9 +74,12 @@ struct DirectLightQuery {
 // hit in the scene. With `emitter_scene` a surface within the offset in
 // front of an emitter does not hide it from the hemisphere ray, as it does
 // not hide it from the light rays.
+// With `base_irradiance` (records, 3; nullable) also the samples' sum
+// weighed by response_base.
 void direct_light_traced(const EmitterTriangles& em, const DirectLightQuery& q,
                          const int32_t* emitter_of, const RayScene& scene,
                          const RayScene* emitter_scene, double* irradiance, double* mean_square,
-                         double* strategy_variance, int threads, const StopCheck& stop);
+                         double* strategy_variance, double* base_irradiance, int threads,
+                         const StopCheck& stop);
 
 }  // namespace voxgi

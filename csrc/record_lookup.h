@@ -35,6 +35,9 @@ struct RecordGrid {
     int64_t lo[3] = {0, 0, 0};            // ijk of key 0
     double origin[3] = {0.0, 0.0, 0.0};
     double pitch = 1.0;
+    // (N, 3) in the order of sorted_key, or null: the share of each record's
+    // light that its diffuse base reflects (docs/design.md §14)
+    const float* share = nullptr;
 };
 
 // The voxel of the grid that holds y.

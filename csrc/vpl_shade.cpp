@@ -127,6 +127,7 @@ void vpl_pixel_rays(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
     const double* x = hits.pos + 3 * p;
     const float *n = hits.normal + 3 * p, *ng = hits.ng + 3 * p, *wo = hits.wo + 3 * p;
     const double ox = x[0] + eps * ng[0], oy = x[1] + eps * ng[1], oz = x[2] + eps * ng[2];
+    const bool follows = vpls.share && follows_lobes(mats, m);
     for (int64_t k = 0; k < vpls.count; ++k) {
         const double* y = vpls.pos + 3 * k;
         const float* ny = vpls.normal + 3 * k;
@@ -158,10 +159,13 @@ void vpl_pixel_rays(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
         float f[3];
         shade_brdf(mats, m, hit_albedo(hits, mats, p, m), n, wi, wo, f);
         const float* wk = vpls.weight + 3 * k;
+        // a pixel whose gather rays follow the lobes they land on takes only
+        // the base's share of a glossy record's light from its VPLs
+        const float* sk = follows ? vpls.share + 3 * k : nullptr;
         float cr[3];
         bool any = false;
         for (int ch = 0; ch < 3; ++ch) {
-            cr[ch] = float(g * f[ch] * wk[ch]);
+            cr[ch] = float(g * f[ch] * wk[ch] * (sk ? sk[ch] : 1.f));
             any |= cr[ch] > 0.f;
         }
         if (!any) continue;
@@ -193,6 +197,7 @@ void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPL
             mine.pos += 3 * a, mine.normal += 3 * a, mine.weight += 3 * a;
             mine.area += a;
             if (mine.pa) mine.pa += a;
+            if (mine.share) mine.share += 3 * a;
         }
         vpl_pixel_rays(hits, mats, mine, mis, eps, p,
                        [&](const float* ro, const float* rd, float len, const float* cr) {
@@ -400,14 +405,96 @@ static bool gather_hit_factors(const ShadeHits& hits, const ShadeMaterials& mats
     return true;
 }
 
+// Whether a gather ray of a pixel of material m that lands at h follows the lobe there.
+inline bool continues(const ShadeMaterials& mats, int32_t m, const GatherHit& h) {
+    return follows_lobes(mats, m) && h.obj >= 0 && h.obj < mats.count &&
+           mats.continue_lobe[h.obj] && mats.lobe[h.obj].kind != 0.f;
+}
+
+// The light leaving the glossy hit h towards the ray's origin
+// (docs/design.md §14): the base's share of record rec's light (ratio: the
+// texture's over the record's albedo), read as the record's mean as VPLs
+// read it, plus one sample of the lobe's specular reflection: a direction
+// drawn from the lobe about the way back, traced, and the record where it
+// lands (or the environment) read by the specular term's f cos / pdf.
+void glossy_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
+                         const RecordGrid& grid, const EnvironmentMap* env, const RayScene& scene,
+                         double eps, const GatherHit& h, int64_t rec, const float ratio[3],
+                         uint64_t& rng, LookupScratch& scratch, float L[3], float coat[3]) {
+    const MicrofacetLobe& lobe = mats.lobe[h.obj];
+    const PackedRecord& R = grid.rec[rec];
+    for (int ch = 0; ch < 3; ++ch) {
+        // the solve's split where it made one, else the split under uniform light
+        const float share = grid.share ? grid.share[3 * rec + ch]
+                            : lobe.kind == 1.f && R.albedo[ch] > 0.f
+                                ? std::max(0.f, 1.f - lobe.solve_s[ch] / R.albedo[ch])
+                                : 0.f;
+        L[ch] = R.radiance[ch] * ratio[ch] * share;
+        coat[ch] = 0.f;
+    }
+    const float wo[3] = {-h.wi[0], -h.wi[1], -h.wi[2]};
+    rng = splitmix64(rng);
+    const double u1 = to_unit(rng);
+    rng = splitmix64(rng);
+    const double u2 = to_unit(rng);
+    float wi[3];
+    if (!microfacet_sample(lobe, h.ns, wo, u1, u2, wi)) return;
+    const double pdf = microfacet_pdf(lobe, h.ns, wo, wi);
+    const float cos_y = dot3(h.ns, wi);
+    if (!(pdf > 0.0) || !(cos_y > 0.f)) return;
+    const float zero[3] = {0.f, 0.f, 0.f};
+    float f[3];
+    microfacet_brdf(lobe, zero, h.ns, wi, wo, f);
+    float ro[3], T[3];
+    for (int a = 0; a < 3; ++a) ro[a] = float(h.y[a] + eps * h.ns[a]);
+    const int32_t t = scene.intersect(ro, wi, nullptr, nullptr, nullptr, T);
+    // y as a "pixel" of one: its normal for the facing tests of gather_hit
+    ShadeHits at_y;
+    at_y.count = 1;
+    at_y.normal = h.ns;
+    at_y.ng = h.ns;
+    GatherHit z;
+    gather_hit(at_y, tris, grid, 0, ro, wi, t, z);
+    float Lz[3] = {0.f, 0.f, 0.f};
+    if (z.escaped) {
+        if (!env) return;
+        const double d[3] = {wi[0], wi[1], wi[2]};
+        const double* Le = env->radiance + 3 * environment_texel(*env, d);
+        for (int ch = 0; ch < 3; ++ch) Lz[ch] = float(Le[ch]);
+    } else {
+        if (z.key < 0) return;
+        const int64_t q = lookup_in_cell(grid, z.y, z.ns, z.obj, z.c, scratch);
+        if (q < 0) return;
+        for (int ch = 0; ch < 3; ++ch) Lz[ch] = grid.rec[q].radiance[ch];
+    }
+    const double w = double(cos_y) / pdf;
+    for (int ch = 0; ch < 3; ++ch) coat[ch] = float(f[ch] * w * Lz[ch] * T[ch]);
+}
+
 // The MIS-weighted light of pixel p's gather ray h from record rec (-1: none)
-// into s, through the sheets before the hit.
+// into s, through the sheets before the hit. With `base` and `coat`
+// (nullable): the light leaving a glossy hit towards the pixel in two parts,
+// the base's share of the record's, which the record's VPLs bring too (MIS),
+// and the coat's, which only the gather rays bring.
 void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                       const RecordGrid& grid, int64_t p, const GatherHit& h, int64_t rec,
-                      double s[3]) {
+                      double s[3], const float* base = nullptr, const float* coat = nullptr) {
     float f[3], ratio[3];
     double denom;
     if (!gather_hit_factors(hits, mats, mis, grid, p, h, rec, f, ratio, denom)) return;
+    if (base) {
+        // the gather rays' own density: denom less the record's VPL density
+        const double* x = hits.pos + 3 * p;
+        double r2 = 0.0;
+        for (int a = 0; a < 3; ++a) r2 += (h.y[a] - x[a]) * (h.y[a] - x[a]);
+        const double own = denom - double(grid.rec[rec].pa) * r2 / double(-dot3(h.ns, h.wi));
+        for (int ch = 0; ch < 3; ++ch) {
+            double L = base[ch] / denom;
+            if (own > 0.0) L += coat[ch] / own;
+            s[ch] += double(f[ch]) * L * h.through[ch] * h.cos_x;
+        }
+        return;
+    }
     const float* radiance = grid.rec[rec].radiance;
     for (int ch = 0; ch < 3; ++ch) {
         const float L = radiance[ch] * ratio[ch];
@@ -525,6 +612,22 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                     if (h[k].key == -2) continue;
                     const int64_t rec =
                         lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c, scratch);
+                    if (rec >= 0 && !transport && continues(mats, hits.material[p - 2], h[k])) {
+                        float ratio[3] = {1.f, 1.f, 1.f};
+                        if (h[k].textured)
+                            for (int ch = 0; ch < 3; ++ch)
+                                if (grid.rec[rec].albedo[ch] > 0.f)
+                                    ratio[ch] =
+                                        solve_albedo(mats.lobe + h[k].obj, h[k].tex[ch], ch) /
+                                        grid.rec[rec].albedo[ch];
+                        uint64_t rng = splitmix64(base ^ 0x9E3779B97F4A7C15ull ^
+                                                  (uint64_t(p - 2) * uint64_t(n_gather) + k));
+                        float L[3], coat[3];
+                        glossy_hit_radiance(mats, tris, grid, env, scene, eps, h[k], rec, ratio,
+                                            rng, scratch, L, coat);
+                        gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s, L, coat);
+                        continue;
+                    }
                     gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s);
                     if (transport)
                         gather_hit_weight(hits, mats, mis, grid, p - 2, h[k], rec, *transport,

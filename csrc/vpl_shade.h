@@ -34,7 +34,17 @@ struct ShadeMaterials {
     // gather_light, where f is multiplied by the material's incidence
     // response at the gather ray's cosine (incidence_response.h)
     const float* response = nullptr;
+    // (M,) or null: 1 where a gather ray that lands on the material's
+    // surface reads the base's share of its record and follows the lobe's
+    // specular reflection one bounce further (glossy_hit_radiance)
+    const uint8_t* continue_lobe = nullptr;
 };
+
+// Whether the gather rays of a pixel of material m follow the lobes of the
+// surfaces they land on (a glossy pixel, where continue_lobe is given).
+inline bool follows_lobes(const ShadeMaterials& mats, int32_t m) {
+    return mats.continue_lobe && mats.lobe && m >= 0 && m < mats.count && mats.lobe[m].kind != 0.f;
+}
 
 // Hit points of one frame (P pixels).
 struct ShadeHits {
@@ -66,6 +76,9 @@ struct ShadeVPLs {
     const float* pa = nullptr;      // (K,) n_v x the VPL's area pdf (per unit area) for VPLs
                                     // combined with gather rays (balance heuristic), 0 for
                                     // the others; or null: none
+    // (K, 3) or null: the share of its light a VPL brings a pixel whose
+    // gather rays follow the lobes they land on (follows_lobes)
+    const float* share = nullptr;
 };
 
 // Multiple importance sampling of each VPL set (emitters, the rest) between VPLs (n_v a

@@ -362,3 +362,63 @@ def test_the_solves_plastic_albedo_is_mitsubas_hemispherical_reflectance(alpha, 
         w.append(float(np.array(weight)[0]))
     err = np.std(w) / math.sqrt(len(w))
     assert abs(np.mean(w) - lobe.solve_albedo([base] * 3)[0]) < 4 * err + 1e-4
+
+
+def _quad(corners) -> trimesh.Trimesh:
+    return trimesh.Trimesh(np.asarray(corners, float), [[0, 1, 2], [0, 2, 3]], process=False)
+
+
+def _two_mirrors(follow: bool) -> tuple[np.ndarray, float]:
+    """The middle pixels' radiance where the camera sees a lamp in a mirror
+    seen in a mirror, and what it should be: the lamp's radiance times the
+    two mirrors' directional albedos at 45°."""
+    mirror = Microfacet("conductor", alpha=0.02, eta=(0.0, 0.0, 0.0), k=(1.0, 1.0, 1.0))
+    cam = Camera(
+        eye=(0.0, 2.0, 0.0), target=(0.0, 0.0, 0.0), up=(0, 0, 1), fov=8.0, width=8, height=8
+    )
+    sc = Scene(cam)
+    # A at the origin turns the camera's rays (-y) to +x, B at x = 2 turns
+    # them to +y, onto the lamp at y = 2 facing down
+    sc.add(
+        _quad([[-0.5, 0.5, -0.5], [-0.5, 0.5, 0.5], [0.5, -0.5, 0.5], [0.5, -0.5, -0.5]]),
+        Material(0.5, specular=mirror),
+        name="A",
+    )
+    sc.add(
+        _quad([[1.5, -0.5, 0.5], [2.5, 0.5, 0.5], [2.5, 0.5, -0.5], [1.5, -0.5, -0.5]]),
+        Material(0.5, specular=mirror),
+        name="B",
+    )
+    # (wide, so that it fills B's lobe from every point of B the rays meet)
+    sc.add(
+        _quad([[0.6, 2.0, -9.0], [13.0, 2.0, -9.0], [13.0, 2.0, 9.0], [0.6, 2.0, 9.0]]),
+        Material(0.0, emission=1.0),
+        name="lamp",
+    )
+    from voxgi.display.settings import _Experiment
+
+    sol = voxgi.solve(voxgi.voxelize(sc, resolution=32, progress=False), progress=False)
+    out = voxgi.render(
+        sc,
+        sol,
+        max_frames=64,
+        tol=0,
+        progress=False,
+        seed=2,
+        tuning=_Experiment(follow_lobes=follow),
+    )
+    r45 = float(mirror.directional_albedo((0.5,) * 3, [math.sqrt(0.5)])[0, 1])
+    return out.image[2:6, 2:6].reshape(-1, 3), r45 * r45
+
+
+def test_a_glossy_pixel_sees_a_lamp_in_a_mirror_seen_in_a_mirror():
+    # The camera's pixels follow mirror A's lobe to mirror B, whose record
+    # holds B's light averaged over every direction, under half of what B
+    # sends towards A: the lamp's image. Following B's lobe one bounce
+    # further finds the lamp: R_A R_B L, within 1.5% (0.8% low here; the
+    # same pixels see the lamp in mirror A alone 0.7% low, the display's
+    # own estimate of a near-mirror pixel, without any record read).
+    got, want = _two_mirrors(follow=True)
+    np.testing.assert_allclose(got.mean(axis=0), want, rtol=0.015)
+    mean_read, _ = _two_mirrors(follow=False)
+    assert mean_read.mean() < 0.6 * want

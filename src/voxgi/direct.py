@@ -164,6 +164,7 @@ def direct_irradiance(
     receivers: str = "reflecting",
     max_rays: int = 1 << 21,
     response: IncidenceResponse | None = None,
+    base_out: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict]:
     """Irradiance from the emitters at every record's surface point, by shadow rays.
 
@@ -197,6 +198,10 @@ def direct_irradiance(
         Each sample's light weighed by its record's R(μ) / A at the
         sample's cosine (:mod:`voxgi.incidence`): the irradiance times what
         the record reflects of it over its mean albedo. None: plain irradiance.
+    base_out : (N, 3) float64 array or None, optional
+        With ``response``: filled with the same samples weighed by the
+        response of the records' diffuse base (``response.base``), the
+        part of the light their base reflects.
 
     Returns
     -------
@@ -241,6 +246,8 @@ def direct_irradiance(
             scale = _hemisphere_scale(pilot, lit, np.asarray(vox.object_id))
             for todo, per in _sample_counts(pilot, lit, rel_error, samples):
                 stats["rays"] += rays.estimate(est, todo, per, rng, max_rays, scale)
+    if base_out is not None:
+        base_out[...] = est.base
     stats["refined_records"] = int(np.count_nonzero(est.counts > samples))
     stats["max_samples"] = int(est.counts.max(initial=0))
     stats["seconds"] = time.perf_counter() - t0
@@ -294,11 +301,17 @@ class _Estimate:
         #: (N, 2): the variance of the light and of the hemisphere samples'
         #: own estimates (the pilot's, :func:`_hemisphere_scale`)
         self.strategy_var = np.zeros((n, 2))
+        #: (N, 3): the same samples weighed by the base's incidence response
+        self.base = np.zeros((n, 3))
 
-    def add(self, rec: np.ndarray, mean: np.ndarray, sq: np.ndarray, per: int, var=None) -> None:
+    def add(
+        self, rec: np.ndarray, mean: np.ndarray, sq: np.ndarray, per: int, var=None, base=None
+    ) -> None:
         """Fold the means of ``per`` more samples of records ``rec`` in."""
         w_old = self.counts[rec] / (self.counts[rec] + per)
         self.irradiance[rec] = w_old[:, None] * self.irradiance[rec] + (1 - w_old)[:, None] * mean
+        if base is not None:
+            self.base[rec] = w_old[:, None] * self.base[rec] + (1 - w_old)[:, None] * base
         self.mean_sq[rec] = w_old * self.mean_sq[rec] + (1 - w_old) * sq
         if var is not None:
             self.strategy_var[rec] = (
@@ -366,7 +379,14 @@ class _Rays:
             )
             hs = None if scale is None else np.ascontiguousarray(scale[rec])
             out = _batch(args, self, hs, rec)
-            est.add(rec, out[0], out[1], per, out[2] if len(out) > 2 else None)
+            est.add(
+                rec,
+                out[0],
+                out[1],
+                per,
+                out[2] if len(out) > 2 else None,
+                out[3] if len(out) > 3 else None,
+            )
         return len(todo) * per
 
 
@@ -410,6 +430,7 @@ def _batch(args: tuple, rays: _Rays, scale=None, rec=None) -> tuple:
         resp = {
             "response": rays.response.table,
             "response_row": np.ascontiguousarray(rays.response.row[rec]),
+            "response_base": rays.response.base,
         }
     return _core.direct_light_traced(
         *args,
@@ -462,6 +483,7 @@ def light_irradiance(
     receivers: str = "reflecting",
     max_rays: int = 1 << 21,
     response: IncidenceResponse | None = None,
+    base_out: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict]:
     """Irradiance from the scene's lights and environment at every record's surface point.
 
@@ -475,7 +497,7 @@ def light_irradiance(
         Environment samples per record (and as many cosine-distributed
         rays); the delta lights take one shadow ray each.
     seed : int, optional
-    threads, offset, receivers, max_rays, response
+    threads, offset, receivers, max_rays, response, base_out
         As for :func:`direct_irradiance`.
 
     Returns
@@ -517,9 +539,11 @@ def light_irradiance(
             step = max(1, max_rays // max(per, 1))
             for a in range(0, len(lit), step):
                 rec = lit[a : a + step]
-                e, rays = _light_batch(
+                e, rays, eb = _light_batch(
                     scene, tracer, x[rec], nrm[rec], samples, rng, offset, response, rec
                 )
+                if base_out is not None and eb is not None:
+                    base_out[rec] = eb
                 out[rec] = e
                 stats["rays"] += rays
     stats["seconds"] = time.perf_counter() - t0
@@ -536,30 +560,36 @@ def _through(tracer: Tracer, org: np.ndarray, dirs: np.ndarray, length: np.ndarr
 
 def _light_batch(
     scene, tracer, x, nrm, samples, rng, offset, response=None, rec=None
-) -> tuple[np.ndarray, int]:
+) -> tuple[np.ndarray, int, np.ndarray | None]:
     """Irradiance (R, 3) at points ``x`` with normals ``nrm`` from the lights
     and the environment (each sample weighed by ``response`` of records
-    ``rec``, if given), and the rays traced."""
+    ``rec``, if given), the rays traced, and with ``response`` the same
+    samples weighed by its base's rows (else None)."""
     r = len(x)
-
-    def weigh(i, cos):
-        # R(μ) / A of the samples' records (i: their rows in the batch)
-        return 1.0 if response is None else response.at(rec[i], cos)
-
     e = np.zeros((r, 3))
+    eb = None if response is None else np.zeros((r, 3))
     rays = 0
     org = x + offset * nrm - tracer.centre
+
+    def add(into, i, light, cos):
+        # a sample's light into e (and eb), weighed by R(μ) / A (and base(μ) / A)
+        if response is None:
+            into[0][i] += light
+            return
+        into[0][i] += light * response.at(rec[i], cos)
+        into[1][i] += light * response.at(rec[i], cos, base=True)
+
     for light in scene.lights:
         w, dist, eperp = light.incident(x)
         cos = np.einsum("ij,ij->i", w, nrm)
         live = np.flatnonzero((cos > 0) & np.any(eperp > 0, axis=1))
         length = np.where(np.isfinite(dist[live]), np.maximum(dist[live] - 2 * offset, 0.0), np.inf)
         through = _through(tracer, org[live], w[live], length)
-        e[live] += eperp[live] * cos[live, None] * through * weigh(live, cos[live])
+        add((e, eb), live, eperp[live] * cos[live, None] * through, cos[live])
         rays += len(live)
     env = scene.environment
     if env is None:
-        return e, rays
+        return e, rays, eb
     # environment samples, then cosine samples; power heuristic between them
     s = samples
     u = rng.random((r, s, 3)).reshape(-1, 3)
@@ -573,9 +603,17 @@ def _light_batch(
     pc = cos_e[live] / np.pi
     wgt = pe[live] / (pe[live] ** 2 + pc**2)
     contrib = np.zeros((r * s, 3))
-    contrib[live] = (
-        env.eval(we[live]) * (cos_e[live] * wgt)[:, None] * through * weigh(live // s, cos_e[live])
-    )
+    contrib_b = None if eb is None else np.zeros((r * s, 3))
+    sample_rec = np.repeat(np.arange(r), s)
+
+    def add_env(i, light, cos):
+        if response is None:
+            contrib[i] += light
+            return
+        contrib[i] += light * response.at(rec[sample_rec[i]], cos)
+        contrib_b[i] += light * response.at(rec[sample_rec[i]], cos, base=True)
+
+    add_env(live, env.eval(we[live]) * (cos_e[live] * wgt)[:, None] * through, cos_e[live])
     wc = _cosine_dirs(nn, rng.random((r * s, 2)))
     hit, hit_through = tracer.intersect(
         np.ascontiguousarray(oo, np.float32), np.ascontiguousarray(wc, np.float32), through=True
@@ -587,11 +625,11 @@ def _light_batch(
     pe = env.pdf(wc[esc])
     with np.errstate(divide="ignore", invalid="ignore"):
         wgt = np.where(pc > 0, pc / (pe**2 + pc**2), 0.0)
-    contrib[esc] += (
-        env.eval(wc[esc]) * (cos_c * wgt)[:, None] * hit_through[esc] * weigh(esc // s, cos_c)
-    )
+    add_env(esc, env.eval(wc[esc]) * (cos_c * wgt)[:, None] * hit_through[esc], cos_c)
     e += contrib.reshape(r, s, 3).mean(axis=1)
-    return e, rays
+    if eb is not None:
+        eb += contrib_b.reshape(r, s, 3).mean(axis=1)
+    return e, rays, eb
 
 
 def _cosine_dirs(n: np.ndarray, u: np.ndarray) -> np.ndarray:

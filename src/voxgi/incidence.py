@@ -22,7 +22,7 @@ import numpy as np
 
 from .microfacet import Microfacet
 
-__all__ = ["NODES", "IncidenceResponse", "incidence_response"]
+__all__ = ["NODES", "IncidenceResponse", "base_radiosity", "incidence_response"]
 
 #: Cosines of a table row, i / (NODES - 1) (csrc/incidence_response.h).
 NODES = 33
@@ -38,10 +38,14 @@ class IncidenceResponse:
         Row t: R / A per channel at μ = i / (NODES - 1), interpolated linearly.
     row : (N,) int32
         Each record's row, -1 where its material has no lobe (R / A = 1).
+    base : (T, NODES, 3) float32 or None
+        Row t: the share of R / A that the material's diffuse base reflects
+        (a plastic's; 0 for a conductor), at the same cosines.
     """
 
     table: np.ndarray
     row: np.ndarray
+    base: np.ndarray | None = None
 
     def __post_init__(self):
         table = np.ascontiguousarray(self.table, np.float32)
@@ -63,18 +67,27 @@ class IncidenceResponse:
             )
         object.__setattr__(self, "table", table)
         object.__setattr__(self, "row", row)
+        if self.base is not None:
+            base = np.ascontiguousarray(self.base, np.float32)
+            if base.shape != table.shape or not (np.isfinite(base) & (base >= 0)).all():
+                raise ValueError(
+                    f"IncidenceResponse.base: shape {table.shape} of finite values >= 0"
+                )
+            object.__setattr__(self, "base", base)
 
-    def at(self, records: np.ndarray, mu: np.ndarray) -> np.ndarray:
-        """(R, 3) R / A of ``records`` (R,) at their cosines ``mu`` (R,)."""
+    def at(self, records: np.ndarray, mu: np.ndarray, base: bool = False) -> np.ndarray:
+        """(R, 3) R / A of ``records`` (R,) at their cosines ``mu`` (R,);
+        with ``base`` the base's share of it (1 for records without a lobe)."""
         out = np.ones((len(records), 3))
         row = self.row[records]
         has = row >= 0
         if not has.any():
             return out
+        table = self.base if base else self.table
         x = np.clip(np.asarray(mu, np.float64)[has], 0.0, 1.0) * (NODES - 1)
         i = np.minimum(x.astype(np.int64), NODES - 2)
         t = (x - i)[:, None]
-        tab = self.table[row[has]]
+        tab = table[row[has]]
         k = np.arange(len(i))
         out[has] = (1.0 - t) * tab[k, i] + t * tab[k, i + 1]
         return out
@@ -95,17 +108,55 @@ def incidence_response(scene, vox) -> IncidenceResponse | None:
         return None
     mu = np.linspace(0.0, 1.0, NODES)
     table = np.ones((len(lobed), NODES, 3), np.float32)
+    base_table = np.ones((len(lobed), NODES, 3), np.float32)
     row_of_object = np.full(len(objects), -1, np.int32)
     for t, i in enumerate(lobed):
         m = objects[i].material
         base = np.asarray(m.albedo, np.float64)
         mean = m.specular.solve_albedo(base)
         r = m.specular.directional_albedo(base, mu)
+        rb = m.specular.base_albedo(base, mu)
         with np.errstate(divide="ignore", invalid="ignore"):
             table[t] = np.where(mean > 0, r / mean, 1.0)
+            base_table[t] = np.where(mean > 0, rb / mean, 1.0)
         row_of_object[i] = t
     object_id = np.asarray(vox.object_id)
     row = np.where(np.asarray(vox.back), -1, row_of_object[object_id]).astype(np.int32)
     if not (row >= 0).any():
         return None
-    return IncidenceResponse(table=np.ascontiguousarray(table), row=row)
+    return IncidenceResponse(table=table, row=row, base=base_table)
+
+
+def base_radiosity(
+    scene, vox, response: IncidenceResponse | None, reflected, direct, direct_base
+) -> np.ndarray | None:
+    """(N, 3) float32: the part of each record's reflected radiosity its
+    diffuse base reflects (all of it for a record without a lobe), or None
+    without glossy records.
+
+    ``reflected`` is the solve's reflected radiosity A (H_d + H_i), ``direct``
+    the direct light H_d weighed by R / A and ``direct_base`` the same weighed
+    by the base's share (:func:`voxgi.direct.direct_irradiance`). The direct
+    light's split is exact; the light reflected from other records comes from
+    all around, and its split is the one under uniform light, 1 - S / A (S the
+    coat's hemispherical reflectance). A conductor's is 0 (``docs/design.md`` §14).
+    """
+    if response is None:
+        return None
+    A = np.asarray(vox.albedo, np.float64)
+    R = np.asarray(reflected, np.float64)
+    out = R.copy()
+    glossy = np.flatnonzero(response.row >= 0)
+    oid = np.asarray(vox.object_id)[glossy]
+    a = A[glossy]
+    uniform = np.zeros((len(glossy), 3))
+    for i in np.unique(oid):
+        lobe = scene.objects[i].material.specular
+        sel = oid == i
+        if lobe.kind == "plastic":
+            coat = np.asarray(lobe._plastic_albedo_terms()[0])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                uniform[sel] = np.where(a[sel] > 0, np.clip(1.0 - coat / a[sel], 0.0, 1.0), 0.0)
+    indirect = np.maximum(R[glossy] - a * direct[glossy], 0.0)
+    out[glossy] = np.minimum(a * direct_base[glossy] + uniform * indirect, R[glossy])
+    return np.maximum(out, 0.0).astype(np.float32)

@@ -209,16 +209,23 @@ class Microfacet:
                 out[:, c] = r * self.specular_reflectance[c]
             return out
         spec = _reflectance(self.distribution, self.alpha, mu, ("dielectric", self.ior))
+        return spec[:, None] * np.asarray(self.specular_reflectance) + self.base_albedo(base, mu)
+
+    def base_albedo(self, base, mu) -> np.ndarray:
+        """(len(mu), 3) the share of light arriving at cos θ = ``mu`` that a
+        plastic's diffuse base ``base`` (3,) sends back out through the coat,
+        g(base) t(μ) τ̄ / η² (:meth:`directional_albedo` less the coat's own
+        reflection); 0 for a conductor."""
+        mu = np.clip(np.atleast_1d(np.asarray(mu, np.float64)), 1e-6, 1.0)
+        if self.kind == "conductor":
+            return np.zeros((len(mu), 3))
         t = np.interp(mu, np.linspace(0.0, 1.0, _COAT_SAMPLES), _coat_transmittance(self))
         base = np.asarray(base, np.float64)
         f = self.internal_reflectance()
         g = base / (1.0 - f * base) if self.nonlinear else base / (1.0 - f)
         _, c = self._plastic_albedo_terms()
         tau = np.sqrt(c) * self.ior  # c = τ̄² / η²
-        return (
-            spec[:, None] * np.asarray(self.specular_reflectance)
-            + g * (t * tau / self.ior**2)[:, None]
-        )
+        return g * (t * tau / self.ior**2)[:, None]
 
     def albedo(self) -> tuple[float, float, float]:
         """The specular term's hemispherical reflectance under uniform

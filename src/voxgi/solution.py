@@ -37,6 +37,12 @@ class Solution:
     stats : dict
         ``rays``, ``shoot_rays``, ``gather_rays``, ``seconds`` (phase -> s),
         and what was skipped.
+    base_radiosity : (N, 3) float32 or None
+        The part of each record's reflected radiosity that a glossy
+        material's diffuse base reflects (the rest is its coat's, which the
+        display follows in direction; ``docs/design.md`` §14); a record
+        without a lobe's whole reflected radiosity. None: no glossy record
+        (or a solution that did not split it).
     """
 
     vox: VoxelSet
@@ -44,6 +50,7 @@ class Solution:
     bounces: int = 0
     residuals: list = field(default_factory=list)
     stats: dict = field(default_factory=dict)
+    base_radiosity: np.ndarray | None = None
 
     @property
     def radiance(self) -> np.ndarray:
@@ -82,6 +89,8 @@ class Solution:
             elif f.name not in ("stats", "scene"):  # the scene stays with its files
                 meta["vox_" + f.name] = v
         arrays["radiosity"] = self.radiosity
+        if self.base_radiosity is not None:
+            arrays["base_radiosity"] = np.asarray(self.base_radiosity, np.float32)
         arrays["meta"] = np.frombuffer(
             json.dumps(meta, default=_json_default).encode(), dtype=np.uint8
         )
@@ -170,6 +179,19 @@ class Solution:
             sol.radiosity = r.astype(np.float32)
         if not np.all(np.isfinite(sol.radiosity)):
             raise ValueError(f"{path}: radiosity has values that are not finite in float32")
+        if sol.base_radiosity is not None:
+            b = np.asarray(sol.base_radiosity)
+            if b.shape != (n, 3) or b.dtype != np.float32:
+                raise ValueError(
+                    f"{path}: base_radiosity must be float32 of shape ({n}, 3), "
+                    f"got {b.dtype} {b.shape}"
+                )
+            bad = np.flatnonzero(~(np.isfinite(b) & (b >= 0)).all(axis=1))
+            if len(bad):
+                raise ValueError(
+                    f"{path}: base_radiosity of record {bad[0]} is {b[bad[0]].tolist()}, "
+                    "expected finite and >= 0"
+                )
         check_solution_records(vox, sol.radiosity, str(path), sol.stats.pop("objects", None))
         return sol
 
@@ -194,6 +216,7 @@ class Solution:
             bounces=meta["bounces"],
             residuals=meta["residuals"],
             stats=meta["stats"],
+            base_radiosity=z["base_radiosity"] if "base_radiosity" in z else None,
         )
         sol.stats["objects"] = meta.get("objects")
         return sol
@@ -213,6 +236,7 @@ _FILE_ARRAYS = {
     "vox_side": (("n",), np.int8),
     "vox_origin": ((3,), np.float64),
     "radiosity": (("n", 3), (np.float32, np.float64)),
+    "base_radiosity": (("n", 3), np.float32),
 }
 
 

@@ -69,6 +69,7 @@ def record_grid(
     pa: np.ndarray | None = None,
     *,
     dense_cells: int = DENSE_TABLE_CELLS,
+    share: np.ndarray | None = None,
 ) -> dict:
     """The records sorted by voxel, as the compiled gather kernels look them up.
 
@@ -86,6 +87,10 @@ def record_grid(
         Largest bounding grid, in cells, given the dense table of each
         voxel's first record; a larger one is searched by voxel key (the same
         answers).
+    share : (N, 3) or None
+        The base's share of each record's light, which a gather ray that
+        follows a glossy record's lobe reads (``docs/design.md`` §14): then
+        also ``rec_share`` in the records' key order.
 
     Returns
     -------
@@ -96,7 +101,11 @@ def record_grid(
         lookup then reads a cache line or two, where separate arrays cost one
         each.
     """
-    return _record_grid(vox, centre, radiance, pa, _voxel_order(vox), dense_cells)
+    order = _voxel_order(vox)
+    out = _record_grid(vox, centre, radiance, pa, order, dense_cells)
+    if share is not None:
+        out["rec_share"] = np.ascontiguousarray(np.asarray(share, np.float32)[order[3]])
+    return out
 
 
 def _record_grid(vox, centre, radiance, pa, voxel_order, dense_cells=DENSE_TABLE_CELLS) -> dict:

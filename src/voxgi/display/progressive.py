@@ -17,7 +17,7 @@ from .executor import FrameExecutor, FrameShaderSpec
 from .pixel_filter import _FILTER_REACH
 from .seen_emission import skip_reason
 from .settings import RenderTuning, _check_executor, _check_render, _check_solution, _RenderSettings
-from .vpls import VPLSampler
+from .vpls import VPLSampler, base_share, continuing_objects
 
 __all__ = ["RenderResult", "render"]
 
@@ -124,6 +124,10 @@ def _with_budget(opt: _RenderSettings, sol) -> _RenderSettings:
 
 def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
     """The VPL sampler and the shadow-ray offset of this scene and solution."""
+    # glossy pixels follow the lobes their gather rays land on (docs/design.md §14)
+    share = None
+    if opt.gather > 0 and opt.follow_lobes:
+        share = base_share(scene, sol, continuing_objects(scene))
     sampler = VPLSampler(
         sol,
         opt.K,
@@ -132,6 +136,7 @@ def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
         mis=opt.gather > 0,
         pdf=opt.vpl_pdf,
         on_surface=opt.vpl_on_surface,
+        follow_share=share,
     )
     diag = float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
     # Shadow-ray offsets: well above float32 rounding of the coordinates

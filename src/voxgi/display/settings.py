@@ -92,6 +92,11 @@ class _Experiment(RenderTuning):
         At pixels that see emission over part of their footprint, each
         frame's seen emission is replaced by its mean over the pixel (default;
         :mod:`voxgi.display.seen_emission`); False keeps each frame's own.
+    follow_lobes : bool
+        A glossy pixel's gather ray that lands on a glossy surface reads the
+        base's share of its record and follows that surface's lobe one
+        bounce further (default; ``docs/design.md`` §14); False reads the
+        record's mean whatever the direction.
     """
 
     vpl_pdf: str = "power"
@@ -99,6 +104,7 @@ class _Experiment(RenderTuning):
     pixel_factor: float = PIXEL_FACTOR
     pixel_share: float = PIXEL_SHARE
     control_emission: bool = True
+    follow_lobes: bool = True
 
 
 @dataclass(frozen=True)
@@ -121,6 +127,7 @@ class _RenderSettings:
     spread: float = math.nan
     denoise: bool = False
     control_emission: bool = True
+    follow_lobes: bool = True
 
 
 def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) -> _RenderSettings:
@@ -172,6 +179,7 @@ def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) ->
         indirect_filter=(0 if denoise else 1) if radius is None else radius,
         denoise=denoise,
         control_emission=bool(t.control_emission),
+        follow_lobes=bool(getattr(t, "follow_lobes", True)),
     )
 
 

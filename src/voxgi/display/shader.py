@@ -28,7 +28,7 @@ from .lighting import _HIT_KEYS, _SceneLights
 from .pixel_filter import gaussian_pixel_filter
 from .samples import camera_arguments, frame_samples
 from .seen_emission import SeenEmission, seen_emission, skip_reason
-from .vpls import VPLSampler, place_vpls
+from .vpls import VPLSampler, continuing_objects, place_vpls
 
 __all__ = ["frame_surface"]
 
@@ -159,7 +159,11 @@ class _FrameShader:
         self.seconds = {"primary": 0.0, "shadow": 0.0, "gather": 0.0}
         if self.gather:
             self._grid = record_grid(
-                sampler.vox, tracer.centre, sampler.B / math.pi, sampler.record_pa
+                sampler.vox,
+                tracer.centre,
+                sampler.B / math.pi,
+                sampler.record_pa,
+                share=sampler.share if self.mat_continue is not None else None,
             )
             self._tri = {
                 "tri_v": tracer.tris,
@@ -183,11 +187,14 @@ class _FrameShader:
         self.mat_nv = np.array([s.nv if s else 1.0 for s in ash], np.float32)
         # the microfacet lobes' rows, or None: no pixel pays for lobes
         self.mat_lobe = None
+        self.mat_continue = None
         if any(isinstance(s, Microfacet) for s in spec):
             self.mat_lobe = np.zeros((len(objs), LOBE_WIDTH), np.float32)
             for i, s in enumerate(spec):
                 if isinstance(s, Microfacet):
                     self.mat_lobe[i] = s.lobe_row()
+            if self.sampler.share is not None:
+                self.mat_continue = continuing_objects(scene)
 
     @property
     def light_rays(self) -> int:
@@ -350,6 +357,13 @@ class _FrameShader:
             target += out * albedo
         self.seconds["filter"] = self.seconds.get("filter", 0.0) + time.perf_counter() - t0
 
+    def _vpl_share(self, vpls: dict) -> dict:
+        """The kernels' arguments for pixels whose gather rays follow the
+        lobes they land on: which materials, and each VPL's share."""
+        if self.mat_continue is None or vpls.get("share") is None:
+            return {}
+        return {"mat_continue": self.mat_continue, "vpl_share": vpls["share"]}
+
     def _vpl_light(self, h: dict, vpls: dict) -> np.ndarray:
         """(P, 3) float32: the VPLs' light at the hits ``h``, each pixel lit by
         its VPL set's VPLs, its shadow rays traced as they are made."""
@@ -369,6 +383,7 @@ class _FrameShader:
             self.threads,
             hit_albedo=h.get("albedo"),
             mat_lobe=self.mat_lobe,
+            **self._vpl_share(vpls),
         )
         self.shadow_rays += rays
         self.seconds["shadow"] += time.perf_counter() - t0
@@ -406,6 +421,7 @@ class _FrameShader:
             hit_albedo=None if h.get("albedo") is None else h["albedo"][a:b],
             **self._gather_textures,
             mat_lobe=self.mat_lobe,
+            mat_continue=self.mat_continue,
         )
         self.seconds["gather"] += time.perf_counter() - t0
 

@@ -9,8 +9,57 @@ import numpy as np
 
 from .. import _validate
 from ..lights import LUMINANCE
+from ..microfacet import Microfacet
 
-__all__ = ["VPLSampler", "place_vpls"]
+__all__ = ["VPLSampler", "continuing_objects", "place_vpls"]
+
+
+def continuing_objects(scene):
+    """(O,) uint8: 1 for the objects with a microfacet lobe and no emission,
+    where the display's gather rays follow the lobe one bounce further
+    (docs/design.md §14); or None where there is none."""
+    flag = np.array(
+        [
+            isinstance(o.material.specular, Microfacet)
+            and not np.any(np.asarray(o.material.emission) > 0)
+            for o in scene.objects
+        ],
+        np.uint8,
+    )
+    return flag if flag.any() else None
+
+
+def base_share(scene, sol, flag) -> np.ndarray | None:
+    """(N, 3) the share of each record's light that a pixel whose gather
+    rays follow the lobes reads as the record's mean: 1, or for the records
+    of an object the rays follow (``flag``) its diffuse base's. From the
+    solve's split (``sol.base_radiosity``) where it made one, else the split
+    under uniform light, 1 - S / A for a plastic (S its coat's hemispherical
+    reflectance, A the record's albedo) and 0 for a conductor."""
+    if flag is None:
+        return None
+    vox = sol.vox
+    share = np.ones((len(vox), 3))
+    oid = np.asarray(vox.object_id)
+    albedo = np.asarray(vox.albedo, np.float64)
+    B = np.asarray(sol.radiosity, np.float64)
+    split = getattr(sol, "base_radiosity", None)
+    for i in np.flatnonzero(flag):
+        sel = oid == i
+        lobe = scene.objects[i].material.specular
+        if split is not None:
+            b = np.asarray(split, np.float64)[sel]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                share[sel] = np.where(B[sel] > 0, np.clip(b / B[sel], 0.0, 1.0), 0.0)
+        elif lobe.kind == "conductor":
+            share[sel] = 0.0
+        else:
+            s, _ = lobe._plastic_albedo_terms()
+            s32 = np.asarray(s, np.float32).astype(np.float64)
+            a = albedo[sel]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                share[sel] = np.where(a > 0, np.maximum(0.0, 1.0 - s32 / a), 0.0)
+    return share
 
 
 def _morton(ijk: np.ndarray) -> np.ndarray:
@@ -83,6 +132,7 @@ class VPLSampler:
         mis: bool = False,
         pdf: str = "power",
         on_surface: bool = True,
+        follow_share: np.ndarray | None = None,
     ):
         if pdf not in ("power", "area"):
             raise ValueError(f"pdf: expected 'power' or 'area', got {pdf!r}")
@@ -137,6 +187,9 @@ class VPLSampler:
         self.normal = np.ascontiguousarray(vox.normal, dtype=np.float32)
         self.area32 = area.astype(np.float32)
         self.B = B
+        #: (N, 3) float32 or None: the share of each record's light its VPLs
+        #: bring a pixel whose gather rays follow the lobes (base_share)
+        self.share = None if follow_share is None else np.asarray(follow_share, np.float32)
         self.vox = vox
         self.on_surface = bool(on_surface)
 
@@ -169,7 +222,7 @@ class VPLSampler:
                 pa_all.append(np.zeros((sets, k), np.float32))
         idx = np.concatenate(idx_all, axis=1).reshape(-1)
         w = np.concatenate(w_all, axis=1).reshape(-1)
-        return {
+        out = {
             "pa": np.ascontiguousarray(np.concatenate(pa_all, axis=1).reshape(-1), np.float32),
             "index": idx,
             "pos": np.ascontiguousarray(self.pos[idx]),
@@ -178,6 +231,9 @@ class VPLSampler:
             "area": np.ascontiguousarray(self.area32[idx]),
             "start": np.arange(sets + 1, dtype=np.int64) * sum(self.counts),
         }
+        if self.share is not None:
+            out["share"] = np.ascontiguousarray(self.share[idx])
+        return out
 
 
 #: Candidate points per VPL and frame; each lands on the record's surface

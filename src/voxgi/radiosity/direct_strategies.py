@@ -101,15 +101,19 @@ def _exact_direct_light(p: Problem):
         receivers=receivers,
         response=p.response,
     )
-    Hd, st = direct_irradiance(p.vox.scene, p.vox, **kw)
+    base = np.zeros((p.n, 3)) if p.response is not None else None
+    Hd, st = direct_irradiance(p.vox.scene, p.vox, base_out=base, **kw)
     p.stats["direct_light"] = {"method": "exact", "receivers": receivers, **st}
     # what the records receive of the emitting triangles' power (the rest escapes)
     received = (Hd * p.area[:, None]).sum(axis=0)
     if p.lights:
         # the lights' power is what the records receive: it counts as emitted
         # in the energy balance, and none of it escapes on the way
-        H_lights, st_l = light_irradiance(p.vox.scene, p.vox, **kw)
+        base_lights = np.zeros((p.n, 3)) if base is not None else None
+        H_lights, st_l = light_irradiance(p.vox.scene, p.vox, base_out=base_lights, **kw)
         Hd = Hd + H_lights
+        if base is not None:
+            base = base + base_lights
         p.light_power = (H_lights * p.area[:, None]).sum(axis=0)
         p.stats["direct_light"]["lights"] = st_l
         p.stats["direct_light"]["rays"] += st_l["rays"]
@@ -119,6 +123,7 @@ def _exact_direct_light(p: Problem):
             "diagnostics=False: what they absorb counts as escaping in stats['energy']"
         )
     escape = (p.E * p.area[:, None]).sum(axis=0) - received
+    p.direct_base = base
     return Hd, escape, 0
 
 

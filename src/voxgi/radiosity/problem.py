@@ -101,6 +101,9 @@ class Problem:
     S: dict = field(default_factory=dict)
     #: power the records receive from lights other than emitting triangles
     light_power: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    #: (N, 3) the direct light weighed by the records' base share
+    #: (voxgi.incidence), where exact direct light met glossy records; or None
+    direct_base: np.ndarray | None = None
 
     @property
     def n(self) -> int:

@@ -6,6 +6,7 @@ import time
 
 import numpy as np
 
+from ..incidence import base_radiosity
 from ..solution import Solution
 from ..voxels import VoxelSet
 from .diagnostics import back_fraction, energy_balance, lost_fraction
@@ -153,4 +154,14 @@ def solve(
     p.seconds["total"] = time.perf_counter() - t_start
     _statistics(p, gather, s, shoot_rays)
     B = (p.E + s.R).astype(np.float32)
-    return Solution(vox=vox, radiosity=B, bounces=s.it, residuals=s.residuals, stats=p.stats)
+    base = None
+    if p.direct_base is not None:
+        base = base_radiosity(vox.scene, vox, p.response, s.R, Hd, p.direct_base)
+    return Solution(
+        vox=vox,
+        radiosity=B,
+        bounces=s.it,
+        residuals=s.residuals,
+        stats=p.stats,
+        base_radiosity=base,
+    )
