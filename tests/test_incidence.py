@@ -79,6 +79,11 @@ def test_a_glossy_floor_under_a_low_sun_reflects_its_directional_albedo(incidenc
     got = np.asarray(sol.radiosity, np.float64)[up]
     if incidence:
         np.testing.assert_allclose(got, np.broadcast_to(want, got.shape), rtol=2e-3)
+        # and the part its base reflects, which the display reads as the
+        # record's mean (the coat's it follows in direction): base(1/4) E
+        base = PLASTIC.base_albedo(BASE, [mu])[0] * mu
+        split = np.asarray(sol.base_radiosity, np.float64)[up]
+        np.testing.assert_allclose(split, np.broadcast_to(base, split.shape), rtol=2e-3)
         # the table's linear interpolation between nodes stays within 1%
         i = int(mu * (NODES - 1))
         between = PLASTIC.directional_albedo(BASE, [(i + 0.5) / (NODES - 1)])[0]

@@ -28,6 +28,21 @@ def test_round_trip(tmp_path, sol):
     assert [p.name for p in tmp_path.iterdir()] == ["s.npz"]
 
 
+def test_the_base_split_round_trips_and_is_checked(tmp_path, sol):
+    split = Solution(vox=sol.vox, radiosity=sol.radiosity, base_radiosity=0.5 * sol.radiosity)
+    p = split.save(tmp_path / "split.npz")
+    np.testing.assert_array_equal(Solution.load(p).base_radiosity, split.base_radiosity)
+    assert Solution.load(sol.save(tmp_path / "plain.npz")).base_radiosity is None
+    bad = split.base_radiosity.copy()
+    bad[3, 1] = -1.0
+    _rewrite(p, tmp_path / "bad.npz", base_radiosity=bad)
+    with pytest.raises(ValueError, match=r"base_radiosity of record 3 is \[.*-1\.0.*expected"):
+        Solution.load(tmp_path / "bad.npz")
+    _rewrite(p, tmp_path / "short.npz", base_radiosity=bad[:-1])
+    with pytest.raises(ValueError, match="base_radiosity"):
+        Solution.load(tmp_path / "short.npz")
+
+
 def test_empty_file(tmp_path):
     p = tmp_path / "empty.npz"
     p.write_bytes(b"")
