@@ -110,15 +110,20 @@ def incidence_response(scene, vox) -> IncidenceResponse | None:
     table = np.ones((len(lobed), NODES, 3), np.float32)
     base_table = np.ones((len(lobed), NODES, 3), np.float32)
     row_of_object = np.full(len(objects), -1, np.int32)
+    # an interior gives hundreds of objects a few materials: each distinct
+    # (lobe, base) is integrated once
+    rows: dict = {}
     for t, i in enumerate(lobed):
         m = objects[i].material
-        base = np.asarray(m.albedo, np.float64)
-        mean = m.specular.solve_albedo(base)
-        r = m.specular.directional_albedo(base, mu)
-        rb = m.specular.base_albedo(base, mu)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            table[t] = np.where(mean > 0, r / mean, 1.0)
-            base_table[t] = np.where(mean > 0, rb / mean, 1.0)
+        key = (m.specular, tuple(float(x) for x in m.albedo))
+        if key not in rows:
+            base = np.asarray(m.albedo, np.float64)
+            mean = m.specular.solve_albedo(base)
+            r = m.specular.directional_albedo(base, mu)
+            rb = m.specular.base_albedo(base, mu)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rows[key] = (np.where(mean > 0, r / mean, 1.0), np.where(mean > 0, rb / mean, 1.0))
+        table[t], base_table[t] = rows[key]
         row_of_object[i] = t
     object_id = np.asarray(vox.object_id)
     row = np.where(np.asarray(vox.back), -1, row_of_object[object_id]).astype(np.int32)
