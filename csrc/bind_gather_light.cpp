@@ -105,7 +105,10 @@ int64_t gather_light_py(
             throw py::value_error("mat_response: one row per material");
         mats.response = mat_response->data();
     }
+    if (mat_continue.has_value() != rec_share.has_value())
+        throw py::value_error("mat_continue and rec_share go together");
     if (mat_continue) {
+        if (!mat_lobe) throw py::value_error("mat_continue needs mat_lobe");
         check_1d(*mat_continue, mats.count, "mat_continue");
         mats.continue_lobe = mat_continue->data();
     }
@@ -193,8 +196,8 @@ With mat_response (M, 33, 3) float32 (the solve's records as pixels), a
 ray's f is multiplied by its material's row of R / A at the ray's cosine
 (voxgi.incidence). With mat_continue (M,) uint8 and mat_lobe, a ray that
 lands on a material marked 1 reads its record's base share and follows the
-lobe's specular reflection one bounce further (not with the transport); with
-rec_share (N, 3) float32 in rec_packed's order, the base's share it reads
-(else 1 - S / A, the share under uniform light).
+lobe's specular reflection one bounce further (not with the transport),
+reading rec_share (N, 3) float32 (in rec_packed's order, given with
+mat_continue) of its record's light.
 Returns the number of gather rays.)doc");
 }

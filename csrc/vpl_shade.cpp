@@ -424,12 +424,8 @@ void glossy_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
     const MicrofacetLobe& lobe = mats.lobe[h.obj];
     const PackedRecord& R = grid.rec[rec];
     for (int ch = 0; ch < 3; ++ch) {
-        // the solve's split where it made one, else the split under uniform light
-        const float share = grid.share ? grid.share[3 * rec + ch]
-                            : lobe.kind == 1.f && R.albedo[ch] > 0.f
-                                ? std::max(0.f, 1.f - lobe.solve_s[ch] / R.albedo[ch])
-                                : 0.f;
-        L[ch] = R.radiance[ch] * ratio[ch] * share;
+        // (grid.share is given wherever continue_lobe is: the binding checks)
+        L[ch] = R.radiance[ch] * ratio[ch] * grid.share[3 * rec + ch];
         coat[ch] = 0.f;
     }
     const float wo[3] = {-h.wi[0], -h.wi[1], -h.wi[2]};

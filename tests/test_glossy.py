@@ -13,6 +13,7 @@ import trimesh
 
 import voxgi
 from voxgi import CONDUCTORS, Camera, Environment, Material, Microfacet, PointLight, Scene
+from voxgi.display.settings import _Experiment
 from voxgi.microfacet import _reflectance
 
 
@@ -395,8 +396,6 @@ def _two_mirrors(follow: bool) -> tuple[np.ndarray, float]:
         Material(0.0, emission=1.0),
         name="lamp",
     )
-    from voxgi.display.settings import _Experiment
-
     sol = voxgi.solve(voxgi.voxelize(sc, resolution=32, progress=False), progress=False)
     out = voxgi.render(
         sc,

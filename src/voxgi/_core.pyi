@@ -271,9 +271,9 @@ def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy
     ray's f is multiplied by its material's row of R / A at the ray's cosine
     (voxgi.incidence). With mat_continue (M,) uint8 and mat_lobe, a ray that
     lands on a material marked 1 reads its record's base share and follows the
-    lobe's specular reflection one bounce further (not with the transport); with
-    rec_share (N, 3) float32 in rec_packed's order, the base's share it reads
-    (else 1 - S / A, the share under uniform light).
+    lobe's specular reflection one bounce further (not with the transport),
+    reading rec_share (N, 3) float32 (in rec_packed's order, given with
+    mat_continue) of its record's light.
     Returns the number of gather rays.
     """
 def geometry_filter(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_glossy: numpy.typing.NDArray[numpy.uint8], eye: numpy.typing.NDArray[numpy.float64], pixel_angle: typing.SupportsFloat | typing.SupportsIndex, width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, radius: typing.SupportsInt | typing.SupportsIndex, reflected: numpy.typing.NDArray[numpy.float32], out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:

@@ -571,13 +571,17 @@ def _light_batch(
     rays = 0
     org = x + offset * nrm - tracer.centre
 
-    def add(into, i, light, cos):
-        # a sample's light into e (and eb), weighed by R(μ) / A (and base(μ) / A)
+    def rec_of(i):
+        return None if rec is None else rec[i]
+
+    def add(into, into_base, i, light, rows, cos):
+        # samples i's light into `into` (and into_base), weighed by their
+        # records' R(μ) / A (and base(μ) / A); rows: their records
         if response is None:
-            into[0][i] += light
+            into[i] += light
             return
-        into[0][i] += light * response.at(rec[i], cos)
-        into[1][i] += light * response.at(rec[i], cos, base=True)
+        into[i] += light * response.at(rows, cos)
+        into_base[i] += light * response.at(rows, cos, base=True)
 
     for light in scene.lights:
         w, dist, eperp = light.incident(x)
@@ -585,7 +589,7 @@ def _light_batch(
         live = np.flatnonzero((cos > 0) & np.any(eperp > 0, axis=1))
         length = np.where(np.isfinite(dist[live]), np.maximum(dist[live] - 2 * offset, 0.0), np.inf)
         through = _through(tracer, org[live], w[live], length)
-        add((e, eb), live, eperp[live] * cos[live, None] * through, cos[live])
+        add(e, eb, live, eperp[live] * cos[live, None] * through, rec_of(live), cos[live])
         rays += len(live)
     env = scene.environment
     if env is None:
@@ -605,15 +609,8 @@ def _light_batch(
     contrib = np.zeros((r * s, 3))
     contrib_b = None if eb is None else np.zeros((r * s, 3))
     sample_rec = np.repeat(np.arange(r), s)
-
-    def add_env(i, light, cos):
-        if response is None:
-            contrib[i] += light
-            return
-        contrib[i] += light * response.at(rec[sample_rec[i]], cos)
-        contrib_b[i] += light * response.at(rec[sample_rec[i]], cos, base=True)
-
-    add_env(live, env.eval(we[live]) * (cos_e[live] * wgt)[:, None] * through, cos_e[live])
+    seen = env.eval(we[live]) * (cos_e[live] * wgt)[:, None] * through
+    add(contrib, contrib_b, live, seen, rec_of(sample_rec[live]), cos_e[live])
     wc = _cosine_dirs(nn, rng.random((r * s, 2)))
     hit, hit_through = tracer.intersect(
         np.ascontiguousarray(oo, np.float32), np.ascontiguousarray(wc, np.float32), through=True
@@ -625,7 +622,8 @@ def _light_batch(
     pe = env.pdf(wc[esc])
     with np.errstate(divide="ignore", invalid="ignore"):
         wgt = np.where(pc > 0, pc / (pe**2 + pc**2), 0.0)
-    add_env(esc, env.eval(wc[esc]) * (cos_c * wgt)[:, None] * hit_through[esc], cos_c)
+    seen = env.eval(wc[esc]) * (cos_c * wgt)[:, None] * hit_through[esc]
+    add(contrib, contrib_b, esc, seen, rec_of(sample_rec[esc]), cos_c)
     e += contrib.reshape(r, s, 3).mean(axis=1)
     if eb is not None:
         eb += contrib_b.reshape(r, s, 3).mean(axis=1)
