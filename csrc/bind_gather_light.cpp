@@ -97,7 +97,7 @@ int64_t gather_light_py(
     const std::optional<F32>& corner_uv, const std::optional<F32>& mat_lobe,
     std::optional<I32Out> transport_record, std::optional<F32Out> transport_weight,
     const std::optional<F32>& mat_response, const std::optional<U8>& mat_continue,
-    const std::optional<F32>& rec_share) {
+    const std::optional<F32>& rec_share, const voxgi::EnvironmentGuide* env_guide) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     if (mat_response) {
@@ -129,8 +129,10 @@ int64_t gather_light_py(
         check_2d(*rec_share, grid.count, 3, "rec_share");
         grid.share = rec_share->data();
     }
-    const std::optional<voxgi::EnvironmentMap> env = make_environment(
+    std::optional<voxgi::EnvironmentMap> env = make_environment(
         env_radiance, env_to_world, env_texel_pdf, env_row_solid_angle, env_samples);
+    if (env_guide && !env) throw py::value_error("env_guide needs the environment's tables");
+    if (env) attach_guide(*env, env_guide);
     check_2d(out, hits.count, 3, "out");
     check_inplace(out, "out");
     float* po = out.mutable_data();
@@ -176,6 +178,7 @@ void bind_gather_light(py::module_& m) {
           "transport_record"_a.noconvert() = py::none(),
           "transport_weight"_a.noconvert() = py::none(), "mat_response"_a.noconvert() = py::none(),
           "mat_continue"_a.noconvert() = py::none(), "rec_share"_a.noconvert() = py::none(),
+          "env_guide"_a = py::none(),
           R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit
@@ -184,7 +187,8 @@ the VPLs; added into out (P, 3) float32. With the environment's tables
 (env_radiance (H, W, 3) float64, env_to_world (3, 3), env_texel_pdf (H*W,),
 env_row_solid_angle (H,) float64, as voxgi.Environment samples), a ray that
 meets nothing adds the environment's radiance MIS-weighted against
-env_samples environment samples per pixel. With hit_albedo (P, 3) float32
+env_samples environment samples per pixel (drawn by env_guide, an
+EnvironmentGuide, where given). With hit_albedo (P, 3) float32
 each pixel's own diffuse albedo replaces its material's; with the textures
 (as camera_hits takes them) a ray that lands on a textured object takes the
 record's radiance times the texture there over the record's albedo (the

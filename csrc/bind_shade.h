@@ -107,6 +107,14 @@ inline void check_scene(const voxgi::RayScene& scene, int64_t triangles) {
 }
 
 // The environment of escaped gather rays: all four tables, or none.
+// The guide on an environment of these tables (checked to be its size).
+inline void attach_guide(voxgi::EnvironmentMap& env, const voxgi::EnvironmentGuide* guide) {
+    if (!guide) return;
+    if (guide->width != env.width || guide->height != env.height)
+        throw py::value_error("env_guide was made for an environment of another size");
+    env.guide = guide;
+}
+
 inline std::optional<voxgi::EnvironmentMap> make_environment(
     const std::optional<F64>& radiance, const std::optional<F64>& to_world,
     const std::optional<F64>& texel_pdf, const std::optional<F64>& row_solid_angle, double samples,

@@ -1,6 +1,7 @@
 // pybind11 bindings for the VPL shading kernels (vpl_shade.h).
 #include <pybind11/stl.h>
 
+#include <memory>
 #include <optional>
 
 #include "bind_shade.h"
@@ -139,6 +140,129 @@ auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I3
     }
 }
 
+// A validated copy of the guide's tables (voxgi.display.environment_guide).
+std::unique_ptr<voxgi::EnvironmentGuide> make_guide(F64 origin, double cell, I64 dims,
+                                                    int64_t width, int64_t height, int64_t blocks_w,
+                                                    int64_t blocks_h, double alpha, I32 key_row,
+                                                    F64 factor, F64 block_cdf, I64 texel_order,
+                                                    I64 block_start, F64 order_cdf) {
+    auto g = std::make_unique<voxgi::EnvironmentGuide>();
+    check_1d(origin, 3, "origin");
+    check_1d(dims, 3, "dims");
+    if (!(cell > 0.0) || !std::isfinite(cell)) throw py::value_error("cell must be finite and > 0");
+    if (!(alpha > 0.0 && alpha <= 1.0)) throw py::value_error("alpha must be in (0, 1]");
+    if (width < 1 || height < 1 || blocks_w < 1 || blocks_h < 1 || blocks_w > width ||
+        blocks_h > height)
+        throw py::value_error("blocks must be within 1 and the environment's width and height");
+    int64_t keys = 6;
+    for (int a = 0; a < 3; ++a) {
+        g->origin[a] = origin.data()[a];
+        if (!std::isfinite(g->origin[a])) throw py::value_error("origin must be finite");
+        g->dims[a] = dims.data()[a];
+        if (g->dims[a] < 1 || g->dims[a] > 4096) throw py::value_error("dims must be in [1, 4096]");
+        keys *= g->dims[a];
+    }
+    g->inv_cell = 1.0 / cell;
+    g->width = width;
+    g->height = height;
+    g->blocks_w = blocks_w;
+    g->blocks_h = blocks_h;
+    g->alpha = alpha;
+    const int64_t B = g->blocks(), n = width * height;
+    if (factor.ndim() != 2 || factor.shape(1) != B)
+        throw py::value_error("factor must have shape (rows, blocks_w * blocks_h)");
+    const int64_t rows = factor.shape(0);
+    check_2d(block_cdf, rows, B, "block_cdf");
+    check_1d(key_row, keys, "key_row");
+    check_1d(texel_order, n, "texel_order");
+    check_1d(block_start, B + 1, "block_start");
+    check_1d(order_cdf, n, "order_cdf");
+    g->key_row.assign(key_row.data(), key_row.data() + keys);
+    for (int32_t r : g->key_row)
+        if (r < -1 || r >= rows) throw py::value_error("key_row: a row out of range");
+    g->factor.assign(factor.data(), factor.data() + rows * B);
+    for (double f : g->factor)
+        if (!(f >= 0.0) || !std::isfinite(f))
+            throw py::value_error("factor must be finite and >= 0");
+    g->block_cdf.assign(block_cdf.data(), block_cdf.data() + rows * B);
+    for (int64_t r = 0; r < rows; ++r) {
+        const double* c = g->block_cdf.data() + r * B;
+        for (int64_t b = 0; b < B; ++b)
+            if (!(c[b] >= (b ? c[b - 1] : 0.0)) || !(c[b] <= 1.0))
+                throw py::value_error("block_cdf: each row must ascend within [0, 1]");
+        if (!(c[B - 1] == 1.0)) throw py::value_error("block_cdf: each row must end at 1");
+    }
+    g->block_start.assign(block_start.data(), block_start.data() + B + 1);
+    if (g->block_start[0] != 0 || g->block_start[size_t(B)] != n)
+        throw py::value_error("block_start must run from 0 to width * height");
+    g->texel_order.assign(texel_order.data(), texel_order.data() + n);
+    for (int64_t b = 0; b < B; ++b) {
+        const int64_t first = g->block_start[size_t(b)], end = g->block_start[size_t(b) + 1];
+        if (!(first < end)) throw py::value_error("block_start: every block must hold a texel");
+        for (int64_t j = first; j < end; ++j) {
+            const int64_t k = g->texel_order[size_t(j)];
+            if (k < 0 || k >= n || g->block(k) != b)
+                throw py::value_error("texel_order: texel " + std::to_string(k) +
+                                      " is not in block " + std::to_string(b));
+        }
+    }
+    g->order_cdf.assign(order_cdf.data(), order_cdf.data() + n);
+    for (int64_t j = 0; j < n; ++j)
+        if (!(g->order_cdf[size_t(j)] >= (j ? g->order_cdf[size_t(j) - 1] : 0.0)))
+            throw py::value_error("order_cdf must ascend from 0");
+    return g;
+}
+
+py::tuple learn_environment_guide_py(const F64& env_radiance, const F64& env_to_world,
+                                     const F64& env_texel_pdf, const F64& env_row_solid_angle,
+                                     const F64& env_texel_cdf, const F64& env_row_cos,
+                                     int64_t blocks_w, int64_t blocks_h, F64 pos, F32 normal,
+                                     I64 row_start, I32 row_rays, uint64_t seed, double eps,
+                                     F64 luminance, const voxgi::RayScene& scene, int threads) {
+    const voxgi::EnvironmentMap env =
+        *make_environment(env_radiance, env_to_world, env_texel_pdf, env_row_solid_angle, 0.0,
+                          &env_texel_cdf, &env_row_cos);
+    voxgi::EnvironmentGuide blocks;
+    blocks.width = env.width;
+    blocks.height = env.height;
+    if (blocks_w < 1 || blocks_h < 1 || blocks_w > env.width || blocks_h > env.height)
+        throw py::value_error("blocks must be within 1 and the environment's width and height");
+    blocks.blocks_w = blocks_w;
+    blocks.blocks_h = blocks_h;
+    check_2d(pos, -1, 3, "pos");
+    const int64_t n = pos.shape(0);
+    check_2d(normal, n, 3, "normal");
+    if (row_start.ndim() != 1 || row_start.shape(0) < 1)
+        throw py::value_error("row_start must have shape (rows + 1,)");
+    const int64_t rows = row_start.shape(0) - 1;
+    const int64_t* rs = row_start.data();
+    if (rs[0] != 0 || rs[rows] != n) throw py::value_error("row_start must run from 0 to N");
+    for (int64_t r = 0; r < rows; ++r)
+        if (rs[r + 1] < rs[r]) throw py::value_error("row_start must ascend");
+    for (int64_t i = 0; i < 3 * n; ++i)
+        if (!std::isfinite(pos.data()[i]) || !std::isfinite(normal.data()[i]))
+            throw py::value_error("pos and normal must be finite");
+    check_1d(row_rays, rows, "row_rays");
+    for (int64_t r = 0; r < rows; ++r)
+        if (row_rays.data()[r] < 0 || row_rays.data()[r] > (1 << 20))
+            throw py::value_error("row_rays must be in [0, 2**20]");
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    check_1d(luminance, 3, "luminance");
+    py::array_t<double> hist({rows, blocks.blocks()});
+    py::array_t<double> possible(rows);
+    std::fill(hist.mutable_data(), hist.mutable_data() + hist.size(), 0.0);
+    std::fill(possible.mutable_data(), possible.mutable_data() + rows, 0.0);
+    int64_t rays = 0;
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        rays = voxgi::learn_environment_guide(
+            env, blocks, pos.data(), normal.data(), rs, rows, row_rays.data(), seed, eps,
+            luminance.data(), scene, hist.mutable_data(), possible.mutable_data(), threads, stop);
+    }
+    return py::make_tuple(hist, possible, rays);
+}
+
 int64_t environment_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                              F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
                              const F64& env_radiance, const F64& env_to_world,
@@ -147,7 +271,8 @@ int64_t environment_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo
                              double n_gather, uint64_t seed, int64_t frame, double eps,
                              const voxgi::RayScene& scene, F32Out out, int threads,
                              const std::optional<F32>& hit_albedo,
-                             const std::optional<F32>& mat_lobe) {
+                             const std::optional<F32>& mat_lobe,
+                             const voxgi::EnvironmentGuide* env_guide) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     voxgi::ShadeHits hits =
@@ -158,9 +283,10 @@ int64_t environment_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo
     if (!(n_gather >= 0.0) || !std::isfinite(n_gather))
         throw py::value_error("n_gather must be finite and >= 0");
     if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
-    const voxgi::EnvironmentMap env =
+    voxgi::EnvironmentMap env =
         *make_environment(env_radiance, env_to_world, env_texel_pdf, env_row_solid_angle,
                           double(env_samples), &env_texel_cdf, &env_row_cos);
+    attach_guide(env, env_guide);
     check_2d(out, hits.count, 3, "out");
     check_inplace(out, "out");
     float* po = out.mutable_data();
@@ -177,6 +303,34 @@ int64_t environment_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo
 }  // namespace
 
 void bind_vpl_shade(py::module_& m) {
+    py::class_<voxgi::EnvironmentGuide>(m, "EnvironmentGuide", R"doc(Where an environment's light
+reaches a scene: per cell of a grid (origin (3,), cell edge, dims (3,)) and
+facing (the geometric normal's dominant axis and sign: key = cell * 6 + 2 *
+axis + (negative)), key_row (dims product * 6,) int32 picks a row (-1: none)
+of factor and block_cdf (rows, blocks_w * blocks_h) float64, the density over
+the environment's own per block of texels and the running shares of the
+blocks. texel_order (width * height,) int64 lists the texels block by block
+(block_start (blocks + 1,)), order_cdf their running texel_pdf. Samples take
+the environment's own tables with probability alpha. Checked and copied;
+voxgi.display.environment_guide builds it.)doc")
+        .def(py::init(&make_guide), "origin"_a.noconvert(), "cell"_a, "dims"_a.noconvert(),
+             "width"_a, "height"_a, "blocks_w"_a, "blocks_h"_a, "alpha"_a, "key_row"_a.noconvert(),
+             "factor"_a.noconvert(), "block_cdf"_a.noconvert(), "texel_order"_a.noconvert(),
+             "block_start"_a.noconvert(), "order_cdf"_a.noconvert());
+    m.def("learn_environment_guide", &learn_environment_guide_py, "env_radiance"_a.noconvert(),
+          "env_to_world"_a.noconvert(), "env_texel_pdf"_a.noconvert(),
+          "env_row_solid_angle"_a.noconvert(), "env_texel_cdf"_a.noconvert(),
+          "env_row_cos"_a.noconvert(), "blocks_w"_a, "blocks_h"_a, "pos"_a.noconvert(),
+          "normal"_a.noconvert(), "row_start"_a.noconvert(), "row_rays"_a.noconvert(), "seed"_a,
+          "eps"_a, "luminance"_a.noconvert(), "scene"_a, "threads"_a = 0,
+          R"doc(The environment guide's learning rays: from each point (pos (N, 3) float64,
+normal (N, 3) float32, offset eps along it) of row r (points row_start[r] to
+row_start[r + 1]), row_rays[r] (rows,) int32 directions each, every other one drawn by the
+environment's own tables and the rest cosine-distributed, traced in scene. Returns (hist (rows, blocks_w * blocks_h) float64: per row
+and block of texels, the luminance-weighted light L cos / p that arrived
+unblocked, p the balance of the two densities; possible (rows,) float64: the same for every ray above the
+surface, blocked or not; the number of rays traced).)doc");
+
     m.def("environment_light", &environment_light_py, "hit_pos"_a.noconvert(),
           "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(),
           "hit_material"_a.noconvert(), "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(),
@@ -185,9 +339,10 @@ void bind_vpl_shade(py::module_& m) {
           "env_row_solid_angle"_a.noconvert(), "env_texel_cdf"_a.noconvert(),
           "env_row_cos"_a.noconvert(), "env_samples"_a, "n_gather"_a, "seed"_a, "frame"_a, "eps"_a,
           "scene"_a, "out"_a.noconvert(), "threads"_a = 0, "hit_albedo"_a.noconvert() = py::none(),
-          "mat_lobe"_a.noconvert() = py::none(),
+          "mat_lobe"_a.noconvert() = py::none(), "env_guide"_a = py::none(),
           R"doc(The environment's light at the hits: env_samples directions per shaded
-pixel drawn from the environment's tables (as voxgi.Environment.sample:
+pixel drawn from the environment's tables (with env_guide, an
+EnvironmentGuide, from its row at each pixel) (as voxgi.Environment.sample:
 env_texel_cdf (H*W,), env_row_cos (H+1,)), each weighed by the balance
 heuristic against n_gather cosine-distributed gather rays and traced in
 scene (a RayScene) as it is made; the free ones' f cos L / density added into

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "incidence_response.h"
+#include "util/hemisphere.h"
 
 namespace voxgi {
 namespace {
@@ -41,19 +42,6 @@ inline int64_t draw_light(const EmitterTriangles& em, const double u[3], double 
 inline double emitter_cosine(const EmitterTriangles& em, int64_t k, const double w[3]) {
     const double c = -dot(w, em.normal + 3 * k);
     return em.two_sided[k] ? std::fabs(c) : std::max(c, 0.0);
-}
-
-// Cosine-distributed direction about n (Malley's method) in an orthonormal
-// frame built without branches (Duff et al. 2017).
-inline void cosine_direction(const double n[3], double u1, double u2, double w[3]) {
-    const double sign = std::copysign(1.0, n[2]);
-    const double a = -1.0 / (sign + n[2]), b = n[0] * n[1] * a;
-    const double t[3] = {1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]};
-    const double bt[3] = {b, sign + n[1] * n[1] * a, -n[1]};
-    const double rad = std::sqrt(u1), phi = 2.0 * kPi * u2;
-    const double x = rad * std::cos(phi), y = rad * std::sin(phi),
-                 z = std::sqrt(std::max(0.0, 1.0 - u1));
-    for (int i = 0; i < 3; ++i) w[i] = x * t[i] + y * bt[i] + z * n[i];
 }
 
 // The light sample's ray and its contribution c, weighted by the power

@@ -6,6 +6,7 @@
 #include <limits>
 #include <vector>
 
+#include "util/hemisphere.h"
 #include "util/random.h"
 #include "vpl_shade.h"
 
@@ -36,14 +37,68 @@ int64_t environment_texel(const EnvironmentMap& env, const double d[3]) {
     return row * env.width + col;
 }
 
+int64_t guide_row(const EnvironmentMap& env, const double x[3], const float ng[3]) {
+    const EnvironmentGuide* g = env.guide;
+    if (!g) return -1;
+    int64_t c[3];
+    for (int a = 0; a < 3; ++a) {
+        const double t = (x[a] - g->origin[a]) * g->inv_cell;
+        // NaN and points off the grid read the nearest cell
+        c[a] = t >= 0.0 ? std::min(int64_t(t), g->dims[a] - 1) : 0;
+    }
+    int axis = 0;
+    for (int a = 1; a < 3; ++a)
+        if (std::fabs(ng[a]) > std::fabs(ng[axis])) axis = a;
+    const int facing = 2 * axis + (ng[axis] < 0.f ? 1 : 0);
+    const int64_t key = ((c[0] * g->dims[1] + c[1]) * g->dims[2] + c[2]) * 6 + facing;
+    return g->key_row[size_t(key)];
+}
+
+double environment_density(const EnvironmentMap& env, int64_t k, int64_t row) {
+    double p = env.texel_pdf[k] / env.row_solid_angle[k / env.width];
+    if (row >= 0) {
+        const EnvironmentGuide& g = *env.guide;
+        p *= g.factor[size_t(row * g.blocks() + g.block(k))];
+    }
+    return p;
+}
+
 namespace {
 
-// One environment sample from the point u of [0, 1)^3: its texel and unit
-// world direction w.
-int64_t environment_sample(const EnvironmentMap& env, const double u[3], double w[3]) {
+// The texel of the sample at u0 in [0, 1) for a point of guide row `row`
+// (-1: the environment's own tables).
+int64_t environment_texel_at(const EnvironmentMap& env, double u0, int64_t row) {
     const int64_t n = env.width * env.height;
-    const int64_t k = std::min(
-        int64_t(std::upper_bound(env.texel_cdf, env.texel_cdf + n, u[0]) - env.texel_cdf), n - 1);
+    if (row >= 0) {
+        const EnvironmentGuide& g = *env.guide;
+        if (u0 >= g.alpha) {
+            // a block by the row's shares, then the place of u0 inside that
+            // block's share picks a texel by the block's running texel_pdf
+            const double v = (u0 - g.alpha) / (1.0 - g.alpha);
+            const double* cdf = g.block_cdf.data() + row * g.blocks();
+            const int64_t b =
+                std::min(int64_t(std::upper_bound(cdf, cdf + g.blocks(), v) - cdf), g.blocks() - 1);
+            const double c0 = b ? cdf[b - 1] : 0.0, c1 = cdf[b];
+            const double t = c1 > c0 ? std::clamp((v - c0) / (c1 - c0), 0.0, 1.0) : 0.5;
+            const int64_t first = g.block_start[size_t(b)], end = g.block_start[size_t(b) + 1];
+            const double* oc = g.order_cdf.data();
+            const double lo = first ? oc[first - 1] : 0.0;
+            const double target = lo + t * (oc[end - 1] - lo);
+            const int64_t j = std::clamp(
+                int64_t(std::upper_bound(oc + first, oc + end, target) - oc), first, end - 1);
+            return g.texel_order[size_t(j)];
+        }
+        u0 /= g.alpha;
+    }
+    return std::min(int64_t(std::upper_bound(env.texel_cdf, env.texel_cdf + n, u0) - env.texel_cdf),
+                    n - 1);
+}
+
+// One environment sample from the point u of [0, 1)^3 for a point of guide
+// row `guide`: its texel and unit world direction w.
+int64_t environment_sample(const EnvironmentMap& env, const double u[3], int64_t guide,
+                           double w[3]) {
+    const int64_t k = environment_texel_at(env, u[0], guide);
     const int64_t row = k / env.width, col = k % env.width;
     const double phi = 2.0 * kPi * (double(col) + u[1]) / double(env.width);
     const double ct = env.row_cos[row] + u[2] * (env.row_cos[row + 1] - env.row_cos[row]);
@@ -95,15 +150,16 @@ void environment_light(const ShadeHits& hits, const ShadeMaterials& mats, const 
             const float ro[3] = {float(x[0] + eps * ng[0]), float(x[1] + eps * ng[1]),
                                  float(x[2] + eps * ng[2])};
             environment_points(base, p, n, u.data());
+            const int64_t row = guide_row(env, x, ng);
             float sum[3] = {0.f, 0.f, 0.f};
             for (int j = 0; j < n; ++j) {
                 double w[3];
-                const int64_t k = environment_sample(env, u.data() + 3 * j, w);
+                const int64_t k = environment_sample(env, u.data() + 3 * j, row, w);
                 const float wf[3] = {float(w[0]), float(w[1]), float(w[2])};
                 if (dot3(ng, wf) <= 0.f) continue;  // below the surface: no ray
                 const double* L = env.radiance + 3 * k;
                 const double cos = w[0] * nf[0] + w[1] * nf[1] + w[2] * nf[2];
-                const double pdf = env.texel_pdf[k] / env.row_solid_angle[k / env.width];
+                const double pdf = environment_density(env, k, row);
                 const double pg = mats.lobe ? gather_density(mats.lobe, m, nf, wo, wf, cos)
                                             : std::max(cos, 0.0) / kPi;
                 const double dens = env.n_samples * pdf + n_gather * pg;
@@ -122,6 +178,63 @@ void environment_light(const ShadeHits& hits, const ShadeMaterials& mats, const 
         }
         return traced;
     });
+}
+
+int64_t learn_environment_guide(const EnvironmentMap& env, const EnvironmentGuide& blocks,
+                                const double* pos, const float* normal, const int64_t* row_start,
+                                int64_t rows, const int32_t* row_rays, uint64_t seed, double eps,
+                                const double luminance[3], const RayScene& scene, double* hist,
+                                double* possible, int threads, const StopCheck& stop) {
+    const int64_t B = blocks.blocks();
+    std::vector<int64_t> traced(size_t(std::max<int64_t>(rows, 1)), 0);
+    // one row per task: a row's sums are written by one thread alone
+    parallel_for(rows, resolve_threads(threads), stop, [&](int64_t r, int) {
+        double* h = hist + r * B;
+        for (int64_t i = row_start[r]; i < row_start[r + 1]; ++i) {
+            const double* x = pos + 3 * i;
+            const float* nf = normal + 3 * i;
+            const float ro[3] = {float(x[0] + eps * nf[0]), float(x[1] + eps * nf[1]),
+                                 float(x[2] + eps * nf[2])};
+            uint64_t state = splitmix64(seed ^ uint64_t(i) * 0xD1B54A32D192ED03ull);
+            const double nd[3] = {nf[0], nf[1], nf[2]};
+            for (int j = 0; j < row_rays[r]; ++j) {
+                double u[3];
+                for (double& c : u) {
+                    state = splitmix64(state);
+                    c = to_unit(state);
+                }
+                // every other ray drawn by the environment's own tables, the
+                // rest cosine-distributed: the balance heuristic of the two
+                // finds a bright patch the first would and an open window
+                // of a dim sky the second would
+                double w[3];
+                int64_t k;
+                if (j % 2 == 0) {
+                    k = environment_sample(env, u, -1, w);
+                } else {
+                    cosine_direction(nd, u[0], u[1], w);
+                    k = environment_texel(env, w);
+                }
+                const double cos = w[0] * nd[0] + w[1] * nd[1] + w[2] * nd[2];
+                if (!(cos > 0.0)) continue;
+                const double density = 0.5 * environment_density(env, k, -1) + 0.5 * cos / kPi;
+                const double* L = env.radiance + 3 * k;
+                const double light =
+                    (luminance[0] * L[0] + luminance[1] * L[1] + luminance[2] * L[2]) * cos /
+                    density;
+                possible[r] += light;
+                ++traced[size_t(r)];
+                const float wf[3] = {float(w[0]), float(w[1]), float(w[2])};
+                float T[3];
+                if (scene.occluded(ro, wf, std::numeric_limits<float>::infinity(), T)) continue;
+                h[blocks.block(k)] +=
+                    light * (luminance[0] * T[0] + luminance[1] * T[1] + luminance[2] * T[2]);
+            }
+        }
+    });
+    int64_t total = 0;
+    for (int64_t t : traced) total += t;
+    return total;
 }
 
 }  // namespace voxgi

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include "ray_scene.h"
 #include "util/parallel.h"
@@ -12,6 +13,36 @@ namespace voxgi {
 
 struct ShadeHits;
 struct ShadeMaterials;
+
+// Where the environment's light reaches the scene (docs/design.md §11): for
+// the points of each cell of a grid that face one way (the geometric
+// normal's dominant axis and its sign), the share of the environment's
+// unblocked light that comes through each block of texels, learned by
+// tracing from the solve's records (voxgi.display.environment_guide). With
+// probability 1 - alpha a sample draws a block from its cell's shares, then
+// a texel inside it in proportion to the environment's own texel_pdf; with
+// alpha, from the environment's own tables. The density of a texel is
+// texel_pdf times factor[row, block]: alpha + (1 - alpha) share / mass.
+struct EnvironmentGuide {
+    double origin[3] = {0.0, 0.0, 0.0};  // the grid's minimum corner
+    double inv_cell = 0.0;               // 1 / the cells' edge
+    int64_t dims[3] = {0, 0, 0};
+    int64_t width = 0, height = 0;       // the environment's texels across and down
+    int64_t blocks_w = 0, blocks_h = 0;  // texel blocks across and down
+    double alpha = 1.0;
+    std::vector<int32_t> key_row;      // (dims product * 6,) row of each cell and facing, -1: none
+    std::vector<double> factor;        // (rows, blocks) density over the environment's own
+    std::vector<double> block_cdf;     // (rows, blocks) running shares, last 1
+    std::vector<int64_t> texel_order;  // (H * W,) texels by block, row-major inside
+    std::vector<int64_t> block_start;  // (blocks + 1,) each block's first in texel_order
+    std::vector<double> order_cdf;     // (H * W,) running texel_pdf along texel_order
+
+    int64_t blocks() const { return blocks_w * blocks_h; }
+    // The block of texel k.
+    int64_t block(int64_t k) const {
+        return ((k / width) * blocks_h / height) * blocks_w + (k % width) * blocks_w / width;
+    }
+};
 
 // An environment (docs/design.md §11): a latitude-longitude radiance image, Mitsuba's convention
 // (image y up; direction (sin t sin f, cos t, -sin t cos f) at u = f / 2 pi, v = t / pi), and the
@@ -25,9 +56,17 @@ struct EnvironmentMap {
     const double* row_solid_angle = nullptr;  // (height,) solid angle of one texel of each row
     double n_samples = 0.0;                   // environment samples per pixel and frame
     // for drawing samples (environment_light); may be null for gather_light alone
-    const double* texel_cdf = nullptr;  // (height * width,) cumulative texel_pdf, last 1
-    const double* row_cos = nullptr;    // (height + 1,) cos of each row's edges, from +1 down
+    const double* texel_cdf = nullptr;        // (height * width,) cumulative texel_pdf, last 1
+    const double* row_cos = nullptr;          // (height + 1,) cos of each row's edges, from +1 down
+    const EnvironmentGuide* guide = nullptr;  // where the light reaches, or null
 };
+
+// The guide's row for a point x with geometric normal ng (-1: the
+// environment's own density there).
+int64_t guide_row(const EnvironmentMap& env, const double x[3], const float ng[3]);
+
+// The solid-angle density of env's samples at texel k for a point of guide row `row`.
+double environment_density(const EnvironmentMap& env, int64_t k, int64_t row);
 
 // The texel of world direction d (any length): its index row * width + col.
 int64_t environment_texel(const EnvironmentMap& env, const double d[3]);
@@ -38,7 +77,8 @@ int64_t environment_texel(const EnvironmentMap& env, const double d[3]);
 // n_samples strata shuffled per pixel (Latin-hypercube pairing), the two
 // inside the texel in a sqrt(n) x sqrt(n) grid when n_samples is a square;
 // jittered with a hash of (seed, frame, pixel, sample), the same for any
-// thread count. Each sample weighs the radiance L(w) by the balance
+// thread count; with env.guide, a texel drawn by the pixel's row of the
+// guide instead. Each sample weighs the radiance L(w) by the balance
 // heuristic against n_gather cosine-distributed gather rays, L / (n_e p_e(w)
 // + n_g cos / pi) (docs/design.md §11), and, where it lies above the
 // geometric surface, its ray (offset `eps` along ng) is traced to infinity
@@ -48,5 +88,22 @@ void environment_light(const ShadeHits& hits, const ShadeMaterials& mats, const 
                        double n_gather, uint64_t seed, int64_t frame, double eps,
                        const RayScene& scene, float* out, int64_t* rays, int threads,
                        const StopCheck& stop);
+
+// The guide's learning rays (voxgi.display.environment_guide): from each of
+// the points of row r (points row_start[r] to row_start[r + 1], offset eps
+// along their normals), row_rays[r] directions each, every other one drawn by env's
+// own tables and the rest cosine-distributed (hashed from seed and the
+// point), traced to infinity in `scene`. Each ray that leaves above the
+// point's surface adds lum(L) cos / p into possible[r] (p: the balance of
+// the two densities), and
+// times the luminance of its transmittance where it is free, into hist[r,
+// block of its texel] (blocks as `blocks` numbers them; hist (rows,
+// blocks.blocks()) zeroed by the caller). lum weighs RGB by `luminance`.
+// Returns the number of rays traced.
+int64_t learn_environment_guide(const EnvironmentMap& env, const EnvironmentGuide& blocks,
+                                const double* pos, const float* normal, const int64_t* row_start,
+                                int64_t rows, const int32_t* row_rays, uint64_t seed, double eps,
+                                const double luminance[3], const RayScene& scene, double* hist,
+                                double* possible, int threads, const StopCheck& stop);
 
 }  // namespace voxgi

@@ -529,7 +529,7 @@ void gather_escape_light(const ShadeHits& hits, const ShadeMaterials& mats, cons
     const double d[3] = {h.wi[0], h.wi[1], h.wi[2]};
     const int64_t texel = environment_texel(env, d);
     const double cos = d[0] * double(n[0]) + d[1] * double(n[1]) + d[2] * double(n[2]);
-    const double pdf = env.texel_pdf[texel] / env.row_solid_angle[texel / env.width];
+    const double pdf = environment_density(env, texel, guide_row(env, hits.pos + 3 * p, ng));
     const int32_t m = hits.material[p];
     const double pg = mats.lobe ? gather_density(mats.lobe, m, n, hits.wo + 3 * p, h.wi, cos)
                                 : std::max(cos, 0.0) / kPi;

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_emission', 'camera_hits', 'camera_rays', 'direct_light_traced', 'environment_light', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'light_accumulate', 'shade_brdf', 'transport_apply', 'transport_compact', 'voxelize', 'vpl_light']
+__all__: list[str] = ['EnvironmentGuide', 'LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_emission', 'camera_hits', 'camera_rays', 'direct_light_traced', 'environment_light', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'learn_environment_guide', 'light_accumulate', 'shade_brdf', 'transport_apply', 'transport_compact', 'voxelize', 'vpl_light']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -129,6 +129,21 @@ class LineSystem:
         """
         Records N.
         """
+class EnvironmentGuide:
+    """
+    Where an environment's light
+    reaches a scene: per cell of a grid (origin (3,), cell edge, dims (3,)) and
+    facing (the geometric normal's dominant axis and sign: key = cell * 6 + 2 *
+    axis + (negative)), key_row (dims product * 6,) int32 picks a row (-1: none)
+    of factor and block_cdf (rows, blocks_w * blocks_h) float64, the density over
+    the environment's own per block of texels and the running shares of the
+    blocks. texel_order (width * height,) int64 lists the texels block by block
+    (block_start (blocks + 1,)), order_cdf their running texel_pdf. Samples take
+    the environment's own tables with probability alpha. Checked and copied;
+    voxgi.display.environment_guide builds it.
+    """
+    def __init__(self, origin: numpy.typing.NDArray[numpy.float64], cell: typing.SupportsFloat | typing.SupportsIndex, dims: numpy.typing.NDArray[numpy.int64], width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, blocks_w: typing.SupportsInt | typing.SupportsIndex, blocks_h: typing.SupportsInt | typing.SupportsIndex, alpha: typing.SupportsFloat | typing.SupportsIndex, key_row: numpy.typing.NDArray[numpy.int32], factor: numpy.typing.NDArray[numpy.float64], block_cdf: numpy.typing.NDArray[numpy.float64], texel_order: numpy.typing.NDArray[numpy.int64], block_start: numpy.typing.NDArray[numpy.int64], order_cdf: numpy.typing.NDArray[numpy.float64]) -> None:
+        ...
 class RayScene:
     """
     Embree 4 scene of a triangle soup, queried from C++ threads (GIL released).
@@ -232,10 +247,11 @@ def direct_light_traced(emitters: tuple, point: numpy.typing.NDArray[numpy.float
     tuple's fourth item (N, 3): the same samples weighed by its rows (the
     base's share; the third item is then None without strategies).
     """
-def environment_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], env_radiance: numpy.typing.NDArray[numpy.float64], env_to_world: numpy.typing.NDArray[numpy.float64], env_texel_pdf: numpy.typing.NDArray[numpy.float64], env_row_solid_angle: numpy.typing.NDArray[numpy.float64], env_texel_cdf: numpy.typing.NDArray[numpy.float64], env_row_cos: numpy.typing.NDArray[numpy.float64], env_samples: typing.SupportsInt | typing.SupportsIndex, n_gather: typing.SupportsFloat | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, mat_lobe: numpy.typing.NDArray[numpy.float32] | None = None) -> int:
+def environment_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], env_radiance: numpy.typing.NDArray[numpy.float64], env_to_world: numpy.typing.NDArray[numpy.float64], env_texel_pdf: numpy.typing.NDArray[numpy.float64], env_row_solid_angle: numpy.typing.NDArray[numpy.float64], env_texel_cdf: numpy.typing.NDArray[numpy.float64], env_row_cos: numpy.typing.NDArray[numpy.float64], env_samples: typing.SupportsInt | typing.SupportsIndex, n_gather: typing.SupportsFloat | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, mat_lobe: numpy.typing.NDArray[numpy.float32] | None = None, env_guide: EnvironmentGuide = None) -> int:
     """
     The environment's light at the hits: env_samples directions per shaded
-    pixel drawn from the environment's tables (as voxgi.Environment.sample:
+    pixel drawn from the environment's tables (with env_guide, an
+    EnvironmentGuide, from its row at each pixel) (as voxgi.Environment.sample:
     env_texel_cdf (H*W,), env_row_cos (H+1,)), each weighed by the balance
     heuristic against n_gather cosine-distributed gather rays and traced in
     scene (a RayScene) as it is made; the free ones' f cos L / density added into
@@ -249,7 +265,7 @@ def gather_families(ijk: numpy.typing.NDArray[numpy.int32], normal: numpy.typing
     families[family_indices] and returns the partial sums, (N, 3) float64 (see
     LineSystem.gather); sums from disjoint subsets add up to the full pass.
     """
-def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], n_gather: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, tri_v: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], rec_sorted_key: numpy.typing.NDArray[numpy.int64], rec_cell_start: numpy.typing.NDArray[numpy.int32], rec_packed: numpy.typing.NDArray[numpy.float32], grid_dims: numpy.typing.NDArray[numpy.int64], grid_lo: numpy.typing.NDArray[numpy.int64], grid_origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, env_radiance: numpy.typing.NDArray[numpy.float64] | None = None, env_to_world: numpy.typing.NDArray[numpy.float64] | None = None, env_texel_pdf: numpy.typing.NDArray[numpy.float64] | None = None, env_row_solid_angle: numpy.typing.NDArray[numpy.float64] | None = None, env_samples: typing.SupportsFloat | typing.SupportsIndex = 0.0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, tex_texels: collections.abc.Sequence[typing.Annotated[numpy.typing.ArrayLike, numpy.uint8]] | None = None, tex_info: numpy.typing.NDArray[numpy.float64] | None = None, obj_texture: numpy.typing.NDArray[numpy.int32] | None = None, corner_uv: numpy.typing.NDArray[numpy.float32] | None = None, mat_lobe: numpy.typing.NDArray[numpy.float32] | None = None, transport_record: numpy.typing.NDArray[numpy.int32] | None = None, transport_weight: numpy.typing.NDArray[numpy.float32] | None = None, mat_response: numpy.typing.NDArray[numpy.float32] | None = None, mat_continue: numpy.typing.NDArray[numpy.uint8] | None = None, rec_share: numpy.typing.NDArray[numpy.float32] | None = None) -> int:
+def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], n_gather: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, tri_v: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], rec_sorted_key: numpy.typing.NDArray[numpy.int64], rec_cell_start: numpy.typing.NDArray[numpy.int32], rec_packed: numpy.typing.NDArray[numpy.float32], grid_dims: numpy.typing.NDArray[numpy.int64], grid_lo: numpy.typing.NDArray[numpy.int64], grid_origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, env_radiance: numpy.typing.NDArray[numpy.float64] | None = None, env_to_world: numpy.typing.NDArray[numpy.float64] | None = None, env_texel_pdf: numpy.typing.NDArray[numpy.float64] | None = None, env_row_solid_angle: numpy.typing.NDArray[numpy.float64] | None = None, env_samples: typing.SupportsFloat | typing.SupportsIndex = 0.0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, tex_texels: collections.abc.Sequence[typing.Annotated[numpy.typing.ArrayLike, numpy.uint8]] | None = None, tex_info: numpy.typing.NDArray[numpy.float64] | None = None, obj_texture: numpy.typing.NDArray[numpy.int32] | None = None, corner_uv: numpy.typing.NDArray[numpy.float32] | None = None, mat_lobe: numpy.typing.NDArray[numpy.float32] | None = None, transport_record: numpy.typing.NDArray[numpy.int32] | None = None, transport_weight: numpy.typing.NDArray[numpy.float32] | None = None, mat_response: numpy.typing.NDArray[numpy.float32] | None = None, mat_continue: numpy.typing.NDArray[numpy.uint8] | None = None, rec_share: numpy.typing.NDArray[numpy.float32] | None = None, env_guide: EnvironmentGuide = None) -> int:
     """
     Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
     hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
@@ -259,7 +275,8 @@ def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy
     (env_radiance (H, W, 3) float64, env_to_world (3, 3), env_texel_pdf (H*W,),
     env_row_solid_angle (H,) float64, as voxgi.Environment samples), a ray that
     meets nothing adds the environment's radiance MIS-weighted against
-    env_samples environment samples per pixel. With hit_albedo (P, 3) float32
+    env_samples environment samples per pixel (drawn by env_guide, an
+    EnvironmentGuide, where given). With hit_albedo (P, 3) float32
     each pixel's own diffuse albedo replaces its material's; with the textures
     (as camera_hits takes them) a ray that lands on a textured object takes the
     record's radiance times the texture there over the record's albedo (the
@@ -289,6 +306,16 @@ def geometry_filter(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: nu
 def hardware_threads() -> int:
     """
     Number of hardware threads the kernels use when threads=None.
+    """
+def learn_environment_guide(env_radiance: numpy.typing.NDArray[numpy.float64], env_to_world: numpy.typing.NDArray[numpy.float64], env_texel_pdf: numpy.typing.NDArray[numpy.float64], env_row_solid_angle: numpy.typing.NDArray[numpy.float64], env_texel_cdf: numpy.typing.NDArray[numpy.float64], env_row_cos: numpy.typing.NDArray[numpy.float64], blocks_w: typing.SupportsInt | typing.SupportsIndex, blocks_h: typing.SupportsInt | typing.SupportsIndex, pos: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float32], row_start: numpy.typing.NDArray[numpy.int64], row_rays: numpy.typing.NDArray[numpy.int32], seed: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, luminance: numpy.typing.NDArray[numpy.float64], scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0) -> tuple:
+    """
+    The environment guide's learning rays: from each point (pos (N, 3) float64,
+    normal (N, 3) float32, offset eps along it) of row r (points row_start[r] to
+    row_start[r + 1]), row_rays[r] (rows,) int32 directions each, every other one drawn by the
+    environment's own tables and the rest cosine-distributed, traced in scene. Returns (hist (rows, blocks_w * blocks_h) float64: per row
+    and block of texels, the luminance-weighted light L cos / p that arrived
+    unblocked, p the balance of the two densities; possible (rows,) float64: the same for every ray above the
+    surface, blocked or not; the number of rays traced).
     """
 def light_accumulate(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], ray_count: numpy.typing.NDArray[numpy.int64], ray_dir: numpy.typing.NDArray[numpy.float32], ray_weight: numpy.typing.NDArray[numpy.float32], occluded: numpy.typing.NDArray[numpy.uint8], out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, mat_lobe: numpy.typing.NDArray[numpy.float32] | None = None) -> None:
     """

@@ -38,6 +38,9 @@ class FrameShaderSpec:
         Replace, at pixels that see emission over part of their footprint,
         each frame's seen emission by its mean over the pixel
         (:mod:`voxgi.display.seen_emission`).
+    guide_environment : bool
+        Draw the environment's samples where its light reaches each pixel's
+        place (:mod:`voxgi.display.environment_guide`).
     """
 
     scene: Scene
@@ -48,6 +51,7 @@ class FrameShaderSpec:
     seed: int
     indirect_filter: int = 0
     control_emission: bool = True
+    guide_environment: bool = True
 
     @property
     def gather_per_frame(self) -> int:
@@ -77,6 +81,7 @@ class FrameShaderSpec:
             self.seed,
             self.indirect_filter,
             self.control_emission,
+            self.guide_environment,
         )
 
 

@@ -53,6 +53,8 @@ class _SceneLights:
         self.rays = 0
         #: the materials' microfacet lobes (csrc/microfacet.h), or None
         self.lobe = None
+        #: where the environment's light reaches (environment_guide), or None
+        self.guide = None
 
     @property
     def any(self) -> bool:
@@ -72,6 +74,7 @@ class _SceneLights:
             "env_texel_pdf": t["texel_pdf"],
             "env_row_solid_angle": t["row_solid_angle"],
             "env_samples": float(self.n_env),
+            "env_guide": None if self.guide is None else self.guide.native,
         }
 
     def add(self, h: dict, out: np.ndarray, frame: int, gathering: int, tile: int) -> None:
@@ -103,6 +106,7 @@ class _SceneLights:
                 self.threads,
                 hit_albedo=h.get("albedo"),
                 mat_lobe=self.lobe,
+                env_guide=None if self.guide is None else self.guide.native,
             )
 
     def _add_delta(self, h: dict, a: int, b: int, out: np.ndarray) -> None:

@@ -150,6 +150,7 @@ def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
         opt.seed,
         opt.indirect_filter,
         opt.control_emission,
+        opt.guide_environment,
     )
 
 
@@ -306,7 +307,17 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds, 
         "denoise_checks": None if rule is None else rule.checks,
         "threads": opt.threads,
         "seen_emission": _seen_emission_stats(source),
+        "environment_guide": _guide_stats(source),
     }
+
+
+def _guide_stats(source) -> dict | None:
+    """The environment guide's open share, learning rays and seconds, where
+    the frames were shaded here and it applied."""
+    guide = getattr(getattr(source, "lights", None), "guide", None)
+    if guide is None:
+        return None
+    return {"open_share": guide.open_share, "rays": guide.rays, "seconds": guide.seconds}
 
 
 def _seen_emission_stats(source) -> dict | None:
@@ -396,6 +407,8 @@ def render(
     source = executor.frames(spec, opt.max_frames, threads=opt.threads)
     seconds = {"setup": time.perf_counter() - t0}
     skipped = _skipped(spec)
+    if getattr(source, "env_guide_skipped", None):
+        skipped.append(source.env_guide_skipped)
     acc, aovs, interrupted, rule = _progressive_mean(source, opt, progress)
     image = acc.mean.reshape(opt.cam.height, opt.cam.width, 3).astype(np.float32)
     aov = aovs.result(opt.cam.height, opt.cam.width)

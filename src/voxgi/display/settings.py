@@ -97,6 +97,10 @@ class _Experiment(RenderTuning):
         base's share of its record and follows that surface's lobe one
         bounce further (default; ``docs/design.md`` §14); False reads the
         record's mean whatever the direction.
+    guide_environment : bool
+        Each pixel's environment samples are drawn where the environment's
+        light reaches its place (default; :mod:`voxgi.display.environment_guide`);
+        False draws them by the environment's brightness alone.
     """
 
     vpl_pdf: str = "power"
@@ -105,6 +109,7 @@ class _Experiment(RenderTuning):
     pixel_share: float = PIXEL_SHARE
     control_emission: bool = True
     follow_lobes: bool = True
+    guide_environment: bool = True
 
 
 @dataclass(frozen=True)
@@ -128,6 +133,7 @@ class _RenderSettings:
     denoise: bool = False
     control_emission: bool = True
     follow_lobes: bool = True
+    guide_environment: bool = True
 
 
 def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) -> _RenderSettings:
@@ -180,6 +186,7 @@ def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) ->
         denoise=denoise,
         control_emission=bool(t.control_emission),
         follow_lobes=bool(getattr(t, "follow_lobes", True)),
+        guide_environment=bool(getattr(t, "guide_environment", True)),
     )
 
 

@@ -24,6 +24,7 @@ from ..scene import Camera, Scene
 from ..textures import surface_tables
 from ..traced import record_grid
 from .aovs import frame_aovs
+from .environment_guide import environment_guide
 from .lighting import _HIT_KEYS, _SceneLights
 from .pixel_filter import gaussian_pixel_filter
 from .samples import camera_arguments, frame_samples
@@ -122,6 +123,7 @@ class _FrameShader:
         seed: int = 0,
         indirect_filter: int = 0,
         control_emission: bool = True,
+        guide_environment: bool = True,
     ):
         self.scene, self.cam, self.tracer, self.sampler = scene, cam, tracer, sampler
         # the filter needs the two kinds of light apart; without any light of
@@ -139,13 +141,25 @@ class _FrameShader:
             if control_emission
             else "seen emission: the control variate is switched off"
         )
+        #: why the environment's samples are not guided (None: they are)
+        self.env_guide_skipped: str | None = None
+        guide = None
+        if self.env is not None and not guide_environment:
+            self.env_guide_skipped = "environment guide: switched off"
+        elif self.env is not None:
+            guide, self.env_guide_skipped = environment_guide(
+                self.env, sampler.vox, tracer, self.eps
+            )
         # environment samples per pixel and frame: as many as the gather rays
-        # they are MIS-combined with (docs/design.md §11)
-        n_env = max(1, self.gather) if self.env is not None else 0
+        # they are MIS-combined with, twice as many where the guide draws
+        # them from the directions open at each place, where each is worth
+        # more than a gather ray (docs/design.md §11)
+        n_env = (2 if guide is not None else 1) * max(1, self.gather) if self.env is not None else 0
         self.lights = _SceneLights(
             scene, tracer, self._materials(), self.eps, self.seed, n_env, self.threads
         )
         self.lights.lobe = self.mat_lobe
+        self.lights.guide = guide
         self.tile = 1 << 16
         self._groups = self._pixel_groups(cam, self.vpl_sets(cam))
         self.primary_rays = 0
