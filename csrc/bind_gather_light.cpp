@@ -97,7 +97,8 @@ int64_t gather_light_py(
     const std::optional<F32>& corner_uv, const std::optional<F32>& mat_lobe,
     std::optional<I32Out> transport_record, std::optional<F32Out> transport_weight,
     const std::optional<F32>& mat_response, const std::optional<U8>& mat_continue,
-    const std::optional<F32>& rec_share, const voxgi::EnvironmentGuide* env_guide) {
+    const std::optional<F32>& rec_share, const voxgi::EnvironmentGuide* env_guide,
+    const std::optional<F32>& mat_base_out) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     if (mat_response) {
@@ -111,6 +112,12 @@ int64_t gather_light_py(
         if (!mat_lobe) throw py::value_error("mat_continue needs mat_lobe");
         check_1d(*mat_continue, mats.count, "mat_continue");
         mats.continue_lobe = mat_continue->data();
+    }
+    if (mat_base_out) {
+        if (!mat_continue) throw py::value_error("mat_base_out needs mat_continue");
+        if (check_incidence_table(*mat_base_out, "mat_base_out") != mats.count)
+            throw py::value_error("mat_base_out: one row per material");
+        mats.base_out = mat_base_out->data();
     }
     voxgi::ShadeHits hits =
         make_hits(hit_pos, hit_normal, hit_ng, hit_wo, hit_material, mats.count);
@@ -178,7 +185,7 @@ void bind_gather_light(py::module_& m) {
           "transport_record"_a.noconvert() = py::none(),
           "transport_weight"_a.noconvert() = py::none(), "mat_response"_a.noconvert() = py::none(),
           "mat_continue"_a.noconvert() = py::none(), "rec_share"_a.noconvert() = py::none(),
-          "env_guide"_a = py::none(),
+          "env_guide"_a = py::none(), "mat_base_out"_a.noconvert() = py::none(),
           R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit
@@ -202,6 +209,8 @@ ray's f is multiplied by its material's row of R / A at the ray's cosine
 lands on a material marked 1 reads its record's base share and follows the
 lobe's specular reflection one bounce further (not with the transport),
 reading rec_share (N, 3) float32 (in rec_packed's order, given with
-mat_continue) of its record's light.
+mat_continue) of its record's light; with mat_base_out (M, 33, 3) float32
+that share times the hit material's row at the cosine towards the ray's
+origin (the base's outgoing radiance over its mean).
 Returns the number of gather rays.)doc");
 }

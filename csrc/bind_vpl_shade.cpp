@@ -43,7 +43,9 @@ py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 
                        double n_gather, double eps, const voxgi::RayScene& scene,
                        std::optional<I32> pixel_set, std::optional<I64> set_start, int threads,
                        const std::optional<F32>& hit_albedo, const std::optional<F32>& mat_lobe,
-                       const std::optional<U8>& mat_continue, const std::optional<F32>& vpl_share) {
+                       const std::optional<U8>& mat_continue, const std::optional<F32>& vpl_share,
+                       const std::optional<F32>& mat_base_out,
+                       const std::optional<I32>& vpl_object) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     voxgi::ShadeHits hits =
@@ -59,6 +61,20 @@ py::tuple vpl_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 
         check_2d(*vpl_share, vpls.count, 3, "vpl_share");
         mats.continue_lobe = mat_continue->data();
         vpls.share = vpl_share->data();
+    }
+    if (mat_base_out.has_value() != vpl_object.has_value())
+        throw py::value_error("mat_base_out and vpl_object go together");
+    if (mat_base_out) {
+        if (!mat_continue) throw py::value_error("mat_base_out needs mat_continue");
+        if (check_incidence_table(*mat_base_out, "mat_base_out") != mats.count)
+            throw py::value_error("mat_base_out: one row per material");
+        check_1d(*vpl_object, vpls.count, "vpl_object");
+        for (int64_t k = 0; k < vpls.count; ++k)
+            if (vpl_object->data()[k] < 0 || vpl_object->data()[k] >= mats.count)
+                throw py::value_error("vpl_object: VPL " + std::to_string(k) +
+                                      " names no material");
+        mats.base_out = mat_base_out->data();
+        vpls.object = vpl_object->data();
     }
     if (pixel_set.has_value() != set_start.has_value())
         throw py::value_error("pixel_set and set_start go together");
@@ -357,7 +373,8 @@ out (P, 3) float32. Returns the number of rays traced.)doc");
           "pixel_set"_a.noconvert() = py::none(), "set_start"_a.noconvert() = py::none(),
           "threads"_a = 0, "hit_albedo"_a.noconvert() = py::none(),
           "mat_lobe"_a.noconvert() = py::none(), "mat_continue"_a.noconvert() = py::none(),
-          "vpl_share"_a.noconvert() = py::none(),
+          "vpl_share"_a.noconvert() = py::none(), "mat_base_out"_a.noconvert() = py::none(),
+          "vpl_object"_a.noconvert() = py::none(),
           R"doc(The VPLs' light at the hits: per (pixel, VPL) pair the unoccluded term and
 its shadow ray, traced in scene (a RayScene) as it is made; returns each
 pixel's sum over its free rays in VPL order (P, 3) float32 and the number of
@@ -373,7 +390,9 @@ vpl_pa (K,) float32: n_v times the area pdf of VPLs combined with gather rays
 int64, pixel p sees only the VPLs of set pixel_set[p]. With mat_continue
 (M,) uint8 and vpl_share (K, 3) float32, a pixel with a lobe (whose gather
 rays follow the lobes of the materials marked 1) takes vpl_share of each
-VPL's light.)doc");
+VPL's light; with mat_base_out (M, 33, 3) float32 and vpl_object (K,) int32
+as well, that share times its material's row of mat_base_out at the VPL's
+cosine towards the pixel (the base's outgoing radiance over its mean).)doc");
 
     m.def("light_accumulate", &light_accumulate_py, "hit_pos"_a.noconvert(),
           "hit_normal"_a.noconvert(), "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(),

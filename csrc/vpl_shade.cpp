@@ -164,8 +164,13 @@ void vpl_pixel_rays(const ShadeHits& hits, const ShadeMaterials& mats, const Sha
         const float* sk = follows ? vpls.share + 3 * k : nullptr;
         float cr[3];
         bool any = false;
+        // which its base sends out towards x as the base's directional albedo
+        double out_y[3] = {1.0, 1.0, 1.0};
+        if (sk && mats.base_out && vpls.object)
+            incidence_response(mats.base_out + int64_t(3) * kIncidenceNodes * vpls.object[k], cos_y,
+                               out_y);
         for (int ch = 0; ch < 3; ++ch) {
-            cr[ch] = float(g * f[ch] * wk[ch] * (sk ? sk[ch] : 1.f));
+            cr[ch] = float(g * f[ch] * wk[ch] * (sk ? sk[ch] * out_y[ch] : 1.f));
             any |= cr[ch] > 0.f;
         }
         if (!any) continue;
@@ -198,6 +203,7 @@ void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPL
             mine.area += a;
             if (mine.pa) mine.pa += a;
             if (mine.share) mine.share += 3 * a;
+            if (mine.object) mine.object += a;
         }
         vpl_pixel_rays(hits, mats, mine, mis, eps, p,
                        [&](const float* ro, const float* rd, float len, const float* cr) {
@@ -423,9 +429,16 @@ void glossy_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
                          uint64_t& rng, LookupScratch& scratch, float L[3], float coat[3]) {
     const MicrofacetLobe& lobe = mats.lobe[h.obj];
     const PackedRecord& R = grid.rec[rec];
+    // the base sends its share out towards the ray's origin as its
+    // directional albedo at that cosine (a plastic's base, behind its
+    // coat's Fresnel, sends little at grazing angles)
+    double out_y[3] = {1.0, 1.0, 1.0};
+    if (mats.base_out)
+        incidence_response(mats.base_out + int64_t(3) * kIncidenceNodes * h.obj, -dot3(h.ns, h.wi),
+                           out_y);
     for (int ch = 0; ch < 3; ++ch) {
         // (grid.share is given wherever continue_lobe is: the binding checks)
-        L[ch] = R.radiance[ch] * ratio[ch] * grid.share[3 * rec + ch];
+        L[ch] = float(R.radiance[ch] * ratio[ch] * grid.share[3 * rec + ch] * out_y[ch]);
         coat[ch] = 0.f;
     }
     const float wo[3] = {-h.wi[0], -h.wi[1], -h.wi[2]};

@@ -38,6 +38,12 @@ struct ShadeMaterials {
     // surface reads the base's share of its record and follows the lobe's
     // specular reflection one bounce further (glossy_hit_radiance)
     const uint8_t* continue_lobe = nullptr;
+    // (M, kIncidenceNodes, 3) or null: per material, the radiance its
+    // diffuse base sends out at cosine mu over its mean (the base's
+    // directional albedo by reciprocity, normalised), by which the base's
+    // share of a glossy record's light leaves it towards a pixel whose gather
+    // rays follow the lobes (given with continue_lobe)
+    const float* base_out = nullptr;
 };
 
 // Whether the gather rays of a pixel of material m follow the lobes of the
@@ -79,6 +85,8 @@ struct ShadeVPLs {
     // (K, 3) or null: the share of its light a VPL brings a pixel whose
     // gather rays follow the lobes they land on (follows_lobes)
     const float* share = nullptr;
+    // (K,) or null: each VPL's object (its material), for mats.base_out
+    const int32_t* object = nullptr;
 };
 
 // Multiple importance sampling of each VPL set (emitters, the rest) between VPLs (n_v a

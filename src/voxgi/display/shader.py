@@ -29,7 +29,7 @@ from .lighting import _HIT_KEYS, _SceneLights
 from .pixel_filter import gaussian_pixel_filter
 from .samples import camera_arguments, frame_samples
 from .seen_emission import SeenEmission, seen_emission, skip_reason
-from .vpls import VPLSampler, continuing_objects, place_vpls
+from .vpls import VPLSampler, base_outgoing, continuing_objects, place_vpls
 
 __all__ = ["frame_surface"]
 
@@ -202,6 +202,7 @@ class _FrameShader:
         # the microfacet lobes' rows, or None: no pixel pays for lobes
         self.mat_lobe = None
         self.mat_continue = None
+        self.mat_base_out = None
         if any(isinstance(s, Microfacet) for s in spec):
             self.mat_lobe = np.zeros((len(objs), LOBE_WIDTH), np.float32)
             for i, s in enumerate(spec):
@@ -209,6 +210,7 @@ class _FrameShader:
                     self.mat_lobe[i] = s.lobe_row()
             if self.sampler.share is not None:
                 self.mat_continue = continuing_objects(scene)
+                self.mat_base_out = base_outgoing(scene)
 
     @property
     def light_rays(self) -> int:
@@ -376,7 +378,12 @@ class _FrameShader:
         lobes they land on: which materials, and each VPL's share."""
         if self.mat_continue is None or vpls.get("share") is None:
             return {}
-        return {"mat_continue": self.mat_continue, "vpl_share": vpls["share"]}
+        return {
+            "mat_continue": self.mat_continue,
+            "vpl_share": vpls["share"],
+            "mat_base_out": self.mat_base_out,
+            "vpl_object": vpls["object"],
+        }
 
     def _vpl_light(self, h: dict, vpls: dict) -> np.ndarray:
         """(P, 3) float32: the VPLs' light at the hits ``h``, each pixel lit by
@@ -436,6 +443,7 @@ class _FrameShader:
             **self._gather_textures,
             mat_lobe=self.mat_lobe,
             mat_continue=self.mat_continue,
+            mat_base_out=self.mat_base_out if self.mat_continue is not None else None,
         )
         self.seconds["gather"] += time.perf_counter() - t0
 

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from .. import _validate
+from ..incidence import NODES
 from ..lights import LUMINANCE
 from ..microfacet import Microfacet
 
@@ -27,6 +28,35 @@ def continuing_objects(scene):
         np.uint8,
     )
     return flag if flag.any() else None
+
+
+def base_outgoing(scene) -> np.ndarray:
+    """(O, NODES, 3) float32: per object, the radiance its diffuse base sends
+    out at cosine μ = i / (NODES - 1) over its mean, ``b(μ) / (2 ∫ b(μ) μ dμ)``
+    with ``b`` the base's directional albedo (by reciprocity the base sends
+    out light as it takes it in); 1 for objects without a microfacet lobe or
+    without a base (a conductor). A plastic's base lies under a coat whose
+    Fresnel reflection grows towards grazing angles, so it sends little
+    there (``docs/design.md`` §14)."""
+    mu = np.linspace(0.0, 1.0, NODES)
+    fine = np.linspace(0.0, 1.0, 513)
+    out = np.ones((len(scene.objects), NODES, 3), np.float32)
+    rows: dict = {}
+    for i, o in enumerate(scene.objects):
+        m = o.material
+        if not isinstance(m.specular, Microfacet):
+            continue
+        key = (m.specular, tuple(float(x) for x in m.albedo))
+        if key not in rows:
+            base = np.asarray(m.albedo, np.float64)
+            b = np.asarray(m.specular.base_albedo(base, fine), np.float64)  # (513, 3)
+            y = b * fine[:, None]
+            mean = 2.0 * np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(fine)[:, None], axis=0)
+            at = np.asarray(m.specular.base_albedo(base, mu), np.float64)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rows[key] = np.where(mean > 0, at / mean, 1.0)
+        out[i] = rows[key]
+    return out
 
 
 def base_share(scene, sol, flag) -> np.ndarray | None:
@@ -233,6 +263,7 @@ class VPLSampler:
         }
         if self.share is not None:
             out["share"] = np.ascontiguousarray(self.share[idx])
+            out["object"] = np.ascontiguousarray(np.asarray(self.vox.object_id)[idx], np.int32)
         return out
 
 
