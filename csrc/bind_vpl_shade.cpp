@@ -279,6 +279,60 @@ py::tuple learn_environment_guide_py(const F64& env_radiance, const F64& env_to_
     return py::make_tuple(hist, possible, rays);
 }
 
+py::tuple environment_irradiance_py(const F64& env_radiance, const F64& env_to_world,
+                                    const F64& env_texel_pdf, const F64& env_row_solid_angle,
+                                    const F64& env_texel_cdf, const F64& env_row_cos, F64 pos,
+                                    F32 normal, int n_env, int n_cos, uint64_t seed, double eps,
+                                    const voxgi::RayScene& scene, int threads,
+                                    const std::optional<F32>& response,
+                                    const std::optional<F32>& response_base,
+                                    const std::optional<I32>& response_row) {
+    const voxgi::EnvironmentMap env =
+        *make_environment(env_radiance, env_to_world, env_texel_pdf, env_row_solid_angle, 0.0,
+                          &env_texel_cdf, &env_row_cos);
+    check_2d(pos, -1, 3, "pos");
+    const int64_t n = pos.shape(0);
+    check_2d(normal, n, 3, "normal");
+    for (int64_t i = 0; i < 3 * n; ++i)
+        if (!std::isfinite(pos.data()[i]) || !std::isfinite(normal.data()[i]))
+            throw py::value_error("pos and normal must be finite");
+    if (n_env < 0 || n_env > 4096 || n_cos < 0 || n_cos > 4096)
+        throw py::value_error("n_env and n_cos must be in [0, 4096]");
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    const int given = int(response.has_value()) + int(response_row.has_value());
+    if (given == 1) throw py::value_error("response and response_row go together");
+    if (response_base && !response) throw py::value_error("response_base needs response");
+    const float *pr = nullptr, *pb = nullptr;
+    const int32_t* rows = nullptr;
+    if (response) {
+        const py::ssize_t T = check_incidence_table(*response, "response");
+        check_1d(*response_row, n, "response_row");
+        rows = response_row->data();
+        for (int64_t i = 0; i < n; ++i)
+            if (rows[i] < -1 || rows[i] >= T)
+                throw py::value_error("response_row: point " + std::to_string(i) +
+                                      " names no row of response");
+        pr = response->data();
+        if (response_base) {
+            if (check_incidence_table(*response_base, "response_base") != T)
+                throw py::value_error("response_base: as many rows as response");
+            pb = response_base->data();
+        }
+    }
+    py::array_t<double> out({n, int64_t(3)});
+    std::optional<py::array_t<double>> base;
+    if (pb) base.emplace(std::vector<py::ssize_t>{n, 3});
+    int64_t rays = 0;
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        rays = voxgi::environment_irradiance(env, pos.data(), normal.data(), n, n_env, n_cos, seed,
+                                             eps, pr, pb, rows, scene, out.mutable_data(),
+                                             base ? base->mutable_data() : nullptr, threads, stop);
+    }
+    return py::make_tuple(out, base ? py::object(*base) : py::object(py::none()), rays);
+}
+
 int64_t environment_light_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material,
                              F32 mat_albedo, F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy,
                              const F64& env_radiance, const F64& env_to_world,
@@ -333,6 +387,22 @@ voxgi.display.environment_guide builds it.)doc")
              "width"_a, "height"_a, "blocks_w"_a, "blocks_h"_a, "alpha"_a, "key_row"_a.noconvert(),
              "factor"_a.noconvert(), "block_cdf"_a.noconvert(), "texel_order"_a.noconvert(),
              "block_start"_a.noconvert(), "order_cdf"_a.noconvert());
+    m.def("environment_irradiance", &environment_irradiance_py, "env_radiance"_a.noconvert(),
+          "env_to_world"_a.noconvert(), "env_texel_pdf"_a.noconvert(),
+          "env_row_solid_angle"_a.noconvert(), "env_texel_cdf"_a.noconvert(),
+          "env_row_cos"_a.noconvert(), "pos"_a.noconvert(), "normal"_a.noconvert(), "n_env"_a,
+          "n_cos"_a, "seed"_a, "eps"_a, "scene"_a, "threads"_a = 0,
+          "response"_a.noconvert() = py::none(), "response_base"_a.noconvert() = py::none(),
+          "response_row"_a.noconvert() = py::none(),
+          R"doc(The environment's irradiance at points (pos (R, 3) float64, unit normal
+(R, 3) float32, rays offset eps along it): n_env samples drawn from the
+environment's tables and n_cos cosine-distributed directions, traced in scene and combined by the
+balance heuristic. With response (T, 33, 3) float32 and response_row (R,)
+int32 (-1: none) each sample is weighed by the point's row at its cosine,
+and with response_base as well the same samples weighed by its rows are
+returned too. Returns (irradiance (R, 3) float64, base irradiance (R, 3)
+float64 or None, the number of rays traced).)doc");
+
     m.def("learn_environment_guide", &learn_environment_guide_py, "env_radiance"_a.noconvert(),
           "env_to_world"_a.noconvert(), "env_texel_pdf"_a.noconvert(),
           "env_row_solid_angle"_a.noconvert(), "env_texel_cdf"_a.noconvert(),

@@ -6,6 +6,7 @@
 #include <limits>
 #include <vector>
 
+#include "incidence_response.h"
 #include "util/hemisphere.h"
 #include "util/random.h"
 #include "vpl_shade.h"
@@ -235,6 +236,78 @@ int64_t learn_environment_guide(const EnvironmentMap& env, const EnvironmentGuid
     int64_t total = 0;
     for (int64_t t : traced) total += t;
     return total;
+}
+
+int64_t environment_irradiance(const EnvironmentMap& env, const double* pos, const float* normal,
+                               int64_t count, int n_env, int n_cos, uint64_t seed, double eps,
+                               const float* response, const float* base, const int32_t* rows,
+                               const RayScene& scene, double* out, double* out_base, int threads,
+                               const StopCheck& stop) {
+    const uint64_t hashed = splitmix64(seed ^ 0x1D1E1D1E1D1E1D1Eull);
+    return sum_over_chunks(count, 256, threads, stop, [&](int64_t i0, int64_t i1) {
+        std::vector<double> u(size_t(3 * std::max(n_env, 1)));
+        int64_t traced = 0;
+        for (int64_t i = i0; i < i1; ++i) {
+            const double* x = pos + 3 * i;
+            const float* nf = normal + 3 * i;
+            const double nd[3] = {nf[0], nf[1], nf[2]};
+            const float ro[3] = {float(x[0] + eps * nd[0]), float(x[1] + eps * nd[1]),
+                                 float(x[2] + eps * nd[2])};
+            const int64_t row = guide_row(env, x, nf);
+            const int32_t r = rows ? rows[i] : -1;
+            double e[3] = {0.0, 0.0, 0.0}, eb[3] = {0.0, 0.0, 0.0};
+            // one sample in direction w at texel k, drawn by either strategy
+            auto add = [&](const double w[3], int64_t k) {
+                const double cos = w[0] * nd[0] + w[1] * nd[1] + w[2] * nd[2];
+                if (!(cos > 0.0)) return;
+                const double* L = env.radiance + 3 * k;
+                if (!(L[0] > 0.0 || L[1] > 0.0 || L[2] > 0.0)) return;
+                const double dens =
+                    double(n_env) * environment_density(env, k, row) + double(n_cos) * cos / kPi;
+                if (!(dens > 0.0)) return;
+                ++traced;
+                const float wf[3] = {float(w[0]), float(w[1]), float(w[2])};
+                float T[3];
+                if (scene.occluded(ro, wf, std::numeric_limits<float>::infinity(), T)) return;
+                double resp[3] = {1.0, 1.0, 1.0}, rb[3] = {1.0, 1.0, 1.0};
+                if (response && r >= 0)
+                    incidence_response(response + int64_t(3) * kIncidenceNodes * r, cos, resp);
+                if (base && r >= 0)
+                    incidence_response(base + int64_t(3) * kIncidenceNodes * r, cos, rb);
+                for (int ch = 0; ch < 3; ++ch) {
+                    const double c = L[ch] * cos * double(T[ch]) / dens;
+                    e[ch] += c * resp[ch];
+                    eb[ch] += c * rb[ch];
+                }
+            };
+            if (n_env > 0) {
+                environment_points(hashed, i, n_env, u.data());
+                for (int j = 0; j < n_env; ++j) {
+                    double w[3];
+                    const int64_t k = environment_sample(env, u.data() + 3 * j, row, w);
+                    add(w, k);
+                }
+            }
+            uint64_t h = splitmix64(hashed ^ uint64_t(i) * 0x9E3779B97F4A7C15ull);
+            const int s = int(std::lround(std::sqrt(double(n_cos))));
+            const bool grid = s > 1 && s * s == n_cos;
+            for (int j = 0; j < n_cos; ++j) {
+                h = splitmix64(h);
+                double u1 = to_unit(h);
+                h = splitmix64(h);
+                double u2 = to_unit(h);
+                if (grid) u1 = (j % s + u1) / s, u2 = (j / s + u2) / s;  // stratified
+                double w[3];
+                cosine_direction(nd, u1, u2, w);
+                add(w, environment_texel(env, w));
+            }
+            for (int ch = 0; ch < 3; ++ch) {
+                out[3 * i + ch] = e[ch];
+                if (out_base) out_base[3 * i + ch] = eb[ch];
+            }
+        }
+        return traced;
+    });
 }
 
 }  // namespace voxgi

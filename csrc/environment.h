@@ -89,6 +89,22 @@ void environment_light(const ShadeHits& hits, const ShadeMaterials& mats, const 
                        const RayScene& scene, float* out, int64_t* rays, int threads,
                        const StopCheck& stop);
 
+// The environment's irradiance at records (voxgi.direct.light_irradiance):
+// at each point i (pos (R, 3), unit normal (R, 3), offset eps along it),
+// n_env samples drawn as environment_light draws a pixel's (by env.guide's
+// row of the point where one is attached) and n_cos cosine-distributed
+// directions, each traced to infinity in `scene`; every free ray adds
+// L cos T / (n_env p_e + n_cos cos / pi) (the balance heuristic) into
+// out[i] (R, 3), times response's row (R / A, nullable: 1) of the point at
+// the sample's cosine, and, with out_base, times base's row into
+// out_base[i]. rows (R,) picks the rows (-1: none; nullable). Hashed from
+// (seed, point, sample): the same for any thread count. Returns the rays.
+int64_t environment_irradiance(const EnvironmentMap& env, const double* pos, const float* normal,
+                               int64_t count, int n_env, int n_cos, uint64_t seed, double eps,
+                               const float* response, const float* base, const int32_t* rows,
+                               const RayScene& scene, double* out, double* out_base, int threads,
+                               const StopCheck& stop);
+
 // The guide's learning rays (voxgi.display.environment_guide): from each of
 // the points of row r (points row_start[r] to row_start[r + 1], offset eps
 // along their normals), row_rays[r] directions each, every other one drawn by env's

@@ -17,7 +17,8 @@ import trimesh
 from conftest import paper
 
 import voxgi
-from voxgi.direct import light_irradiance
+from voxgi.direct import ENVIRONMENT_SAMPLES, light_irradiance
+from voxgi.incidence import incidence_response
 from voxgi.lights import spot_falloff
 
 
@@ -94,7 +95,37 @@ def test_constant_environment_over_plane_gives_pi_l():
     se = vals.std(axis=0) / math.sqrt(len(vals))
     assert np.all(np.abs(vals.mean(axis=0) - 1.0) < 4 * se + 1e-12), (vals.mean(axis=0), se)
     assert se.max() < 0.01  # the check can see a 4% error
-    assert st["environment_samples"] == 16
+    assert st["environment_samples"] == ENVIRONMENT_SAMPLES * 16
+
+
+def test_a_plastic_planes_records_weigh_a_low_sky_by_their_incidence_response():
+    # A sky that shines only below 45° of elevation: a record of a plastic
+    # plane gathers 2π ∫ L (R(μ) / A) μ dμ over μ < cos 45°, more than the
+    # π L / 2 a diffuse record would (a plastic reflects grazing light
+    # better), and its base's part with base(μ) in place of R(μ) / A.
+    sc = voxgi.Scene()
+    v = [[-50, 0, -50], [50, 0, -50], [50, 0, 50], [-50, 0, 50]]
+    lobe = voxgi.Microfacet("plastic", alpha=0.1)
+    plane = trimesh.Trimesh(v, [[0, 2, 1], [0, 3, 2]], process=False)
+    sc.add(plane, voxgi.Material(0.5, specular=lobe))
+    sky = np.zeros((8, 16, 3))
+    sky[2:4] = 1.0  # rows 2 and 3: θ from 45° to 90°
+    sc.environment = voxgi.Environment(sky)
+    vox, up = _up_records(sc)
+    resp = incidence_response(sc, vox)
+    base = np.zeros((len(vox), 3))
+    e, _ = light_irradiance(sc, vox, samples=16, seed=5, threads=2, response=resp, base_out=base)
+    mu = np.linspace(0.0, math.sqrt(0.5), 4001)
+    rec = np.full(len(mu), np.flatnonzero(up)[0])
+    for got, weight in ((e, resp.at(rec, mu)), (base, resp.at(rec, mu, base=True))):
+        want = 2 * math.pi * np.trapezoid(weight[:, 0] * mu, mu)
+        vals = got[up, 0]
+        se = vals.std() / math.sqrt(len(vals))
+        assert abs(vals.mean() - want) < 4 * se, (vals.mean(), want, se)
+        assert se < 0.005 * want  # the check can see a 2% error
+    # the response matters here: the diffuse answer π / 2 is 3% (8 se) off
+    want = 2 * math.pi * np.trapezoid(resp.at(rec, mu)[:, 0] * mu, mu)
+    assert want - math.pi / 2 > 8 * e[up, 0].std() / math.sqrt(up.sum())
 
 
 def test_closed_sphere_gets_no_environment_light():

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['EnvironmentGuide', 'LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_emission', 'camera_hits', 'camera_rays', 'direct_light_traced', 'environment_light', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'learn_environment_guide', 'light_accumulate', 'shade_brdf', 'transport_apply', 'transport_compact', 'voxelize', 'vpl_light']
+__all__: list[str] = ['EnvironmentGuide', 'LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_emission', 'camera_hits', 'camera_rays', 'direct_light_traced', 'environment_irradiance', 'environment_light', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'learn_environment_guide', 'light_accumulate', 'shade_brdf', 'transport_apply', 'transport_compact', 'voxelize', 'vpl_light']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -246,6 +246,17 @@ def direct_light_traced(emitters: tuple, point: numpy.typing.NDArray[numpy.float
     at the sample's cosine (voxgi.incidence). With response_base (T, 33, 3) the
     tuple's fourth item (N, 3): the same samples weighed by its rows (the
     base's share; the third item is then None without strategies).
+    """
+def environment_irradiance(env_radiance: numpy.typing.NDArray[numpy.float64], env_to_world: numpy.typing.NDArray[numpy.float64], env_texel_pdf: numpy.typing.NDArray[numpy.float64], env_row_solid_angle: numpy.typing.NDArray[numpy.float64], env_texel_cdf: numpy.typing.NDArray[numpy.float64], env_row_cos: numpy.typing.NDArray[numpy.float64], pos: numpy.typing.NDArray[numpy.float64], normal: numpy.typing.NDArray[numpy.float32], n_env: typing.SupportsInt | typing.SupportsIndex, n_cos: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0, response: numpy.typing.NDArray[numpy.float32] | None = None, response_base: numpy.typing.NDArray[numpy.float32] | None = None, response_row: numpy.typing.NDArray[numpy.int32] | None = None) -> tuple:
+    """
+    The environment's irradiance at points (pos (R, 3) float64, unit normal
+    (R, 3) float32, rays offset eps along it): n_env samples drawn from the
+    environment's tables and n_cos cosine-distributed directions, traced in scene and combined by the
+    balance heuristic. With response (T, 33, 3) float32 and response_row (R,)
+    int32 (-1: none) each sample is weighed by the point's row at its cosine,
+    and with response_base as well the same samples weighed by its rows are
+    returned too. Returns (irradiance (R, 3) float64, base irradiance (R, 3)
+    float64 or None, the number of rays traced).
     """
 def environment_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy.typing.NDArray[numpy.float32], hit_ng: numpy.typing.NDArray[numpy.float32], hit_wo: numpy.typing.NDArray[numpy.float32], hit_material: numpy.typing.NDArray[numpy.int32], mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.typing.NDArray[numpy.float32], mat_nu: numpy.typing.NDArray[numpy.float32], mat_nv: numpy.typing.NDArray[numpy.float32], mat_glossy: numpy.typing.NDArray[numpy.uint8], env_radiance: numpy.typing.NDArray[numpy.float64], env_to_world: numpy.typing.NDArray[numpy.float64], env_texel_pdf: numpy.typing.NDArray[numpy.float64], env_row_solid_angle: numpy.typing.NDArray[numpy.float64], env_texel_cdf: numpy.typing.NDArray[numpy.float64], env_row_cos: numpy.typing.NDArray[numpy.float64], env_samples: typing.SupportsInt | typing.SupportsIndex, n_gather: typing.SupportsFloat | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, scene: ..., out: numpy.typing.NDArray[numpy.float32], threads: typing.SupportsInt | typing.SupportsIndex = 0, hit_albedo: numpy.typing.NDArray[numpy.float32] | None = None, mat_lobe: numpy.typing.NDArray[numpy.float32] | None = None, env_guide: EnvironmentGuide = None) -> int:
     """

@@ -494,8 +494,9 @@ def light_irradiance(
     vox : VoxelSet
         Records; each receives at ``vox.centroid`` on the side of ``vox.normal``.
     samples : int, optional
-        Environment samples per record (and as many cosine-distributed
-        rays); the delta lights take one shadow ray each.
+        :data:`ENVIRONMENT_SAMPLES` times this many environment samples per
+        record, and as many cosine-distributed rays; the delta lights take
+        one shadow ray each.
     seed : int, optional
     threads, offset, receivers, max_rays, response, base_out
         As for :func:`direct_irradiance`.
@@ -512,9 +513,10 @@ def light_irradiance(
     falloff) or the sun's ``E cos θ`` where the shadow ray is free; the
     sun's ray runs to infinity (nothing lies outside the scene's bounds).
     The environment's ``∫ L(ω) cos θ dω`` over the directions whose ray
-    leaves the scene is estimated from ``samples`` directions drawn from the
-    environment (luminance × solid angle) and ``samples`` drawn in
-    proportion to cos θ, combined by the power heuristic (``docs/design.md`` §11).
+    leaves the scene is estimated in one compiled kernel from directions
+    drawn from the environment (luminance × solid angle) and as many drawn
+    in proportion to cos θ, combined by the balance heuristic
+    (``docs/design.md`` §11).
     """
     samples, seed, nthreads = _check(scene, vox, samples, seed, threads, receivers)
     t0 = time.perf_counter()
@@ -525,7 +527,7 @@ def light_irradiance(
     stats = {
         "rays": 0,
         "lights": len(scene.lights),
-        "environment_samples": samples if env is not None else 0,
+        "environment_samples": ENVIRONMENT_SAMPLES * samples if env is not None else 0,
         "records_lit": len(lit),
     }
     if len(lit) and scene.has_lights:
@@ -534,17 +536,24 @@ def light_irradiance(
         with Tracer(scene, nthreads) as tracer:
             x = np.asarray(vox.centroid, np.float64)
             nrm = np.asarray(vox.normal, np.float64)
-            rng = np.random.default_rng([seed, 2])
-            per = len(scene.lights) + (2 * samples if env is not None else 0)
-            step = max(1, max_rays // max(per, 1))
-            for a in range(0, len(lit), step):
-                rec = lit[a : a + step]
-                e, rays, eb = _light_batch(
-                    scene, tracer, x[rec], nrm[rec], samples, rng, offset, response, rec
+            if scene.lights:
+                step = max(1, max_rays // len(scene.lights))
+                for a in range(0, len(lit), step):
+                    rec = lit[a : a + step]
+                    e, rays, eb = _delta_lights(
+                        scene, tracer, x[rec], nrm[rec], offset, response, rec
+                    )
+                    if base_out is not None and eb is not None:
+                        base_out[rec] += eb
+                    out[rec] += e
+                    stats["rays"] += rays
+            if env is not None:
+                e, eb, rays = _environment(
+                    env, tracer, x[lit], nrm[lit], samples, seed, offset, response, lit
                 )
+                out[lit] += e
                 if base_out is not None and eb is not None:
-                    base_out[rec] = eb
-                out[rec] = e
+                    base_out[lit] += eb
                 stats["rays"] += rays
     stats["seconds"] = time.perf_counter() - t0
     return out, stats
@@ -558,86 +567,69 @@ def _through(tracer: Tracer, org: np.ndarray, dirs: np.ndarray, length: np.ndarr
     return tracer.transmittance(org, dirs, length).astype(np.float64)
 
 
-def _light_batch(
-    scene, tracer, x, nrm, samples, rng, offset, response=None, rec=None
+def _delta_lights(
+    scene, tracer, x, nrm, offset, response=None, rec=None
 ) -> tuple[np.ndarray, int, np.ndarray | None]:
-    """Irradiance (R, 3) at points ``x`` with normals ``nrm`` from the lights
-    and the environment (each sample weighed by ``response`` of records
-    ``rec``, if given), the rays traced, and with ``response`` the same
-    samples weighed by its base's rows (else None)."""
+    """Irradiance (R, 3) at points ``x`` with normals ``nrm`` from the delta
+    lights (each weighed by ``response`` of records ``rec``, if given), the
+    rays traced, and with ``response`` the same weighed by its base's rows
+    (else None)."""
     r = len(x)
     e = np.zeros((r, 3))
     eb = None if response is None else np.zeros((r, 3))
     rays = 0
     org = x + offset * nrm - tracer.centre
-
-    def rec_of(i):
-        return None if rec is None else rec[i]
-
-    def add(into, into_base, i, light, rows, cos):
-        # samples i's light into `into` (and into_base), weighed by their
-        # records' R(μ) / A (and base(μ) / A); rows: their records
-        if response is None:
-            into[i] += light
-            return
-        into[i] += light * response.at(rows, cos)
-        into_base[i] += light * response.at(rows, cos, base=True)
-
     for light in scene.lights:
         w, dist, eperp = light.incident(x)
         cos = np.einsum("ij,ij->i", w, nrm)
         live = np.flatnonzero((cos > 0) & np.any(eperp > 0, axis=1))
         length = np.where(np.isfinite(dist[live]), np.maximum(dist[live] - 2 * offset, 0.0), np.inf)
         through = _through(tracer, org[live], w[live], length)
-        add(e, eb, live, eperp[live] * cos[live, None] * through, rec_of(live), cos[live])
+        light_in = eperp[live] * cos[live, None] * through
+        if response is None:
+            e[live] += light_in
+        else:
+            e[live] += light_in * response.at(rec[live], cos[live])
+            eb[live] += light_in * response.at(rec[live], cos[live], base=True)
         rays += len(live)
-    env = scene.environment
-    if env is None:
-        return e, rays, eb
-    # environment samples, then cosine samples; power heuristic between them
-    s = samples
-    u = rng.random((r, s, 3)).reshape(-1, 3)
-    we, pe = env.sample(u)
-    nn = np.repeat(nrm, s, axis=0)
-    oo = np.repeat(org, s, axis=0)
-    cos_e = np.einsum("ij,ij->i", we, nn)
-    live = np.flatnonzero((cos_e > 0) & (pe > 0))
-    through = _through(tracer, oo[live], we[live], np.full(len(live), np.inf))
-    rays += len(live)
-    pc = cos_e[live] / np.pi
-    wgt = pe[live] / (pe[live] ** 2 + pc**2)
-    contrib = np.zeros((r * s, 3))
-    contrib_b = None if eb is None else np.zeros((r * s, 3))
-    sample_rec = np.repeat(np.arange(r), s)
-    seen = env.eval(we[live]) * (cos_e[live] * wgt)[:, None] * through
-    add(contrib, contrib_b, live, seen, rec_of(sample_rec[live]), cos_e[live])
-    wc = _cosine_dirs(nn, rng.random((r * s, 2)))
-    hit, hit_through = tracer.intersect(
-        np.ascontiguousarray(oo, np.float32), np.ascontiguousarray(wc, np.float32), through=True
-    )
-    rays += len(wc)
-    esc = np.flatnonzero(hit == -1)
-    cos_c = np.maximum(np.einsum("ij,ij->i", wc[esc], nn[esc]), 0.0)
-    pc = cos_c / np.pi
-    pe = env.pdf(wc[esc])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        wgt = np.where(pc > 0, pc / (pe**2 + pc**2), 0.0)
-    seen = env.eval(wc[esc]) * (cos_c * wgt)[:, None] * hit_through[esc]
-    add(contrib, contrib_b, esc, seen, rec_of(sample_rec[esc]), cos_c)
-    e += contrib.reshape(r, s, 3).mean(axis=1)
-    if eb is not None:
-        eb += contrib_b.reshape(r, s, 3).mean(axis=1)
     return e, rays, eb
 
 
-def _cosine_dirs(n: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Cosine-distributed unit directions about unit normals ``n`` (R, 3)
-    (Malley's method in the frame of Duff et al. 2017)."""
-    sign = np.where(n[:, 2] >= 0, 1.0, -1.0)
-    a = -1.0 / (sign + n[:, 2])
-    b = n[:, 0] * n[:, 1] * a
-    t = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
-    bt = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
-    rad, phi = np.sqrt(u[:, 0]), 2.0 * np.pi * u[:, 1]
-    z = np.sqrt(np.maximum(0.0, 1.0 - u[:, 0]))
-    return (rad * np.cos(phi))[:, None] * t + (rad * np.sin(phi))[:, None] * bt + z[:, None] * n
+#: Environment samples and cosine-distributed rays per record, each, as a
+#: multiple of ``samples``: the sky a record sees through a window is the
+#: light most of a room reflects, and the error of its estimate stays in
+#: the records the display reads (``docs/design.md`` §11).
+ENVIRONMENT_SAMPLES = 4
+
+
+def _environment(env, tracer, x, nrm, samples, seed, offset, response, rec):
+    """The environment's irradiance (R, 3) at records ``rec`` (points ``x``,
+    normals ``nrm``), with the base's part where ``response`` is given (else
+    None), and the rays traced."""
+    t = env.tables()
+    n = ENVIRONMENT_SAMPLES * samples
+    kw = {}
+    if response is not None:
+        kw = {
+            "response": response.table,
+            "response_base": response.base,
+            "response_row": np.ascontiguousarray(response.row[rec]),
+        }
+    e, eb, rays = _core.environment_irradiance(
+        env.image,
+        np.ascontiguousarray(env.to_world, np.float64),
+        t["texel_pdf"],
+        t["row_solid_angle"],
+        t["texel_cdf"],
+        t["row_cos"],
+        np.ascontiguousarray(x - tracer.centre, np.float64),
+        np.ascontiguousarray(nrm, np.float32),
+        n,
+        n,
+        int(seed) & ((1 << 64) - 1),
+        float(offset),
+        tracer.native,
+        tracer.threads,
+        **kw,
+    )
+    return e, eb, rays
