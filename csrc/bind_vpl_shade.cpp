@@ -160,8 +160,7 @@ auto light_accumulate_py(F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I3
 std::unique_ptr<voxgi::EnvironmentGuide> make_guide(F64 origin, double cell, I64 dims,
                                                     int64_t width, int64_t height, int64_t blocks_w,
                                                     int64_t blocks_h, double alpha, I32 key_row,
-                                                    F64 factor, F64 block_cdf, I64 texel_order,
-                                                    I64 block_start, F64 order_cdf) {
+                                                    F64 factor, F64 block_cdf, F64 row_cdf) {
     auto g = std::make_unique<voxgi::EnvironmentGuide>();
     check_1d(origin, 3, "origin");
     check_1d(dims, 3, "dims");
@@ -184,15 +183,13 @@ std::unique_ptr<voxgi::EnvironmentGuide> make_guide(F64 origin, double cell, I64
     g->blocks_w = blocks_w;
     g->blocks_h = blocks_h;
     g->alpha = alpha;
-    const int64_t B = g->blocks(), n = width * height;
+    const int64_t B = g->blocks();
     if (factor.ndim() != 2 || factor.shape(1) != B)
         throw py::value_error("factor must have shape (rows, blocks_w * blocks_h)");
     const int64_t rows = factor.shape(0);
     check_2d(block_cdf, rows, B, "block_cdf");
     check_1d(key_row, keys, "key_row");
-    check_1d(texel_order, n, "texel_order");
-    check_1d(block_start, B + 1, "block_start");
-    check_1d(order_cdf, n, "order_cdf");
+    check_2d(row_cdf, blocks_w, height, "row_cdf");
     g->key_row.assign(key_row.data(), key_row.data() + keys);
     for (int32_t r : g->key_row)
         if (r < -1 || r >= rows) throw py::value_error("key_row: a row out of range");
@@ -208,24 +205,18 @@ std::unique_ptr<voxgi::EnvironmentGuide> make_guide(F64 origin, double cell, I64
                 throw py::value_error("block_cdf: each row must ascend within [0, 1]");
         if (!(c[B - 1] == 1.0)) throw py::value_error("block_cdf: each row must end at 1");
     }
-    g->block_start.assign(block_start.data(), block_start.data() + B + 1);
-    if (g->block_start[0] != 0 || g->block_start[size_t(B)] != n)
-        throw py::value_error("block_start must run from 0 to width * height");
-    g->texel_order.assign(texel_order.data(), texel_order.data() + n);
-    for (int64_t b = 0; b < B; ++b) {
-        const int64_t first = g->block_start[size_t(b)], end = g->block_start[size_t(b) + 1];
-        if (!(first < end)) throw py::value_error("block_start: every block must hold a texel");
-        for (int64_t j = first; j < end; ++j) {
-            const int64_t k = g->texel_order[size_t(j)];
-            if (k < 0 || k >= n || g->block(k) != b)
-                throw py::value_error("texel_order: texel " + std::to_string(k) +
-                                      " is not in block " + std::to_string(b));
+    g->row_cdf.assign(row_cdf.data(), row_cdf.data() + blocks_w * height);
+    for (int64_t bx = 0; bx < blocks_w; ++bx)
+        for (int64_t by = 0; by < blocks_h; ++by) {
+            const double* rc = g->row_cdf.data() + bx * height;
+            const int64_t r0 = g->first_row(by), r1 = g->first_row(by + 1);
+            if (!(r0 < r1)) throw py::value_error("blocks must each hold a row");
+            for (int64_t r = r0; r < r1; ++r)
+                if (!std::isfinite(rc[r]) || !(rc[r] >= (r > r0 ? rc[r - 1] : 0.0)))
+                    throw py::value_error("row_cdf: block (" + std::to_string(by) + ", " +
+                                          std::to_string(bx) + ") must ascend from 0 at row " +
+                                          std::to_string(r));
         }
-    }
-    g->order_cdf.assign(order_cdf.data(), order_cdf.data() + n);
-    for (int64_t j = 0; j < n; ++j)
-        if (!(g->order_cdf[size_t(j)] >= (j ? g->order_cdf[size_t(j) - 1] : 0.0)))
-            throw py::value_error("order_cdf must ascend from 0");
     return g;
 }
 
@@ -379,14 +370,14 @@ facing (the geometric normal's dominant axis and sign: key = cell * 6 + 2 *
 axis + (negative)), key_row (dims product * 6,) int32 picks a row (-1: none)
 of factor and block_cdf (rows, blocks_w * blocks_h) float64, the density over
 the environment's own per block of texels and the running shares of the
-blocks. texel_order (width * height,) int64 lists the texels block by block
-(block_start (blocks + 1,)), order_cdf their running texel_pdf. Samples take
+blocks. row_cdf (blocks_w, height) float64: per column of blocks, the
+running texel_pdf of its texels row by row, from 0 again at each block's
+first row (a row ceil(by * height / blocks_h)). Samples take
 the environment's own tables with probability alpha. Checked and copied;
 voxgi.display.environment_guide builds it.)doc")
         .def(py::init(&make_guide), "origin"_a.noconvert(), "cell"_a, "dims"_a.noconvert(),
              "width"_a, "height"_a, "blocks_w"_a, "blocks_h"_a, "alpha"_a, "key_row"_a.noconvert(),
-             "factor"_a.noconvert(), "block_cdf"_a.noconvert(), "texel_order"_a.noconvert(),
-             "block_start"_a.noconvert(), "order_cdf"_a.noconvert());
+             "factor"_a.noconvert(), "block_cdf"_a.noconvert(), "row_cdf"_a.noconvert());
     m.def("environment_irradiance", &environment_irradiance_py, "env_radiance"_a.noconvert(),
           "env_to_world"_a.noconvert(), "env_texel_pdf"_a.noconvert(),
           "env_row_solid_angle"_a.noconvert(), "env_texel_cdf"_a.noconvert(),

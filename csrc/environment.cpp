@@ -81,13 +81,22 @@ int64_t environment_texel_at(const EnvironmentMap& env, double u0, int64_t row) 
                 std::min(int64_t(std::upper_bound(cdf, cdf + g.blocks(), v) - cdf), g.blocks() - 1);
             const double c0 = b ? cdf[b - 1] : 0.0, c1 = cdf[b];
             const double t = c1 > c0 ? std::clamp((v - c0) / (c1 - c0), 0.0, 1.0) : 0.5;
-            const int64_t first = g.block_start[size_t(b)], end = g.block_start[size_t(b) + 1];
-            const double* oc = g.order_cdf.data();
-            const double lo = first ? oc[first - 1] : 0.0;
-            const double target = lo + t * (oc[end - 1] - lo);
-            const int64_t j = std::clamp(
-                int64_t(std::upper_bound(oc + first, oc + end, target) - oc), first, end - 1);
-            return g.texel_order[size_t(j)];
+            const int64_t by = b / g.blocks_w, bx = b % g.blocks_w;
+            const int64_t r0 = g.first_row(by), r1 = g.first_row(by + 1);
+            const int64_t c_0 = g.first_col(bx), c_1 = g.first_col(bx + 1);
+            // a row by the block's running mass, then the rest of the
+            // target among the row's columns of the block
+            const double* rc = g.row_cdf.data() + bx * env.height;
+            const double target = t * rc[r1 - 1];
+            const int64_t r =
+                std::clamp(int64_t(std::upper_bound(rc + r0, rc + r1, target) - rc), r0, r1 - 1);
+            const double within = target - (r > r0 ? rc[r - 1] : 0.0);
+            const int64_t first = r * env.width + c_0, end = r * env.width + c_1;
+            const double before = first ? env.texel_cdf[first - 1] : 0.0;
+            return std::clamp(int64_t(std::upper_bound(env.texel_cdf + first, env.texel_cdf + end,
+                                                       before + within) -
+                                      env.texel_cdf),
+                              first, end - 1);
         }
         u0 /= g.alpha;
     }

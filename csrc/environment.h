@@ -23,6 +23,9 @@ struct ShadeMaterials;
 // a texel inside it in proportion to the environment's own texel_pdf; with
 // alpha, from the environment's own tables. The density of a texel is
 // texel_pdf times factor[row, block]: alpha + (1 - alpha) share / mass.
+// Inside a block a row is drawn by row_cdf, then a column by the
+// environment's own texel_cdf over the block's columns of that row: no
+// table grows with the environment's texels.
 struct EnvironmentGuide {
     double origin[3] = {0.0, 0.0, 0.0};  // the grid's minimum corner
     double inv_cell = 0.0;               // 1 / the cells' edge
@@ -30,18 +33,22 @@ struct EnvironmentGuide {
     int64_t width = 0, height = 0;       // the environment's texels across and down
     int64_t blocks_w = 0, blocks_h = 0;  // texel blocks across and down
     double alpha = 1.0;
-    std::vector<int32_t> key_row;      // (dims product * 6,) row of each cell and facing, -1: none
-    std::vector<double> factor;        // (rows, blocks) density over the environment's own
-    std::vector<double> block_cdf;     // (rows, blocks) running shares, last 1
-    std::vector<int64_t> texel_order;  // (H * W,) texels by block, row-major inside
-    std::vector<int64_t> block_start;  // (blocks + 1,) each block's first in texel_order
-    std::vector<double> order_cdf;     // (H * W,) running texel_pdf along texel_order
+    std::vector<int32_t> key_row;   // (dims product * 6,) row of each cell and facing, -1: none
+    std::vector<double> factor;     // (rows, blocks) density over the environment's own
+    std::vector<double> block_cdf;  // (rows, blocks) running shares, last 1
+    // (blocks_w, H): for each column of blocks, the running texel_pdf of
+    // its texels row by row, restarting at each block's first row
+    std::vector<double> row_cdf;
 
     int64_t blocks() const { return blocks_w * blocks_h; }
     // The block of texel k.
     int64_t block(int64_t k) const {
         return ((k / width) * blocks_h / height) * blocks_w + (k % width) * blocks_w / width;
     }
+    // The first row of block row `by` (by = blocks_h: height) and the first
+    // column of block column `bx` (bx = blocks_w: width).
+    int64_t first_row(int64_t by) const { return (by * height + blocks_h - 1) / blocks_h; }
+    int64_t first_col(int64_t bx) const { return (bx * width + blocks_w - 1) / blocks_w; }
 };
 
 // An environment (docs/design.md §11): a latitude-longitude radiance image, Mitsuba's convention

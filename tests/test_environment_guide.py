@@ -134,10 +134,11 @@ def test_an_open_scene_skips_the_guide():
 
 
 def _tables(width=4, height=2, bw=2, bh=2):
-    """A valid guide's arguments: one cell, its six facings on row 0."""
-    k = np.arange(width * height)
-    block = ((k // width) * bh // height) * bw + (k % width) * bw // width
-    order = np.argsort(block, kind="stable").astype(np.int64)
+    """A valid guide's arguments: one cell, its six facings on row 0, an
+    environment of equal texels (each block's rows run up by one row's
+    share of the block's columns)."""
+    rows_per, cols_per = height // bh, width // bw
+    step = cols_per / (width * height)
     return dict(
         origin=np.zeros(3),
         cell=1.0,
@@ -150,9 +151,7 @@ def _tables(width=4, height=2, bw=2, bh=2):
         key_row=np.zeros(6, np.int32),
         factor=np.ones((1, bw * bh)),
         block_cdf=np.cumsum(np.full((1, bw * bh), 1.0 / (bw * bh)), axis=1),
-        texel_order=order,
-        block_start=np.searchsorted(block[order], np.arange(bw * bh + 1)).astype(np.int64),
-        order_cdf=np.cumsum(np.full(width * height, 1.0 / (width * height))),
+        row_cdf=np.tile(step * (np.arange(height) % rows_per + 1.0), (bw, 1)),
     )
 
 
@@ -161,7 +160,7 @@ def _tables(width=4, height=2, bw=2, bh=2):
     [
         (dict(key_row=np.full(6, 3, np.int32)), "key_row: a row out of range"),
         (dict(block_cdf=np.full((1, 4), 0.5)), "block_cdf: each row must end at 1"),
-        (dict(texel_order=np.arange(8, dtype=np.int64)[::-1].copy()), "texel_order: texel"),
+        (dict(row_cdf=np.full((2, 2), -1.0)), r"row_cdf: block \(0, 0\) must ascend"),
         (dict(factor=np.full((1, 4), np.nan)), "factor must be finite"),
         (dict(alpha=0.0), "alpha must be in"),
     ],

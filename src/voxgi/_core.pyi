@@ -137,12 +137,13 @@ class EnvironmentGuide:
     axis + (negative)), key_row (dims product * 6,) int32 picks a row (-1: none)
     of factor and block_cdf (rows, blocks_w * blocks_h) float64, the density over
     the environment's own per block of texels and the running shares of the
-    blocks. texel_order (width * height,) int64 lists the texels block by block
-    (block_start (blocks + 1,)), order_cdf their running texel_pdf. Samples take
+    blocks. row_cdf (blocks_w, height) float64: per column of blocks, the
+    running texel_pdf of its texels row by row, from 0 again at each block's
+    first row (a row ceil(by * height / blocks_h)). Samples take
     the environment's own tables with probability alpha. Checked and copied;
     voxgi.display.environment_guide builds it.
     """
-    def __init__(self, origin: numpy.typing.NDArray[numpy.float64], cell: typing.SupportsFloat | typing.SupportsIndex, dims: numpy.typing.NDArray[numpy.int64], width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, blocks_w: typing.SupportsInt | typing.SupportsIndex, blocks_h: typing.SupportsInt | typing.SupportsIndex, alpha: typing.SupportsFloat | typing.SupportsIndex, key_row: numpy.typing.NDArray[numpy.int32], factor: numpy.typing.NDArray[numpy.float64], block_cdf: numpy.typing.NDArray[numpy.float64], texel_order: numpy.typing.NDArray[numpy.int64], block_start: numpy.typing.NDArray[numpy.int64], order_cdf: numpy.typing.NDArray[numpy.float64]) -> None:
+    def __init__(self, origin: numpy.typing.NDArray[numpy.float64], cell: typing.SupportsFloat | typing.SupportsIndex, dims: numpy.typing.NDArray[numpy.int64], width: typing.SupportsInt | typing.SupportsIndex, height: typing.SupportsInt | typing.SupportsIndex, blocks_w: typing.SupportsInt | typing.SupportsIndex, blocks_h: typing.SupportsInt | typing.SupportsIndex, alpha: typing.SupportsFloat | typing.SupportsIndex, key_row: numpy.typing.NDArray[numpy.int32], factor: numpy.typing.NDArray[numpy.float64], block_cdf: numpy.typing.NDArray[numpy.float64], row_cdf: numpy.typing.NDArray[numpy.float64]) -> None:
         ...
 class RayScene:
     """

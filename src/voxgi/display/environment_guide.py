@@ -66,12 +66,24 @@ class EnvironmentGuide:
         self.native, self.open_share, self.rays, self.seconds = native, open_share, rays, seconds
 
 
-def _blocks(env: Environment) -> tuple[int, int, np.ndarray]:
-    """Blocks across and down, and each texel's block (row-major texels)."""
+def _blocks(env: Environment) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """Blocks across and down, each block's share of the environment's own
+    density (row-major blocks) and the kernels' ``row_cdf`` (blocks_w, H):
+    per column of blocks, the running density of its texels row by row,
+    from 0 again at each block's first row. Nothing here grows with the
+    texels beyond one (H, blocks_w) table."""
     h, w = env.image.shape[:2]
     bw, bh = min(BLOCKS[0], w), min(BLOCKS[1], h)
-    k = np.arange(h * w)
-    return bw, bh, ((k // w) * bh // h) * bw + (k % w) * bw // w
+    first_col = (np.arange(bw) * w + bw - 1) // bw
+    first_row = (np.arange(bh + 1) * h + bh - 1) // bh
+    seg = np.add.reduceat(env.tables()["texel_pdf"].reshape(h, w), first_col, axis=1)  # (H, bw)
+    run = np.cumsum(seg, axis=0)
+    band = (np.arange(h) * bh) // h
+    start = first_row[:-1]
+    before = np.where((start > 0)[:, None], run[np.maximum(start - 1, 0)], 0.0)  # (bh, bw)
+    row_cdf = run - before[band]
+    mass = row_cdf[first_row[1:] - 1]  # (bh, bw): each block's last row
+    return bw, bh, mass.reshape(-1), np.ascontiguousarray(row_cdf.T)
 
 
 def environment_guide(
@@ -98,7 +110,7 @@ def environment_guide(
     """
     if env is None:
         return None, "no environment"
-    bw, bh, texel_block = _blocks(env)
+    bw, bh, mass, row_cdf = _blocks(env)
     if bw * bh < 2:
         return None, "environment guide: a constant environment has no directions to choose"
     t0 = time.perf_counter()
@@ -155,11 +167,8 @@ def environment_guide(
     reached = hist.sum(axis=1)
     if not np.any(reached > 0):
         return None, "environment guide: no learning ray reached the environment"
-    n_blocks = bw * bh
     keys, hist = keys[reached > 0], hist[reached > 0]
     share = hist / hist.sum(axis=1, keepdims=True)
-    texel_pdf = t["texel_pdf"]
-    mass = np.bincount(texel_block, weights=texel_pdf, minlength=n_blocks)
     factor = ALPHA + (1.0 - ALPHA) * np.divide(
         share, mass[None], out=np.zeros_like(share), where=mass[None] > 0
     )
@@ -168,10 +177,6 @@ def environment_guide(
     block_cdf[:, -1] = 1.0
     key_row = np.full(int(dims.prod()) * 6, -1, np.int32)
     key_row[keys] = np.arange(len(keys), dtype=np.int32)
-    texel_order = np.argsort(texel_block, kind="stable").astype(np.int64)
-    block_start = np.searchsorted(texel_block[texel_order], np.arange(n_blocks + 1)).astype(
-        np.int64
-    )
     native = _core.EnvironmentGuide(
         lo,
         cell,
@@ -184,13 +189,9 @@ def environment_guide(
         key_row,
         np.ascontiguousarray(factor),
         np.ascontiguousarray(block_cdf),
-        texel_order,
-        block_start,
-        np.cumsum(texel_pdf[texel_order]),
+        row_cdf,
     )
-    guide = EnvironmentGuide(native, open_share, rays, time.perf_counter() - t0)
-    guide.keys, guide.share, guide.lo, guide.cell, guide.dims = keys, share, lo, cell, dims
-    return guide, None
+    return EnvironmentGuide(native, open_share, rays, time.perf_counter() - t0), None
 
 
 def _keys(pos: np.ndarray, nrm: np.ndarray, lo: np.ndarray, cell: float, dims: np.ndarray):
