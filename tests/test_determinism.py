@@ -170,3 +170,21 @@ def test_full_pipeline_twice_identical(tmp_path):
         )
         imgs.append(voxgi.display.render(sc, sol, max_frames=2, progress=False, seed=3).image)
     assert np.array_equal(imgs[0], imgs[1])
+
+
+def test_a_room_lit_through_a_skylight_is_the_same_for_any_thread_count():
+    # the environment's light on the records, the guide's learning rays and
+    # the guided samples: each record's and each row's sums within one task
+    from test_environment_guide import SKY, _skylight_room
+
+    scene = _skylight_room(voxgi.Environment(np.full((16, 32, 3), SKY)))
+    vox = voxgi.voxelize(scene, resolution=16, threads=1, progress=False)
+    sols = [voxgi.solve(vox, threads=th, progress=False) for th in THREADS[:2]]
+    assert np.array_equal(sols[0].radiosity, sols[1].radiosity)
+    outs = [
+        voxgi.render(scene, sols[0], max_frames=2, seed=3, threads=th, progress=False)
+        for th in THREADS
+    ]
+    assert outs[0].stats["environment_guide"] is not None
+    assert outs[0].image.max() > 0
+    _same([(o.image,) for o in outs], "image")
