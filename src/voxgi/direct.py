@@ -606,7 +606,6 @@ def _environment(env, tracer, x, nrm, samples, seed, offset, response, rec):
     """The environment's irradiance (R, 3) at records ``rec`` (points ``x``,
     normals ``nrm``), with the base's part where ``response`` is given (else
     None), and the rays traced."""
-    t = env.tables()
     n = ENVIRONMENT_SAMPLES * samples
     kw = {}
     if response is not None:
@@ -616,12 +615,7 @@ def _environment(env, tracer, x, nrm, samples, seed, offset, response, rec):
             "response_row": np.ascontiguousarray(response.row[rec]),
         }
     e, eb, rays = _core.environment_irradiance(
-        env.image,
-        np.ascontiguousarray(env.to_world, np.float64),
-        t["texel_pdf"],
-        t["row_solid_angle"],
-        t["texel_cdf"],
-        t["row_cos"],
+        *env.sampling_arguments(),
         np.ascontiguousarray(x - tracer.centre, np.float64),
         np.ascontiguousarray(nrm, np.float32),
         n,

@@ -333,6 +333,20 @@ class Environment:
             "row_cos": cos_edges,
         }
 
+    def sampling_arguments(self) -> tuple:
+        """``(image, to_world, texel_pdf, row_solid_angle, texel_cdf,
+        row_cos)``: the environment as the compiled kernels that draw its
+        samples take it (float64, C order; :meth:`tables`)."""
+        t = self.tables()
+        return (
+            self.image,
+            np.ascontiguousarray(self.to_world, np.float64),
+            t["texel_pdf"],
+            t["row_solid_angle"],
+            t["texel_cdf"],
+            t["row_cos"],
+        )
+
     def pdf(self, dirs: np.ndarray) -> np.ndarray:
         """(N,) solid-angle density of :meth:`sample` at world directions."""
         p, _, omega_row, _ = self._build()

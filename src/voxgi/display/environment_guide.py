@@ -136,15 +136,9 @@ def environment_guide(
     rank = np.arange(len(order)) - np.repeat(first, np.diff(np.r_[first, len(order)]))
     learn = order[rank < RECORDS_PER_KEY]
     keys, count = np.unique(key[learn], return_counts=True)
-    t = env.tables()
     h, w = env.image.shape[:2]
     hist, possible, rays = _core.learn_environment_guide(
-        env.image,
-        np.ascontiguousarray(env.to_world, np.float64),
-        t["texel_pdf"],
-        t["row_solid_angle"],
-        t["texel_cdf"],
-        t["row_cos"],
+        *env.sampling_arguments(),
         bw,
         bh,
         np.ascontiguousarray(pos[learn]),

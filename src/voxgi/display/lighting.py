@@ -86,16 +86,10 @@ class _SceneLights:
             for a in range(0, P, tile):
                 self._add_delta(h, a, min(P, a + tile), out)
         if self.env is not None and self.n_env > 0:
-            t = self.env.tables()
             self.rays += _core.environment_light(
                 *(h[k] for k in _HIT_KEYS),
                 *self.materials,
-                self.env.image,
-                np.ascontiguousarray(self.env.to_world, np.float64),
-                t["texel_pdf"],
-                t["row_solid_angle"],
-                t["texel_cdf"],
-                t["row_cos"],
+                *self.env.sampling_arguments(),
                 self.n_env,
                 float(gathering),
                 self.seed,
