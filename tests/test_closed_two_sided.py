@@ -125,3 +125,32 @@ def test_an_open_two_sided_box_stays_two_sided():
     vox = voxgi.voxelize(scene, resolution=RES, progress=False)
     assert vox.stats["sealed_objects"] == []
     assert vox.stats["inner_records"] == 0
+
+
+def _room_holding(box: trimesh.Trimesh) -> voxgi.Scene:
+    """A closed two-sided room seen from outside it (the camera's eye and no
+    light inside), holding ``box``: only the furniture says it is occupied."""
+    scene = voxgi.Scene(camera=voxgi.Camera(eye=(0.5, 0.5, 3.0), target=(0.5, 0.5, 0.0)))
+    room = _inward(_box((1.0, 1.0, 1.0), (0.5, 0.5, 0.5)))
+    scene.add(room, voxgi.Material(albedo=0.5), name="room", two_sided=True)
+    scene.add(box, voxgi.Material(emission=1.0), name="furniture")
+    scene.add(_box((0.2, 0.2, 0.2), (0.5, 0.5, 1.6)), voxgi.Material(albedo=0.5), name="outside")
+    return scene
+
+
+def test_a_closed_two_sided_room_holding_furniture_stays_two_sided():
+    # The furniture's vertices lie inside the room's solid: what the room
+    # holds is seen, so its inner side must stay live.
+    scene = _room_holding(_box((0.2, 0.2, 0.2), (0.5, 0.3, 0.5)))
+    vox = voxgi.voxelize(scene, resolution=16, progress=False)
+    assert vox.stats["sealed_objects"] == []
+    assert not vox.back[vox.object_id == 0].any()
+
+
+def test_a_box_piercing_a_closed_two_sided_object_does_not_occupy_it():
+    # A leg under a cushion: a box with half its vertices outside the
+    # room's solid does not keep it live; the room is sealed.
+    scene = _room_holding(_box((0.2, 0.2, 1.6), (0.5, 0.5, 1.2)))
+    vox = voxgi.voxelize(scene, resolution=16, progress=False)
+    assert vox.stats["sealed_objects"] == [0]
+    assert vox.back[vox.object_id == 0].any()
