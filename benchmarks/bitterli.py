@@ -2,8 +2,11 @@
 
 The scenes: every whole scene of Bitterli's Mitsuba interiors as
 ``scripts/extract_bitterli.py`` extracts them (``<scenes>/<name>/diffuse/scene.toml``,
-the scene as voxgi loads it, textures and glossy lobes included),
-and the built-in Cornell box, window room and door room. Each is rendered at
+the scene as voxgi loads it, textures and glossy lobes included); for a
+scene that is not whole, its partial variant where one was written
+(``<name>-partial``: the shapes whose meshes the snapshot lacks left out,
+missing textures grey; ``extract_bitterli.py --partial``); and the built-in
+Cornell box, window room and door room. Each is rendered at
 ``--width`` pixels wide (the height keeps the camera's aspect) by
 
 - voxgi's defaults (``voxgi.render(scene)``: voxelize, solve, display),
@@ -54,6 +57,17 @@ REFS_DIR = Path("/work/refs")
 BITTERLI = ("bathroom", "bathroom2", "dining-room", "kitchen", "living-room", "staircase",
             "staircase2")  # fmt: skip
 BUILT_IN = ("cornell-box", "window-room", "door-room")
+
+
+def _extracted(scenes_dir: Path) -> list[str]:
+    """Each of Bitterli's scenes extracted whole, or else its partial variant."""
+    names = []
+    for n in BITTERLI:
+        for variant in (n, f"{n}-partial"):
+            if (scenes_dir / variant / "diffuse" / "scene.toml").exists():
+                names.append(variant)
+                break
+    return names
 
 
 def load(name: str, width: int, scenes_dir: Path = SCENES_DIR) -> voxgi.Scene:
@@ -161,15 +175,16 @@ def _render_passes(scene, tag: str, spp: int, base: Path, pass_spp: int, verbose
     return sums, info
 
 
-def original_render(folder: Path, width: int, spp: int) -> np.ndarray:
-    """Mitsuba's render of ``folder/scene.xml`` as written (its own BSDFs,
+def original_render(xml: Path, width: int, spp: int) -> np.ndarray:
+    """Mitsuba's render of the scene file ``xml`` as written (its own BSDFs,
     textures and glass), ``width`` pixels wide: the camera check."""
     import re
 
     from voxgi.mitsuba import mitsuba_module
 
     mi = mitsuba_module()
-    text = (folder / "scene.xml").read_text(encoding="utf-8")
+    folder = xml.parent
+    text = xml.read_text(encoding="utf-8")
     w = int(re.search(r'name="width" value="(\d+)"', text).group(1))
     h = int(re.search(r'name="height" value="(\d+)"', text).group(1))
     text = re.sub(r'(name="width" value=")\d+', rf"\g<1>{width}", text, count=1)
@@ -309,10 +324,7 @@ def main(argv=None) -> int:
     ap.add_argument("--original-spp", type=int, default=64)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
-    names = args.scenes or [
-        *(n for n in BITTERLI if (args.scenes_dir / n / "diffuse" / "scene.toml").exists()),
-        *BUILT_IN,
-    ]
+    names = args.scenes or [*_extracted(args.scenes_dir), *BUILT_IN]
     rows = []
     for name in names:
         scene = load(name, args.width, args.scenes_dir)
@@ -334,7 +346,10 @@ def main(argv=None) -> int:
         if args.pictures is not None:
             pics = [res.voxgi, res.reference]
             if name not in BUILT_IN:
-                pics.append(original_render(args.scenes_dir / name, args.width, args.original_spp))
+                xml = args.scenes_dir / name / "scene.xml"
+                if name.endswith("-partial"):
+                    xml = args.scenes_dir / name.removesuffix("-partial") / "scene.partial.xml"
+                pics.append(original_render(xml, args.width, args.original_spp))
             print("  wrote", side_by_side(args.pictures / f"{name}_{args.width}.png", pics))
     if rows:
         print_table(rows)

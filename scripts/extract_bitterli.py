@@ -18,12 +18,20 @@ For each scene folder of the mirror (a bare git directory holding the
    ``voxgi.Scene.load(scene.xml)`` (every material as voxgi maps it: diffuse
    part, texture, glossy lobe, glass) saved with ``Scene.save`` as
    ``diffuse/scene.toml`` (the folder's name is historical);
-   ``voxgi.mitsuba.to_mitsuba`` exports that same scene to Mitsuba.
+   ``voxgi.mitsuba.to_mitsuba`` exports that same scene to Mitsuba;
+5. with ``--partial``, for a scene that lacks meshes or textures (not its
+   environment map), writes the scene less the shapes whose mesh is missing,
+   each missing bitmap texture replaced by a constant grey 0.5, as a scene
+   of its own, ``<name>-partial/diffuse/scene.toml`` (what was left out or
+   replaced is listed in ``<name>-partial/OMITTED.txt``). It is not the
+   author's scene, but both renderers see the same one, so it serves a
+   comparison.
 
 Usage::
 
     python scripts/extract_bitterli.py                       # every scene, to /work/scenes
     python scripts/extract_bitterli.py living-room staircase2 --out /tmp/scenes
+    python scripts/extract_bitterli.py kitchen --partial     # the kitchen less its missing meshes
     python scripts/extract_bitterli.py --list                # what the mirror holds
 
 Exit status 0 when every requested scene was extracted (whole or not).
@@ -153,6 +161,68 @@ def write_diffuse(folder: Path) -> Path:
     return scene.save(folder / "diffuse" / "scene.toml")
 
 
+#: The constant that stands in for a missing bitmap texture in a partial scene.
+STAND_IN_GREY = "0.5"
+
+
+def write_partial(folder: Path, absent: list[str]) -> Path | None:
+    """The scene less its missing meshes, missing textures grey, as ``<folder>-partial``.
+
+    Returns the written ``scene.toml``, or None where a missing file is
+    neither a shape's mesh nor a bitmap texture (an environment map: a
+    stand-in would change the light itself).
+    """
+    import shutil
+
+    text = (folder / "scene.xml").read_text(encoding="utf-8")
+    root = ET.fromstring(text)
+    owners = {}
+    for el in root.iter():
+        if el.tag in ("shape", "texture"):
+            for child in el.findall("string"):
+                if child.get("name") == "filename":
+                    owners[child.get("value")] = el
+    if any(
+        a not in owners or owners[a].get("type") not in ("obj", "ply", "bitmap") for a in absent
+    ):
+        return None
+    parents = {child: parent for parent in root.iter() for child in parent}
+    notes = []
+    for a in absent:
+        el = owners[a]
+        parent = parents[el]
+        if el.tag == "shape":
+            parent.remove(el)
+            notes.append(f"left out: the shape of {a}\n")
+        else:
+            grey = ET.Element("spectrum", name=el.get("name", "reflectance"), value=STAND_IN_GREY)
+            parent.insert(list(parent).index(el), grey)
+            parent.remove(el)
+            notes.append(f"replaced by grey {STAND_IN_GREY}: the texture {a}\n")
+    dest = folder.with_name(folder.name + "-partial")
+    if dest.exists():
+        shutil.rmtree(dest)
+    dest.mkdir(parents=True)
+    # The shapes' relative paths resolve against the scene file's folder:
+    # the partial scene file stays beside the original's meshes.
+    xml = folder / "scene.partial.xml"
+    ET.ElementTree(root).write(xml, encoding="utf-8")
+    (dest / "OMITTED.txt").write_text(
+        "Files missing from the snapshot, and what the partial scene does instead:\n"
+        + "".join(notes)
+    )
+    import warnings
+
+    import voxgi
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = voxgi.Scene.load(xml)
+    for w in caught:
+        print(f"    voxgi: {w.message}")
+    return scene.save(dest / "diffuse" / "scene.toml")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("scenes", nargs="*", help=f"scene folders (default: {' '.join(SCENES)})")
@@ -160,6 +230,11 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=OUT, help="target folder (outside the repository)")
     ap.add_argument("--no-diffuse", action="store_true", help="skip the diffuse variant")
     ap.add_argument("--list", action="store_true", help="list the mirror's folders and exit")
+    ap.add_argument(
+        "--partial",
+        action="store_true",
+        help="for a scene lacking only meshes, write it less those shapes as <name>-partial",
+    )
     args = ap.parse_args(argv)
     if args.list:
         print(_git(args.mirror, "ls-tree", "--name-only", "HEAD").stdout)
@@ -184,6 +259,13 @@ def main(argv=None) -> int:
             whole.append(name)
             if not args.no_diffuse:
                 print(f"    diffuse variant: {write_diffuse(folder)}")
+        elif args.partial:
+            partial = write_partial(folder, absent)
+            print(
+                f"    partial variant: {partial}"
+                if partial
+                else "    no partial variant: a missing file is neither a mesh nor a texture"
+            )
     print("whole scenes:", " ".join(whole) if whole else "none")
     return 0
 
