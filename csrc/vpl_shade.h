@@ -47,9 +47,12 @@ struct ShadeMaterials {
 };
 
 // Whether the gather rays of a pixel of material m follow the lobes of the
-// surfaces they land on (a glossy pixel, where continue_lobe is given).
+// surfaces they land on: every shaded pixel, where continue_lobe is given. A
+// diffuse pixel beside a mirror sees the mirror's reflection in its own
+// direction, not the mirror's light spread evenly over the hemisphere
+// (docs/design.md §14).
 inline bool follows_lobes(const ShadeMaterials& mats, int32_t m) {
-    return mats.continue_lobe && mats.lobe && m >= 0 && m < mats.count && mats.lobe[m].kind != 0.f;
+    return mats.continue_lobe && mats.lobe && m >= 0 && m < mats.count;
 }
 
 // Hit points of one frame (P pixels).

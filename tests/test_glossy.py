@@ -470,3 +470,80 @@ def test_a_plastic_seen_at_grazing_in_a_mirror_sends_its_base_light_through_its_
     # (0.67, 0.65% low; 0.84 with the base read as its mean)
     got, want = _plastic_seen_in_a_mirror(0.1)
     np.testing.assert_allclose(got.mean(axis=0), want, rtol=0.02)
+
+
+def _irradiance_from_quad(x, n, corners) -> float:
+    """Irradiance at point x (unit normal n) from a quad of unit radiance
+    wholly in front of it: Lambert's polygon formula, ½ Σ β_i (γ_i · n)."""
+    v = [np.asarray(c, float) - x for c in corners]
+    v = [a / np.linalg.norm(a) for a in v]
+    total = 0.0
+    for a, b in zip(v, v[1:] + v[:1], strict=True):
+        g = np.cross(a, b)
+        total += math.acos(np.clip(np.dot(a, b), -1.0, 1.0)) * np.dot(g / np.linalg.norm(g), n)
+    return 0.5 * abs(total)
+
+
+def _wall_beside_a_mirror_floor(facing: float, follow: bool) -> np.ndarray:
+    """The middle pixels of a grey wall patch standing on a mirror floor at
+    x = -0.3 facing, ``facing`` = 1: +x, towards a lamp that hangs over the
+    floor at x >= 0.5 facing down, so that it sees the lamp and the lamp's
+    image in the mirror; or at x = +0.3 facing -x, away from both, so that
+    it sees only the mirror reflecting the dark half of the room."""
+    mirror = Microfacet("conductor", alpha=0.02, eta=(0.0, 0.0, 0.0), k=(1.0, 1.0, 1.0))
+    x0 = -0.3 * facing
+    cam = Camera(
+        eye=(x0 + 2.0 * facing, 0.7, 0.0),
+        target=(x0, 0.7, 0.0),
+        fov=3.0,
+        width=8,
+        height=8,
+    )
+    sc = Scene(cam)
+    sc.add(_quad([[-3, 0, -3], [-3, 0, 3], [3, 0, 3], [3, 0, -3]]), Material(0.5, specular=mirror))
+    wall = [[x0, 0.2, -0.5], [x0, 1.2, -0.5], [x0, 1.2, 0.5], [x0, 0.2, 0.5]]
+    sc.add(_quad(wall if facing > 0 else wall[::-1]), Material(0.5), name="wall")
+    sc.add(_quad(LAMP), Material(0.0, emission=1.0), name="lamp")
+    sol = voxgi.solve(voxgi.voxelize(sc, resolution=32, progress=False), progress=False)
+    out = voxgi.render(
+        sc,
+        sol,
+        max_frames=64,
+        tol=0,
+        progress=False,
+        seed=3,
+        tuning=_Experiment(follow_lobes=follow),
+    )
+    return out.image[2:6, 2:6].reshape(-1, 3).mean(axis=0)
+
+
+#: The lamp over the mirror floor, facing down (-y).
+LAMP = [[0.5, 2.0, -3.0], [3.0, 2.0, -3.0], [3.0, 2.0, 3.0], [0.5, 2.0, 3.0]]
+
+
+def test_a_diffuse_wall_sees_a_lamp_in_a_mirror_floor():
+    # The wall facing the lamp takes the lamp's light straight and through
+    # its image below the mirror: ρ/π (E_lamp + R E_image), Lambert's
+    # formula for both quads.
+    x = np.array([-0.3, 0.7, 0.0])
+    n = np.array([1.0, 0.0, 0.0])
+    image = [[a, -b, c] for a, b, c in LAMP]
+    mirror = Microfacet("conductor", alpha=0.02, eta=(0.0, 0.0, 0.0), k=(1.0, 1.0, 1.0))
+    # the image's light meets the floor at about 45 degrees
+    r = float(mirror.directional_albedo((0.5,) * 3, [math.sqrt(0.5)])[0, 1])
+    want = (
+        0.5 / math.pi * (_irradiance_from_quad(x, n, LAMP) + r * _irradiance_from_quad(x, n, image))
+    )
+    got = _wall_beside_a_mirror_floor(1.0, follow=True)
+    np.testing.assert_allclose(got, want, rtol=0.02)
+
+
+def test_a_diffuse_wall_facing_away_from_a_lamp_sees_it_in_no_mirror():
+    # Every ray from the wall that the mirror reflects goes on away from
+    # the lamp: the wall must stay black, where the mirror's mean light
+    # would make it glow.
+    got = _wall_beside_a_mirror_floor(-1.0, follow=True)
+    lit = _wall_beside_a_mirror_floor(1.0, follow=True)
+    assert np.all(got < 0.01 * lit)
+    mean_read = _wall_beside_a_mirror_floor(-1.0, follow=False)
+    assert np.all(mean_read > 0.05 * lit)

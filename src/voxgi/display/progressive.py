@@ -124,7 +124,7 @@ def _with_budget(opt: _RenderSettings, sol) -> _RenderSettings:
 
 def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
     """The VPL sampler and the shadow-ray offset of this scene and solution."""
-    # glossy pixels follow the lobes their gather rays land on (docs/design.md §14)
+    # pixels follow the lobes their gather rays land on (docs/design.md §14)
     share = None
     if opt.gather > 0 and opt.follow_lobes:
         share = base_share(scene, sol, continuing_objects(scene))

@@ -93,10 +93,10 @@ class _Experiment(RenderTuning):
         frame's seen emission is replaced by its mean over the pixel (default;
         :mod:`voxgi.display.seen_emission`); False keeps each frame's own.
     follow_lobes : bool
-        A glossy pixel's gather ray that lands on a glossy surface reads the
-        base's share of its record and follows that surface's lobe one
-        bounce further (default; ``docs/design.md`` §14); False reads the
-        record's mean whatever the direction.
+        A pixel's gather ray that lands on a glossy surface reads the base's
+        share of its record and follows that surface's lobe one bounce
+        further (default; ``docs/design.md`` §14); False reads the record's
+        mean whatever the direction.
     guide_environment : bool
         Each pixel's environment samples are drawn where the environment's
         light reaches its place (default; :mod:`voxgi.display.environment_guide`);
