@@ -163,13 +163,17 @@ def occupied(scene, k: int, mesh, bounds: np.ndarray | None = None) -> bool:
     if not samples:
         return False
     # one parity test for every candidate's samples: each point's answer
-    # is its own, and a call costs far more than a point
+    # is its own, and a call costs far more than a point; a point outside
+    # the solid's bounding box is outside it and needs none
     owner = np.concatenate(owner)
-    within = inside(mesh, np.concatenate(samples))
+    points = np.concatenate(samples)
+    boxed = np.flatnonzero(np.all((points >= lo) & (points <= hi), axis=1))
     n = len(scene.objects)
-    return bool(
-        np.any(2 * np.bincount(owner[within], minlength=n) > np.bincount(owner, minlength=n))
-    )
+    counts = np.bincount(owner, minlength=n)
+    if not np.any(2 * np.bincount(owner[boxed], minlength=n) > counts):
+        return False
+    within = boxed[inside(mesh, points[boxed])]
+    return bool(np.any(2 * np.bincount(owner[within], minlength=n) > counts))
 
 
 def seal(res: dict, scene, pitch: float) -> tuple[dict, int]:
