@@ -23,9 +23,10 @@ For each scene folder of the mirror (a bare git directory holding the
    environment map), writes the scene less the shapes whose mesh is missing,
    each missing bitmap texture replaced by a constant grey 0.5, as a scene
    of its own, ``<name>-partial/diffuse/scene.toml`` (what was left out or
-   replaced is listed in ``<name>-partial/OMITTED.txt``). It is not the
-   author's scene, but both renderers see the same one, so it serves a
-   comparison.
+   replaced is listed in ``<name>-partial/OMITTED.txt``; the edited Mitsuba
+   file is ``<name>/scene.partial.xml``, beside the meshes it names). It is
+   not the author's scene, but both renderers see the same one, so it
+   serves a comparison.
 
 Usage::
 
