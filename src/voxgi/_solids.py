@@ -124,8 +124,15 @@ _OCCUPANT_SAMPLES = 64
 
 
 def object_bounds(scene) -> np.ndarray:
-    """(n_objects, 2, 3): each object's vertex bounds, lowest then highest."""
-    return np.array([[o.vertices.min(axis=0), o.vertices.max(axis=0)] for o in scene.objects])
+    """(n_objects, 2, 3): each object's vertex bounds, lowest then highest
+    (an object without vertices: an empty box, near nothing)."""
+    out = np.empty((len(scene.objects), 2, 3))
+    out[:, 0], out[:, 1] = np.inf, -np.inf
+    for j, o in enumerate(scene.objects):
+        v = np.asarray(o.vertices, np.float64).reshape(-1, 3)
+        if len(v):
+            out[j] = v.min(axis=0), v.max(axis=0)
+    return out
 
 
 def occupied(scene, k: int, mesh, bounds: np.ndarray | None = None) -> bool:
