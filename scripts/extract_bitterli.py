@@ -148,18 +148,24 @@ def apply_edits(folder: Path) -> list[str]:
     return done
 
 
-def write_diffuse(folder: Path) -> Path:
-    """``diffuse/scene.toml``: the scene as voxgi loads it, for both renderers."""
+def save_as_loaded(xml: Path, dest: Path) -> Path:
+    """``dest/diffuse/scene.toml``: the scene file ``xml`` as voxgi loads it,
+    for both renderers; voxgi's load warnings printed."""
     import warnings
 
     import voxgi
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        scene = voxgi.Scene.load(folder / "scene.xml")
+        scene = voxgi.Scene.load(xml)
     for w in caught:
         print(f"    voxgi: {w.message}")
-    return scene.save(folder / "diffuse" / "scene.toml")
+    return scene.save(dest / "diffuse" / "scene.toml")
+
+
+def write_diffuse(folder: Path) -> Path:
+    """``diffuse/scene.toml``: the scene as voxgi loads it, for both renderers."""
+    return save_as_loaded(folder / "scene.xml", folder)
 
 
 #: The constant that stands in for a missing bitmap texture in a partial scene.
@@ -212,16 +218,7 @@ def write_partial(folder: Path, absent: list[str]) -> Path | None:
         "Files missing from the snapshot, and what the partial scene does instead:\n"
         + "".join(notes)
     )
-    import warnings
-
-    import voxgi
-
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        scene = voxgi.Scene.load(xml)
-    for w in caught:
-        print(f"    voxgi: {w.message}")
-    return scene.save(dest / "diffuse" / "scene.toml")
+    return save_as_loaded(xml, dest)
 
 
 def main(argv=None) -> int:

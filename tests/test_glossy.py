@@ -369,11 +369,30 @@ def _quad(corners) -> trimesh.Trimesh:
     return trimesh.Trimesh(np.asarray(corners, float), [[0, 1, 2], [0, 2, 3]], process=False)
 
 
+#: A near-perfect mirror: a smooth conductor whose Fresnel reflectance is 1.
+MIRROR = Microfacet("conductor", alpha=0.02, eta=(0.0, 0.0, 0.0), k=(1.0, 1.0, 1.0))
+
+
+def _middle_pixels(sc: Scene, follow: bool, seed: int) -> np.ndarray:
+    """(16, 3): the middle 4 x 4 pixels of an 8 x 8 camera after 64 frames of
+    the default solve at resolution 32, the lobes followed or not."""
+    sol = voxgi.solve(voxgi.voxelize(sc, resolution=32, progress=False), progress=False)
+    out = voxgi.render(
+        sc,
+        sol,
+        max_frames=64,
+        tol=0,
+        progress=False,
+        seed=seed,
+        tuning=_Experiment(follow_lobes=follow),
+    )
+    return out.image[2:6, 2:6].reshape(-1, 3)
+
+
 def _two_mirrors(follow: bool) -> tuple[np.ndarray, float]:
     """The middle pixels' radiance where the camera sees a lamp in a mirror
     seen in a mirror, and what it should be: the lamp's radiance times the
     two mirrors' directional albedos at 45°."""
-    mirror = Microfacet("conductor", alpha=0.02, eta=(0.0, 0.0, 0.0), k=(1.0, 1.0, 1.0))
     cam = Camera(
         eye=(0.0, 2.0, 0.0), target=(0.0, 0.0, 0.0), up=(0, 0, 1), fov=8.0, width=8, height=8
     )
@@ -382,12 +401,12 @@ def _two_mirrors(follow: bool) -> tuple[np.ndarray, float]:
     # them to +y, onto the lamp at y = 2 facing down
     sc.add(
         _quad([[-0.5, 0.5, -0.5], [-0.5, 0.5, 0.5], [0.5, -0.5, 0.5], [0.5, -0.5, -0.5]]),
-        Material(0.5, specular=mirror),
+        Material(0.5, specular=MIRROR),
         name="A",
     )
     sc.add(
         _quad([[1.5, -0.5, 0.5], [2.5, 0.5, 0.5], [2.5, 0.5, -0.5], [1.5, -0.5, -0.5]]),
-        Material(0.5, specular=mirror),
+        Material(0.5, specular=MIRROR),
         name="B",
     )
     # (wide, so that it fills B's lobe from every point of B the rays meet)
@@ -396,18 +415,8 @@ def _two_mirrors(follow: bool) -> tuple[np.ndarray, float]:
         Material(0.0, emission=1.0),
         name="lamp",
     )
-    sol = voxgi.solve(voxgi.voxelize(sc, resolution=32, progress=False), progress=False)
-    out = voxgi.render(
-        sc,
-        sol,
-        max_frames=64,
-        tol=0,
-        progress=False,
-        seed=2,
-        tuning=_Experiment(follow_lobes=follow),
-    )
-    r45 = float(mirror.directional_albedo((0.5,) * 3, [math.sqrt(0.5)])[0, 1])
-    return out.image[2:6, 2:6].reshape(-1, 3), r45 * r45
+    r45 = float(MIRROR.directional_albedo((0.5,) * 3, [math.sqrt(0.5)])[0, 1])
+    return _middle_pixels(sc, follow, seed=2), r45 * r45
 
 
 def test_a_glossy_pixel_sees_a_lamp_in_a_mirror_seen_in_a_mirror():
@@ -490,7 +499,6 @@ def _wall_beside_a_mirror_floor(facing: float, follow: bool) -> np.ndarray:
     floor at x >= 0.5 facing down, so that it sees the lamp and the lamp's
     image in the mirror; or at x = +0.3 facing -x, away from both, so that
     it sees only the mirror reflecting the dark half of the room."""
-    mirror = Microfacet("conductor", alpha=0.02, eta=(0.0, 0.0, 0.0), k=(1.0, 1.0, 1.0))
     x0 = -0.3 * facing
     cam = Camera(
         eye=(x0 + 2.0 * facing, 0.7, 0.0),
@@ -500,21 +508,11 @@ def _wall_beside_a_mirror_floor(facing: float, follow: bool) -> np.ndarray:
         height=8,
     )
     sc = Scene(cam)
-    sc.add(_quad([[-3, 0, -3], [-3, 0, 3], [3, 0, 3], [3, 0, -3]]), Material(0.5, specular=mirror))
+    sc.add(_quad([[-3, 0, -3], [-3, 0, 3], [3, 0, 3], [3, 0, -3]]), Material(0.5, specular=MIRROR))
     wall = [[x0, 0.2, -0.5], [x0, 1.2, -0.5], [x0, 1.2, 0.5], [x0, 0.2, 0.5]]
     sc.add(_quad(wall if facing > 0 else wall[::-1]), Material(0.5), name="wall")
     sc.add(_quad(LAMP), Material(0.0, emission=1.0), name="lamp")
-    sol = voxgi.solve(voxgi.voxelize(sc, resolution=32, progress=False), progress=False)
-    out = voxgi.render(
-        sc,
-        sol,
-        max_frames=64,
-        tol=0,
-        progress=False,
-        seed=3,
-        tuning=_Experiment(follow_lobes=follow),
-    )
-    return out.image[2:6, 2:6].reshape(-1, 3).mean(axis=0)
+    return _middle_pixels(sc, follow, seed=3).mean(axis=0)
 
 
 #: The lamp over the mirror floor, facing down (-y).
@@ -528,9 +526,8 @@ def test_a_diffuse_wall_sees_a_lamp_in_a_mirror_floor():
     x = np.array([-0.3, 0.7, 0.0])
     n = np.array([1.0, 0.0, 0.0])
     image = [[a, -b, c] for a, b, c in LAMP]
-    mirror = Microfacet("conductor", alpha=0.02, eta=(0.0, 0.0, 0.0), k=(1.0, 1.0, 1.0))
     # the image's light meets the floor at about 45 degrees
-    r = float(mirror.directional_albedo((0.5,) * 3, [math.sqrt(0.5)])[0, 1])
+    r = float(MIRROR.directional_albedo((0.5,) * 3, [math.sqrt(0.5)])[0, 1])
     want = (
         0.5 / math.pi * (_irradiance_from_quad(x, n, LAMP) + r * _irradiance_from_quad(x, n, image))
     )
