@@ -224,14 +224,60 @@ def test_killed_worker_is_survived(cornell_small, local_solution, client):
     finally:
         done.set()
         th.join()
+        # the nanny brings a new worker process back; wait so later tests see two
+        client.wait_for_workers(2, timeout=60)
     t_end = time.perf_counter()
     assert "addr" in killed, "the solve ended before a worker could be killed"
     assert killed["at"] < t_end
     assert _rel(sol.radiosity, local_solution.radiosity) < 1e-6
     assert sol.bounces == local_solution.bounces
-    # the nanny brings a new worker process back; wait so later tests see two
-    client.wait_for_workers(2, timeout=60)
     assert set(client.run(os.getpid).values()) != set(pids.values())
+
+
+def _lose_last_copy(client, fut):
+    """Do what Dask's active memory manager and a killed worker do together:
+    reduce a broadcast value to one copy, then SIGKILL the worker holding it."""
+    client.amm.run_once()  # ReduceReplicas drops the copies no task waits for
+    deadline = time.perf_counter() + 30
+    while len(client.who_has([fut]).get(fut.key, ())) != 1:
+        assert time.perf_counter() < deadline, "the copies were not reduced to one"
+        time.sleep(0.02)
+    (holder,) = client.who_has([fut])[fut.key]
+    os.kill(client.run(os.getpid)[holder], signal.SIGKILL)
+    while fut.status == "finished":
+        assert time.perf_counter() < deadline, "the cluster did not lose the value"
+        time.sleep(0.02)
+    client.wait_for_workers(2, timeout=60)
+
+
+class _LosingExecutor:
+    """A DaskExecutor whose cluster loses the records or the frames' scene
+    right after they were sent (and before any task used them)."""
+
+    def __init__(self, client):
+        from voxgi.distributed import DaskExecutor
+
+        self.dask = DaskExecutor(client)
+        self.client = client
+
+    def line_system(self, records, *, progress=False):
+        system = self.dask.line_system(records, progress=progress)
+        _lose_last_copy(self.client, system._records)
+        return system
+
+    def frames(self, spec, max_frames, *, threads=1):
+        frames = self.dask.frames(spec, max_frames, threads=threads)
+        _lose_last_copy(self.client, frames._payload)
+        return frames
+
+
+def test_records_lost_with_a_worker_are_sent_again(cornell_small, local_solution, client):
+    """The cluster's last copy of the records dies with a worker: sent again."""
+    _, vox = cornell_small
+    sol = voxgi.solve(vox, radius=R, tuning=TUNED, progress=False, client=_LosingExecutor(client))
+    assert _rel(sol.radiosity, local_solution.radiosity) < 1e-6
+    assert sol.bounces == local_solution.bounces
+    assert sol.stats["executor"]["resent"] >= 1
 
 
 # -- render ------------------------------------------------------------------------------------
@@ -254,6 +300,16 @@ def test_render_equals_local(cornell_small, local_solution, client):
     assert control > 0
     assert extra % control == 0
     assert 1 <= extra // control <= 2
+
+
+def test_scene_lost_with_a_worker_is_sent_again(cornell_small, local_solution, client):
+    """The cluster's last copy of the frames' scene dies with a worker: sent again."""
+    scene, _ = cornell_small
+    kw = dict(max_frames=6, tol=2e-3, seed=3, progress=False)
+    ref = voxgi.render(scene, local_solution, threads=1, **kw)
+    out = voxgi.render(scene, local_solution, client=_LosingExecutor(client), **kw)
+    np.testing.assert_allclose(out.image, ref.image, rtol=1e-6, atol=1e-7)
+    assert out.frames == ref.frames
 
 
 def test_progress_bar_counts_finished_tasks(cornell_small, client, monkeypatch):

@@ -26,7 +26,10 @@ class _Farm:
             "bytes_sent": 0,
             "bytes_received": 0,
             "seconds_waiting": 0.0,
+            "resent": 0,
         }
+        self._sent: dict = {}  # key: (future, value) of what _send scattered
+        self._resent: dict = {}  # a lost future's key: the future sent in its place
 
     def _check_memory(self, need: int, what: str) -> None:
         """Refuse before any work when a worker's memory_limit is under ``need``.
@@ -51,6 +54,42 @@ class _Farm:
                 )
         self.stats["bytes_per_worker_estimate"] = int(need)
 
+    def _send(self, value):
+        """Scatter ``value`` to every worker; return its future.
+
+        Dask's active memory manager (its ``ReduceReplicas`` policy, on by
+        default) drops the copies of a broadcast value that no task waits
+        for, down to one; a worker killed then takes the last copy with it.
+        The farm keeps the value so that :meth:`_map` can send it again.
+        """
+        fut = self.client.scatter([value], broadcast=True, hash=False)[0]
+        self._sent[fut.key] = (fut, value)
+        return fut
+
+    def _live(self, x):
+        """``x``, or the future sent in its place if ``x`` was lost."""
+        while getattr(x, "key", None) in self._resent:
+            x = self._resent[x.key]
+        return x
+
+    def _resend_lost(self) -> int:
+        """Scatter again every sent value whose data the cluster lost."""
+        n = 0
+        for key, (fut, value) in list(self._sent.items()):
+            if fut.status != "finished":
+                del self._sent[key]
+                self._resent[key] = self._send(value)
+                n += 1
+        self.stats["resent"] += n
+        return n
+
+    def _unsend(self, fut) -> None:
+        """Release a sent value (and whatever was sent in its place)."""
+        while fut is not None:
+            self._sent.pop(fut.key, None)
+            fut.release()
+            fut = self._resent.pop(fut.key, None)
+
     def _map(self, fn, chunks, *common, key_prefix: str):
         """Run ``fn(*common, *chunk)`` for every chunk, one worker each (loosely:
         another may take over if it dies); return the results in chunk order."""
@@ -59,8 +98,8 @@ class _Farm:
         def submit(i):
             return self.client.submit(
                 fn,
-                *common,
-                *chunks[i],
+                *(self._live(x) for x in common),
+                *(self._live(x) for x in chunks[i]),
                 workers=[self.workers[i % len(self.workers)]],
                 allow_other_workers=True,
                 pure=False,
@@ -85,8 +124,10 @@ class _Farm:
                 if fut.cancelled() and resubmitted < len(futs):
                     # A worker killed while another fetched a result from it
                     # can leave the scheduler forgetting that task ("already
-                    # forgotten"): the inputs are on every worker, so it runs again.
+                    # forgotten"), or take with it the last copy of an input
+                    # ("lost dependencies"): send what was lost, run it again.
                     resubmitted += 1
+                    self._resend_lost()
                     again = submit(i)
                     where[again.key] = i
                     pending.add(again)

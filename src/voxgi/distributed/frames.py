@@ -40,7 +40,7 @@ class DistributedFrames(_Farm):
         self._check_memory(need, f"a {cam.width}x{cam.height} render of {n} records")
         self.key = "frames-" + _uid()
         t = time.perf_counter()
-        self._payload = client.scatter([spec], broadcast=True, hash=False)[0]
+        self._payload = self._send(spec)  # kept, to be sent again if the cluster loses it
         self.stats["seconds_scatter"] = time.perf_counter() - t
         slots = sum(int(v.get("nthreads", 1)) for v in _workers(client).values())
         self.ahead = max(2, 2 * slots)
@@ -55,35 +55,39 @@ class DistributedFrames(_Farm):
         while self._next <= min(last, self.max_frames - 1):
             f = self._next
             w = self.workers[f % len(self.workers)]
-            self._futs[f] = self.client.submit(
-                _task_frame,
-                self._payload,
-                self.key,
-                f,
-                seed,
-                workers=[w],
-                allow_other_workers=True,
-                pure=False,
-                key=f"voxgi-frame-{f}-{_uid()}",
-            )
-            self.stats["tasks"] += 1
+            self._futs[f] = self._submit(f, seed, workers=[w], allow_other_workers=True)
             self._next += 1
+
+    def _submit(self, f: int, seed: int, **where):
+        self.stats["tasks"] += 1
+        return self.client.submit(
+            _task_frame,
+            self._live(self._payload),
+            self.key,
+            f,
+            seed,
+            pure=False,
+            key=f"voxgi-frame-{f}-{_uid()}",
+            **where,
+        )
 
     def frame(self, f: int, seed: int) -> np.ndarray:
         """(H*W, 3) float32 radiance of frame ``f`` (computed on a worker)."""
+        from distributed import as_completed
+
         self._submit_upto(f + self.ahead, seed)
         if f not in self._futs:  # asked out of order: compute it alone
-            self._futs[f] = self.client.submit(
-                _task_frame,
-                self._payload,
-                self.key,
-                f,
-                seed,
-                pure=False,
-                key=f"voxgi-frame-{f}-{_uid()}",
-            )
+            self._futs[f] = self._submit(f, seed)
         t = time.perf_counter()
-        x, self.surface, counts, secs = self._futs.pop(f).result()
+        fut = self._futs.pop(f)
+        for _ in range(len(self.workers)):
+            next(as_completed([fut]))  # done, or cancelled (where wait() raises)
+            if not fut.cancelled():
+                break
+            # forgotten or lost with a killed worker (see _Farm._map): again
+            self._resend_lost()
+            fut = self._submit(f, seed)
+        x, self.surface, counts, secs = fut.result()
         self.stats["seconds_waiting"] += time.perf_counter() - t
         self.stats["bytes_received"] += x.nbytes + sum(a.nbytes for a in self.surface)
         self.primary_rays += counts[0]
@@ -98,4 +102,4 @@ class DistributedFrames(_Farm):
         if self._futs:
             self.client.cancel(list(self._futs.values()))
             self._futs.clear()
-        self._payload.release()
+        self._unsend(self._payload)

@@ -91,9 +91,9 @@ class DistributedLineSystem(_Farm):
         self.key = _token(ijk, normal, point, np.float32([epsilon, history]))
         records = LineRecords(ijk, normal, point, epsilon, history)
         t = time.perf_counter()
-        # once, to every worker: a killed worker's tasks find a copy elsewhere
-        # (in a list: a container itself would be scattered value by value)
-        self._records = client.scatter([records], broadcast=True, hash=False)[0]
+        # once, to every worker, kept to be sent again should a killed worker
+        # take the cluster's last copy with it
+        self._records = self._send(records)
         self.stats["seconds_scatter"] = time.perf_counter() - t
         self.stats["bytes_scattered"] = int(ijk.nbytes + normal.nbytes + point.nbytes)
         self._stand_in_cache = None  # (token, future) of the last stand-in flags sent
@@ -106,7 +106,7 @@ class DistributedLineSystem(_Farm):
         if v.shape != (self.size, 3):
             raise ValueError(f"values: expected shape ({self.size}, 3), got {v.shape}")
         # once per call to every worker, not once per task
-        fut = self.client.scatter(v, broadcast=True, hash=False)
+        fut = self._send(v)
         self.stats["bytes_sent"] += v.nbytes * len(self.workers)
         return fut
 
@@ -130,7 +130,9 @@ class DistributedLineSystem(_Farm):
             raise ValueError(f"stand_in: expected shape ({self.size},), got {sb.shape}")
         tok = _token(sb)
         if self._stand_in_cache is None or self._stand_in_cache[0] != tok:
-            fut = self.client.scatter(sb, broadcast=True, hash=False)
+            if self._stand_in_cache is not None:
+                self._unsend(self._stand_in_cache[1])
+            fut = self._send(sb)
             self.stats["bytes_sent"] += sb.nbytes * len(self.workers)
             self._stand_in_cache = (tok, fut)
         return self._stand_in_cache[1]
@@ -145,7 +147,12 @@ class DistributedLineSystem(_Farm):
         vfut = self._values(values)
         sfut = self._stand_in(stand_in)
         chunks = [(fams[c], wts[c], vfut, bool(want_vis), sfut) for c in self._chunks(len(sel))]
-        parts = self._map(_task_gather, chunks, self._records, self.key, key_prefix="voxgi-gather")
+        try:
+            parts = self._map(
+                _task_gather, chunks, self._records, self.key, key_prefix="voxgi-gather"
+            )
+        finally:
+            self._unsend(vfut)
         sums = np.zeros((self.size, 3))
         vis = np.zeros(self.size) if want_vis else None
         lines = 0
@@ -186,9 +193,12 @@ class DistributedLineSystem(_Farm):
             (np.ascontiguousarray(families[c]), np.ascontiguousarray(weights[c]), vfut, sfut, sil)
             for c in self._chunks(len(families))
         ]
-        parts = self._map(
-            _task_shoot, chunks, self._records, self.key, em, cov, key_prefix="voxgi-shoot"
-        )
+        try:
+            parts = self._map(
+                _task_shoot, chunks, self._records, self.key, em, cov, key_prefix="voxgi-shoot"
+            )
+        finally:
+            self._unsend(vfut)
         hd = np.zeros((self.size, 3))
         unfound = np.zeros(len(em))
         rays = steps = 0
@@ -202,7 +212,7 @@ class DistributedLineSystem(_Farm):
 
     def close(self) -> None:
         """Release the scattered records (the workers' caches keep at most two systems)."""
-        self._records.release()
+        self._unsend(self._records)
         if self._stand_in_cache is not None:
-            self._stand_in_cache[1].release()
+            self._unsend(self._stand_in_cache[1])
             self._stand_in_cache = None
