@@ -72,6 +72,55 @@ def test_rays_down_onto_a_square_hit_the_right_triangle_at_the_right_point():
         assert np.all(tr.occluded(org, up, np.full(len(org), np.inf, np.float32)) == 0)
 
 
+def test_tracers_of_one_scene_share_its_compiled_scene_until_it_changes(monkeypatch):
+    """The BVH is built once per scene; an object added, its vertices moved in
+    place or its transmittance changed gives a new one that sees the change."""
+    import trimesh
+
+    import voxgi.rays as rays
+
+    builds = []
+    build = rays.ray_scene
+    monkeypatch.setattr(rays, "ray_scene", lambda *a: builds.append(1) or build(*a))
+    scene = unit_square_scene()
+    a, b = Tracer(scene, 1), Tracer(scene, 2)
+    assert len(builds) == 1
+    assert a.native is b.native
+    assert a.tris is b.tris
+    assert not a.tris.flags.writeable  # shared: no tracer may edit it
+    down = np.float32([[0.25, 0.75, 1.0]]) - a.centre.astype(np.float32)
+    dirs = np.float32([[0, 0, -1]])
+    assert Tracer(scene, 1).intersect(down, dirs)[0] == 1
+    # a square above the first: the next tracer meets it first
+    above = trimesh.Trimesh(
+        vertices=[[0, 0, 0.5], [1, 0, 0.5], [1, 1, 0.5], [0, 1, 0.5]],
+        faces=[[0, 1, 2], [0, 2, 3]],
+        process=False,
+    )
+    scene.add(above, voxgi.Material(albedo=0.5), name="above")
+    t = Tracer(scene, 1)
+    assert len(builds) == 2
+    assert t.intersect(np.float32([[0.25, 0.75, 1.0]]) - t.centre.astype(np.float32), dirs)[0] == 3
+    # the upper square moved away in place, sideways out of the ray's way
+    scene.objects[1].vertices[:, 0] += 5.0
+    t = Tracer(scene, 1)
+    assert len(builds) == 3
+    assert t.intersect(np.float32([[0.25, 0.75, 1.0]]) - t.centre.astype(np.float32), dirs)[0] == 1
+    # the same scene again: no build
+    Tracer(scene, 1)
+    assert len(builds) == 3
+    # the lower square made a pane of glass: the ray passes it
+    scene.objects[0].material = voxgi.Material(albedo=0.0, transmittance=0.9)
+    t = Tracer(scene, 1)
+    assert len(builds) == 4
+    assert t.has_sheets
+    prim, T = t.intersect(
+        np.float32([[0.25, 0.75, 1.0]]) - t.centre.astype(np.float32), dirs, through=True
+    )
+    assert prim[0] == -1
+    np.testing.assert_allclose(T[0], 0.9, rtol=1e-6)
+
+
 def test_the_compiled_scene_answers_as_embreex_does():
     scene = voxgi.scenes.cornell_box()
     rng = np.random.default_rng(0)

@@ -15,6 +15,11 @@ no light passes the segment, 0 where some does, as the compiled kernels take
 it. Transmitting sheets (glass, ``docs/design.md`` §13) are in a scene of
 their own: no query stops at one; :meth:`Tracer.transmittance` and
 ``through`` give the product of the transmittances of the sheets crossed.
+
+A scene's compiled Embree scene is built once and kept while the scene lives
+(:func:`compiled_scene`): the voxelization's direct light, the solve's traced
+passes and the display all trace the same triangles, and building the
+hierarchy of a million of them takes about half a second.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from __future__ import annotations
 import functools
 import os
 import sys
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +35,14 @@ import numpy as np
 from . import _core
 from .scene import Scene
 
-__all__ = ["EMBREEX_RANGE", "Tracer", "embree_library", "embree_version", "ray_scene"]
+__all__ = [
+    "EMBREEX_RANGE",
+    "Tracer",
+    "compiled_scene",
+    "embree_library",
+    "embree_version",
+    "ray_scene",
+]
 
 #: The embreex releases whose bundled Embree the compiled core loads
 #: (``pyproject.toml`` pins the same range).
@@ -112,6 +125,44 @@ def embree_version() -> str:
     return ray_scene(np.eye(3, dtype=np.float32)[None]).embree_version
 
 
+# scene -> (its geometry's key, centre, centred float64 triangles, RayScene)
+_COMPILED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def compiled_scene(scene: Scene) -> tuple[np.ndarray, np.ndarray, _core.RayScene]:
+    """The frame centre, the centred (F, 3, 3) float64 triangles and the
+    compiled Embree scene of ``scene``, built on first use and kept while
+    ``scene`` lives and its geometry and transmittances stay the same.
+
+    The triangles are read-only: every tracer of the scene shares them.
+
+    Raises
+    ------
+    ImportError
+        Where the Embree 4 library cannot be opened (:func:`embree_library`).
+    """
+    through = None
+    if scene.has_sheets:
+        through = np.concatenate(
+            [
+                np.broadcast_to(np.float32(o.material.transmittance), (len(o.faces), 3))
+                for o in scene.objects
+            ]
+        )
+    # the fingerprint covers vertices and faces (and materials): an object
+    # added, replaced or edited in place gives a new key
+    key = (scene.fingerprint(), None if through is None else through.tobytes())
+    kept = _COMPILED.get(scene)
+    if kept is not None and kept[0] == key:
+        return kept[1:]
+    centre = scene.bounds.mean(axis=0)
+    tris = np.concatenate([o.vertices[o.faces] for o in scene.objects]) - centre
+    tris.flags.writeable = False
+    native = ray_scene(np.ascontiguousarray(tris, dtype=np.float32), through)
+    _COMPILED[scene] = (key, centre, tris, native)
+    return centre, tris, native
+
+
 class Tracer:
     """Occlusion and first-hit queries on ``scene``'s triangles, on C++ threads.
 
@@ -127,11 +178,12 @@ class Tracer:
     ----------
     centre : (3,) float64
         The frame's origin in world coordinates (the middle of the scene's bounds).
-    tris : (F, 3, 3) float64
+    tris : (F, 3, 3) float64, read-only
         The triangles' corners in the centred frame.
     native : voxgi._core.RayScene
         The compiled scene, which the display and the direct light also hand
-        to their kernels.
+        to their kernels; shared by every tracer of the scene
+        (:func:`compiled_scene`).
 
     Raises
     ------
@@ -140,18 +192,8 @@ class Tracer:
     """
 
     def __init__(self, scene: Scene, threads: int):
-        self.centre = scene.bounds.mean(axis=0)
-        self.tris = np.concatenate([o.vertices[o.faces] for o in scene.objects]) - self.centre
+        self.centre, self.tris, self.native = compiled_scene(scene)
         self.threads = max(1, int(threads))
-        through = None
-        if scene.has_sheets:
-            through = np.concatenate(
-                [
-                    np.broadcast_to(np.float32(o.material.transmittance), (len(o.faces), 3))
-                    for o in scene.objects
-                ]
-            )
-        self.native = ray_scene(np.ascontiguousarray(self.tris, dtype=np.float32), through)
 
     @property
     def has_sheets(self) -> bool:

@@ -36,6 +36,15 @@ __all__ = [
 ]
 
 
+def _used_bounds(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least and greatest corner of the vertices ``faces`` use (a mask, not a
+    sort: a mesh's unused vertices do not count)."""
+    used = np.zeros(len(vertices), bool)
+    used[faces.ravel()] = True
+    v = vertices[used]
+    return v.min(axis=0), v.max(axis=0)
+
+
 @dataclass
 class SceneObject:
     """One mesh of a scene: float64 vertices, int64 faces, a material, and
@@ -280,9 +289,8 @@ class Scene:
     def bounds(self) -> np.ndarray:
         """(2, 3) float64 axis-aligned bounding box of all meshes."""
         self.check_nonempty()
-        lo = np.min([o.vertices[np.unique(o.faces)].min(axis=0) for o in self.objects], axis=0)
-        hi = np.max([o.vertices[np.unique(o.faces)].max(axis=0) for o in self.objects], axis=0)
-        return np.stack([lo, hi])
+        lo, hi = zip(*(_used_bounds(o.vertices, o.faces) for o in self.objects), strict=True)
+        return np.stack([np.min(lo, axis=0), np.max(hi, axis=0)])
 
     def area(self) -> float:
         """Total surface area of the scene (scene units²)."""
