@@ -304,3 +304,48 @@ def test_paper_scenes_are_lit_and_inside_their_enclosure(name):
 
 def test_sponza_atrium_has_many_triangles():
     assert voxgi.scenes.sponza_atrium().n_triangles > 4000
+
+
+def _glossy_lit_scene() -> Scene:
+    """A mirror-like conductor, a glossy plastic and a point light: the
+    materials and lights whose values a fingerprint writes out."""
+    from voxgi.microfacet import Microfacet
+
+    sc = Scene()
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    copper = Microfacet("conductor", alpha=0.1, eta=(0.27105, 0.67693, 1.31640), k=(3.6, 2.6, 2.3))
+    sc.add(box, voxgi.Material(specular=copper), name="copper")
+    shiny = Microfacet("plastic", alpha=0.05)
+    sc.add(box.copy().apply_translation((2, 0, 0)), voxgi.Material(0.123456789, specular=shiny))
+    sc.lights.append(voxgi.PointLight(position=(0.0, 3.0, 0.0), intensity=(1.0, 2.0, 3.0)))
+    return sc
+
+
+def test_the_fingerprint_does_not_follow_numpy_print_options():
+    """A solution still belongs to its scene after ``np.set_printoptions``
+    (a conductor's albedo, worked out from its lobe, once printed short)."""
+    sc = _glossy_lit_scene()
+    assert all(type(v) is float for v in sc.objects[0].material.albedo)
+    fp = sc.fingerprint()
+    with np.printoptions(precision=2, floatmode="fixed"):
+        assert sc.fingerprint() == fp
+
+
+def test_the_fingerprint_writes_plain_values_as_repr_does():
+    """Scenes of plain Python values keep the fingerprints they had: their
+    canonical text is their repr."""
+    from voxgi.scene import _stable_repr
+
+    sc = _glossy_lit_scene()
+    for v in (
+        (0.1, 0.2, 0.30000000000000004),
+        (0.5,),
+        ("sheet", (0.9, 0.9, 0.9)),
+        ("lobe", sc.objects[1].material.specular),
+        sc.lights[0],
+        [1, True, None, "x"],
+    ):
+        assert _stable_repr(v) == repr(v)
+    # numpy values read as the Python numbers they hold, in full
+    assert _stable_repr(np.array([0.52994119123, 0.5])) == repr((0.52994119123, 0.5))
+    assert _stable_repr((np.float32(0.5), np.int64(3))) == repr((0.5, 3))

@@ -126,7 +126,12 @@ class Material:
             if self.texture is not None:
                 raise ValueError("Material: a conductor has no diffuse base to texture")
             below_one = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
-            object.__setattr__(self, "albedo", np.minimum(self.specular.albedo(), below_one))
+            albedo = np.minimum(self.specular.albedo(), below_one)
+            object.__setattr__(
+                self,
+                "albedo",
+                _validate.rgb(albedo, "Material.albedo", high=1.0, high_inclusive=False),
+            )
         object.__setattr__(
             self,
             "transmittance",

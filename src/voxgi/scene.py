@@ -8,6 +8,7 @@ written by :mod:`voxgi.formats`.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import warnings
@@ -34,6 +35,30 @@ __all__ = [
     "SceneObject",
     "SpotLight",
 ]
+
+
+def _stable_repr(x) -> str:
+    """``repr(x)`` with numpy arrays and scalars written as the Python numbers
+    they hold: the same text whatever numpy's print options (which shorten an
+    array's repr), and every digit of a float. For plain Python values and
+    dataclasses of them it is ``repr(x)`` itself, so their fingerprints stay."""
+    if isinstance(x, np.ndarray):
+        x = x.tolist()
+        if isinstance(x, list):
+            return _stable_repr(tuple(x))
+    if isinstance(x, np.generic):
+        return repr(x.item())
+    if isinstance(x, tuple):
+        inner = ", ".join(_stable_repr(v) for v in x)
+        return f"({inner},)" if len(x) == 1 else f"({inner})"
+    if isinstance(x, list):
+        return "[" + ", ".join(_stable_repr(v) for v in x) + "]"
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        fields = ", ".join(
+            f"{f.name}={_stable_repr(getattr(x, f.name))}" for f in dataclasses.fields(x) if f.repr
+        )
+        return f"{type(x).__qualname__}({fields})"
+    return repr(x)
 
 
 def _used_bounds(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -342,16 +367,16 @@ class Scene:
         for o in self.objects:
             h.update(o.vertices.tobytes())
             h.update(o.faces.tobytes())
-            h.update(repr((o.material.albedo, o.material.emission, o.two_sided)).encode())
+            h.update(_stable_repr((o.material.albedo, o.material.emission, o.two_sided)).encode())
             if o.material.texture is not None:
                 h.update(o.material.texture.digest().encode())
                 h.update(o.uv.tobytes())
             if o.material.is_sheet:  # (an opaque scene keeps the hash it had)
-                h.update(repr(("sheet", o.material.transmittance)).encode())
+                h.update(_stable_repr(("sheet", o.material.transmittance)).encode())
             if isinstance(o.material.specular, Microfacet):  # (the solve's albedo follows it)
-                h.update(repr(("lobe", o.material.specular)).encode())
+                h.update(_stable_repr(("lobe", o.material.specular)).encode())
         for light in self.lights:
-            h.update(repr(light).encode())
+            h.update(_stable_repr(light).encode())
         if self.environment is not None:
             h.update(b"environment" + self.environment.digest().encode())
         return h.hexdigest()[:16]
