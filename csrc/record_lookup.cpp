@@ -6,7 +6,10 @@
 // lookup asks it of as few candidates as it can: in the order of their
 // scores, stopping at the first that nothing separates, since no later one
 // can then win; and what a record's plane says of the hit point alone is
-// worked out once per voxel record, not once per candidate.
+// worked out once per voxel record, not once per candidate. Where no
+// record of the hit's voxel is clean, the neighbouring voxels' records are
+// mostly set apart by the same few walls: those are settled as they are
+// collected, and only the rest are asked.
 #include "record_lookup.h"
 
 #include <algorithm>
@@ -136,40 +139,66 @@ int separation(const RecordGrid& g, const double y[3], const float n[3], const P
     return level;
 }
 
-// The same over the hit's own voxel, whose records' planes at the hit are
-// S.own. The answer is the largest of the records' verdicts, in any order,
-// so the records most likely to set r apart are asked first: the one that
-// set the last candidate apart (a wall between the hit and a cluster of
-// records sets them all apart), then the planes that hold the hit (any
-// record off the hit's own sheet is apart by them).
-int separation_own(const RecordGrid& g, const float n[3], const PackedRecord& r, int64_t h0,
-                   LookupScratch& S) {
-    const int64_t h1 = h0 + int64_t(S.own.size());
-    // Whether a holding plane's record is cut off is asked at most once per
-    // lookup, and only where the answer matters.
-    auto cut_off = [&](int32_t i) {
+// How far own record i (of the hit's voxel, from h0) sets r apart (apart_by).
+// Whether a holding plane's record is cut off is asked at most once per
+// lookup, and only where the answer matters.
+inline int apart_by_own(const RecordGrid& g, const float n[3], const PackedRecord& r, int64_t h0,
+                        int32_t i, LookupScratch& S) {
+    return apart_by(g.rec[h0 + i], S.own[size_t(i)], r, n, [&] {
         Plane& p = S.own[size_t(i)];
-        if (p.cut < 0)
+        if (p.cut < 0) {
+            const int64_t h1 = h0 + int64_t(S.own.size());
             p.cut = holding_record_cut(g, h0 + i, h0, h1,
                                        [&](int64_t k) { return S.own[size_t(k - h0)]; });
+        }
         return p.cut == 1;
-    };
-    int level = 0;
-    const int32_t last = S.last_apart;
-    if (last >= 0 && &g.rec[h0 + last] != &r) {
-        level =
-            apart_by(g.rec[h0 + last], S.own[size_t(last)], r, n, [&] { return cut_off(last); });
-        if (level == 2) return 2;
+    });
+}
+
+// Whether one of the own records that set the last candidates apart sets r
+// apart too (then the one that does moves to the front of S.recent).
+inline bool apart_by_recent(const RecordGrid& g, const float n[3], const PackedRecord& r,
+                            int64_t h0, LookupScratch& S, int& level) {
+    constexpr int R = LookupScratch::kRecent;
+    for (int k = 0; k < R && S.recent[k] >= 0; ++k) {
+        const int32_t i = S.recent[k];
+        if (&g.rec[h0 + i] == &r) continue;
+        const int apart = apart_by_own(g, n, r, h0, i, S);
+        if (apart == 2) {
+            for (; k > 0; --k) S.recent[k] = S.recent[k - 1];
+            S.recent[0] = i;
+            return true;
+        }
+        level = std::max(level, apart);
     }
+    return false;
+}
+
+// The same over the hit's own voxel, whose records' planes at the hit are
+// S.own. The answer is the largest of the records' verdicts, in any order,
+// so the records most likely to set r apart are asked first: the few that
+// set the last candidates apart (a wall between the hit and a cluster of
+// records sets them all apart; a crowded voxel has a few such walls), then
+// the planes that hold the hit (any record off the hit's own sheet is apart
+// by them).
+int separation_own(const RecordGrid& g, const float n[3], const PackedRecord& r, int64_t h0,
+                   LookupScratch& S) {
+    int level = 0;
+    if (apart_by_recent(g, n, r, h0, S, level)) return 2;
+    constexpr int R = LookupScratch::kRecent;
     const int32_t count = int32_t(S.own.size());
     const bool ordered = !S.own_order.empty();
     for (int32_t j = 0; j < count; ++j) {
         const int32_t i = ordered ? S.own_order[size_t(j)] : j;
         const PackedRecord& o = g.rec[h0 + i];
-        if (i == last || &o == &r) continue;
-        const int apart = apart_by(o, S.own[size_t(i)], r, n, [&] { return cut_off(i); });
+        if (&o == &r) continue;
+        bool asked = false;
+        for (int k = 0; k < R && S.recent[k] >= 0; ++k) asked |= S.recent[k] == i;
+        if (asked) continue;
+        const int apart = apart_by_own(g, n, r, h0, i, S);
         if (apart == 2) {
-            S.last_apart = i;
+            for (int k = R - 1; k > 0; --k) S.recent[k] = S.recent[k - 1];
+            S.recent[0] = i;
             return 2;
         }
         level = std::max(level, apart);
@@ -203,7 +232,7 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
                 if (S.own[size_t(q - h0)].holds == (pass == 0))
                     S.own_order.push_back(int32_t(q - h0));
     }
-    S.last_apart = -1;
+    for (int32_t& i : S.recent) i = -1;
     std::vector<Candidate>& C = S.candidates;
     C.clear();
     S.cell_first.clear();
@@ -211,7 +240,14 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
     int32_t visited = 0;
     // The records of voxel [q0, q1) facing n's side, with their scores; none
     // that could not beat a clean best.
-    auto collect = [&](int64_t q0, int64_t q1) {
+    int32_t best_order = 0;
+    // With `settle`, a record that one of the own records which set the last
+    // candidates apart sets apart too is settled here, not asked later: it is
+    // apart (2, the most), so it wins only as the nearest of those apart.
+    // The best is the least of (separation, score, order) in any order of
+    // asking, so this changes no answer; it spares the neighbours' many such
+    // records (most of a crowded voxel's, behind one wall) their asking.
+    auto collect = [&](int64_t q0, int64_t q1, bool settle) {
         const int32_t cell = int32_t(S.cell_first.size());
         S.cell_first.push_back(q0);
         S.cell_end.push_back(q1);
@@ -224,6 +260,13 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
             const double penalty = 4.0 * (1.0 - facing) + (r.object != obj ? 4.0 : 0.0);
             const double score = dx * dx + dy * dy + dz * dz + p2 * penalty;
             if (best >= 0 && best_apart == 0 && score >= best_score) continue;
+            int level = 0;
+            if (settle && best >= 0 && apart_by_recent(g, n, r, h0, S, level)) {
+                if (best_apart == 2 &&
+                    (score < best_score || (score == best_score && visited < best_order)))
+                    best = q, best_score = score, best_penalty = penalty, best_order = visited;
+                continue;
+            }
             C.push_back({score, penalty, q, visited, cell});
         }
     };
@@ -233,7 +276,6 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
     // of them is most often clean, and then no later one can win; the rest
     // as they come (where none is clean all are asked anyway, and sorting
     // them would cost more than it saves).
-    int32_t best_order = 0;
     auto nearer = [&](const Candidate& k) {  // k before the best, at the same separation
         return k.score < best_score || (k.score == best_score && k.order < best_order);
     };
@@ -261,7 +303,7 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
         }
         for (size_t i = first; i < C.size(); ++i) ask(C[i], own);
     };
-    collect(h0, h1);
+    collect(h0, h1, false);
     choose(true);
     if (best >= 0 && best_penalty < 0.5 && best_apart == 0) return best;
     C.clear();
@@ -271,7 +313,7 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
                 if (di || dj || dk) {
                     int64_t q0, q1;
                     cell_records(g, c[0] + di, c[1] + dj, c[2] + dk, q0, q1);
-                    collect(q0, q1);
+                    collect(q0, q1, true);
                 }
     choose(false);
     return best;

@@ -70,7 +70,9 @@ struct LookupScratch {
     };
     std::vector<Plane> own;          // of each record of the hit's voxel
     std::vector<int32_t> own_order;  // those records in the order they are asked
-    int32_t last_apart = -1;         // the last of them that set a candidate apart
+    // the last few of them that set a candidate apart, the latest first (-1: none)
+    static constexpr int kRecent = 4;
+    int32_t recent[kRecent] = {-1, -1, -1, -1};
     std::vector<Candidate> candidates;
     std::vector<int64_t> cell_first, cell_end;  // the voxels visited
 };
