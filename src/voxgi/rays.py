@@ -125,14 +125,14 @@ def embree_version() -> str:
     return ray_scene(np.eye(3, dtype=np.float32)[None]).embree_version
 
 
-# scene -> (its geometry's key, centre, centred float64 triangles, RayScene)
+# scene -> (its fingerprint, centre, centred float64 triangles, RayScene)
 _COMPILED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def compiled_scene(scene: Scene) -> tuple[np.ndarray, np.ndarray, _core.RayScene]:
     """The frame centre, the centred (F, 3, 3) float64 triangles and the
     compiled Embree scene of ``scene``, built on first use and kept while
-    ``scene`` lives and its geometry and transmittances stay the same.
+    ``scene`` lives and its fingerprint (geometry, materials) stays the same.
 
     The triangles are read-only: every tracer of the scene shares them.
 
@@ -141,6 +141,13 @@ def compiled_scene(scene: Scene) -> tuple[np.ndarray, np.ndarray, _core.RayScene
     ImportError
         Where the Embree 4 library cannot be opened (:func:`embree_library`).
     """
+    # the fingerprint covers vertices, faces and materials, sheets'
+    # transmittances included: an object added, replaced or edited in place
+    # gives a new key
+    key = scene.fingerprint()
+    kept = _COMPILED.get(scene)
+    if kept is not None and kept[0] == key:
+        return kept[1:]
     through = None
     if scene.has_sheets:
         through = np.concatenate(
@@ -149,12 +156,6 @@ def compiled_scene(scene: Scene) -> tuple[np.ndarray, np.ndarray, _core.RayScene
                 for o in scene.objects
             ]
         )
-    # the fingerprint covers vertices and faces (and materials): an object
-    # added, replaced or edited in place gives a new key
-    key = (scene.fingerprint(), None if through is None else through.tobytes())
-    kept = _COMPILED.get(scene)
-    if kept is not None and kept[0] == key:
-        return kept[1:]
     centre = scene.bounds.mean(axis=0)
     tris = np.concatenate([o.vertices[o.faces] for o in scene.objects]) - centre
     tris.flags.writeable = False
