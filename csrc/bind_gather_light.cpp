@@ -98,7 +98,10 @@ int64_t gather_light_py(
     std::optional<I32Out> transport_record, std::optional<F32Out> transport_weight,
     const std::optional<F32>& mat_response, const std::optional<U8>& mat_continue,
     const std::optional<F32>& rec_share, const voxgi::EnvironmentGuide* env_guide,
-    const std::optional<F32>& mat_base_out) {
+    const std::optional<F32>& mat_base_out, const std::optional<U8>& obj_emits, double reach,
+    const std::optional<F64>& emitter_pos, const std::optional<F32>& emitter_normal,
+    const std::optional<F32>& emitter_radiance, const std::optional<F32>& emitter_density,
+    double emitter_per_set) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     if (mat_response) {
@@ -127,6 +130,35 @@ int64_t gather_light_py(
     voxgi::ShadeMIS mis = make_mis(n_gather);
     voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
     check_scene(scene, tris.count);
+    if (obj_emits) {
+        check_1d(*obj_emits, obj_two_sided.shape(0), "obj_emits");
+        tris.emits = obj_emits->data();
+    }
+    if (!(reach >= 0.0) || !std::isfinite(reach))
+        throw py::value_error("reach must be finite and >= 0");
+    if (reach > 0.0 && !obj_emits) throw py::value_error("reach needs obj_emits");
+    tris.reach = reach;
+    {
+        const int given = int(emitter_pos.has_value()) + int(emitter_normal.has_value()) +
+                          int(emitter_radiance.has_value()) + int(emitter_density.has_value());
+        if (given != 0 && given != 4)
+            throw py::value_error("emitter_pos, _normal, _radiance and _density go together");
+        if (given == 4) {
+            check_2d(*emitter_pos, -1, 3, "emitter_pos");
+            const py::ssize_t K = emitter_pos->shape(0);
+            check_2d(*emitter_normal, K, 3, "emitter_normal");
+            check_2d(*emitter_radiance, K, 3, "emitter_radiance");
+            check_1d(*emitter_density, K, "emitter_density");
+            tris.emitter_count = K;
+            tris.emitter_pos = emitter_pos->data();
+            tris.emitter_normal = emitter_normal->data();
+            tris.emitter_radiance = emitter_radiance->data();
+            tris.emitter_density = emitter_density->data();
+            if (!(emitter_per_set >= 1.0) || !std::isfinite(emitter_per_set))
+                throw py::value_error("emitter_per_set must be >= 1");
+            tris.emitter_per_set = emitter_per_set;
+        }
+    }
     const auto tex = make_textures(tex_texels, tex_info, obj_texture, corner_uv, tris.count,
                                    obj_two_sided.shape(0));
     if (tex) tris.textures = &tex->surface;
@@ -186,6 +218,10 @@ void bind_gather_light(py::module_& m) {
           "transport_weight"_a.noconvert() = py::none(), "mat_response"_a.noconvert() = py::none(),
           "mat_continue"_a.noconvert() = py::none(), "rec_share"_a.noconvert() = py::none(),
           "env_guide"_a = py::none(), "mat_base_out"_a.noconvert() = py::none(),
+          "obj_emits"_a.noconvert() = py::none(), "reach"_a = 0.0,
+          "emitter_pos"_a.noconvert() = py::none(), "emitter_normal"_a.noconvert() = py::none(),
+          "emitter_radiance"_a.noconvert() = py::none(),
+          "emitter_density"_a.noconvert() = py::none(), "emitter_per_set"_a = 1.0,
           R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit
@@ -212,5 +248,14 @@ reading rec_share (N, 3) float32 (in rec_packed's order, given with
 mat_continue) of its record's light; with mat_base_out (M, 33, 3) float32
 that share times the hit material's row at the cosine towards the ray's
 origin (the base's outgoing radiance over its mean).
+With reach > 0 and obj_emits (O,) uint8 (1: the object emits), a ray that
+lands nearer than reach to its pixel's point on a diffuse object that does
+not emit continues one bounce: its albedo times one cosine-distributed ray
+from there (the record where it lands, or the environment) and, given the
+frame's emitter VPLs (emitter_pos (K, 3) float64, emitter_normal (K, 3),
+emitter_radiance (K, 3) B / pi and emitter_density (K,) their records' area
+density p(y), float32; emitter_per_set the emitter VPLs a pixel sees, by
+which a record's packed pa is divided for p(y)), one of them drawn
+uniformly with a shadow ray, the two MIS-combined (balance heuristic).
 Returns the number of gather rays.)doc");
 }

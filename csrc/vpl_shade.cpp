@@ -480,6 +480,126 @@ void glossy_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
     for (int ch = 0; ch < 3; ++ch) coat[ch] = float(f[ch] * w * Lz[ch] * T[ch]);
 }
 
+// Whether pixel p's gather ray h, landing on a diffuse object that does not
+// emit within tris.reach of the pixel's point, continues there (see
+// ShadeTriangles::reach).
+inline bool continues_near(const ShadeHits& hits, const ShadeMaterials& mats,
+                           const ShadeTriangles& tris, int64_t p, const GatherHit& h) {
+    if (!(tris.reach > 0.0) || h.obj < 0 || h.obj >= mats.count) return false;
+    if (tris.emits && tris.emits[h.obj]) return false;
+    if (mats.continue_lobe && mats.continue_lobe[h.obj]) return false;
+    const double* x = hits.pos + 3 * p;
+    double r2 = 0.0;
+    for (int a = 0; a < 3; ++a) r2 += (h.y[a] - x[a]) * (h.y[a] - x[a]);
+    return r2 < tris.reach * tris.reach;
+}
+
+// The light leaving the diffuse hit h towards the ray's origin, from one
+// more bounce: its albedo (the solve's, its texture's where it has one)
+// times the radiance along one cosine-distributed ray from it, read from
+// the record where that lands (or the environment), and with the frame's
+// emitter VPLs the emitters' light from one of them, the two combined by the
+// balance heuristic. Returns the rays traced.
+int near_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
+                      const RecordGrid& grid, const EnvironmentMap* env, const RayScene& scene,
+                      double eps, const GatherHit& h, uint64_t& rng, LookupScratch& scratch,
+                      float L[3]) {
+    L[0] = L[1] = L[2] = 0.f;
+    int rays = 1;
+    const MicrofacetLobe* lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
+    float rho[3];
+    for (int ch = 0; ch < 3; ++ch)
+        rho[ch] = solve_albedo(lobe, h.textured ? h.tex[ch] : mats.albedo[3 * h.obj + ch], ch);
+    float u[3], v[3];
+    tangent_frame(h.ns, u, v);
+    rng = splitmix64(rng);
+    const double u1 = to_unit(rng);
+    rng = splitmix64(rng);
+    const double phi = 2.0 * kPi * to_unit(rng);
+    const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
+    const double lx = r * std::cos(phi), ly = r * std::sin(phi);
+    float wi[3], ro[3], T[3];
+    for (int a = 0; a < 3; ++a) {
+        wi[a] = float(lx * u[a] + ly * v[a] + z * h.ns[a]);
+        ro[a] = float(h.y[a] + eps * h.ns[a]);
+    }
+    const int32_t t = scene.intersect(ro, wi, nullptr, nullptr, nullptr, T);
+    ShadeHits at_y;
+    at_y.count = 1;
+    at_y.normal = h.ns;
+    at_y.ng = h.ns;
+    GatherHit g;
+    gather_hit(at_y, tris, grid, 0, ro, wi, t, g);
+    // The emitters' light at y from one of the frame's emitter VPLs; the
+    // ray above then reads only the light of surfaces that do not emit.
+    float Ld[3] = {0.f, 0.f, 0.f};
+    if (tris.emitter_count > 0) {
+        rng = splitmix64(rng);
+        const int64_t k =
+            std::min(tris.emitter_count - 1, int64_t(to_unit(rng) * double(tris.emitter_count)));
+        const double* e = tris.emitter_pos + 3 * k;
+        const float* ne = tris.emitter_normal + 3 * k;
+        const double dx = e[0] - h.y[0], dy = e[1] - h.y[1], dz = e[2] - h.y[2];
+        const double r2 = dx * dx + dy * dy + dz * dz;
+        if (r2 > 0.0 && tris.emitter_density[k] > 0.f) {
+            const double r = std::sqrt(r2);
+            const float we[3] = {float(dx / r), float(dy / r), float(dz / r)};
+            const float cos_y = dot3(h.ns, we), cos_e = -dot3(ne, we);
+            if (cos_y > 0.f && cos_e > 0.f) {
+                // balance heuristic with the ray below, whose density per
+                // unit area at e is cos_y cos_e / (pi r²)
+                const double cc = double(cos_y) * cos_e;
+                const double gb = cc / (r2 * double(tris.emitter_density[k]) + cc / kPi) / kPi;
+                const double tx = e[0] + eps * ne[0] - ro[0], ty = e[1] + eps * ne[1] - ro[1],
+                             tz = e[2] + eps * ne[2] - ro[2];
+                const double len = std::sqrt(tx * tx + ty * ty + tz * tz);
+                float sd[3] = {we[0], we[1], we[2]}, Ts[3];
+                if (len > 0.0)
+                    sd[0] = float(tx / len), sd[1] = float(ty / len), sd[2] = float(tz / len);
+                ++rays;
+                if (!scene.occluded(ro, sd, float(std::max(len - eps, 0.0)), Ts))
+                    for (int ch = 0; ch < 3; ++ch)
+                        Ld[ch] = float(gb * tris.emitter_radiance[3 * k + ch] * Ts[ch]);
+            }
+        }
+    }
+    for (int ch = 0; ch < 3; ++ch) L[ch] = rho[ch] * Ld[ch];
+    float Lz[3] = {0.f, 0.f, 0.f};
+    if (g.escaped) {
+        if (!env) return rays;
+        const double d[3] = {wi[0], wi[1], wi[2]};
+        const double* Le = env->radiance + 3 * environment_texel(*env, d);
+        for (int ch = 0; ch < 3; ++ch) Lz[ch] = float(Le[ch]);
+    } else {
+        if (g.key < 0) return rays;
+        const int64_t q = lookup_in_cell(grid, g.y, g.ns, g.obj, g.c, scratch);
+        if (q < 0) return rays;
+        if (tris.emitter_count > 0 && tris.emits && tris.emits[g.obj]) {
+            // an emitter's record, also sampled above: the balance heuristic
+            const float cos_z = -dot3(g.ns, wi);
+            const double pa = double(grid.rec[q].pa) / tris.emitter_per_set;
+            double dz2 = 0.0;
+            for (int a = 0; a < 3; ++a) dz2 += (g.y[a] - h.y[a]) * (g.y[a] - h.y[a]);
+            const double pc = double(z) * std::max(cos_z, 0.f) / kPi;
+            const double w = pc > 0.0 ? pc / (pc + dz2 * pa) : 0.0;
+            for (int ch = 0; ch < 3; ++ch)
+                L[ch] += float(rho[ch] * grid.rec[q].radiance[ch] * T[ch] * w);
+            return rays;
+        }
+        const PackedRecord& R = grid.rec[q];
+        for (int ch = 0; ch < 3; ++ch) {
+            float ratio = 1.f;
+            if (g.textured && R.albedo[ch] > 0.f) {
+                const MicrofacetLobe* gl = mats.lobe ? mats.lobe + g.obj : nullptr;
+                ratio = solve_albedo(gl, g.tex[ch], ch) / R.albedo[ch];
+            }
+            Lz[ch] = R.radiance[ch] * ratio;
+        }
+    }
+    for (int ch = 0; ch < 3; ++ch) L[ch] += rho[ch] * Lz[ch] * T[ch];
+    return rays;
+}
+
 // The MIS-weighted light of pixel p's gather ray h from record rec (-1: none)
 // into s, through the sheets before the hit. With `base` and `coat`
 // (nullable): the light leaving a glossy hit towards the pixel in two parts,
@@ -635,6 +755,16 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                         glossy_hit_radiance(mats, tris, grid, env, scene, eps, h[k], rec, ratio,
                                             rng, scratch, L, coat);
                         gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s, L, coat);
+                        continue;
+                    }
+                    if (rec >= 0 && !transport && continues_near(hits, mats, tris, p - 2, h[k])) {
+                        uint64_t rng = splitmix64(base ^ 0xC2B2AE3D27D4EB4Full ^
+                                                  (uint64_t(p - 2) * uint64_t(n_gather) + k));
+                        float L[3];
+                        n_traced += near_hit_radiance(mats, tris, grid, env, scene, eps, h[k], rng,
+                                                      scratch, L);
+                        const float none[3] = {0.f, 0.f, 0.f};
+                        gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s, L, none);
                         continue;
                     }
                     gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s);

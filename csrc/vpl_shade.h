@@ -112,6 +112,23 @@ struct ShadeTriangles {
     // the record's light is taken times the texture there over the record's
     // albedo (the texture's detail within the record)
     const SurfaceTextures* textures = nullptr;
+    // nullable (O,): 1 where the object emits
+    const uint8_t* emits = nullptr;
+    // A gather ray that lands nearer than this (scene units; 0: never) on a
+    // diffuse object that does not emit continues one bounce there instead
+    // of reading the record: a record averages its voxel, which a near hit
+    // sees under a wide angle (a crease, a groove).
+    double reach = 0.0;
+    // The emitters' VPLs of the frame, for the direct light where such a ray
+    // continues (one drawn uniformly, a shadow ray to it, MIS-combined with
+    // the continued ray): their points, normals, radiance B / pi and area
+    // densities p(y) in the emitters' table (none: the ray alone).
+    int64_t emitter_count = 0;
+    const double* emitter_pos = nullptr;
+    const float* emitter_normal = nullptr;
+    const float* emitter_radiance = nullptr;
+    const float* emitter_density = nullptr;
+    double emitter_per_set = 1.0;  // emitter VPLs a pixel sees (a record's pa over it: p(y))
 };
 
 // Per (pixel, VPL) pair the unoccluded contribution f(wi, wo) W_k G_bounded

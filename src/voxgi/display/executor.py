@@ -41,6 +41,9 @@ class FrameShaderSpec:
     guide_environment : bool
         Draw the environment's samples where its light reaches each pixel's
         place (:mod:`voxgi.display.environment_guide`).
+    near_reach : float
+        Gather rays that land nearer than this many voxel pitches on a
+        diffuse surface that does not emit continue one bounce (0: never).
     """
 
     scene: Scene
@@ -52,6 +55,7 @@ class FrameShaderSpec:
     indirect_filter: int = 0
     control_emission: bool = True
     guide_environment: bool = True
+    near_reach: float = 0.0
 
     @property
     def gather_per_frame(self) -> int:
@@ -82,6 +86,7 @@ class FrameShaderSpec:
             self.indirect_filter,
             self.control_emission,
             self.guide_environment,
+            self.near_reach,
         )
 
 

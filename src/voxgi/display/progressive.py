@@ -151,6 +151,7 @@ def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
         opt.indirect_filter,
         opt.control_emission,
         opt.guide_environment,
+        opt.near_reach,
     )
 
 
@@ -177,6 +178,11 @@ def _skipped(spec: FrameShaderSpec) -> list[str]:
     )
     if why is not None:
         skipped.append(why)
+    if spec.near_reach > 0 and spec.gather_per_frame > 0 and scene.lights:
+        skipped.append(
+            "near bounce: the scene has point, spot or directional lights, "
+            "which a continued gather ray does not sample; near hits read their records"
+        )
     return skipped
 
 

@@ -21,6 +21,11 @@ __all__ = ["DEFAULT_TOL", "RenderTuning"]
 #: picture's remaining noise.
 DEFAULT_TOL = 1e-3
 
+#: Gather rays that land nearer than this many voxel pitches continue one
+#: bounce (:attr:`_Experiment.near_reach`): a record averages its voxel,
+#: which a hit that near sees under a wide angle.
+NEAR_REACH = 1.0
+
 
 @dataclass(frozen=True)
 class RenderTuning:
@@ -101,6 +106,11 @@ class _Experiment(RenderTuning):
         Each pixel's environment samples are drawn where the environment's
         light reaches its place (default; :mod:`voxgi.display.environment_guide`);
         False draws them by the environment's brightness alone.
+    near_reach : float
+        A gather ray that lands on a diffuse surface that does not emit
+        nearer than this many voxel pitches continues one bounce there
+        instead of reading the record (default 1; ``docs/design.md`` §6);
+        0 always reads the record.
     """
 
     vpl_pdf: str = "power"
@@ -110,6 +120,7 @@ class _Experiment(RenderTuning):
     control_emission: bool = True
     follow_lobes: bool = True
     guide_environment: bool = True
+    near_reach: float = NEAR_REACH
 
 
 @dataclass(frozen=True)
@@ -134,6 +145,7 @@ class _RenderSettings:
     control_emission: bool = True
     follow_lobes: bool = True
     guide_environment: bool = True
+    near_reach: float = NEAR_REACH
 
 
 def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) -> _RenderSettings:
@@ -187,6 +199,7 @@ def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) ->
         control_emission=bool(t.control_emission),
         follow_lobes=bool(getattr(t, "follow_lobes", True)),
         guide_environment=bool(getattr(t, "guide_environment", True)),
+        near_reach=_validate.real(t.near_reach, "near_reach", low=0.0),
     )
 
 

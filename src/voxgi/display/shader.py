@@ -124,6 +124,7 @@ class _FrameShader:
         indirect_filter: int = 0,
         control_emission: bool = True,
         guide_environment: bool = True,
+        near_reach: float = 0.0,
     ):
         self.scene, self.cam, self.tracer, self.sampler = scene, cam, tracer, sampler
         # the filter needs the two kinds of light apart; without any light of
@@ -171,6 +172,8 @@ class _FrameShader:
         self.gather_rays = 0
         # the VPLs' and gather rays' shading is timed with their rays
         self.seconds = {"primary": 0.0, "shadow": 0.0, "gather": 0.0}
+        # the frame's emitter VPLs, for the gather rays that continue (shade)
+        self._near: dict = {}
         if self.gather:
             self._grid = record_grid(
                 sampler.vox,
@@ -184,6 +187,11 @@ class _FrameShader:
                 "tri_object": tracer.obj,
                 "obj_two_sided": self.two_sided.astype(np.uint8),
             }
+            # A near hit continues with the emitters' light sampled at it; a
+            # delta light it could not sample (docs/design.md §6).
+            if near_reach > 0 and not scene.lights:
+                self._tri["obj_emits"] = (self.mat_emission.max(axis=1) > 0).astype(np.uint8)
+                self._tri["reach"] = float(near_reach) * float(sampler.vox.pitch)
             self._env = self.lights.environment_tables()
 
     def _material_tables(self, scene: Scene) -> None:
@@ -332,12 +340,34 @@ class _FrameShader:
             if len(part["index"]) > 0:
                 into += self._vpl_light(h, part)
         if self.gather:
+            self._near = self._near_emitters(vpls)
             for a in range(0, P, self.tile):
                 b = min(P, a + self.tile)
                 self._gather(h, a, b, out if reflected is None else reflected)
         if reflected is not None:
             self._filter(h, reflected, out)
         return out
+
+    def _near_emitters(self, vpls: dict) -> dict:
+        """The gather kernel's arguments for the emitters' light where a
+        near gather ray continues: this frame's emitter VPLs (every set's),
+        each drawn with its record's density per unit area in the emitters'
+        table, so that one picked uniformly among them is a sample of that
+        density (empty: no ray continues, or no emitter to sample)."""
+        nd = self.sampler.counts[0]
+        if self._tri.get("reach", 0.0) <= 0 or nd == 0 or not self.sampler.mis:
+            return {}
+        e = _vpl_part(vpls, 0, nd)
+        density = self.sampler.sets[0][3]
+        return {
+            "emitter_pos": e["pos"],
+            "emitter_normal": e["normal"],
+            "emitter_radiance": np.ascontiguousarray(
+                self.sampler.B[e["index"]] / math.pi, dtype=np.float32
+            ),
+            "emitter_density": np.ascontiguousarray(density[e["index"]], dtype=np.float32),
+            "emitter_per_set": float(nd),
+        }
 
     def _filter(self, h: dict, reflected: np.ndarray, out: np.ndarray) -> None:
         """Add the non-emitting records' light, filtered over the pixels that
@@ -444,6 +474,7 @@ class _FrameShader:
             mat_lobe=self.mat_lobe,
             mat_continue=self.mat_continue,
             mat_base_out=self.mat_base_out if self.mat_continue is not None else None,
+            **self._near,
         )
         self.seconds["gather"] += time.perf_counter() - t0
 
