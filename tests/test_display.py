@@ -1053,3 +1053,21 @@ def test_near_gather_rays_continue_towards_the_fine_solution():
     assert err_read > 0.015
     assert err_near < 0.014, (err_near, err_read)
     assert err_near < 0.6 * err_read, (err_near, err_read)
+
+
+def test_near_gather_rays_read_their_records_where_a_delta_light_shines():
+    # A continued ray samples the emitters' records, not a point light,
+    # which would go missing from near hits: with one, near hits read their
+    # records (the picture as with near_reach 0) and the stats say so.
+    scene = _slot_scene(16)
+    scene.add_light(voxgi.PointLight((0.0, 0.9, 0.0), 0.5))
+    sol = voxgi.solve(voxgi.voxelize(scene, 16, progress=False), progress=False)
+    out = {
+        reach: voxgi.render(
+            scene, sol, progress=False, max_frames=4, tol=0, tuning=_Experiment(near_reach=reach)
+        )
+        for reach in (0.0, 1.0)
+    }
+    assert np.array_equal(out[0.0].image, out[1.0].image)
+    assert any(s.startswith("near bounce") for s in out[1.0].stats["skipped"])
+    assert not any(s.startswith("near bounce") for s in out[0.0].stats["skipped"])
