@@ -16,6 +16,7 @@ import pytest
 
 import voxgi
 from voxgi.direct import direct_irradiance
+from voxgi.display.settings import _Experiment
 from voxgi.scenes.thin_walls import SPLIT_AT, SPLIT_SLAB, split_box, split_normal
 from voxgi.traced import TracedGather
 
@@ -225,3 +226,34 @@ def test_a_face_poking_through_the_ceiling_lends_the_room_no_light(res, ceiling)
     a = vox.area[below]
     assert (H[below] * a).sum() / a.sum() <= 1e-5
     assert H[below].max() <= 1.0 / 256 + 1e-6
+
+
+@pytest.mark.parametrize("wall", ["sheet", "slab"])
+def test_the_dark_rooms_picture_takes_no_light_across_the_wall(wall):
+    # Records lit in the lit room alone (the lamp's included), the display's
+    # defaults from inside the dark room, looking at the wall and the
+    # corners it makes: no VPL, gather ray or near gather hit continued one
+    # bounce (docs/design.md §6) may bring the other room's light, so every
+    # pixel is exactly black.
+    scene = split_box(wall, width=32, height=32)
+    vox = voxgi.voxelize(scene, RES, progress=False)
+    dark, lit, _ = rooms(vox, wall)
+    b = np.where(lit[:, None], np.pi, 0.0) * np.ones((1, 3))
+    sol = voxgi.Solution(vox=vox, radiosity=b.astype(np.float32))
+    cam = voxgi.Camera(
+        eye=(-0.45, -0.3, 0.1), target=(0.0, -0.45, -0.2), fov=70, width=32, height=32
+    )
+    rays, image = {}, None
+    for reach in (0.0, 1.0):
+        out = voxgi.render(
+            scene,
+            sol,
+            camera=cam,
+            progress=False,
+            max_frames=8,
+            tol=0,
+            tuning=_Experiment(near_reach=reach),
+        )
+        rays[reach], image = out.stats["gather_rays"], out.image
+    assert rays[1.0] > rays[0.0]  # near hits continued
+    assert image.max() == 0.0
