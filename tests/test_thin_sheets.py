@@ -237,7 +237,7 @@ def test_the_dark_rooms_picture_takes_no_light_across_the_wall(wall):
     # pixel is exactly black.
     scene = split_box(wall, width=32, height=32)
     vox = voxgi.voxelize(scene, RES, progress=False)
-    dark, lit, _ = rooms(vox, wall)
+    _, lit, _ = rooms(vox, wall)
     b = np.where(lit[:, None], np.pi, 0.0) * np.ones((1, 3))
     sol = voxgi.Solution(vox=vox, radiosity=b.astype(np.float32))
     cam = voxgi.Camera(
