@@ -73,22 +73,6 @@ py::tuple intersect_py(const voxgi::RayScene& s, const F32& org, const F32& dir,
     return py::make_tuple(prim, u, v);
 }
 
-I32 crossings_py(const voxgi::RayScene& s, const F32& org, const F32& dir, float step,
-                 int threads) {
-    check_rays(org, dir, -1);
-    if (!(step > 0.0f) || !std::isfinite(step)) throw py::value_error("step must be > 0");
-    const py::ssize_t n = org.shape(0);
-    I32 out(n);
-    const float *po = org.data(), *pd = dir.data();
-    int32_t* pc = out.mutable_data();
-    auto stop = make_stop_check();
-    {
-        py::gil_scoped_release release;
-        s.crossings(po, pd, n, step, pc, voxgi::resolve_threads(threads), stop);
-    }
-    return out;
-}
-
 }  // namespace
 
 void bind_rays(py::module_& m) {
@@ -136,8 +120,5 @@ void bind_rays(py::module_& m) {
              "through"_a = false,
              "First opaque triangle each ray meets (int32, -1: none) and, with uv, its float32 "
              "barycentrics u, v (empty arrays otherwise); with through, a fourth array (R, 3) "
-             "float32: the product of the sheets' transmittances before it.")
-        .def("crossings", &crossings_py, "org"_a, "dirs"_a, "step"_a, "threads"_a = 0,
-             "(R,) int32: how many triangles each ray meets along its whole length, starting "
-             "again step past each hit (twice as far after meeting the same triangle again).");
+             "float32: the product of the sheets' transmittances before it.");
 }

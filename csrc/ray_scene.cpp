@@ -72,7 +72,6 @@ Ray make_ray(const float o[3], const float d[3], float tfar) {
 
 struct EmbreeApi {
     void* (*new_device)(const char*);
-    void (*retain_device)(void*);
     void (*release_device)(void*);
     int (*get_device_error)(void*);
     void* (*new_scene)(void*);
@@ -124,7 +123,6 @@ const EmbreeApi* load_embree(const std::string& path) {
     }
     EmbreeApi api{};
     bind(lib, path, "rtcNewDevice", api.new_device);
-    bind(lib, path, "rtcRetainDevice", api.retain_device);
     bind(lib, path, "rtcReleaseDevice", api.release_device);
     bind(lib, path, "rtcGetDeviceError", api.get_device_error);
     bind(lib, path, "rtcNewScene", api.new_scene);
@@ -140,23 +138,6 @@ const EmbreeApi* load_embree(const std::string& path) {
     bind(lib, path, "rtcOccluded1", api.occluded1);
     bind(lib, path, "rtcGetDeviceProperty", api.get_device_property);
     return &loaded.emplace(path, api).first->second;
-}
-
-// One Embree device per library for the life of the process, retained by
-// each scene: a device starts Embree's task system, which costs far more
-// than a small scene's build (the parity tests of the voxelization build
-// one scene per closed object), and opening one device after another while
-// other code holds Embree devices of its own can fail. Null: none could be
-// made (the caller says so).
-void* shared_device(const EmbreeApi* api) {
-    static std::mutex mutex;
-    static std::map<const EmbreeApi*, void*> devices;
-    std::lock_guard<std::mutex> lock(mutex);
-    auto it = devices.find(api);
-    if (it != devices.end()) return it->second;
-    void* device = api->new_device(nullptr);
-    if (device != nullptr) devices.emplace(api, device);
-    return device;
 }
 
 constexpr int64_t kBatch = 4096;  // rays per task of a batch query
@@ -187,9 +168,8 @@ RayScene::RayScene(const std::string& library, const float* tris, int64_t n_tris
         }
         if (sheets.empty()) opaque_index_.clear();
     }
-    device_ = shared_device(api_);
+    device_ = api_->new_device(nullptr);
     if (device_ == nullptr) throw std::runtime_error("Embree could not create a device");
-    api_->retain_device(device_);
     // The ray and hit layouts above are Embree 4's; another major version
     // would read and write them wrongly.
     version_ = int64_t(api_->get_device_property(device_, kDevicePropertyVersion));
@@ -410,38 +390,6 @@ void RayScene::occluded(const float* org, const float* dir, const float* tfar, i
                 occluded(org + 3 * i, dir + 3 * i, tfar[i], through ? through + 3 * i : nullptr)
                     ? 1
                     : 0;
-    });
-}
-
-void RayScene::crossings(const float* org, const float* dir, int64_t n, float step, int32_t* out,
-                         int threads, const StopCheck& stop) const {
-    // a bound on the hits of one ray: no modelled solid folds on itself
-    // that many times along one line
-    constexpr int kMaxHits = 4096;
-    const int64_t tasks = (n + kBatch - 1) / kBatch;
-    parallel_for(tasks, threads, stop, [&](int64_t task, int) {
-        const int64_t end = std::min(n, (task + 1) * kBatch);
-        for (int64_t i = task * kBatch; i < end; ++i) {
-            const float* d = dir + 3 * i;
-            float o[3] = {org[3 * i], org[3 * i + 1], org[3 * i + 2]};
-            int32_t count = 0, last = -1;
-            float offset = step;
-            for (int k = 0; k < kMaxHits; ++k) {
-                float t;
-                const int32_t prim = intersect(o, d, nullptr, nullptr, &t);
-                if (prim < 0) break;
-                if (prim == last) {  // the step was lost to rounding
-                    offset *= 2.0f;
-                    for (int a = 0; a < 3; ++a) o[a] += offset * d[a];
-                    continue;
-                }
-                ++count;
-                last = prim;
-                offset = step;
-                for (int a = 0; a < 3; ++a) o[a] += (t + step) * d[a];
-            }
-            out[i] = count;
-        }
     });
 }
 

@@ -68,13 +68,6 @@ class RayScene {
     void intersect(const float* org, const float* dir, int64_t n, int32_t* prim, float* u, float* v,
                    float* through, int threads, const StopCheck& stop) const;
 
-    // Batch: how many triangles each ray meets along its whole length (for
-    // the parity of a closed mesh's inside). After each hit the ray starts
-    // again `step` past it; one that meets the same triangle again (the
-    // step lost to rounding) moves on by twice the last step.
-    void crossings(const float* org, const float* dir, int64_t n, float step, int32_t* out,
-                   int threads, const StopCheck& stop) const;
-
    private:
     // Multiplies `through` by the transmittance of each sheet on [0, tfar).
     void cross_sheets(const float org[3], const float dir[3], float tfar, float* through) const;

@@ -239,31 +239,3 @@ def test_a_ray_meets_the_face_of_coincident_reversed_triangles_turned_to_it():
                 + v[:, None] * (tri[:, 2] - tri[:, 0])
             )
             np.testing.assert_allclose(got, want, atol=1e-5)
-
-
-def test_crossings_count_every_surface_along_a_ray():
-    # Two nested closed boxes: from the centre a ray leaves both (2), from
-    # between them the outer one alone (1); from outside along -x it meets
-    # nothing, along +x all four walls in its way. A sphere's inside by the
-    # parity of its crossings agrees with trimesh's contains away from the
-    # surface. Counting the first hit alone gives 1 at the centre.
-    import trimesh
-
-    from voxgi._solids import inside
-    from voxgi.rays import ray_scene
-
-    boxes = trimesh.util.concatenate(
-        [trimesh.creation.box(extents=[2, 2, 2]), trimesh.creation.box(extents=[4, 4, 4])]
-    )
-    scene = ray_scene(np.ascontiguousarray(boxes.triangles, np.float32))
-    d = np.array([0.5286, 0.6213, 0.5784], np.float32)
-    d /= np.linalg.norm(d)
-    org = np.array([[0, 0, 0], [1.5, 0.1, 0.2], [-3, 0.1, 0.2], [-3, 0.1, 0.2]], np.float32)
-    dirs = np.array([d, d, [-1, 0, 0], [1, 0, 0]], np.float32)
-    assert scene.crossings(org, dirs, 1e-6).tolist() == [2, 1, 0, 4]
-    sphere = trimesh.creation.icosphere(subdivisions=3)
-    pts = np.random.default_rng(0).uniform(-1.3, 1.3, (2000, 3))
-    far = np.abs(np.linalg.norm(pts, axis=1) - 1.0) > 0.02
-    assert np.array_equal(inside(sphere, pts)[far], sphere.contains(pts)[far])
-    with pytest.raises(ValueError, match="step"):
-        scene.crossings(org, dirs, 0.0)

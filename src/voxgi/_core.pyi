@@ -153,10 +153,6 @@ class RayScene:
         """
         Build the scene from (F, 3, 3) float32 corners with the Embree at `library`; `transmittance` (F, 3) float32 or None: a triangle with a channel above 0 is a sheet that rays cross, scaled by it.
         """
-    def crossings(self, org: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], dirs: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], step: typing.SupportsFloat | typing.SupportsIndex, threads: typing.SupportsInt | typing.SupportsIndex = 0) -> numpy.typing.NDArray[numpy.int32]:
-        """
-        (R,) int32: how many triangles each ray meets along its whole length, starting again step past each hit (twice as far after meeting the same triangle again).
-        """
     def intersect(self, org: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], dirs: typing.Annotated[numpy.typing.ArrayLike, numpy.float32], uv: bool = False, threads: typing.SupportsInt | typing.SupportsIndex = 0, through: bool = False) -> tuple:
         """
         First opaque triangle each ray meets (int32, -1: none) and, with uv, its float32 barycentrics u, v (empty arrays otherwise); with through, a fourth array (R, 3) float32: the product of the sheets' transmittances before it.

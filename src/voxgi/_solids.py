@@ -8,11 +8,7 @@ the solve's lines let them stand in for their outer twin (§5).
 
 from __future__ import annotations
 
-import weakref
-
 import numpy as np
-
-from .rays import ray_scene
 
 
 def is_closed(obj) -> bool:
@@ -28,41 +24,32 @@ _PARITY_DIRECTIONS = np.array(
 )
 
 
-#: The compiled Embree scene of each mesh :func:`inside` was asked about (a
-#: mesh is asked about twice: whether anything occupies it, then which
-#: records face into it).
-_SCENES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
 def inside(mesh, points: np.ndarray) -> np.ndarray:
     """(P,) bool: whether each point lies inside the closed ``mesh``, by the
     parity of the crossings along rays, as ``trimesh.Trimesh.contains``
     decides it, but with the same answer on every call.
 
-    For each of three fixed directions, the crossings forward and backward
-    (the compiled core's ``RayScene.crossings``, stepping a millionth of the
-    mesh's size past each hit, as trimesh's multiple hits do): no crossing
-    either way says outside; equal parities say what they say; unequal ones
-    (a ray through an edge or a vertex counted a crossing twice or not at
-    all) say nothing. The most votes win, ties outside. ``contains``
-    settles such rays with a random direction instead.
+    For each of three fixed directions, the crossings forward and backward:
+    no crossing either way says outside; equal parities say what they say;
+    unequal ones (a ray through an edge or a vertex counted a crossing twice
+    or not at all) say nothing. The most votes win, ties outside.
+    ``contains`` settles such rays with a random direction instead.
     """
     n = len(points)
     inside = np.zeros(n, np.int64)
     outside = np.zeros(n, np.int64)
-    if n == 0 or len(mesh.faces) == 0:
-        return inside > outside
-    scene = _SCENES.get(mesh)
-    if scene is None:
-        scene = _SCENES[mesh] = ray_scene(np.ascontiguousarray(mesh.triangles, np.float32))
-    step = max(1e-8, float(mesh.scale) * 1e-6)
-    org = np.ascontiguousarray(points, np.float32)
     for d in _PARITY_DIRECTIONS:
         d = d / np.linalg.norm(d)
-        fwd, back = (
-            scene.crossings(org, np.tile(np.float32(sign) * d.astype(np.float32), (n, 1)), step)
-            for sign in (1.0, -1.0)
-        )
+        odd = []
+        for sign in (1.0, -1.0):
+            _, ray = mesh.ray.intersects_id(
+                points,
+                np.broadcast_to(sign * d, (n, 3)),
+                multiple_hits=True,
+                return_locations=False,
+            )
+            odd.append(np.bincount(ray, minlength=n))
+        fwd, back = odd
         free = (fwd == 0) | (back == 0)
         agree = ~free & (fwd % 2 == back % 2)
         inside += agree & (fwd % 2 == 1)
