@@ -154,3 +154,28 @@ def test_a_box_piercing_a_closed_two_sided_object_does_not_occupy_it():
     vox = voxgi.voxelize(scene, resolution=16, progress=False)
     assert vox.stats["sealed_objects"] == [0]
     assert vox.back[vox.object_id == 0].any()
+
+
+def test_a_voxelization_leaves_no_embree_scene_of_its_parity_tests_alive():
+    # Each mesh the parity tests trace holds an embreex Embree scene in a
+    # reference cycle; left to the cycle collector, the thousands of a
+    # cluttered scene (Bitterli's Salle de bain: 2134 tests) made its second
+    # voxelization in one process crash inside embreex. With the collector
+    # switched off, none may outlive the voxelization.
+    import gc
+
+    from embreex.rtcore_scene import EmbreeScene
+
+    def alive() -> int:
+        return sum(isinstance(o, EmbreeScene) for o in gc.get_objects())
+
+    scene = room_with_box(True)
+    gc.collect()
+    before = alive()
+    gc.disable()
+    try:
+        vox = voxgi.voxelize(scene, RES, progress=False)
+        assert vox.stats["sealed_objects"] == [len(scene.objects) - 1]
+        assert alive() == before
+    finally:
+        gc.enable()

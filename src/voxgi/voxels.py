@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import math
 import time
 from dataclasses import dataclass, field
@@ -514,6 +515,12 @@ def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> Voxel
     stats["buried_records"] = bury(res, scene, stats["closed_objects"], pitch, sealed)
     stats["closed_objects"] = sorted(set(stats["closed_objects"]) | set(sealed))
     stats["sealed_objects"] = sorted(sealed)
+    # Every mesh the parity tests traced holds an Embree device of embreex's
+    # in a reference cycle (the mesh and its ray intersector), which only the
+    # cycle collector frees: thousands of them left to it made the next
+    # voxelization of a cluttered scene crash inside embreex.
+    del sealed
+    gc.collect()
     stats["inner_records"] = inner
     stats["seconds"] = time.perf_counter() - t_start
     return _voxel_set(res, pitch, origin, resolution, scene, stats)
