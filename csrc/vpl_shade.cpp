@@ -417,6 +417,20 @@ inline bool continues(const ShadeMaterials& mats, int32_t m, const GatherHit& h)
            mats.continue_lobe[h.obj] && mats.lobe[h.obj].kind != 0.f;
 }
 
+// The hit of a ray leaving gather hit h along wi, from h's point offset
+// along its normal by eps (into ro), with the sheets' transmittance before
+// it (T): h stands as a "pixel" of one for gather_hit's facing tests.
+void trace_on(const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene, double eps,
+              const GatherHit& h, const float wi[3], float ro[3], float T[3], GatherHit& out) {
+    for (int a = 0; a < 3; ++a) ro[a] = float(h.y[a] + eps * h.ns[a]);
+    const int32_t t = scene.intersect(ro, wi, nullptr, nullptr, nullptr, T);
+    ShadeHits at_y;
+    at_y.count = 1;
+    at_y.normal = h.ns;
+    at_y.ng = h.ns;
+    gather_hit(at_y, tris, grid, 0, ro, wi, t, out);
+}
+
 // The light leaving the glossy hit h towards the ray's origin
 // (docs/design.md §14): the base's share of record rec's light (ratio: the
 // texture's over the record's albedo), read as the record's mean as VPLs
@@ -455,15 +469,8 @@ void glossy_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
     float f[3];
     microfacet_brdf(lobe, zero, h.ns, wi, wo, f);
     float ro[3], T[3];
-    for (int a = 0; a < 3; ++a) ro[a] = float(h.y[a] + eps * h.ns[a]);
-    const int32_t t = scene.intersect(ro, wi, nullptr, nullptr, nullptr, T);
-    // y as a "pixel" of one: its normal for the facing tests of gather_hit
-    ShadeHits at_y;
-    at_y.count = 1;
-    at_y.normal = h.ns;
-    at_y.ng = h.ns;
     GatherHit z;
-    gather_hit(at_y, tris, grid, 0, ro, wi, t, z);
+    trace_on(tris, grid, scene, eps, h, wi, ro, T, z);
     float Lz[3] = {0.f, 0.f, 0.f};
     if (z.escaped) {
         if (!env) return;
@@ -519,17 +526,9 @@ int near_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
     const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
     const double lx = r * std::cos(phi), ly = r * std::sin(phi);
     float wi[3], ro[3], T[3];
-    for (int a = 0; a < 3; ++a) {
-        wi[a] = float(lx * u[a] + ly * v[a] + z * h.ns[a]);
-        ro[a] = float(h.y[a] + eps * h.ns[a]);
-    }
-    const int32_t t = scene.intersect(ro, wi, nullptr, nullptr, nullptr, T);
-    ShadeHits at_y;
-    at_y.count = 1;
-    at_y.normal = h.ns;
-    at_y.ng = h.ns;
+    for (int a = 0; a < 3; ++a) wi[a] = float(lx * u[a] + ly * v[a] + z * h.ns[a]);
     GatherHit g;
-    gather_hit(at_y, tris, grid, 0, ro, wi, t, g);
+    trace_on(tris, grid, scene, eps, h, wi, ro, T, g);
     // The emitters' light at y from one of the frame's emitter VPLs; the
     // ray above then reads only the light of surfaces that do not emit.
     float Ld[3] = {0.f, 0.f, 0.f};
