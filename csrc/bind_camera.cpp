@@ -45,6 +45,36 @@ voxgi::PrimaryScene make_primary_scene(const F64& tri_v, const F64& tri_ng,
 }
 
 // (3,) finite vector `name` into out.
+// The mirrors of camera_hits and camera_emission, or none where no object is
+// one (obj_mirror absent or all 0).
+std::optional<voxgi::CameraMirrors> make_mirrors(const std::optional<U8>& obj_mirror,
+                                                 const std::optional<F32>& obj_lobe,
+                                                 uint64_t mirror_seed, double eps,
+                                                 py::ssize_t objects) {
+    if (!obj_mirror) return std::nullopt;
+    check_1d(*obj_mirror, objects, "obj_mirror");
+    const uint8_t* pm = obj_mirror->data();
+    bool any = false;
+    for (py::ssize_t i = 0; i < objects; ++i) any |= pm[i] != 0;
+    if (!any) return std::nullopt;
+    if (!obj_lobe) throw py::value_error("obj_mirror needs obj_lobe");
+    check_2d(*obj_lobe, objects, voxgi::kLobeWidth, "obj_lobe");
+    if (!(eps > 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and > 0");
+    voxgi::CameraMirrors M;
+    M.is_mirror = pm;
+    M.lobe = reinterpret_cast<const voxgi::MicrofacetLobe*>(obj_lobe->data());
+    for (py::ssize_t i = 0; i < objects; ++i) {
+        const voxgi::MicrofacetLobe& L = M.lobe[i];
+        if (pm[i] && (L.kind != 2.f || !(L.alpha >= 1e-4f && L.alpha <= 4.f)))
+            throw py::value_error("obj_lobe: object " + std::to_string(i) +
+                                  " is a mirror but its row is not a conductor's lobe (kind 2, "
+                                  "alpha in [1e-4, 4])");
+    }
+    M.seed = mirror_seed;
+    M.eps = eps;
+    return M;
+}
+
 void vector3(const F64& a, const char* name, double out[3]) {
     check_1d(a, 3, name);
     for (int c = 0; c < 3; ++c) {
@@ -115,7 +145,9 @@ py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const 
                          const std::optional<F32>& obj_albedo,
                          const std::optional<std::vector<U8>>& tex_texels,
                          const std::optional<F64>& tex_info, const std::optional<I32>& obj_texture,
-                         const std::optional<F32>& corner_uv) {
+                         const std::optional<F32>& corner_uv, const std::optional<U8>& obj_mirror,
+                         const std::optional<F32>& obj_lobe, uint64_t mirror_seed, double eps,
+                         std::pair<double, double> mirror_point) {
     const voxgi::PixelCamera cam =
         make_camera(eye, right, up, forward, tan_half_fov, width, height, aperture, focus);
     double off[2], ln[2];
@@ -145,17 +177,29 @@ py::tuple camera_hits_py(const F64& eye, const F64& right, const F64& up, const 
           *pl = le.mutable_data();
     int32_t* pm = material.mutable_data();
     // what the sheets before each hit let through: only a scene with sheets has it
-    F32 through({scene.has_sheets() ? P : py::ssize_t(0), py::ssize_t(3)});
-    float* pt = scene.has_sheets() ? through.mutable_data() : nullptr;
+    auto mirrors = make_mirrors(obj_mirror, obj_lobe, mirror_seed, eps, O);
+    if (mirrors) {
+        const double u[2] = {mirror_point.first, mirror_point.second};
+        for (int a = 0; a < 2; ++a) {
+            if (!(u[a] >= 0.0 && u[a] < 1.0))
+                throw py::value_error("mirror_point must lie in [0, 1)^2");
+            mirrors->point[a] = u[a];
+        }
+    }
+    // what the sheets and mirrors before each hit let through: only a scene
+    // with either has it
+    const bool has_through = scene.has_sheets() || mirrors.has_value();
+    F32 through({has_through ? P : py::ssize_t(0), py::ssize_t(3)});
+    float* pt = has_through ? through.mutable_data() : nullptr;
     auto stop = make_stop_check();
     {
         py::gil_scoped_release release;
         voxgi::camera_hits(cam, off, ln, scene, sc, ppos, pn, pg, pw, pm, pl, prim.mutable_data(),
-                           pt, threads, stop, tex ? &tex->surface : nullptr, oa, pa);
+                           pt, threads, stop, tex ? &tex->surface : nullptr, oa, pa,
+                           mirrors ? &*mirrors : nullptr);
     }
     return py::make_tuple(pos, normal, ng, wo, material, le, prim,
-                          scene.has_sheets() ? py::object(through) : py::object(py::none()),
-                          albedo);
+                          has_through ? py::object(through) : py::object(py::none()), albedo);
 }
 
 py::tuple camera_emission_py(const F64& eye, const F64& right, const F64& up, const F64& forward,
@@ -163,14 +207,18 @@ py::tuple camera_emission_py(const F64& eye, const F64& right, const F64& up, co
                              double focus, const I64& pixels, const F64& samples, const F64& tri_v,
                              const F64& tri_ng, const std::optional<F64>& corner_normals,
                              const I32& tri_object, const U8& obj_two_sided,
-                             const F32& obj_emission, const voxgi::RayScene& scene, int threads) {
+                             const F32& obj_emission, const voxgi::RayScene& scene, int threads,
+                             const std::optional<U8>& obj_mirror,
+                             const std::optional<F32>& obj_lobe, uint64_t mirror_seed, double eps) {
     const voxgi::PixelCamera cam =
         make_camera(eye, right, up, forward, tan_half_fov, width, height, aperture, focus);
     const voxgi::PrimaryScene sc =
         make_primary_scene(tri_v, tri_ng, corner_normals, tri_object, obj_two_sided, obj_emission);
     check_scene(scene, tri_v.shape(0));
     check_1d(pixels, -1, "pixels");
-    check_2d(samples, -1, 4, "samples");
+    if (samples.ndim() != 2 || (samples.shape(1) != 4 && samples.shape(1) != 6))
+        throw py::value_error("samples must have shape (K, 4) or (K, 6)");
+    const int sw = int(samples.shape(1));
     const py::ssize_t M = pixels.shape(0), K = samples.shape(0);
     const int64_t* pp = pixels.data();
     for (py::ssize_t m = 0; m < M; ++m)
@@ -179,7 +227,10 @@ py::tuple camera_emission_py(const F64& eye, const F64& right, const F64& up, co
                                   std::to_string(width) + "x" + std::to_string(height) + " image");
     const double* ps = samples.data();
     for (py::ssize_t k = 0; k < K; ++k) {
-        const double* s = ps + 4 * k;
+        const double* s = ps + sw * k;
+        if (sw == 6 && !(s[4] >= 0.0 && s[4] < 1.0 && s[5] >= 0.0 && s[5] < 1.0))
+            throw py::value_error("samples: mirror numbers " + std::to_string(k) +
+                                  " outside [0, 1)^2");
         if (!(s[0] >= 0.0 && s[0] <= 1.0 && s[1] >= 0.0 && s[1] <= 1.0))
             throw py::value_error("samples: offset " + std::to_string(k) + " outside [0, 1]^2");
         if (!(s[2] * s[2] + s[3] * s[3] <= 1.0 + 1e-9))
@@ -189,17 +240,20 @@ py::tuple camera_emission_py(const F64& eye, const F64& right, const F64& up, co
     const py::ssize_t N = M * K;
     F32 le({N, py::ssize_t(3)}), wo({N, py::ssize_t(3)});
     I32 prim(N);
-    F32 through({scene.has_sheets() ? N : py::ssize_t(0), py::ssize_t(3)});
-    float* pt = scene.has_sheets() ? through.mutable_data() : nullptr;
+    const auto mirrors =
+        make_mirrors(obj_mirror, obj_lobe, mirror_seed, eps, obj_emission.shape(0));
+    const bool has_through = scene.has_sheets() || mirrors.has_value();
+    F32 through({has_through ? N : py::ssize_t(0), py::ssize_t(3)});
+    float* pt = has_through ? through.mutable_data() : nullptr;
     float *pl = le.mutable_data(), *pw = wo.mutable_data();
     int32_t* pr = prim.mutable_data();
     auto stop = make_stop_check();
     {
         py::gil_scoped_release release;
-        voxgi::camera_emission(cam, pp, M, ps, K, scene, sc, pl, pw, pr, pt, threads, stop);
+        voxgi::camera_emission(cam, pp, M, ps, K, sw, scene, sc, pl, pw, pr, pt, threads, stop,
+                               mirrors ? &*mirrors : nullptr);
     }
-    return py::make_tuple(le, wo, prim,
-                          scene.has_sheets() ? py::object(through) : py::object(py::none()));
+    return py::make_tuple(le, wo, prim, has_through ? py::object(through) : py::object(py::none()));
 }
 
 }  // namespace
@@ -221,7 +275,9 @@ for aperture 0, else a thin lens focused at distance focus along forward.)doc");
           "obj_two_sided"_a.noconvert(), "obj_emission"_a.noconvert(), "scene"_a, "threads"_a = 0,
           "obj_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
           "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
-          "corner_uv"_a.noconvert() = py::none(),
+          "corner_uv"_a.noconvert() = py::none(), "obj_mirror"_a.noconvert() = py::none(),
+          "obj_lobe"_a.noconvert() = py::none(), "mirror_seed"_a = 0, "eps"_a = 0.0,
+          "mirror_point"_a = std::make_pair(0.5, 0.5),
           R"doc(Every pixel's camera ray (camera_rays, with eye in the scene's frame), its
 first hit in scene (a RayScene built from tri_v) and the hit: the exact point
 on the hit triangle's plane pos (P, 3) float64, normal, ng and wo (the
@@ -234,20 +290,30 @@ sheets the product of their transmittances before the hit (P, 3) float32
 (P, 3) float32 (else None): its object's, or its texture's at the hit point
 where the textures (tex_texels, a list of (H, W, 3) uint8; tex_info (T, 12)
 float64: filter, wrap, raw, to_uv, factor; obj_texture (O,) int32, -1: none;
-corner_uv (F, 3, 2) float32) give the object one.)doc");
+corner_uv (F, 3, 2) float32) give the object one. With obj_mirror (O,)
+uint8 (nonzero: a smooth mirror) and obj_lobe (O, LOBE_WIDTH) float32 (a
+mirror's row a conductor's lobe), a ray that meets a mirror goes on in a
+direction drawn from its lobe (the first from mirror_point in [0, 1)^2
+rotated by a hash of mirror_seed and the pixel, the next from a stream of
+that hash), eps off it, through up to 4 mirrors: the outputs are those of the hit it ends
+on, wo the way back along its last link, and `through` (then always given)
+includes the mirrors' f cos / pdf.)doc");
 
     m.def("camera_emission", &camera_emission_py, "eye"_a.noconvert(), "right"_a.noconvert(),
           "up"_a.noconvert(), "forward"_a.noconvert(), "tan_half_fov"_a, "width"_a, "height"_a,
           "aperture"_a, "focus"_a, "pixels"_a.noconvert(), "samples"_a.noconvert(),
           "tri_v"_a.noconvert(), "tri_ng"_a.noconvert(), "corner_normals"_a.noconvert(),
           "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(), "obj_emission"_a.noconvert(),
-          "scene"_a, "threads"_a = 0,
+          "scene"_a, "threads"_a = 0, "obj_mirror"_a.noconvert() = py::none(),
+          "obj_lobe"_a.noconvert() = py::none(), "mirror_seed"_a = 0, "eps"_a = 0.0,
           R"doc(The emission seen by K camera samples through each of M pixels (pixels
 (M,) int64, row-major indices), the camera as in camera_hits; samples (K, 4)
 float64: the sub-pixel offset in [0, 1]^2 (x right, y down) and the lens
-point on the unit disc. Returns, at index m * K + k: the first hit's
+point on the unit disc; or (K, 6): then also the first mirror link's
+numbers in [0, 1)^2 (rotated by a hash of mirror_seed and the pixel). Returns, at index m * K + k: the first hit's
 emission (M * K, 3) float32 (0 on a miss or a one-sided back), wo (the unit
 direction back to the eye) (M * K, 3) float32, the hit triangle (M * K,)
 int32 (-1: none) and, where the scene has sheets, what they let through
-before the hit (M * K, 3) float32 (None otherwise).)doc");
+before the hit (M * K, 3) float32 (None otherwise). obj_mirror, obj_lobe,
+mirror_seed and eps as in camera_hits (a stream per sample).)doc");
 }

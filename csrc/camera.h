@@ -5,6 +5,7 @@
 
 #include <cstdint>
 
+#include "microfacet.h"
 #include "ray_scene.h"
 #include "texture.h"
 #include "util/parallel.h"
@@ -36,6 +37,23 @@ void camera_ray(const PixelCamera& cam, const double offset[2], const double len
 void camera_rays(const PixelCamera& cam, const double offset[2], const double lens[2], double* org,
                  double* dir, int threads, const StopCheck& stop);
 
+// The smooth mirrors a camera ray continues through (docs/design.md §6):
+// per object, whether it is one and its lobe (a conductor's). A pixel's hit
+// on a mirror becomes the surface seen in it: one direction drawn from the
+// lobe about the way back (microfacet_sample: the first from `point`
+// rotated by a hash of `seed` and the ray's index, the next from a stream
+// of that hash), traced `eps` off the mirror, and `through`
+// multiplied by the lobe's f cos / pdf there; up to `max_links` mirrors in
+// turn. A direction below the mirror's geometric plane ends the ray dark.
+struct CameraMirrors {
+    const uint8_t* is_mirror = nullptr;    // (O,)
+    const MicrofacetLobe* lobe = nullptr;  // (O,) rows; read only where is_mirror
+    uint64_t seed = 0;
+    double point[2] = {0.5, 0.5};  // the frame's numbers of the first link (camera_hits)
+    double eps = 0.0;
+    int max_links = 4;
+};
+
 // Every pixel's camera ray, its first hit in `scene` and primary_hit on it:
 // pos (P, 3), normal, ng, wo (the unit direction back to the eye) (P, 3),
 // material (P,), emission (P, 3) and the hit triangle prim (P,) (-1: none),
@@ -43,25 +61,31 @@ void camera_rays(const PixelCamera& cam, const double offset[2], const double le
 // transmittances before the hit (RayScene::intersect). With `albedo` (P, 3)
 // (nullable), also each hit's diffuse albedo: its object's `obj_albedo`
 // (O, 3), or its texture at the hit point where `textures` (nullable) gives
-// the object one; 0 where nothing is shaded.
+// the object one; 0 where nothing is shaded. With `mirrors` (nullable;
+// `through` must then be given), the ray goes on through mirrors and every
+// output is that of the hit it ends on (wo: the way back along the last
+// link), `through` including the mirrors' reflectance.
 void camera_hits(const PixelCamera& cam, const double offset[2], const double lens[2],
                  const RayScene& scene, const PrimaryScene& triangles, double* pos, float* normal,
                  float* ng, float* wo, int32_t* material, float* emission, int32_t* prim,
                  float* through, int threads, const StopCheck& stop,
                  const SurfaceTextures* textures = nullptr, const float* obj_albedo = nullptr,
-                 float* albedo = nullptr);
+                 float* albedo = nullptr, const CameraMirrors* mirrors = nullptr);
 
 // The emission seen by camera samples (offset, lens) through chosen pixels,
 // for the display's control variate on emitters seen directly (docs/design.md
 // §6): for pixel pixels[m] and sample k (samples (K, 4): sub-pixel offset in
-// [0, 1)^2, then the lens point on the unit disc), at index m * K + k, the
+// [0, 1)^2, then the lens point on the unit disc; `width` 6: then the first
+// mirror link's numbers in [0, 1)^2, else 4), at index m * K + k, the
 // emission of the first hit (primary_hit's; 0 on a miss or a one-sided
 // back), wo (the unit direction back to the eye, which finds the
 // environment on a miss), the hit triangle prim (-1: none) and, where
-// `through` is not null, what the sheets before the hit let through.
+// `through` is not null, what the sheets before the hit let through. With
+// `mirrors` (nullable; `through` must then be given), as camera_hits.
 void camera_emission(const PixelCamera& cam, const int64_t* pixels, int64_t count,
-                     const double* samples, int64_t K, const RayScene& scene,
+                     const double* samples, int64_t K, int width, const RayScene& scene,
                      const PrimaryScene& triangles, float* emission, float* wo, int32_t* prim,
-                     float* through, int threads, const StopCheck& stop);
+                     float* through, int threads, const StopCheck& stop,
+                     const CameraMirrors* mirrors = nullptr);
 
 }  // namespace voxgi

@@ -197,7 +197,7 @@ def test_the_kernel_sees_what_the_camera_hits_see():
         wide[0, 2:] = (1.0, 1.0)
         with pytest.raises(ValueError, match="lens point 0 outside the unit disc"):
             _core.camera_emission(*camera, pixels, wide, *tables, tr.native)
-        with pytest.raises(ValueError, match=r"samples must have shape \(N, 4\)"):
+        with pytest.raises(ValueError, match=r"samples must have shape \(K, 4\) or \(K, 6\)"):
             _core.camera_emission(*camera, pixels, samples[:, :2].copy(), *tables, tr.native)
     finally:
         tr.close()

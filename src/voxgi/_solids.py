@@ -130,9 +130,11 @@ def inside(mesh, points: np.ndarray) -> np.ndarray:
     # every point's six rays (three directions, forward and back) in one batch
     dirs = _PARITY_DIRECTIONS / np.linalg.norm(_PARITY_DIRECTIONS, axis=1)[:, None]
     dirs = np.concatenate([dirs[:, None, :], -dirs[:, None, :]], axis=1).reshape(6, 1, 3)
-    counts = _parity_rays(mesh).crossings(
-        np.tile(points, (6, 1)), np.broadcast_to(dirs, (6, n, 3)).reshape(-1, 3)
-    ).reshape(3, 2, n)
+    counts = (
+        _parity_rays(mesh)
+        .crossings(np.tile(points, (6, 1)), np.broadcast_to(dirs, (6, n, 3)).reshape(-1, 3))
+        .reshape(3, 2, n)
+    )
     for fwd, back in counts:
         free = (fwd == 0) | (back == 0)
         agree = ~free & (fwd % 2 == back % 2)

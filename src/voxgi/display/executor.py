@@ -44,6 +44,9 @@ class FrameShaderSpec:
     near_reach : float
         Gather rays that land nearer than this many voxel pitches on a
         diffuse surface that does not emit continue one bounce (0: never).
+    mirror_alpha : float
+        Camera rays go on through conductors whose lobe's alpha is at most
+        this (0: through none; :attr:`RenderTuning.mirror_alpha`).
     """
 
     scene: Scene
@@ -56,6 +59,7 @@ class FrameShaderSpec:
     control_emission: bool = True
     guide_environment: bool = True
     near_reach: float = 0.0
+    mirror_alpha: float = 0.0
 
     @property
     def gather_per_frame(self) -> int:
@@ -87,6 +91,7 @@ class FrameShaderSpec:
             self.control_emission,
             self.guide_environment,
             self.near_reach,
+            self.mirror_alpha,
         )
 
 

@@ -41,8 +41,9 @@ class RenderResult:
         ``stats["est_rel_mse"]`` (``docs/design.md`` §6, "What the estimate
         leaves out").
     stats : dict
-        ``seconds`` per phase, ray counts, VPLs used, what was skipped. The
-        phases: ``setup``; ``primary`` (camera rays and their hits);
+        ``seconds`` per phase, ray counts, VPLs used, what was skipped,
+        ``mirror_objects`` (the mirrors the camera rays go on through,
+        ``docs/design.md`` §6). The phases: ``setup``; ``primary`` (camera rays and their hits);
         ``shadow`` (the VPLs' light: shadow rays and the shading of the VPLs
         they find); ``gather`` (gather rays and the shading of their hits);
         ``lights`` where the scene has lights or an environment (their
@@ -61,7 +62,9 @@ class RenderResult:
     solution : Solution or None
         The voxel solution displayed (computed here when none was given).
     albedo : (H, W, 3) float32 or None
-        Diffuse albedo of the surfaces each pixel's camera rays met, averaged
+        Diffuse albedo of the surfaces each pixel's camera rays met (where
+        a ray went on through a mirror, of the surface it met there: every
+        AOV describes the hit the pixel shows), averaged
         over the frames' camera samples with the image's pixel filter (so an
         edge pixel holds the coverage-weighted mean of its surfaces; 0 where
         a ray met nothing). None when the frames came without their AOVs.
@@ -152,6 +155,7 @@ def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
         opt.control_emission,
         opt.guide_environment,
         opt.near_reach,
+        opt.mirror_alpha,
     )
 
 
@@ -313,6 +317,9 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds, 
         "denoise_checks": None if rule is None else rule.checks,
         "threads": opt.threads,
         "seen_emission": _seen_emission_stats(source),
+        "mirror_objects": int(
+            np.count_nonzero(getattr(source, "mirrors", {}).get("obj_mirror", []))
+        ),
         "environment_guide": _guide_stats(source),
     }
 
@@ -338,6 +345,8 @@ def _seen_emission_stats(source) -> dict | None:
         "samples": ctl.samples,
         "rays": ctl.rays,
         "seconds": ctl.seconds,
+        "mirrored": ctl.mirrored,
+        "mirror_samples": ctl.mirror_samples,
     }
 
 

@@ -11,7 +11,7 @@ from .. import _core
 from .._qmc import sobol
 from ..scene import Camera
 
-__all__ = ["camera_arguments", "camera_rays", "frame_samples"]
+__all__ = ["camera_arguments", "camera_rays", "frame_samples", "mirror_points"]
 
 
 def _radical_inverse(i: int, base: int) -> float:
@@ -55,6 +55,17 @@ def frame_samples(frame: int, seed: int = 0) -> tuple[tuple[float, float], tuple
     lu = (_radical_inverse(i + 1, 3) + rot[0]) % 1.0
     lv = (_radical_inverse(i + 1, 5) + rot[1]) % 1.0
     return off, _concentric_disc(lu, lv)
+
+
+def mirror_points(index, seed: int = 0) -> np.ndarray:
+    """(n, 2) numbers in [0, 1)² of the first mirror link of samples
+    ``index`` (n,): Sobol' dimensions 3 and 4 with a random digit scramble
+    drawn from ``seed``, so that with the sub-pixel offsets (dimensions 1
+    and 2, :func:`frame_samples`) the samples stay evenly spread in all four
+    (the compiled kernels rotate them by each pixel's own offset)."""
+    rng = np.random.default_rng([int(seed), 0x3C1])
+    scramble = rng.integers(0, 1 << 32, size=2, dtype=np.uint64).astype(np.uint32)
+    return (sobol(index, 4)[:, 2:] ^ scramble) / 2.0**32
 
 
 def camera_arguments(cam: Camera, centre=(0.0, 0.0, 0.0)) -> tuple:

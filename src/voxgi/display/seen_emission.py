@@ -34,7 +34,7 @@ import numpy as np
 from .. import _core
 from .._qmc import sobol
 from .pixel_filter import _FILTER_REACH, GAUSSIAN_TAPS, gaussian_norms, gaussian_weights
-from .samples import camera_arguments
+from .samples import camera_arguments, mirror_points
 
 __all__ = ["SeenEmission", "seen_emission", "skip_reason"]
 
@@ -47,6 +47,10 @@ _SPREAD = 1e-2
 _MOST = 256
 _FEWEST = 64
 _BUDGET = 8
+#: Samples per pixel that sees a mirror: at most this many, their rays at
+#: most :data:`_MIRROR_BUDGET` times the image's pixels.
+_MIRROR_MOST = 1024
+_MIRROR_BUDGET = 256
 #: Camera rays per kernel call (bounds the temporary arrays).
 _BATCH = 1 << 18
 
@@ -73,6 +77,10 @@ class SeenEmission:
     rays : int
         Camera rays traced in all (the corners' included).
     seconds : float
+    mirrored : int
+        Of the pixels sampled, those that see a mirror.
+    mirror_samples : int
+        Camera rays per pixel that sees a mirror (with the box filter).
     """
 
     pixels: np.ndarray
@@ -81,6 +89,8 @@ class SeenEmission:
     samples: int
     rays: int
     seconds: float
+    mirrored: int = 0
+    mirror_samples: int = 0
 
 
 def skip_reason(cam, emits: bool, env) -> str | None:
@@ -96,7 +106,13 @@ def _seen(ctx: dict, pixels: np.ndarray, samples: np.ndarray) -> np.ndarray:
     """(M, K, 3) float32 emission seen by ``samples`` (K, 4) through ``pixels``
     (``ctx``: the arguments :func:`seen_emission` gathers)."""
     le, wo, prim, through = _core.camera_emission(
-        *ctx["camera"], pixels, samples, *ctx["triangles"], ctx["scene"], threads=ctx["threads"]
+        *ctx["camera"],
+        pixels,
+        samples,
+        *ctx["triangles"],
+        ctx["scene"],
+        threads=ctx["threads"],
+        **ctx["mirrors"],
     )
     env = ctx["env"]
     if env is not None:
@@ -143,18 +159,45 @@ def _uneven_pixels(ctx: dict, width: int, height: int) -> np.ndarray:
     return _grow(hi - lo > _SPREAD * hi, 1)
 
 
-def _footprint_samples(count: int, seed: int) -> np.ndarray:
+def _mirror_pixels(ctx: dict, width: int, height: int) -> np.ndarray:
+    """(H, W) bool: pixels one of whose four corners' rays first meets a mirror."""
+    P = width * height
+    corner = np.zeros((1, 4))
+    obj = ctx["triangles"][3]
+    mirror = ctx["mirrors"]["obj_mirror"].astype(bool)
+    seen = np.zeros(P, bool)
+    every = np.arange(P, dtype=np.int64)
+    for s in _batches(P, 1):
+        _, _, prim, _ = _core.camera_emission(
+            *ctx["camera"],
+            every[s],
+            corner,
+            *ctx["triangles"],
+            ctx["scene"],
+            threads=ctx["threads"],
+        )
+        seen[s] = (prim >= 0) & mirror[obj[np.maximum(prim, 0)]]
+    grid = np.pad(seen.reshape(height, width), ((0, 1), (0, 1)), mode="edge")
+    return grid[:-1, :-1] | grid[:-1, 1:] | grid[1:, :-1] | grid[1:, 1:]
+
+
+def _footprint_samples(count: int, seed: int, mirrors: bool = False) -> np.ndarray:
     """(count, 4) sub-pixel offsets of a scrambled (0, 2)-sequence (count a
     power of two: one in each cell of every elementary grid of that area),
-    the lens at its centre."""
+    the lens at its centre; with ``mirrors`` (count, 6), the numbers of the
+    first mirror link following (:func:`~voxgi.display.samples.mirror_points`)."""
     rng = np.random.default_rng([int(seed), 0x5EE1])
     scramble = rng.integers(0, 1 << 32, size=2, dtype=np.uint64).astype(np.uint32)
-    out = np.zeros((count, 4))
+    out = np.zeros((count, 6 if mirrors else 4))
     out[:, :2] = (sobol(np.arange(count), 2) ^ scramble) / 2.0**32
+    if mirrors:
+        out[:, 4:] = mirror_points(np.arange(count), seed)
     return out
 
 
-def seen_emission(cam, tracer, triangles: tuple, env, seed: int, threads: int) -> SeenEmission:
+def seen_emission(
+    cam, tracer, triangles: tuple, env, seed: int, threads: int, mirrors: dict | None = None
+) -> SeenEmission:
     """The controlled pixels of ``cam``'s image and their mean seen emission.
 
     Parameters
@@ -170,6 +213,10 @@ def seen_emission(cam, tracer, triangles: tuple, env, seed: int, threads: int) -
     seed : int
         Scrambles the footprint samples.
     threads : int
+    mirrors : dict or None
+        The mirrors' arguments of :func:`voxgi._core.camera_emission`
+        (``obj_mirror``, ``obj_lobe``, ``mirror_seed``, ``eps``): the samples
+        go on through smooth mirrors as the frames' camera rays do.
     """
     t0 = time.perf_counter()
     ctx = {
@@ -178,6 +225,7 @@ def seen_emission(cam, tracer, triangles: tuple, env, seed: int, threads: int) -
         "scene": tracer.native,
         "env": env,
         "threads": threads,
+        "mirrors": mirrors or {},
     }
     P = cam.width * cam.height
     # Through a filter of reach r a pixel is made of the samples within r of
@@ -185,21 +233,68 @@ def seen_emission(cam, tracer, triangles: tuple, env, seed: int, threads: int) -
     # uneven one are controlled, from the samples within 2r.
     reach = _FILTER_REACH[cam.pixel_filter]
     uneven = _uneven_pixels(ctx, cam.width, cam.height)
+    mirrored = np.zeros_like(uneven)
+    if mirrors:
+        # what a mirror shows is spread by its lobe beyond the pixel's
+        # footprint: every pixel that sees a mirror is controlled
+        mirrored = _grow(_mirror_pixels(ctx, cam.width, cam.height), 1)
+        uneven |= mirrored
     target = np.flatnonzero(_grow(uneven, reach).ravel()).astype(np.int64)
     sampled = np.flatnonzero(_grow(uneven, 2 * reach).ravel()).astype(np.int64)
     M = len(sampled)
+    # the mirrored pixels take more samples below; the others share the budget
+    plain = M - int(np.count_nonzero(mirrored.ravel()[sampled]))
     per = _MOST
     if M:
-        per = 1 << math.floor(math.log2(max(1.0, max(_BUDGET * P, _BATCH) / M)))
+        per = 1 << math.floor(math.log2(max(1.0, max(_BUDGET * P, _BATCH) / max(1, plain))))
         per = int(min(_MOST, max(_FEWEST, per)))
-    samples = _footprint_samples(per, seed)
+    samples = _footprint_samples(per, seed, bool(mirrors))
+    rays = P + M * per
+    extra = 0
     if reach:
         mean = _gaussian_mean(ctx, cam, sampled, target, samples)
     else:
         mean = np.zeros((M, 3), np.float32)
         for s in _batches(M, per):
             mean[s] = _seen(ctx, sampled[s], samples).mean(axis=1, dtype=np.float64)
-    return SeenEmission(target, mean, M, per, P + M * per, time.perf_counter() - t0)
+        if mirrors:
+            extra = _mirror_means(ctx, sampled, mirrored.ravel()[sampled], mean, per, seed)
+            rays += extra
+    n_mirrored = int(np.count_nonzero(mirrored.ravel()[sampled])) if M else 0
+    return SeenEmission(
+        target,
+        mean,
+        M,
+        per,
+        rays,
+        time.perf_counter() - t0,
+        n_mirrored,
+        per + (extra // n_mirrored if n_mirrored and not reach else 0),
+    )
+
+
+def _mirror_means(ctx, sampled, mirrored, mean, per: int, seed: int) -> int:
+    """Refine ``mean`` in place at the ``mirrored`` pixels (bool, one per
+    ``sampled`` pixel) with more samples: :data:`_MIRROR_MOST`, fewer (a
+    power of two) where their rays would pass :data:`_MIRROR_BUDGET` a
+    pixel of the image. A mirror's lobe spreads a window or a lamp over
+    many pixels, in part through its lobe's rare wide directions that a few
+    samples miss, and the frames replace what each pixel sees by this mean:
+    its error stays in the picture. Returns the rays traced."""
+    idx = np.flatnonzero(mirrored)
+    if len(idx) == 0:
+        return 0
+    P = ctx["camera"][5] * ctx["camera"][6]
+    K = min(_MIRROR_MOST, 1 << math.floor(math.log2(max(1.0, _MIRROR_BUDGET * P / len(idx)))))
+    if K <= per:
+        return 0
+    # the first `per` samples of K are those already taken
+    extra = _footprint_samples(K, seed, True)[per:]
+    for s in _batches(len(idx), len(extra)):
+        q = idx[s]
+        le = _seen(ctx, sampled[q], extra).sum(axis=1, dtype=np.float64)
+        mean[q] = (mean[q] * per + le) / K
+    return len(idx) * len(extra)
 
 
 def _gaussian_mean(ctx: dict, cam, sampled: np.ndarray, target: np.ndarray, samples):

@@ -26,6 +26,11 @@ DEFAULT_TOL = 1e-3
 #: which a hit that near sees under a wide angle.
 NEAR_REACH = 1.0
 
+#: A conductor whose lobe's alpha is at most this is a mirror that camera
+#: rays go on through (:attr:`RenderTuning.mirror_alpha`): what it shows is
+#: shaded where the reflected ray lands, not read from that surface's records.
+MIRROR_ALPHA = 0.05
+
 
 @dataclass(frozen=True)
 class RenderTuning:
@@ -111,6 +116,14 @@ class _Experiment(RenderTuning):
         nearer than this many voxel pitches continues one bounce there
         instead of reading the record (default 1; ``docs/design.md`` §6);
         0 always reads the record.
+    mirror_alpha : float
+        A conductor whose lobe's alpha is at most this (a smooth metal, a
+        mirror; Mitsuba's ``conductor``) is a mirror: a camera ray that meets
+        it goes on in a direction drawn from its lobe, and the pixel shows
+        the surface the ray lands on, shaded as if seen directly, times the
+        mirror's reflectance (default 0.05; ``docs/design.md`` §6). 0: camera
+        rays stop at every surface, and a mirror's pixels read its lobe's
+        gather rays (§14).
     """
 
     vpl_pdf: str = "power"
@@ -121,6 +134,7 @@ class _Experiment(RenderTuning):
     follow_lobes: bool = True
     guide_environment: bool = True
     near_reach: float = NEAR_REACH
+    mirror_alpha: float = MIRROR_ALPHA
 
 
 @dataclass(frozen=True)
@@ -146,6 +160,7 @@ class _RenderSettings:
     follow_lobes: bool = True
     guide_environment: bool = True
     near_reach: float = NEAR_REACH
+    mirror_alpha: float = MIRROR_ALPHA
 
 
 def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) -> _RenderSettings:
@@ -200,6 +215,7 @@ def _check_render(scene, sol, camera, max_frames, tol, seed, threads, tuning) ->
         follow_lobes=bool(getattr(t, "follow_lobes", True)),
         guide_environment=bool(getattr(t, "guide_environment", True)),
         near_reach=_validate.real(t.near_reach, "near_reach", low=0.0),
+        mirror_alpha=_validate.real(t.mirror_alpha, "mirror_alpha", low=0.0),
     )
 
 

@@ -27,7 +27,7 @@ from .aovs import frame_aovs
 from .environment_guide import environment_guide
 from .lighting import _HIT_KEYS, _SceneLights
 from .pixel_filter import gaussian_pixel_filter
-from .samples import camera_arguments, frame_samples
+from .samples import camera_arguments, frame_samples, mirror_points
 from .seen_emission import SeenEmission, seen_emission, skip_reason
 from .vpls import VPLSampler, base_outgoing, continuing_objects, place_vpls
 
@@ -125,6 +125,7 @@ class _FrameShader:
         control_emission: bool = True,
         guide_environment: bool = True,
         near_reach: float = 0.0,
+        mirror_alpha: float = 0.0,
     ):
         self.scene, self.cam, self.tracer, self.sampler = scene, cam, tracer, sampler
         # the filter needs the two kinds of light apart; without any light of
@@ -134,6 +135,7 @@ class _FrameShader:
         self.gather = int(gather) if sampler.mis else 0
         self.seed = int(seed)
         self._material_tables(scene)
+        self._mirror_tables(float(mirror_alpha))
         self.env = scene.environment
         emits = bool(np.any(self.mat_emission > 0))
         #: why the seen emission is not controlled (None: it is)
@@ -220,6 +222,31 @@ class _FrameShader:
                 self.mat_continue = continuing_objects(scene)
                 self.mat_base_out = base_outgoing(scene)
 
+    def _mirror_tables(self, alpha: float) -> None:
+        """``mirrors``: the mirrors' arguments of the camera kernels, the
+        conductors whose lobe's alpha is at most ``alpha`` that do not emit
+        ({} where none is: camera rays stop at every surface)."""
+        self.mirrors: dict = {}
+        if self.mat_lobe is None or not alpha > 0:
+            return
+        spec = [o.material.specular for o in self.scene.objects]
+        mirror = np.array(
+            [isinstance(s, Microfacet) and s.kind == "conductor" and s.alpha <= alpha for s in spec]
+        ) & ~(self.mat_emission.max(axis=1) > 0)
+        if mirror.any():
+            self.mirrors = {
+                "obj_mirror": mirror.astype(np.uint8),
+                "obj_lobe": self.mat_lobe,
+                "eps": self.eps,
+            }
+
+    def _mirror_arguments(self, stream: int, **extra) -> dict:
+        """The mirrors' arguments with the random stream ``stream`` and
+        ``extra`` (none without mirrors)."""
+        if not self.mirrors:
+            return {}
+        return {**self.mirrors, "mirror_seed": int(stream) & 0xFFFFFFFFFFFFFFFF, **extra}
+
     @property
     def light_rays(self) -> int:
         """Shadow rays traced to the lights and the environment."""
@@ -242,6 +269,10 @@ class _FrameShader:
             tr.native,
             threads=self.threads,
             **self._textures,
+            **self._mirror_arguments(
+                hash((self.seed, self._frame, 0x3C1)),
+                mirror_point=tuple(mirror_points([self._frame], self.seed)[0]),
+            ),
         )
         self.primary_rays += len(prim)
         if self.env is not None:
@@ -260,7 +291,13 @@ class _FrameShader:
         if self.emission_skipped is not None:
             return None
         out = seen_emission(
-            self.cam, self.tracer, self._primary_scene, self.env, self.seed, self.threads
+            self.cam,
+            self.tracer,
+            self._primary_scene,
+            self.env,
+            self.seed,
+            self.threads,
+            self._mirror_arguments(hash((self.seed, 0x3C2))),
         )
         self.primary_rays += out.rays
         self.seconds["primary"] += out.seconds
