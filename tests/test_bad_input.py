@@ -410,6 +410,8 @@ def test_render_bad_args(small):
         ({"tuning": {"gather": 4}}, TypeError, "tuning"),
         ({"tuning": voxgi.RenderTuning(emitter_share=2.0)}, ValueError, "emitter_share"),
         ({"tuning": _Experiment(vpl_pdf="uniform")}, ValueError, "pdf"),
+        ({"tuning": _Experiment(mirror_alpha=-0.1)}, ValueError, "mirror_alpha"),
+        ({"tuning": _Experiment(mirror_alpha=NAN)}, ValueError, "mirror_alpha"),
         ({"client": 42}, TypeError, "client"),
     ]:
         with pytest.raises(exc, match=word):

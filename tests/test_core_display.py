@@ -692,3 +692,46 @@ def test_camera_hits_go_on_through_a_mirror_to_what_the_unfolded_camera_sees(met
     if metal == "Au":
         assert np.ptp(fresnel[:, 2]) > 0.01
         assert fresnel[:, 2].max() < 0.9
+
+
+def test_camera_kernels_refuse_bad_mirrors():
+    import voxgi
+    from voxgi.display.samples import camera_arguments
+
+    perfect = ((0.0,) * 3, (1.0,) * 3)
+    cam, scene, tr, tables = _boxes_over_a_mirror(perfect, (0.3, -3.0, 3.0), (0.0, 0.0, 1.0))
+    n_obj = len(scene.objects)
+    lobes = np.zeros((n_obj, len(scene.objects[-1].material.specular.lobe_row())), np.float32)
+    lobes[-1] = scene.objects[-1].material.specular.lobe_row()
+    mirror = np.zeros(n_obj, np.uint8)
+    mirror[-1] = 1
+    good = dict(obj_mirror=mirror, obj_lobe=lobes, mirror_seed=1, eps=1e-6)
+    args = (*camera_arguments(cam, tr.centre), (0.5, 0.5), (0.0, 0.0), *tables, tr.native)
+    plastic = lobes.copy()
+    plastic[-1] = voxgi.Microfacet("plastic", alpha=0.02).lobe_row()
+    try:
+        for change, word in [
+            ({"obj_mirror": mirror[:-1]}, "obj_mirror"),
+            ({"obj_lobe": None}, "obj_mirror needs obj_lobe"),
+            ({"obj_lobe": lobes[:, :-1].copy()}, "obj_lobe"),
+            ({"obj_lobe": plastic}, "not a conductor's lobe"),
+            ({"eps": 0.0}, "eps"),
+            ({"mirror_point": (1.0, 0.5)}, "mirror_point"),
+        ]:
+            with pytest.raises(ValueError, match=word):
+                _core.camera_hits(*args, **{**good, **change})
+        # no mirror at all: the same hits as without the arguments, no `through`
+        none = _core.camera_hits(*args, **{**good, "obj_mirror": np.zeros(n_obj, np.uint8)})
+        assert none[7] is None
+        samples = np.array([[0.5, 0.5, 0.0, 0.0, 1.2, 0.1]])
+        with pytest.raises(ValueError, match="mirror numbers 0 outside"):
+            _core.camera_emission(
+                *camera_arguments(cam, tr.centre)[:9],
+                np.array([0], np.int64),
+                samples,
+                *tables,
+                tr.native,
+                **good,
+            )
+    finally:
+        tr.close()
