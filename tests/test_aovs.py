@@ -1,5 +1,5 @@
-"""The pixel AOVs (albedo, normal, depth, object) against the camera rays'
-own hits computed in closed form."""
+"""The pixel AOVs (albedo, normal, depth, object, seen emission) against the
+camera rays' own hits computed in closed form."""
 
 from __future__ import annotations
 
@@ -91,6 +91,22 @@ def test_aovs_are_the_camera_hits_averaged_over_the_frames(seed):
     np.testing.assert_allclose(out.albedo[:, 4:], np.broadcast_to(FAR_ALBEDO, (H, 4, 3)), atol=1e-6)
 
 
+def test_emission_aov_is_the_emitters_radiance_each_pixel_sees():
+    """The far plane emits radiance 1 and the near quad nothing: the emission
+    AOV is 1 right of the near quad's edge and 0 left of it; column 3, half
+    covered, is controlled (``stats["seen_emission"]``) and holds its
+    controlled mean, a half. The rest of the image is reflected light."""
+    out = _render("box", 16, 0)
+    np.testing.assert_array_equal(out.emission[:, :3], 0.0)
+    np.testing.assert_array_equal(out.emission[:, 4:], 1.0)
+    np.testing.assert_allclose(out.emission[:, 3], 0.5, atol=0.02)
+    assert out.stats["seen_emission"]["pixels"] >= H
+    assert np.all(out.image - out.emission >= -1e-6)
+    # where the far plane fills the pixel, it reflects nothing back (the near
+    # quad faces away from it): the image there is its emission exactly
+    np.testing.assert_array_equal(out.image[:, 4:], out.emission[:, 4:])
+
+
 def test_aovs_take_the_images_gaussian_pixel_filter():
     frames, seed = 8, 1
     out = _render("gaussian", frames, seed)
@@ -116,6 +132,7 @@ def test_exr_layers_round_trip(tmp_path):
     )
     np.testing.assert_array_equal(voxgi.io.read_exr(p, layer="albedo"), out.albedo)
     np.testing.assert_array_equal(voxgi.io.read_exr(p, layer="normal"), out.normal)
+    np.testing.assert_array_equal(voxgi.io.read_exr(p, layer="emission"), out.emission)
     ch = voxgi.io.read_exr_channels(p)
     np.testing.assert_array_equal(ch["depth.Z"], out.depth)
     np.testing.assert_array_equal(ch["object_id"], out.object_id)

@@ -1,5 +1,6 @@
-"""The pixel AOVs: albedo, shading normal, depth and object of each pixel's
-first hits, from the camera hits the frames trace anyway (no extra rays),
+"""The pixel AOVs: albedo, shading normal, depth, object and seen emission of
+each pixel's first hits, from the camera hits the frames trace anyway (no
+extra rays),
 averaged over the frames' camera samples with the image's pixel filter
 (``docs/design.md`` §6)."""
 
@@ -7,20 +8,31 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["AOV_CHANNELS", "AOVMean", "frame_aovs"]
+__all__ = ["AOV_CHANNELS", "EMISSION_COLUMN", "AOVMean", "frame_aovs"]
 
 #: Columns of :func:`frame_aovs`: albedo RGB, shading normal XYZ, view depth
-#: times the hit indicator, and the hit indicator (the share of the pixel's
-#: filtered samples that met a surface).
+#: times the hit indicator, the hit indicator (the share of the pixel's
+#: filtered samples that met a surface), and the emitted radiance RGB the
+#: pixel sees (an emitter's or the environment's, as the image counts it).
 AOV_CHANNELS = (
     *("albedo.R", "albedo.G", "albedo.B"),
     *("normal.X", "normal.Y", "normal.Z"),
     *("zhit", "hit"),
+    *("emission.R", "emission.G", "emission.B"),
 )
+
+#: Where the seen emission's columns start in :data:`AOV_CHANNELS`.
+EMISSION_COLUMN = 8
 
 
 def frame_aovs(
-    hits: dict, albedo: np.ndarray, eye: np.ndarray, forward: np.ndarray, *, per_hit: bool = False
+    hits: dict,
+    albedo: np.ndarray,
+    eye: np.ndarray,
+    forward: np.ndarray,
+    *,
+    per_hit: bool = False,
+    emission: np.ndarray | None = None,
 ) -> np.ndarray:
     """One frame's AOV samples, a row per pixel (:data:`AOV_CHANNELS`).
 
@@ -35,10 +47,13 @@ def frame_aovs(
         (a texture's; 0 where nothing is met).
     eye, forward : (3,) float
         The camera's centre, in the hits' frame, and its unit view axis.
+    emission : (P, 3) float, optional
+        The emitted radiance each camera ray sees, as the frame's image
+        counts it (0 without).
 
     Returns
     -------
-    (P, 8) float32
+    (P, 11) float32
         A pixel that met nothing has albedo, normal and depth 0 and hit 0.
     """
     mat = hits["material"]
@@ -56,6 +71,11 @@ def frame_aovs(
         depth = (hits["pos"] - np.asarray(eye)) @ np.asarray(forward)
     out[:, 6] = np.where(hit, depth, 0.0)
     out[:, 7] = hit
+    e = EMISSION_COLUMN
+    if emission is None:
+        out[:, e : e + 3] = 0.0
+    else:
+        out[:, e : e + 3] = emission
     return out
 
 
@@ -68,7 +88,7 @@ class AOVMean:
         self.object_id: np.ndarray | None = None
 
     def add(self, aovs: np.ndarray | None, objects: np.ndarray | None) -> None:
-        """Add a frame's (P, 8) AOV samples; keep the first frame's objects."""
+        """Add a frame's (P, 11) AOV samples; keep the first frame's objects."""
         if aovs is None:
             return
         if self.sum is None:
@@ -78,9 +98,10 @@ class AOVMean:
         self.frames += 1
 
     def result(self, height: int, width: int) -> dict:
-        """``albedo`` and ``normal`` (H, W, 3), ``depth`` and ``object_id``
-        (H, W) of :class:`RenderResult`; all None without any frame's AOVs."""
-        keys = ("albedo", "normal", "depth", "object_id")
+        """``albedo``, ``normal`` and ``emission`` (H, W, 3), ``depth`` and
+        ``object_id`` (H, W) of :class:`RenderResult`; all None without any
+        frame's AOVs."""
+        keys = ("albedo", "normal", "depth", "object_id", "emission")
         if self.sum is None or self.frames == 0:
             return dict.fromkeys(keys)
         m = (self.sum / self.frames).reshape(height, width, -1)
@@ -93,4 +114,5 @@ class AOVMean:
             "normal": m[..., 3:6].astype(np.float32),
             "depth": depth.astype(np.float32),
             "object_id": obj,
+            "emission": m[..., EMISSION_COLUMN : EMISSION_COLUMN + 3].astype(np.float32),
         }

@@ -340,7 +340,7 @@ class _Mean:
 DENOISED_FACTOR = 2.0
 
 
-def denoised_estimate(acc: _Mean, shape, albedo, normal) -> tuple[float, np.ndarray]:
+def denoised_estimate(acc: _Mean, shape, albedo, normal, emission=None) -> tuple[float, np.ndarray]:
     """The estimated relMSE of the denoised running mean, and that image.
 
     With ``h`` of the ``n`` frames in the first half of the complete batches,
@@ -358,6 +358,9 @@ def denoised_estimate(acc: _Mean, shape, albedo, normal) -> tuple[float, np.ndar
     shape : (H, W, 3)
     albedo, normal : (H, W, 3) float32 or None
         The denoiser's guides.
+    emission : (H, W, 3) float32 or None
+        The seen emission, kept out of the denoiser
+        (:func:`voxgi.denoise.denoise`).
 
     Returns
     -------
@@ -370,10 +373,10 @@ def denoised_estimate(acc: _Mean, shape, albedo, normal) -> tuple[float, np.ndar
     half = acc.count // 2
     h, n = half * acc.size, acc.frames
     full = acc.mean.reshape(shape).astype(np.float32)
-    d_n = denoise(full, albedo, normal)
+    d_n = denoise(full, albedo, normal, emission=emission)
     if half == 0 or h >= n:
         return math.inf, d_n
     first = acc.batches[:half].mean(axis=0, dtype=np.float64).reshape(shape)
-    d_h = denoise(first.astype(np.float32), albedo, normal)
+    d_h = denoise(first.astype(np.float32), albedo, normal, emission=emission)
     spread = (d_h.astype(np.float64) - d_n) ** 2 / (full.astype(np.float64) ** 2 + _REL_EPS)
     return DENOISED_FACTOR * float(np.mean(spread)) * h / (n - h), d_n

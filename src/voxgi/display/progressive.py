@@ -78,6 +78,13 @@ class RenderResult:
     object_id : (H, W) int32 or None
         Index in ``scene.objects`` of the object the first frame's camera ray
         met in each pixel (-1: nothing, or a one-sided back); not averaged.
+    emission : (H, W, 3) float32 or None
+        The part of ``image`` that is emitted radiance seen directly (an
+        emitter's, or the environment's where a ray leaves the scene),
+        averaged the same way; where the emission a pixel sees is
+        controlled (``stats["seen_emission"]``), its controlled mean. The
+        rest of the image is reflected light, and a denoiser is given only
+        that rest (``docs/design.md`` §6).
     undenoised : (H, W, 3) float32 or None
         With ``RenderTuning(denoise=True)``: the image before denoising,
         whose error ``stderr`` and ``stats["est_rel_mse"]`` estimate; ``image``
@@ -93,17 +100,19 @@ class RenderResult:
     normal: np.ndarray | None = None
     depth: np.ndarray | None = None
     object_id: np.ndarray | None = None
+    emission: np.ndarray | None = None
     undenoised: np.ndarray | None = None
 
     def exr_layers(self) -> dict:
         """The AOVs as EXR channels for :func:`voxgi.io.write_exr`'s
-        ``layers``: ``albedo.R/G/B``, ``normal.X/Y/Z``, ``depth.Z`` and
-        ``object_id`` (as float32, exact for any object count under 2^24),
-        and ``undenoised.R/G/B`` when the image was denoised."""
+        ``layers``: ``albedo.R/G/B``, ``normal.X/Y/Z``, ``emission.R/G/B``,
+        ``depth.Z`` and ``object_id`` (as float32, exact for any object
+        count under 2^24), and ``undenoised.R/G/B`` when the image was
+        denoised."""
         out = {}
         if self.undenoised is not None:
             out.update({f"undenoised.{c}": self.undenoised[..., i] for i, c in enumerate("RGB")})
-        for name, chans in (("albedo", "RGB"), ("normal", "XYZ")):
+        for name, chans in (("albedo", "RGB"), ("normal", "XYZ"), ("emission", "RGB")):
             a = getattr(self, name)
             if a is not None:
                 out.update({f"{name}.{c}": a[..., i] for i, c in enumerate(chans)})
@@ -212,7 +221,9 @@ class _DenoisedRule:
         """Denoise the running mean and estimate its error."""
         t0 = time.perf_counter()
         a = aovs.result(*self.shape[:2])
-        self.est, self.image = denoised_estimate(acc, self.shape, a["albedo"], a["normal"])
+        self.est, self.image = denoised_estimate(
+            acc, self.shape, a["albedo"], a["normal"], a["emission"]
+        )
         self.frames = acc.frames
         self.checks += 1
         self.seconds += time.perf_counter() - t0

@@ -23,7 +23,7 @@ from ..rays import Tracer
 from ..scene import Camera, Scene
 from ..textures import surface_tables
 from ..traced import record_grid
-from .aovs import frame_aovs
+from .aovs import EMISSION_COLUMN, frame_aovs
 from .environment_guide import environment_guide
 from .lighting import _HIT_KEYS, _SceneLights
 from .pixel_filter import gaussian_pixel_filter
@@ -533,6 +533,7 @@ class _FrameShader:
             np.asarray(self.cam.eye) - self.tracer.centre,
             self.cam.frame()[2],
             per_hit=per_hit,
+            emission=self._seen_emission(h),
         )
         vpls = None
         if not self.sampler.empty:
@@ -550,20 +551,21 @@ class _FrameShader:
         ctl = self.emission_control
         if ctl is not None and len(ctl.pixels) == 0:
             ctl = None
+        e = EMISSION_COLUMN
         if self.cam.pixel_filter == "gaussian":
-            # the AOVs, and the emission seen where it is controlled, through
-            # the same filter as the image, in the same pass
-            parts = [img, self.aovs] + ([self._seen_emission(h)] if ctl else [])
+            # the AOVs, the seen emission among them, through the same filter
+            # as the image, in the same pass
             both = gaussian_pixel_filter(
-                np.concatenate(parts, axis=1), self.cam.width, self.cam.height, offset
+                np.concatenate([img, self.aovs], axis=1), self.cam.width, self.cam.height, offset
             )
             img = np.ascontiguousarray(both[:, :3])
-            self.aovs = both[:, 3 : 3 + self.aovs.shape[1]]
-            if ctl:
-                img[ctl.pixels] += ctl.mean - both[ctl.pixels, -3:]
-        elif ctl:
-            # the frame's seen emission at the controlled pixels, for its mean
-            img[ctl.pixels] += ctl.mean - self._seen_emission(h, ctl.pixels)
+            self.aovs = np.ascontiguousarray(both[:, 3:])
+        if ctl:
+            # the frame's seen emission at the controlled pixels, for its
+            # mean; the emission AOV alike, so that it stays the part of the
+            # image that is emission
+            img[ctl.pixels] += ctl.mean - self.aovs[ctl.pixels, e : e + 3]
+            self.aovs[ctl.pixels, e : e + 3] = ctl.mean
         return img
 
     @classmethod
