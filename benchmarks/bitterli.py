@@ -257,12 +257,12 @@ def print_table(rows: list[dict]) -> None:
         " | s to 5e-3: voxgi / Mitsuba / +OIDN | s to 1e-3: voxgi / Mitsuba / +OIDN"
         " | ref noise |"
         + (
-            " voxgi+OIDN net relMSE, SSIM, s; Mitsuba+OIDN s to it |"
+            " voxgi+OIDN net relMSE, SSIM, s; Mitsuba+OIDN s to it | voxgi+OIDN s to 5e-3 / 1e-3 |"
             if any(r.get("voxgi_oidn") for r in rows)
             else ""
         )
     )
-    print("|" + "---|" * (11 if any(r.get("voxgi_oidn") for r in rows) else 10))
+    print("|" + "---|" * (12 if any(r.get("voxgi_oidn") for r in rows) else 10))
     for r in rows:
         ph, t = r["voxgi_phases"], r["time_to"]
         b = " / ".join(f"{x:.3f}" for x in r["brightness"])
@@ -288,6 +288,8 @@ def print_table(rows: list[dict]) -> None:
                 f"{den['rel_mse_net']:.2e}, SSIM {den['ssim']:.4f}, {den['seconds']:.1f} s; "
                 f"Mitsuba+OIDN {_fmt(to)} s"
             )
+            own = t.get("voxgi+oidn", {})
+            cells.append(f"{_fmt(own.get(str(5e-3)))} / {_fmt(own.get(str(1e-3)))}")
         print("| " + " | ".join(cells) + " |")
 
 

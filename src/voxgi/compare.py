@@ -69,14 +69,15 @@ class Comparison:
         voxgi's solution displayed at each of the looser tolerances asked
         for and at the default (last); each one's seconds are its display's
         plus the voxelize and solve of the default run.
+    sweep_voxgi_denoised : list of (tol, seconds, rel_mse_net)
+        The same for the denoised display (``voxgi_denoise``), else empty.
     time_to : dict
         ``{method: {target: seconds or None}}`` for ``"mitsuba"`` and
         ``"mitsuba+oidn"``, targets ``"voxgi"`` (voxgi's own net relMSE; and
         ``"voxgi+oidn"``'s with ``voxgi_denoise``) and each of
         :data:`TARGETS`; None where the sweep did not reach it. ``"voxgi"``
-        has each of :data:`TARGETS`, interpolated alike over ``sweep_voxgi``;
-        ``"voxgi+oidn"`` its run's seconds where its net relMSE meets it (an
-        upper bound), else None.
+        has each of :data:`TARGETS`, interpolated alike over ``sweep_voxgi``,
+        and ``"voxgi+oidn"`` over ``sweep_voxgi_denoised``.
     reference_noise : float
         The reference's own relMSE: a quarter of the relMSE between its two
         halves.
@@ -92,6 +93,7 @@ class Comparison:
     time_to: dict
     reference_noise: float
     sweep_voxgi: list = field(default_factory=list)
+    sweep_voxgi_denoised: list = field(default_factory=list)
     files: dict = field(default_factory=dict)
 
     @property
@@ -125,8 +127,7 @@ class Comparison:
             for target, t in times.items():
                 what = f"{target}'s relMSE" if isinstance(target, str) else f"relMSE {target:.0e}"
                 parts.append(f"{what}: " + ("not reached" if t is None else f"{t:.3g} s"))
-            how = "(its run)" if method == "voxgi+oidn" else "(interpolated)"
-            lines.append(f"{method} to " + "; ".join(parts) + " " + how)
+            lines.append(f"{method} to " + "; ".join(parts) + " (interpolated)")
         lines.append(
             f"reference noise (estimated relMSE, subtracted as net): {self.reference_noise:.2e}"
         )
@@ -286,6 +287,10 @@ def compare(
     sweeps = {
         "voxgi": _voxgi_sweep(scene, out, cam, seed, threads, tols, ref, ref_noise, mask, rows)
     }
+    if voxgi_denoise:
+        sweeps["voxgi+oidn"] = _voxgi_sweep(
+            scene, out, cam, seed, threads, tols, ref, ref_noise, mask, rows, base=rows[1]
+        )
     sweeps |= _sweeps(mi, plain, scene, cam, counts, denoise, goal, ref, ref_noise, mask, rows)
     rows.append(_reference_row(spp if reference is None else None, ref_seconds, ref_noise))
     result = _comparison(rows, out.image, ref, ref_noise, sweeps)
@@ -306,16 +311,11 @@ def _comparison(rows, img, ref, ref_noise: float, sweeps: dict) -> Comparison:
     time_to = {
         m: {k: _seconds_to(e, sw) for k, e in targets.items()}
         for m, sw in sweeps.items()
-        if m != "voxgi"
+        if not m.startswith("voxgi")
     }
-    time_to["voxgi"] = {t: _seconds_to(t, sweeps["voxgi"]) for t in TARGETS}
-    # the denoised display as it stands: its time where it meets a target
-    # (an upper bound: fewer frames might do), None where it does not
-    for r in rows:
-        if r["method"] == "voxgi+oidn":
-            time_to[r["method"]] = {
-                t: (r["seconds"] if r["rel_mse_net"] <= t else None) for t in TARGETS
-            }
+    for m in ("voxgi", "voxgi+oidn"):
+        if m in sweeps:
+            time_to[m] = {t: _seconds_to(t, sweeps[m]) for t in TARGETS}
     return Comparison(
         rows,
         img,
@@ -325,6 +325,7 @@ def _comparison(rows, img, ref, ref_noise: float, sweeps: dict) -> Comparison:
         time_to,
         ref_noise,
         sweep_voxgi=sweeps["voxgi"],
+        sweep_voxgi_denoised=sweeps.get("voxgi+oidn", []),
     )
 
 
@@ -340,14 +341,23 @@ def _checked_tols(sweep_tol) -> tuple[float, ...]:
     return tuple(sorted(set(tols), reverse=True))
 
 
-def _voxgi_sweep(scene, out, cam, seed, threads, tols, ref, ref_noise: float, mask, rows) -> list:
+def _voxgi_sweep(
+    scene, out, cam, seed, threads, tols, ref, ref_noise: float, mask, rows, base=None
+) -> list:
     """voxgi's solution of ``out`` displayed at each of ``tols`` looser than the
     default's, then the default run itself: ``[(tol, seconds, rel_mse_net), ...]``.
 
     Each display's seconds count the default run's voxelize and solve, as a
     run at that tolerance would; rows of the displays are appended to ``rows``.
+    ``base``: the default run's row, ``rows[0]`` (voxgi's defaults) unless
+    given; the denoised display's row (``"voxgi+oidn"``) sweeps the denoised
+    display.
     """
-    v = rows[0]
+    from .display import RenderTuning
+
+    v = rows[0] if base is None else base
+    method = v["method"]
+    tuning = RenderTuning(denoise=True) if method == "voxgi+oidn" else None
     default_tol = float(out.stats["tol"])
     v["tol"] = default_tol
     before = v["phases"]["voxelize"] + v["phases"]["solve"]
@@ -356,8 +366,10 @@ def _voxgi_sweep(scene, out, cam, seed, threads, tols, ref, ref_noise: float, ma
         if tol <= default_tol:
             continue
         t = time.perf_counter()
-        r = pipeline_render(scene, out.solution, camera=cam, tol=tol, seed=seed, threads=threads)
-        row = _row("voxgi", None, before + time.perf_counter() - t, r.image, ref, ref_noise, mask)
+        r = pipeline_render(
+            scene, out.solution, camera=cam, tol=tol, seed=seed, threads=threads, tuning=tuning
+        )
+        row = _row(method, None, before + time.perf_counter() - t, r.image, ref, ref_noise, mask)
         row["tol"], row["frames"] = tol, r.frames
         rows.append(row)
         sweep.append((tol, row["seconds"], row["rel_mse_net"]))
