@@ -147,6 +147,7 @@ def test_cli_writes_the_aov_layers(tmp_path):
     assert cli.main(["render", "cornell-box", "-o", str(out), *small]) == 0
     ch = voxgi.io.read_exr_channels(out)
     want = {"albedo.R", "albedo.G", "albedo.B", "normal.X", "normal.Y", "normal.Z"}
+    want |= {"emission.R", "emission.G", "emission.B"}
     assert want | {"depth.Z", "object_id", "stderr.R"} <= set(ch)
     albedo = voxgi.io.read_exr(out, layer="albedo")
     assert np.all((albedo >= 0) & (albedo <= 1))
