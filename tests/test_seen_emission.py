@@ -94,6 +94,46 @@ def test_the_mean_seen_emission_is_the_lamps_covered_share():
     assert np.abs(out.mean - want).max() > 0  # not a closed form in disguise
 
 
+def test_a_glint_seen_by_few_samples_takes_more():
+    """A lamp strip 0.03 of a pixel wide down column 2, rows 2-9, beside the
+    wide lamp: about 8 of a strip pixel's 256 first samples see it, too few
+    for its mean to be trusted in general (a bright sky through a gap). Those
+    pixels, and only those, take 1024 samples (the rays say so), and their
+    means come out within 2/1024 of the lamp's radiance of the exact share;
+    the wide lamp's edge pixels keep their 256. (Here the 256 samples of a
+    (0, 2)-sequence already met that bound: the rays and the count are what
+    fail without the refinement.)"""
+    from voxgi.display.seen_emission import seen_emission
+
+    scene = _lamp_scene()
+    aspect = W / H
+    x0, x1 = ((2 * u / W - 1) * TAN * aspect for u in (2.0, 2.03))
+    y1, y0 = ((1 - 2 * v / H) * TAN for v in (2.0, 10.0))
+    strip = trimesh.Trimesh(
+        [(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0)],
+        [[0, 1, 2], [0, 2, 3]],
+        process=False,
+    )
+    scene.add(strip, voxgi.Material(albedo=0.0, emission=LE), name="strip")
+    tr = _Tracer(scene, 2)
+    try:
+        out = seen_emission(scene.camera, tr, _triangles(scene, tr), None, seed=3, threads=2)
+    finally:
+        tr.close()
+    mean = dict(zip(out.pixels.tolist(), out.mean, strict=True))
+    strip_pixels = [i * W + 2 for i in range(2, 10)]  # rows 2-9: the strip spans them
+    assert out.few == len(strip_pixels)
+    assert out.rays == W * H + 256 * len(out.pixels) + (1024 - 256) * out.few
+    got = np.array([mean[p] for p in strip_pixels])
+    want = np.broadcast_to(0.03 * np.array(LE), got.shape)
+    np.testing.assert_allclose(got, want, rtol=0, atol=2 / 1024 * max(LE))
+    cov = _coverage().ravel()
+    edges = [p for p in np.flatnonzero((cov > 0) & (cov < 1)).tolist()]
+    want = cov[edges, None] * np.array(LE)
+    got = np.array([mean[p] for p in edges])
+    np.testing.assert_allclose(got, want, rtol=0, atol=2 / 256 * max(LE) + 1e-6)
+
+
 @pytest.mark.parametrize("control", [True, False])
 def test_a_lamps_outline_is_exact_in_eight_frames_with_the_control(control):
     scene = _lamp_scene()

@@ -358,6 +358,7 @@ def _seen_emission_stats(source) -> dict | None:
         "seconds": ctl.seconds,
         "mirrored": ctl.mirrored,
         "mirror_samples": ctl.mirror_samples,
+        "few": ctl.few,
     }
 
 

@@ -51,6 +51,14 @@ _BUDGET = 8
 #: most :data:`_MIRROR_BUDGET` times the image's pixels.
 _MIRROR_MOST = 1024
 _MIRROR_BUDGET = 256
+#: A controlled pixel whose first samples saw emission fewer than this many
+#: times (but some) takes :data:`_FEW_MOST` samples: its mean rests on those
+#: few, a glint of a bright sky through a gap erring by about its own size,
+#: and the frames replace what the pixel sees by it. Their rays are at most
+#: :data:`_FEW_BUDGET` times the image's pixels.
+_FEW_HITS = 16
+_FEW_MOST = 1024
+_FEW_BUDGET = 16
 #: Camera rays per kernel call (bounds the temporary arrays).
 _BATCH = 1 << 18
 
@@ -81,6 +89,9 @@ class SeenEmission:
         Of the pixels sampled, those that see a mirror.
     mirror_samples : int
         Camera rays per pixel that sees a mirror (with the box filter).
+    few : int
+        Of the pixels sampled, those whose first samples saw emission only
+        a few times, and took more (with the box filter).
     """
 
     pixels: np.ndarray
@@ -91,6 +102,7 @@ class SeenEmission:
     seconds: float
     mirrored: int = 0
     mirror_samples: int = 0
+    few: int = 0
 
 
 def skip_reason(cam, emits: bool, env) -> str | None:
@@ -255,12 +267,21 @@ def seen_emission(
         mean = _gaussian_mean(ctx, cam, sampled, target, samples)
     else:
         mean = np.zeros((M, 3), np.float32)
+        hits = np.zeros(M, np.int64)
         for s in _batches(M, per):
-            mean[s] = _seen(ctx, sampled[s], samples).mean(axis=1, dtype=np.float64)
+            le = _seen(ctx, sampled[s], samples)
+            mean[s] = le.mean(axis=1, dtype=np.float64)
+            hits[s] = np.count_nonzero(le.max(axis=2) > 0, axis=1)
+        on_mirror = mirrored.ravel()[sampled]
         if mirrors:
-            extra = _mirror_means(ctx, sampled, mirrored.ravel()[sampled], mean, per, seed)
+            extra = _mirror_means(ctx, sampled, on_mirror, mean, per, seed)
             rays += extra
+        few = (hits > 0) & (hits < _FEW_HITS) & ~on_mirror
+        n_few = int(np.count_nonzero(few))
+        rays += _refine(ctx, sampled, few, mean, per, seed, _FEW_MOST, _FEW_BUDGET)
     n_mirrored = int(np.count_nonzero(mirrored.ravel()[sampled])) if M else 0
+    if reach:
+        n_few = 0
     return SeenEmission(
         target,
         mean,
@@ -270,6 +291,7 @@ def seen_emission(
         time.perf_counter() - t0,
         n_mirrored,
         per + (extra // n_mirrored if n_mirrored and not reach else 0),
+        n_few,
     )
 
 
@@ -281,15 +303,22 @@ def _mirror_means(ctx, sampled, mirrored, mean, per: int, seed: int) -> int:
     many pixels, in part through its lobe's rare wide directions that a few
     samples miss, and the frames replace what each pixel sees by this mean:
     its error stays in the picture. Returns the rays traced."""
-    idx = np.flatnonzero(mirrored)
+    return _refine(ctx, sampled, mirrored, mean, per, seed, _MIRROR_MOST, _MIRROR_BUDGET)
+
+
+def _refine(ctx, sampled, which, mean, per: int, seed: int, most: int, budget: int) -> int:
+    """Refine ``mean`` in place at the pixels ``which`` (bool, one per
+    ``sampled`` pixel) to ``most`` footprint samples, fewer (a power of two)
+    where their rays would pass ``budget`` a pixel of the image; the first
+    ``per`` of them are those already taken. Returns the rays traced."""
+    idx = np.flatnonzero(which)
     if len(idx) == 0:
         return 0
     P = ctx["camera"][5] * ctx["camera"][6]
-    K = min(_MIRROR_MOST, 1 << math.floor(math.log2(max(1.0, _MIRROR_BUDGET * P / len(idx)))))
+    K = min(most, 1 << math.floor(math.log2(max(1.0, budget * P / len(idx)))))
     if K <= per:
         return 0
-    # the first `per` samples of K are those already taken
-    extra = _footprint_samples(K, seed, True)[per:]
+    extra = _footprint_samples(K, seed, bool(ctx["mirrors"]))[per:]
     for s in _batches(len(idx), len(extra)):
         q = idx[s]
         le = _seen(ctx, sampled[q], extra).sum(axis=1, dtype=np.float64)
