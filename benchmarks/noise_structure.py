@@ -3,7 +3,9 @@
 Per scene (the Cornell box and the door room at ``--size`` pixels square):
 one voxelize + solve with the defaults of ``voxgi.render(scene)``; a
 reference render of that same solution with ``--ref-frames`` frames
-(``tol=0``, seed 1000); then, at seeds 0 .. N-1, a render with the defaults
+(``tol=0``, seed 1000, without the indirect filter, so that what is left
+of its own noise is white and does not add to the correlation measured);
+then, at seeds 0 .. N-1, a render with the defaults
 (stopping at ``tol``) and one of ``--frames`` frames, each with the
 display's indirect filter as given by ``--indirect-filter``. For each
 image:
@@ -56,7 +58,15 @@ def _row(out, ref, seconds: float) -> dict:
 def measure(name: str, frames: int, size: int, ref_frames: int, seeds: int, radius: int) -> dict:
     scene = voxgi.scenes.get(name, width=size, height=size)
     sol = voxgi.solve(voxgi.voxelize(scene), progress=False)
-    ref = voxgi.render(scene, sol, max_frames=ref_frames, tol=0.0, seed=1000, progress=False)
+    ref = voxgi.render(
+        scene,
+        sol,
+        max_frames=ref_frames,
+        tol=0.0,
+        seed=1000,
+        progress=False,
+        tuning=voxgi.RenderTuning(indirect_filter=0),
+    )
     tuning = voxgi.RenderTuning(indirect_filter=radius)
     out = {"scene": name, "ref_frames": ref_frames, "defaults": [], "fixed": []}
     for seed in range(seeds):
@@ -71,7 +81,7 @@ def measure(name: str, frames: int, size: int, ref_frames: int, seeds: int, radi
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, default=256)
-    ap.add_argument("--ref-frames", type=int, default=256)
+    ap.add_argument("--ref-frames", type=int, default=1024)
     ap.add_argument("--seeds", type=int, default=3, help="seeds 0 .. N-1 per scene")
     ap.add_argument("--indirect-filter", type=int, default=voxgi.RenderTuning().indirect_filter)
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=SCENES)
