@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _validate
-from .display import camera_rays
+from .display import RenderTuning, camera_rays
 from .metrics import flip, rel_mse, ssim
 from .pipeline import render as pipeline_render
 from .pipeline import solve
@@ -353,8 +353,6 @@ def _voxgi_sweep(
     given; the denoised display's row (``"voxgi+oidn"``) sweeps the denoised
     display.
     """
-    from .display import RenderTuning
-
     v = rows[0] if base is None else base
     method = v["method"]
     tuning = RenderTuning(denoise=True) if method == "voxgi+oidn" else None
@@ -440,8 +438,6 @@ def _voxgi_row(out, t_voxgi: float, ref, ref_noise: float, mask) -> dict:
 def _voxgi_denoised(scene, out, cam, seed, threads, progress):
     """voxgi's solution of ``out`` displayed with ``RenderTuning(denoise=True)``:
     (RenderResult, display seconds)."""
-    from .display import RenderTuning
-
     t0 = time.perf_counter()
     den = pipeline_render(
         scene,

@@ -1,8 +1,7 @@
 """The pixel AOVs: albedo, shading normal, depth, object and seen emission of
 each pixel's first hits, from the camera hits the frames trace anyway (no
-extra rays),
-averaged over the frames' camera samples with the image's pixel filter
-(``docs/design.md`` §6)."""
+extra rays), averaged over the frames' camera samples with the image's pixel
+filter (``docs/design.md`` §6)."""
 
 from __future__ import annotations
 
@@ -71,11 +70,7 @@ def frame_aovs(
         depth = (hits["pos"] - np.asarray(eye)) @ np.asarray(forward)
     out[:, 6] = np.where(hit, depth, 0.0)
     out[:, 7] = hit
-    e = EMISSION_COLUMN
-    if emission is None:
-        out[:, e : e + 3] = 0.0
-    else:
-        out[:, e : e + 3] = emission
+    out[:, EMISSION_COLUMN : EMISSION_COLUMN + 3] = 0.0 if emission is None else emission
     return out
 
 

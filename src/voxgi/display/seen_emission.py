@@ -262,7 +262,7 @@ def seen_emission(
         per = int(min(_MOST, max(_FEWEST, per)))
     samples = _footprint_samples(per, seed, bool(mirrors))
     rays = P + M * per
-    extra = 0
+    extra = n_few = 0
     if reach:
         mean = _gaussian_mean(ctx, cam, sampled, target, samples)
     else:
@@ -280,8 +280,6 @@ def seen_emission(
         n_few = int(np.count_nonzero(few))
         rays += _refine(ctx, sampled, few, mean, per, seed, _FEW_MOST, _FEW_BUDGET)
     n_mirrored = int(np.count_nonzero(mirrored.ravel()[sampled])) if M else 0
-    if reach:
-        n_few = 0
     return SeenEmission(
         target,
         mean,

@@ -303,12 +303,12 @@ class _FrameShader:
         self.seconds["primary"] += out.seconds
         return out
 
-    def _seen_emission(self, h: dict, idx=slice(None)) -> np.ndarray:
-        """The emission this frame's rays saw at pixels ``idx``, as the frame
-        counts it (through the sheets before it)."""
-        seen = h["emission"][idx]
+    def _seen_emission(self, h: dict) -> np.ndarray:
+        """The emission this frame's rays saw, as the frame counts it
+        (through the sheets before it)."""
+        seen = h["emission"]
         if h["through"] is not None:
-            seen = seen * h["through"][idx]
+            seen = seen * h["through"]
         return seen
 
     @cached_property
