@@ -53,8 +53,8 @@ OUT = Path("/work/scenes")
 #: Bitterli's interiors in the snapshot (the Cornell boxes and the Veach
 #: scene are left out: voxgi has its own Cornell box).
 SCENES = (
-    "bathroom",  # Salle de bain
-    "bathroom2",  # Contemporary Bathroom
+    "bathroom",  # Contemporary Bathroom
+    "bathroom2",  # Salle de bain
     "dining-room",  # The Breakfast Room
     "kitchen",  # Country Kitchen
     "living-room",  # The Grey & White Room

@@ -159,7 +159,7 @@ def test_a_box_piercing_a_closed_two_sided_object_does_not_occupy_it():
 def test_a_voxelization_leaves_no_embree_scene_of_its_parity_tests_alive():
     # Each mesh the parity tests trace holds an embreex Embree scene in a
     # reference cycle; left to the cycle collector, the thousands of a
-    # cluttered scene (Bitterli's Salle de bain: 2134 tests) made its second
+    # cluttered scene (Bitterli's Contemporary Bathroom: 2134 tests) made its second
     # voxelization in one process crash inside embreex. With the collector
     # switched off, none may outlive the voxelization.
     import gc
