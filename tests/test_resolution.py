@@ -204,3 +204,28 @@ def test_render_solves_as_solve_scene_does():
     s = out.stats["seconds"]
     assert s["voxelize"] > 0
     assert s["solve"] > 0
+
+
+def test_a_looser_picture_takes_a_lighter_solve_that_keeps_its_picture():
+    # SolveTuning.for_picture: a picture of relMSE 5e-3 stops the traced
+    # passes at 5e-3 and starts them with 16 rays a record, not 64; its
+    # picture stays within 2% of that tolerance of the defaults' (measured
+    # 1.8e-5, same seeds), where stopping the passes at 0.3 does not
+    # (3.5e-4; one ray a record at 5e-3: 5.0e-4)
+    scene = voxgi.scenes.cornell_box(width=32, height=32)
+    vox = voxgi.voxelize(scene, 32, progress=False)
+    kw = dict(max_frames=64, tol=0.0, seed=3, progress=False, threads=2)
+    light = voxgi.SolveTuning.for_picture(5e-3)
+    assert (light.tol, light.traced_samples) == (5e-3, 16)
+    assert voxgi.SolveTuning.for_picture(1e-3) == voxgi.SolveTuning()
+    assert voxgi.SolveTuning.for_picture(1.0).tol == 1e-2
+    full = voxgi.solve(vox, progress=False, threads=2)
+    sol = voxgi.solve(vox, tuning=light, progress=False, threads=2)
+    assert sol.stats["traced"]["rays"] < full.stats["traced"]["rays"] / 2
+    reference = voxgi.render(scene, full, **kw).image
+    assert rel_mse(voxgi.render(scene, sol, **kw).image, reference) <= 0.02 * 5e-3
+    broken = voxgi.solve(vox, tuning=voxgi.SolveTuning(tol=0.3, traced_samples=16), progress=False, threads=2)
+    assert rel_mse(voxgi.render(scene, broken, **kw).image, reference) > 0.02 * 5e-3
+    # solve_scene, and so voxgi.render without a solution, solves so
+    chosen = solve_scene(scene, tol=5e-3, progress=False, threads=2).stats["resolution"]
+    assert chosen["solve_tuning"] == {"tol": 5e-3, "traced_samples": 16}

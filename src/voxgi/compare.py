@@ -26,7 +26,9 @@ from .display import RenderTuning, camera_rays
 from .metrics import flip, rel_mse, ssim
 from .pipeline import render as pipeline_render
 from .pipeline import solve
+from .radiosity import SolveTuning
 from .rays import Tracer
+from .resolution import solve_scene
 from .scene import Scene
 from .voxels import voxelize
 
@@ -251,9 +253,10 @@ def compare(
     variant : str or None
         Mitsuba variant (None: ``llvm_ad_rgb`` where it works).
     sweep_tol : sequence of float
-        Display tolerances, looser than the default, at which voxgi's
-        solution is shown again for its time to each target (``()``: its
-        default run's seconds alone, an upper bound).
+        Tolerances, looser than the default, at which voxgi runs again for
+        its time to each target, solving anew where the looser tolerance
+        asks for a lighter solve (:meth:`voxgi.SolveTuning.for_picture`;
+        ``()``: its default run's seconds alone, an upper bound).
     voxgi_denoise : bool
         Also display voxgi's solution denoised (``RenderTuning(denoise=True)``,
         needs ``mitsuba-oidn``): the row ``"voxgi+oidn"``, its seconds those of
@@ -284,12 +287,15 @@ def compare(
         den, t_den = _voxgi_denoised(scene, out, cam, seed, threads, progress)
         rows.append(_voxgi_denoised_row(den, t_den, rows[0]["phases"], ref, ref_noise, mask))
     goal = min(*(r["rel_mse_net"] for r in rows), *TARGETS)
+    solved = {}
     sweeps = {
-        "voxgi": _voxgi_sweep(scene, out, cam, seed, threads, tols, ref, ref_noise, mask, rows)
+        "voxgi": _voxgi_sweep(
+            scene, out, cam, seed, threads, tols, ref, ref_noise, mask, rows, solved=solved
+        )
     }
     if voxgi_denoise:
         sweeps["voxgi+oidn"] = _voxgi_sweep(
-            scene, out, cam, seed, threads, tols, ref, ref_noise, mask, rows, base=rows[1]
+            scene, out, cam, seed, threads, tols, ref, ref_noise, mask, rows, rows[1], solved
         )
     sweeps |= _sweeps(mi, plain, scene, cam, counts, denoise, goal, ref, ref_noise, mask, rows)
     rows.append(_reference_row(spp if reference is None else None, ref_seconds, ref_noise))
@@ -342,36 +348,55 @@ def _checked_tols(sweep_tol) -> tuple[float, ...]:
 
 
 def _voxgi_sweep(
-    scene, out, cam, seed, threads, tols, ref, ref_noise: float, mask, rows, base=None
+    scene, out, cam, seed, threads, tols, ref, ref_noise: float, mask, rows, base=None, solved=None
 ) -> list:
-    """voxgi's solution of ``out`` displayed at each of ``tols`` looser than the
-    default's, then the default run itself: ``[(tol, seconds, rel_mse_net), ...]``.
+    """voxgi at each of ``tols`` looser than the default's, then the default
+    run itself: ``[(tol, seconds, rel_mse_net), ...]``.
 
-    Each display's seconds count the default run's voxelize and solve, as a
-    run at that tolerance would; rows of the displays are appended to ``rows``.
-    ``base``: the default run's row, ``rows[0]`` (voxgi's defaults) unless
-    given; the denoised display's row (``"voxgi+oidn"``) sweeps the denoised
-    display.
+    Each run's seconds count a voxelize and a solve, as a run at that
+    tolerance would: where the default run solved the scene itself
+    (:func:`voxgi.resolution.solve_scene`) and the looser tolerance asks for
+    a lighter solve (:meth:`voxgi.SolveTuning.for_picture`), that solve is
+    made and timed (once per tolerance, kept in ``solved`` for the denoised
+    sweep); otherwise the default run's solution is shown again after its
+    voxelize and solve. Rows are appended to ``rows``. ``base``: the
+    default run's row, ``rows[0]`` (voxgi's defaults) unless given; the
+    denoised display's row (``"voxgi+oidn"``) sweeps the denoised display.
     """
     v = rows[0] if base is None else base
     method = v["method"]
     tuning = RenderTuning(denoise=True) if method == "voxgi+oidn" else None
     default_tol = float(out.stats["tol"])
     v["tol"] = default_tol
-    before = v["phases"]["voxelize"] + v["phases"]["solve"]
+    solved = {} if solved is None else solved
     sweep = []
     for tol in tols:
         if tol <= default_tol:
             continue
+        sol, before = _solution_for(scene, out, v, tol, default_tol, threads, solved)
         t = time.perf_counter()
         r = pipeline_render(
-            scene, out.solution, camera=cam, tol=tol, seed=seed, threads=threads, tuning=tuning
+            scene, sol, camera=cam, tol=tol, seed=seed, threads=threads, tuning=tuning
         )
         row = _row(method, None, before + time.perf_counter() - t, r.image, ref, ref_noise, mask)
         row["tol"], row["frames"] = tol, r.frames
         rows.append(row)
         sweep.append((tol, row["seconds"], row["rel_mse_net"]))
     return [*sweep, (default_tol, v["seconds"], v["rel_mse_net"])]
+
+
+def _solution_for(scene, out, row, tol: float, default_tol: float, threads, solved: dict):
+    """The solution a run at ``tol`` shows and the seconds of its voxelize and
+    solve: the default run's where it fits, else a solve for ``tol`` (kept in
+    ``solved``)."""
+    own = "resolution" in out.solution.stats
+    if not own or SolveTuning.for_picture(tol) == SolveTuning.for_picture(default_tol):
+        return out.solution, row["phases"]["voxelize"] + row["phases"]["solve"]
+    if tol not in solved:
+        t = time.perf_counter()
+        sol = solve_scene(scene, tol=tol, threads=threads, progress=False)
+        solved[tol] = (sol, time.perf_counter() - t)
+    return solved[tol]
 
 
 def _checked(scene, spp, sweep_spp, width, height, variant, denoise):

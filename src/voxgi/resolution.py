@@ -226,7 +226,9 @@ def solve_scene(
     resolution on which the records
     grow about as the square of the resolution (:data:`RESOLVED_GROWTH`:
     the surfaces are larger than its voxels), it solves each in turn with
-    :func:`voxgi.solve`'s defaults and stops at the first solution whose
+    the solve this tolerance needs (``tuning``; None:
+    :meth:`SolveTuning.for_picture`, :func:`voxgi.solve`'s defaults at
+    the default tolerance and under it) and stops at the first solution whose
     :func:`solution_difference` from the one before is at most
     ``AGREEMENT_SHARE · tol``: the two light the surfaces alike, so a finer
     grid would not change the picture at that tolerance. Where every level
@@ -239,8 +241,10 @@ def solve_scene(
         The picture's tolerance (relMSE), as :func:`voxgi.render`'s ``tol``.
     max_resolution : int
         The finest resolution tried (voxels along the scene's longest side).
-    radius, threads, progress, tuning
+    radius, threads, progress
         As :func:`voxgi.solve`.
+    tuning : SolveTuning or None
+        As :func:`voxgi.solve`; None: ``SolveTuning.for_picture(tol)``.
     executor : LineExecutor or None
         Where the passes run (:func:`voxgi.distributed.executor`).
 
@@ -255,13 +259,17 @@ def solve_scene(
         ``levels`` (per resolution solved: ``resolution``, ``records``,
         ``voxelize_seconds``, ``solve_seconds`` and, from the second on,
         ``difference`` from the one before, its ``brightness`` and
-        ``difference_seconds``), ``voxelize_seconds`` (every grid) and
-        ``reason``; ``stats["skipped"]`` names the resolutions left out.
+        ``difference_seconds``), ``voxelize_seconds`` (every grid),
+        ``reason`` and ``solve_tuning`` (the tuning's ``tol`` and
+        ``traced_samples``); ``stats["skipped"]`` names the resolutions
+        left out.
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected voxgi.Scene, got {type(scene).__name__}")
     tol = _validate.real(tol, "tol", low=0.0, low_open=True)
     max_resolution = _validate.integer(max_resolution, "max_resolution", low=2)
+    if tuning is None:
+        tuning = SolveTuning.for_picture(tol)
     tried = resolutions(max_resolution)
     limit = AGREEMENT_SHARE * tol
     # The finest grid first, then, unless it is crowded, the coarser ones:
@@ -344,6 +352,7 @@ def solve_scene(
         "levels": levels,
         "voxelize_seconds": float(sum(voxelize_seconds)),
         "reason": reason,
+        "solve_tuning": {"tol": tuning.tol, "traced_samples": tuning.traced_samples},
     }
     left = [r for r in tried if r != chosen and r not in [lv["resolution"] for lv in levels]]
     if left:

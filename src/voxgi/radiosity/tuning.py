@@ -21,6 +21,7 @@ from .. import _validate
 
 __all__ = [
     "LINES_RADIUS",
+    "LOOSEST_SOLVE_TOL",
     "TRACED_RADIUS",
     "Settings",
     "SolveTuning",
@@ -35,6 +36,11 @@ __all__ = [
 TRACED_RADIUS = 4
 #: Gathering radius when the lines alone carry the reflected light.
 LINES_RADIUS = 8
+
+#: The loosest tolerance of the traced passes that
+#: :meth:`SolveTuning.for_picture` gives a loose picture: a remaining error
+#: of 1% of the records' light, under 1e-4 of the picture's relMSE.
+LOOSEST_SOLVE_TOL = 1e-2
 
 
 @dataclass(frozen=True)
@@ -121,6 +127,43 @@ class SolveTuning:
     pair_cache: bool | None = None
     traced_cache: bool | None = None
     max_cache_bytes: int | None = None
+
+    @staticmethod
+    def for_picture(tol: float) -> SolveTuning:
+        """The defaults, with the effort a picture of relMSE ``tol`` needs.
+
+        At the defaults' tolerance (1e-3) and under it, the defaults. Looser
+        pictures stop the traced passes at ``tol`` (at most
+        :data:`LOOSEST_SOLVE_TOL`) and start them with ``64 · 1e-3 / tol``
+        rays a record, rounded down to a square, at least 16: a remaining
+        relative error ``ε`` of the records adds about ``ε²`` to the
+        picture's relMSE, and their noise shrinks as the rays grow, so that
+        both stay a small share of the looser tolerance
+        (``docs/design.md`` §5, "The solve a picture needs").
+        :func:`voxgi.resolution.solve_scene`, and so :func:`voxgi.render`
+        without a solution, solve with it.
+
+        Parameters
+        ----------
+        tol : float
+            The picture's tolerance (relMSE), > 0.
+
+        Returns
+        -------
+        SolveTuning
+
+        >>> SolveTuning.for_picture(1e-3) == SolveTuning()
+        True
+        >>> t = SolveTuning.for_picture(5e-3); t.tol, t.traced_samples
+        (0.005, 16)
+        """
+        tol = _validate.real(tol, "tol", low=0.0, low_open=True)
+        base = SolveTuning()
+        if tol <= base.tol:
+            return base
+        rays = base.traced_samples * base.tol / tol
+        square = max(int(np.floor(np.sqrt(rays) + 1e-9)), 4) ** 2
+        return replace(base, tol=min(tol, LOOSEST_SOLVE_TOL), traced_samples=square)
 
     @staticmethod
     def paper(**changes) -> SolveTuning:
