@@ -9,17 +9,22 @@ For each scene folder of the mirror (a bare git directory holding the
 
 1. writes every file the snapshot holds, one by one (``git cat-file``; the
    snapshot lacks files of 4 MiB and more, which are skipped and counted);
-2. reports whether the scene is *whole*: every file its ``scene.xml``
+2. fills in the meshes the snapshot lacks from Bitterli's own pbrt-v4
+   exports of the same scenes, held whole in other public mirrors
+   (:data:`MESH_SOURCES`: binary PLY, written as the OBJ the scene names,
+   vertex for vertex; a source is used for a scene only where the meshes
+   both hold are identical, which the script checks);
+3. reports whether the scene is *whole*: every file its ``scene.xml``
    references (meshes, textures, environment maps) is present;
-3. applies the small edits Mitsuba 3 needs to load the file, the same file
+4. applies the small edits Mitsuba 3 needs to load the file, the same file
    that voxgi reads, so that both renderers see the same scene (the original
    is kept as ``scene.original.xml``);
-4. for a whole scene, writes the variant that both renderers render:
+5. for a whole scene, writes the variant that both renderers render:
    ``voxgi.Scene.load(scene.xml)`` (every material as voxgi maps it: diffuse
    part, texture, glossy lobe, glass) saved with ``Scene.save`` as
    ``diffuse/scene.toml`` (the folder's name is historical);
    ``voxgi.mitsuba.to_mitsuba`` exports that same scene to Mitsuba;
-5. with ``--partial``, for a scene that lacks meshes or textures (not its
+6. with ``--partial``, for a scene that lacks meshes or textures (not its
    environment map), writes the scene less the shapes whose mesh is missing,
    each missing bitmap texture replaced by a constant grey 0.5, as a scene
    of its own, ``<name>-partial/diffuse/scene.toml`` (what was left out or
@@ -34,6 +39,11 @@ Usage::
     python scripts/extract_bitterli.py living-room staircase2 --out /tmp/scenes
     python scripts/extract_bitterli.py kitchen --partial     # the kitchen less its missing meshes
     python scripts/extract_bitterli.py --list                # what the mirror holds
+    python scripts/extract_bitterli.py kitchen --mirrors /work/.mirror   # meshes filled in
+
+The mesh sources are bare git directories ``<mirrors>/<owner>+<name>/repo``
+of the repositories in :data:`MESH_SOURCES` (``git clone --bare`` does as
+well); a source that is absent is skipped and said so.
 
 Exit status 0 when every requested scene was extracted (whole or not).
 """
@@ -49,6 +59,17 @@ from pathlib import Path
 
 MIRROR = Path("/work/.mirror/jgarciapueyo+mitsuba2-transient-scenes/repo")
 OUT = Path("/work/scenes")
+MIRRORS = Path("/work/.mirror")
+
+#: Where a mesh the snapshot lacks is found whole: (repository, path of the
+#: binary PLY with ``{scene}`` the folder and ``{stem}`` the OBJ's name).
+#: Both hold Bitterli's pbrt-v4 exports, whose PLY files carry the Mitsuba
+#: OBJs' vertices (position, normal, uv) in the same order and the same
+#: triangles.
+MESH_SOURCES = (
+    ("gonsolo/bitterli", "{scene}/pbrt/models/{stem}.ply"),
+    ("CoronaEngine/CoronaResource", "examples/assets/test_pbrt/{scene}/models/{stem}.ply"),
+)
 
 #: Bitterli's interiors in the snapshot (the Cornell boxes and the Veach
 #: scene are left out: voxgi has its own Cornell box).
@@ -119,6 +140,119 @@ def extract(mirror: Path, folder: str, out: Path) -> tuple[int, list[str]]:
         tmp.replace(dest)
         written += 1
     return written, missing
+
+
+def _read_obj(path: Path):
+    """(vertices, uv, normals, triangles) of an OBJ whose faces index v, vt
+    and vn alike (``f a/a/a ...``), as Bitterli's are; None otherwise."""
+    import numpy as np
+
+    v, vt, vn, f = [], [], [], []
+    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+        parts = line.split()
+        if not parts:
+            continue
+        if parts[0] == "v":
+            v.append(parts[1:4])
+        elif parts[0] == "vt":
+            vt.append(parts[1:3])
+        elif parts[0] == "vn":
+            vn.append(parts[1:4])
+        elif parts[0] == "f":
+            corners = [c.split("/") for c in parts[1:]]
+            if len(corners) != 3 or any(len(set(c)) != 1 for c in corners):
+                return None
+            f.append([int(c[0]) - 1 for c in corners])
+    as_array = lambda rows: np.asarray(rows, np.float64).reshape(len(rows), -1)  # noqa: E731
+    return as_array(v), as_array(vt), as_array(vn), np.asarray(f, np.int64).reshape(-1, 3)
+
+
+def _read_ply(data: bytes):
+    """(vertices, uv, normals, triangles) of a binary PLY mesh."""
+    import io
+
+    import numpy as np
+    import trimesh
+
+    mesh = trimesh.load(io.BytesIO(data), file_type="ply", process=False)
+    uv = getattr(mesh.visual, "uv", None)
+    uv = np.zeros((len(mesh.vertices), 0)) if uv is None else np.asarray(uv, np.float64)
+    normals = np.asarray(mesh.vertex_normals, np.float64)
+    return np.asarray(mesh.vertices, np.float64), uv, normals, np.asarray(mesh.faces, np.int64)
+
+
+def _write_obj(mesh, dest: Path) -> None:
+    """``mesh`` (vertices, uv, normals, triangles) as an OBJ whose faces index
+    v, vt and vn alike, as the scene's own OBJs do."""
+    import numpy as np
+
+    v, uv, n, f = mesh
+    lines = [f"v {a:.9g} {b:.9g} {c:.9g}" for a, b, c in v]
+    if uv.shape[1] == 2:
+        lines += [f"vt {a:.9g} {b:.9g}" for a, b in uv]
+    lines += [f"vn {a:.9g} {b:.9g} {c:.9g}" for a, b, c in n]
+    tag = "{0}/{0}/{0}" if uv.shape[1] == 2 else "{0}//{0}"
+    lines += ["f " + " ".join(tag.format(i + 1) for i in tri) for tri in np.asarray(f)]
+    tmp = dest.with_name(dest.name + ".part")
+    tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    tmp.replace(dest)
+
+
+def _same_mesh(a, b) -> bool:
+    import numpy as np
+
+    return (
+        a is not None
+        and a[0].shape == b[0].shape
+        and np.array_equal(a[3], b[3])
+        and bool(np.allclose(a[0], b[0], atol=1e-5))
+        and (a[1].shape != b[1].shape or bool(np.allclose(a[1], b[1], atol=1e-5)))
+    )
+
+
+def fill_meshes(folder: Path, absent: list[str], mirrors: Path) -> list[str]:
+    """Write the OBJ meshes of ``absent`` that a :data:`MESH_SOURCES` mirror
+    holds; returns a line per source tried. A source serves a scene only if
+    the first mesh it shares with the scene's own is identical to it."""
+    wanted = [a for a in absent if a.startswith("models/") and a.endswith(".obj")]
+    notes = []
+    for repo, template in MESH_SOURCES:
+        if not wanted:
+            break
+        mirror = mirrors / repo.replace("/", "+") / "repo"
+        if not mirror.is_dir():
+            notes.append(f"{repo}: no mirror at {mirror}, skipped")
+            continue
+        ply = {a: template.format(scene=folder.name, stem=Path(a).stem) for a in wanted}
+        held = [
+            a for a in wanted if _git(mirror, "cat-file", "-e", f"HEAD:{ply[a]}").returncode == 0
+        ]
+        if not held:
+            continue
+        own = sorted(p.relative_to(folder).as_posix() for p in (folder / "models").glob("*.obj"))
+        check = None
+        for o in own:
+            path = template.format(scene=folder.name, stem=Path(o).stem)
+            blob = _git(mirror, "show", f"HEAD:{path}", binary=True)
+            if blob.returncode == 0 and blob.stdout:
+                check = (o, _same_mesh(_read_obj(folder / o), _read_ply(blob.stdout)))
+                break
+        if check is None or not check[1]:
+            why = (
+                "holds none of the scene's own meshes"
+                if check is None
+                else f"differs on {check[0]}"
+            )
+            notes.append(f"{repo}: not used, it {why}")
+            continue
+        for a in held:
+            data = _git(mirror, "show", f"HEAD:{ply[a]}", binary=True)
+            if data.returncode != 0 or not data.stdout:
+                continue
+            _write_obj(_read_ply(data.stdout), folder / a)
+            wanted.remove(a)
+        notes.append(f"{repo}: {len(held)} meshes (checked identical on {check[0]})")
+    return notes
 
 
 def referenced_files(xml_path: Path) -> list[str]:
@@ -226,6 +360,9 @@ def main(argv=None) -> int:
     ap.add_argument("scenes", nargs="*", help=f"scene folders (default: {' '.join(SCENES)})")
     ap.add_argument("--mirror", type=Path, default=MIRROR, help="bare git directory")
     ap.add_argument("--out", type=Path, default=OUT, help="target folder (outside the repository)")
+    ap.add_argument(
+        "--mirrors", type=Path, default=MIRRORS, help="folder of the mesh sources' bare mirrors"
+    )
     ap.add_argument("--no-diffuse", action="store_true", help="skip the diffuse variant")
     ap.add_argument("--list", action="store_true", help="list the mirror's folders and exit")
     ap.add_argument(
@@ -247,6 +384,10 @@ def main(argv=None) -> int:
         edits = apply_edits(folder)
         refs = referenced_files(folder / "scene.xml")
         absent = [r for r in refs if not (folder / r).is_file()]
+        if absent:
+            for note in fill_meshes(folder, absent, args.mirrors):
+                print(f"    mesh source {note}")
+            absent = [r for r in refs if not (folder / r).is_file()]
         state = "whole" if not absent else f"NOT whole: {len(absent)} referenced files missing"
         print(f"{name}: {written} files, {len(missing)} absent from the snapshot; {state}")
         for r in absent:
