@@ -314,8 +314,8 @@ def main(argv=None) -> int:
         type=float,
         nargs="*",
         default=list(SWEEP_TOL),
-        help="display tolerances, looser than the default, at which voxgi's solution is "
-        "shown again for its time to each target",
+        help="tolerances, looser than the default, at which voxgi runs again for its time "
+        "to each target (solving anew where SolveTuning.for_picture asks for a lighter solve)",
     )
     ap.add_argument(
         "--pictures",

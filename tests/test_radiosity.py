@@ -994,6 +994,18 @@ def test_the_lines_stop_at_a_hundred_times_tol_where_kept_passes_follow():
     assert fresh.bounces > kept.bounces
 
 
+def test_ahead_of_fresh_passes_the_lines_stop_at_most_at_1e_3():
+    # a looser tol loosens the fresh passes, not the lines whose last updates
+    # give those passes their slowest mode's ratio: the lines run as at 1e-3
+    vox = voxgi.voxelize(voxgi.scenes.cornell_box(), 8, progress=False)
+    fresh = dict(progress=False, tuning=voxgi.SolveTuning(traced_cache=False))
+    at_default = voxgi.solve(vox, **fresh)
+    loose = voxgi.solve(vox, tol=1e-2, **fresh)
+    assert loose.stats["lines_tol"] == pytest.approx(1e-3)
+    assert loose.bounces == at_default.bounces
+    assert voxgi.solve(vox, tol=1e-4, **fresh).bounces > at_default.bounces
+
+
 def test_one_white_object_does_not_hold_the_lines_to_its_albedo():
     # The lines stop once res λ / (1 − λ) < tol, λ the updates' own steady
     # ratio. Bounding λ by the largest albedo instead, one object of albedo

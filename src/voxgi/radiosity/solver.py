@@ -93,9 +93,10 @@ def solve(
     tol : float or None
         Bound on the estimated remaining relative error ``r λ / (1 − λ)``, ``r``
         the area-weighted residual (``residuals``), ``λ`` the largest albedo,
-        for the lines and then for the traced passes (the lines stop at 10
-        times it where the traced passes keep their rays, and then
-        ``stats["lines_tol"]`` says so). None: ``tuning.tol`` (1e-3; the
+        for the lines and then for the traced passes (the lines stop at 100
+        times it where the traced passes keep their rays, and at most at
+        1e-3 where they trace fresh rays; ``stats["lines_tol"]`` says where
+        it differs). None: ``tuning.tol`` (1e-3; the
         paper's 1e-4).
     max_bounces : int or None
         At most this many gathering iterations along the lines, and then no
