@@ -224,7 +224,9 @@ def test_a_looser_picture_takes_a_lighter_solve_that_keeps_its_picture():
     assert sol.stats["traced"]["rays"] < full.stats["traced"]["rays"] / 2
     reference = voxgi.render(scene, full, **kw).image
     assert rel_mse(voxgi.render(scene, sol, **kw).image, reference) <= 0.02 * 5e-3
-    broken = voxgi.solve(vox, tuning=voxgi.SolveTuning(tol=0.3, traced_samples=16), progress=False, threads=2)
+    broken = voxgi.solve(
+        vox, tuning=voxgi.SolveTuning(tol=0.3, traced_samples=16), progress=False, threads=2
+    )
     assert rel_mse(voxgi.render(scene, broken, **kw).image, reference) > 0.02 * 5e-3
     # solve_scene, and so voxgi.render without a solution, solves so
     chosen = solve_scene(scene, tol=5e-3, progress=False, threads=2).stats["resolution"]
