@@ -79,3 +79,15 @@ def test_a_source_whose_copy_of_a_present_mesh_differs_is_not_used(extract, tmp_
     notes = extract.fill_meshes(scene, ["models/Mesh002.obj"], mirrors)
     assert any("not used, it differs on models/Mesh001.obj" in n for n in notes), notes
     assert not (scene / "models/Mesh002.obj").exists()
+
+
+def test_vertices_no_triangle_uses_do_not_make_two_meshes_differ(extract):
+    # Bitterli's OBJs keep a few vertices that no triangle uses, which the
+    # PLY export drops: the triangles are the same
+    m = _mesh(0.0)
+    ply = extract._read_ply(trimesh.exchange.ply.export_ply(m, encoding="binary"))
+    v, uv, n, f = ply
+    padded = (np.vstack([v, [[9.0, 9.0, 9.0]]]), np.vstack([uv, [[0.5, 0.5]]]), n, f)
+    assert extract._same_mesh(padded, ply)
+    moved = (v + [0.0, 1e-3, 0.0], uv, n, f)
+    assert not extract._same_mesh(moved, ply)
