@@ -89,5 +89,5 @@ def test_vertices_no_triangle_uses_do_not_make_two_meshes_differ(extract):
     v, uv, n, f = ply
     padded = (np.vstack([v, [[9.0, 9.0, 9.0]]]), np.vstack([uv, [[0.5, 0.5]]]), n, f)
     assert extract._same_mesh(padded, ply)
-    moved = (v + [0.0, 1e-3, 0.0], uv, n, f)
+    moved = (v + np.array([0.0, 1e-3, 0.0]), uv, n, f)
     assert not extract._same_mesh(moved, ply)
