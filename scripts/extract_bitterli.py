@@ -163,8 +163,8 @@ def _read_obj(path: Path):
             if len(corners) != 3 or any(len(set(c)) != 1 for c in corners):
                 return None
             f.append([int(c[0]) - 1 for c in corners])
-    as_array = lambda rows: np.asarray(rows, np.float64).reshape(len(rows), -1)  # noqa: E731
-    return as_array(v), as_array(vt), as_array(vn), np.asarray(f, np.int64).reshape(-1, 3)
+    v, vt, vn = (np.asarray(rows, np.float64).reshape(len(rows), -1) for rows in (v, vt, vn))
+    return v, vt, vn, np.asarray(f, np.int64).reshape(-1, 3)
 
 
 def _read_ply(data: bytes):
