@@ -131,7 +131,7 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
         "touch_records"_a = st.touch_records, "clusters"_a = st.clusters,
         "cut_clusters"_a = st.cut_clusters, "cut_records"_a = st.cut_records,
         "cut_limit_hits"_a = st.cut_limit_hits, "cut_small_planes"_a = st.cut_small_planes,
-        "polygon_overflows"_a = st.polygon_overflows,
+        "layer_records"_a = st.layer_records, "polygon_overflows"_a = st.polygon_overflows,
         "peak_bytes"_a = std::max<int64_t>(
             st.peak_bytes, int64_t(N) * int64_t(sizeof(voxgi::VoxelRecord)) + out_bytes),
         "seconds_pairs"_a = st.seconds_pairs, "seconds_sort"_a = st.seconds_sort,

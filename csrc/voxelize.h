@@ -63,6 +63,7 @@ struct VoxelizeStats {
     int64_t cut_records = 0;         // front records made by those splits (beyond one each)
     int64_t cut_limit_hits = 0;      // cutting planes ignored (more than kMaxCuts in a voxel)
     int64_t cut_small_planes = 0;    // planes of small clusters (they cut only large ones)
+    int64_t layer_records = 0;       // front records made by stacked sheets (beyond one each)
     int64_t polygon_overflows = 0;   // clipped polygons that hit the vertex limit (should be 0)
     int64_t peak_bytes = 0;          // peak of the kernel's own large buffers
     double seconds_pairs = 0, seconds_sort = 0, seconds_records = 0;
@@ -84,6 +85,11 @@ constexpr double kSeparatingShare = 0.25;
 // A small cluster's plane cuts a large cluster only where one of its pieces
 // comes this close to the large cluster's plane (voxel units).
 constexpr double kTouch = 0.05;
+// Pieces of one cluster whose distances along its normal lie further apart
+// than this (voxel units) are separate layers, each its own record
+// (docs/design.md §2, stacked sheets). Nearer sheets stay one record: split,
+// they cost records and the lines' convergence and improved no picture.
+constexpr double kLayerGap = 0.1;
 
 // Voxelize `n_tris` triangles.
 //   tris        (n_tris, 3, 3) world corner positions, C order

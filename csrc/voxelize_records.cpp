@@ -45,6 +45,7 @@ struct PartRef {
     PolyView poly;
     int piece;
     uint64_t sig;  // bit b set: on the positive side of the cluster's b-th cutting plane
+    int layer;     // its piece's layer in the cluster (layer_pieces)
     double area;
     double c[3];
 };
@@ -55,12 +56,16 @@ struct Scratch {
     std::vector<Cluster> clusters;
     std::vector<int> order, cl_start, cl_items, next;
     std::vector<PartRef> parts, parts2;
-    std::deque<Poly> pool;  // polygons of cut parts (stable addresses)
+    std::vector<int> layer_of;                           // per piece (layer_pieces)
+    std::vector<std::pair<double, double>> layer_span;   // scratch: per piece, its range
+    std::vector<std::pair<double, double>> layer_range;  // scratch: per layer, its range
+    std::deque<Poly> pool;                               // polygons of cut parts (stable addresses)
 };
 
 struct ChunkStats {
     int64_t cells = 0, records = 0, back = 0, two_sided = 0, touch = 0, clusters = 0,
-            cut_clusters = 0, cut_records = 0, cut_limit = 0, cut_small = 0, overflows = 0;
+            cut_clusters = 0, cut_records = 0, cut_limit = 0, cut_small = 0, overflows = 0,
+            layer_records = 0;
 };
 
 struct Context {
@@ -536,8 +541,8 @@ int cut_cluster(const Context& ctx, size_t ci, size_t ncl, const Plane* planes, 
                         Poly& poly = pool.back();
                         clip_plane(pt.poly, poly, pl.n, pl.off, s == 0 ? 1.0 : -1.0);
                         if (poly.n == 0) continue;
-                        PartRef np_{
-                            view(poly), pt.piece, pt.sig | (s == 0 ? bit : 0), 0.0, {0, 0, 0}};
+                        PartRef np_{view(poly), pt.piece, pt.sig | (s == 0 ? bit : 0),
+                                    pt.layer,   0.0,      {0, 0, 0}};
                         np_.area = poly.n >= 3 ? area_centroid(view(poly), tn, np_.c) : 0.0;
                         if (!(np_.area > 0)) {
                             np_.area = 0;
@@ -557,6 +562,67 @@ int cut_cluster(const Context& ctx, size_t ci, size_t ncl, const Plane* planes, 
     return n_cuts;
 }
 
+// The layers of cluster ci: its pieces with area, in order of their least
+// distance along the cluster's normal, split wherever the next one starts
+// over kLayerGap beyond the furthest so far. A connected sheet, however
+// curved within the voxel, is one layer (its neighbouring pieces share
+// edges, so their ranges meet); a stack of separate parallel sheets finer
+// than a voxel (blinds, shelves, treads) is one layer per sheet. Lumped
+// into one record, the sheets of a stack would share one radiosity and one
+// point: rays from the gap between two slats would read the light of the
+// slat's lit edge, and rays from the record's point would see past the
+// slats it stands for. Pieces without area join the layer nearest them.
+// Into S.layer_of (per piece); returns the number of layers.
+int layer_pieces(size_t ci, Scratch& S) {
+    const Cluster& c = S.clusters[ci];
+    const int b = S.cl_start[ci], e = S.cl_start[ci + 1];
+    double n[3];
+    const double len = std::sqrt(dot3(c.sum_an, c.sum_an));
+    for (int d = 0; d < 3; ++d) n[d] = len > 0 ? c.sum_an[d] / len : c.seed[d];
+    auto& span = S.layer_span;  // (least, greatest) distance, per item of the cluster
+    span.resize(size_t(e - b));
+    auto& order = S.next;
+    order.clear();
+    for (int k = b; k < e; ++k) {
+        const Piece& pc = S.pieces[S.cl_items[k]];
+        const PolyView pv{
+            reinterpret_cast<const double (*)[3]>(S.verts.data() + 3 * size_t(pc.v_off)), pc.v_n};
+        double mn = dot3(n, pc.c), mx = mn;
+        if (pc.area > 0) {
+            signed_range(pv, n, 0.0, mn, mx);
+            order.push_back(k - b);
+        }
+        span[size_t(k - b)] = {mn, mx};
+    }
+    std::stable_sort(order.begin(), order.end(),
+                     [&](int x, int y) { return span[size_t(x)].first < span[size_t(y)].first; });
+    // layers as ranges [lo, hi] of distance, in order
+    auto& layers = S.layer_range;
+    layers.clear();
+    for (int i : order) {
+        const auto& sp = span[size_t(i)];
+        if (layers.empty() || sp.first > layers.back().second + kLayerGap)
+            layers.push_back(sp);
+        else
+            layers.back().second = std::max(layers.back().second, sp.second);
+        S.layer_of[size_t(S.cl_items[size_t(b + i)])] = int(layers.size()) - 1;
+    }
+    for (int k = b; k < e; ++k) {
+        const Piece& pc = S.pieces[S.cl_items[k]];
+        if (pc.area > 0) continue;
+        int best = 0;
+        double best_d = std::numeric_limits<double>::infinity();
+        const auto& sp = span[size_t(k - b)];
+        for (size_t l = 0; l < layers.size(); ++l) {
+            const double d =
+                std::max({layers[l].first - sp.second, sp.first - layers[l].second, 0.0});
+            if (d < best_d) best_d = d, best = int(l);
+        }
+        S.layer_of[size_t(S.cl_items[k])] = best;
+    }
+    return std::max<int>(1, int(layers.size()));
+}
+
 void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t np, Scratch& S,
                   std::vector<VoxelRecord>& out, ChunkStats& cs) {
     const VoxelizeParams& P = *ctx.P;
@@ -574,31 +640,40 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
     if (do_cut) cutting_planes(clusters, cell, planes, cs);
     auto& parts = S.parts;
     S.pool.clear();
+    S.layer_of.assign(size_t(n_pieces), 0);
     for (size_t ci = 0; ci < ncl; ++ci) {
         const Cluster& cl = clusters[ci];
+        const int n_layers = S.cl_start[ci + 1] - S.cl_start[ci] > 1 ? layer_pieces(ci, S) : 1;
         parts.clear();
         for (int q = S.cl_start[ci]; q < S.cl_start[ci + 1]; ++q) {
-            const Piece& pc = pieces[S.cl_items[q]];
+            const int idx = S.cl_items[q];
+            const Piece& pc = pieces[idx];
             const PolyView pv{
                 reinterpret_cast<const double (*)[3]>(S.verts.data() + 3 * size_t(pc.v_off)),
                 pc.v_n};
-            parts.push_back(PartRef{pv, S.cl_items[q], 0, pc.area, {pc.c[0], pc.c[1], pc.c[2]}});
+            parts.push_back(
+                PartRef{pv, idx, 0, S.layer_of[size_t(idx)], pc.area, {pc.c[0], pc.c[1], pc.c[2]}});
         }
         const int n_cuts = do_cut ? cut_cluster(ctx, ci, ncl, planes, S, cs) : 0;
-        if (n_cuts > 0)
-            std::stable_sort(parts.begin(), parts.end(),
-                             [](const PartRef& x, const PartRef& y) { return x.sig < y.sig; });
+        if (n_cuts > 0 || n_layers > 1)
+            std::stable_sort(parts.begin(), parts.end(), [](const PartRef& x, const PartRef& y) {
+                return x.layer < y.layer || (x.layer == y.layer && x.sig < y.sig);
+            });
+        // one record per layer and side of the cutting planes
         size_t b = 0, n_rec = 0;
         while (b < parts.size()) {
             size_t e = b + 1;
-            while (e < parts.size() && parts[e].sig == parts[b].sig) ++e;
+            while (e < parts.size() && parts[e].sig == parts[b].sig &&
+                   parts[e].layer == parts[b].layer)
+                ++e;
             emit_records(ctx, cell, cl, pieces, parts, b, e, out, cs);
             ++n_rec;
             b = e;
         }
-        if (n_rec > 1) {
+        cs.layer_records += int64_t(n_layers - 1);
+        if (n_rec > size_t(n_layers)) {
             ++cs.cut_clusters;
-            cs.cut_records += int64_t(n_rec - 1);
+            cs.cut_records += int64_t(n_rec) - n_layers;
         }
     }
 }
@@ -646,6 +721,7 @@ std::vector<std::vector<VoxelRecord>> cell_records(const double* tris, const int
         st.cut_limit_hits += cs.cut_limit;
         st.cut_small_planes += cs.cut_small;
         st.polygon_overflows += cs.overflows;
+        st.layer_records += cs.layer_records;
         rec_bytes += out[ch].capacity() * sizeof(VoxelRecord);
     }
     st.peak_bytes = std::max<int64_t>(

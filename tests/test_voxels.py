@@ -573,6 +573,57 @@ def test_same_orientation_surfaces_do_not_cut_each_other():
     assert len(shared) > 0  # they do share voxels
 
 
+def _stack_of_slats(n=9, spacing=0.015, tilt=25.0):
+    """n parallel two-sided slats of one object, 0.16 wide and 0.6 long,
+    ``spacing`` apart, turned by a random rotation: at resolution 16 (pitch
+    about 0.04) two or three slats share every voxel they cross. Returns
+    the scene and the slats."""
+    rot = rotation(np.random.default_rng(11))
+    t = np.radians(tilt)
+    along = np.array([np.cos(t), np.sin(t), 0.0]) * 0.08
+    e = np.array([0.0, 0.0, 0.3])
+    slats = []
+    for i in range(n):
+        c = np.array([0.0, spacing * i, 0.0])
+        corners = [c - along - e, c + along - e, c + along + e, c - along + e]
+        slats.append(rotated(quad(corners), rot))
+    return scene_of(trimesh.util.concatenate(slats), two_sided=True), slats
+
+
+def test_each_sheet_of_a_stack_finer_than_a_voxel_has_records_of_its_own():
+    # Lumped into one record per voxel, the slats of a stack would share one
+    # radiosity and one point on one of them: rays from that point see past
+    # the slats it stands for. Each record must lie on one slat, and each
+    # slat's records must hold exactly its area, on both of its sides.
+    scene, slats = _stack_of_slats()
+    vox = voxgi.voxelize(scene, 16)
+    assert vox.stats["layer_records"] > 0
+    size = float(np.max(np.ptp(scene.bounds, axis=0)))
+    tris = np.stack([m.vertices[m.faces] for m in slats])  # (slat, 2, 3, 3)
+    d = point_triangle_distance(vox.centroid, tris.reshape(-1, 3, 3)).reshape(len(vox), -1, 2)
+    on = d.min(axis=2) <= 1e-9 * size  # (record, slat): the record's point lies on the slat
+    assert np.all(on.sum(axis=1) == 1)
+    slat = np.argmax(on, axis=1)
+    for side in (0, 1):
+        sel = vox.side == side
+        got = np.bincount(slat[sel], weights=vox.area[sel].astype(np.float64), minlength=len(slats))
+        want = [m.area for m in slats]
+        np.testing.assert_allclose(got, want, rtol=1e-5)
+
+
+@pytest.mark.parametrize(("gap", "layers"), [(0.05, False), (0.3, True)])
+def test_sheets_a_tenth_of_a_voxel_apart_or_nearer_stay_one_record(gap, layers):
+    # two parallel quads of one object, `gap` pitches apart along their
+    # normal, inside the same voxels
+    h = 1.0 / 8
+    a = quad([(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 1.0, 0.0), (0.0, 1.0, 0.0)])
+    b = quad(np.asarray(a.vertices) + np.array([0.0, 0.0, gap * h]))
+    vox = voxgi.voxelize(scene_of(trimesh.util.concatenate([a, b])), 8)
+    cells = np.unique(vox.ijk[front(vox)], axis=0)
+    assert (vox.stats["layer_records"] > 0) == layers
+    assert int(front(vox).sum()) == len(cells) * (2 if layers else 1)
+
+
 # ------------------------------------------------------ order, stats, memory
 
 

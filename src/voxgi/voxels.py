@@ -324,6 +324,7 @@ def _voxelize_stats(
         "cut_records": int(st["cut_records"]),
         "cut_limit_hits": int(st["cut_limit_hits"]),
         "cut_small_planes": int(st["cut_small_planes"]),
+        "layer_records": int(st["layer_records"]),
         "polygon_overflows": int(st["polygon_overflows"]),
         "peak_bytes": int(st["peak_bytes"] + triangles.nbytes),
         "estimate_bytes": est["bytes"],
