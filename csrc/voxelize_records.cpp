@@ -569,9 +569,9 @@ int cut_cluster(const Context& ctx, size_t ci, size_t ncl, const Plane* planes, 
 // edges, so their ranges meet); a stack of separate parallel sheets finer
 // than a voxel (blinds, shelves, treads) is one layer per sheet. Lumped
 // into one record, the sheets of a stack would share one radiosity and one
-// point: rays from the gap between two slats would read the light of the
-// slat's lit edge, and rays from the record's point would see past the
-// slats it stands for. Pieces without area join the layer nearest them.
+// point: a ray landing in the gap between two slats would read the mean of
+// every slat of the voxel, and rays from the record's point would see past
+// the slats it stands for. Pieces without area join the layer nearest them.
 // Into S.layer_of (per piece); returns the number of layers.
 int layer_pieces(size_t ci, Scratch& S) {
     const Cluster& c = S.clusters[ci];
