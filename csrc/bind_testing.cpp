@@ -226,14 +226,21 @@ py::tuple input_alignment(I32 i32, I64 i64, F32 f32, F64 f64) {
 // voxgi.traced.record_grid, by the kernels' lookup or by the reference one:
 // (H,) int64 rows of rec_packed, -1 for none.
 I64 record_lookup(I64 rec_sorted_key, I32 rec_cell_start, F32 rec_packed, I64 grid_dims,
-                  I64 grid_lo, F64 grid_origin, double pitch, F64 y, F32 n, I32 obj,
-                  bool reference) {
-    const voxgi::RecordGrid g = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
-                                          grid_lo, grid_origin, pitch);
+                  I64 grid_lo, F64 grid_origin, double pitch, F64 y, F32 n, I32 obj, bool reference,
+                  const std::optional<I32>& tri, const std::optional<U8>& front,
+                  const std::optional<I64>& piece_first, const std::optional<I64>& piece_key,
+                  const std::optional<I32>& piece_record) {
+    voxgi::RecordGrid g = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims, grid_lo,
+                                    grid_origin, pitch);
+    attach_pieces(g, piece_first, piece_key, piece_record);
     check_2d(y, -1, 3, "y");
     const py::ssize_t H = y.shape(0);
     check_2d(n, H, 3, "n");
     check_1d(obj, H, "obj");
+    if (tri.has_value() != front.has_value()) throw py::value_error("tri and front go together");
+    if (tri) check_1d(*tri, H, "tri"), check_1d(*front, H, "front");
+    const int32_t* pt = tri ? tri->data() : nullptr;
+    const uint8_t* pf = front ? front->data() : nullptr;
     I64 out(H);
     const double* yp = y.data();
     const float* pn = n.data();
@@ -248,7 +255,8 @@ I64 record_lookup(I64 rec_sorted_key, I32 rec_cell_start, F32 rec_packed, I64 gr
             res[h] =
                 reference
                     ? voxgi::lookup_reference::lookup_in_cell(g, yp + 3 * h, pn + 3 * h, po[h], c)
-                    : voxgi::lookup_in_cell(g, yp + 3 * h, pn + 3 * h, po[h], c, scratch);
+                    : voxgi::lookup_in_cell(g, yp + 3 * h, pn + 3 * h, po[h], c, pt ? pt[h] : -1,
+                                            pf ? pf[h] != 0 : true, scratch);
         }
     }
     return out;
@@ -284,10 +292,16 @@ holds power. Returns (hd, unfound, rays, steps) as LineSystem.shoot.)doc");
           "rec_cell_start"_a.noconvert(), "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(),
           "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a, "y"_a.noconvert(),
           "n"_a.noconvert(), "obj"_a.noconvert(), "reference"_a = false,
+          "tri"_a.noconvert() = py::none(), "front"_a.noconvert() = py::none(),
+          "piece_first"_a.noconvert() = py::none(), "piece_key"_a.noconvert() = py::none(),
+          "piece_record"_a.noconvert() = py::none(),
           R"doc(The record each hit reads, as the gather kernels look it up.
 
 y (H, 3) float64 hit points in the tracer's frame, n (H, 3) float32 unit
 normals on the side seen, obj (H,) int32 hit objects; the grid as
-voxgi.traced.record_grid returns it. reference: the lookup as first
-written, for comparison. Returns (H,) int64 rows of rec_packed, -1: none.)doc");
+voxgi.traced.record_grid returns it (its piece_* too: with tri (H,) int32,
+the triangle of each hit, and front (H,) uint8, 1 where it is met on the
+side its winding faces, the kernels' lookup reads a listed piece's record).
+reference: the search as first written, for comparison (it reads no
+pieces). Returns (H,) int64 rows of rec_packed, -1: none.)doc");
 }

@@ -73,7 +73,7 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
         };
     }
 
-    std::vector<std::vector<voxgi::VoxelRecord>> chunks;
+    std::vector<voxgi::VoxelChunk> chunks;
     const double* tp = triangles.data();
     const int32_t* op = tri_object.data();
     const bool* tsp = two_sided.data();
@@ -85,8 +85,9 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
     }
     // the final state, so that a caller always hears of the end, however short the work
     if (!progress.is_none()) progress(prog.phase.load(), prog.total.load(), prog.total.load());
-    py::ssize_t N = 0;
-    for (const auto& c : chunks) N += py::ssize_t(c.size());
+    py::ssize_t N = 0, M = 0;
+    for (const auto& c : chunks)
+        N += py::ssize_t(c.records.size()), M += py::ssize_t(c.pieces.size());
     I32 ijk({N, py::ssize_t(3)});
     F32 normal({N, py::ssize_t(3)});
     F32 area(N);
@@ -96,7 +97,10 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
     I32 object(N);
     B8 back(N);
     py::array_t<int8_t, py::array::c_style> side(N);
+    I32 piece_tri(M);
+    I32 piece_rec({M, py::ssize_t(2)});
     {
+        int32_t *pt = piece_tri.mutable_data(), *pr = piece_rec.mutable_data();
         int32_t *pi = ijk.mutable_data(), *po = object.mutable_data();
         float *pn = normal.mutable_data(), *pa = area.mutable_data(), *pal = alb.mutable_data(),
               *pe = emi.mutable_data();
@@ -104,9 +108,18 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
         bool* pb = back.mutable_data();
         int8_t* ps = side.mutable_data();
         py::gil_scoped_release release;
-        py::ssize_t r = 0;
+        py::ssize_t r = 0, m = 0;
         for (auto& c : chunks) {
-            for (const auto& rec : c) {
+            // the pieces' records, from the chunk's indices to the output's
+            const int32_t first = int32_t(r);
+            for (const auto& pc : c.pieces) {
+                pt[m] = pc.tri;
+                pr[2 * m] = first + pc.front;
+                pr[2 * m + 1] = first + pc.back;
+                ++m;
+            }
+            std::vector<voxgi::SurfacePiece>().swap(c.pieces);
+            for (const auto& rec : c.records) {
                 for (int d = 0; d < 3; ++d) {
                     pi[3 * r + d] = rec.ijk[d];
                     pn[3 * r + d] = rec.normal[d];
@@ -120,10 +133,11 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
                 ps[r] = static_cast<int8_t>(rec.side);
                 ++r;
             }
-            std::vector<voxgi::VoxelRecord>().swap(c);  // free as we go: peak ~ one copy
+            std::vector<voxgi::VoxelRecord>().swap(c.records);  // free as we go: peak ~ one copy
         }
     }
-    const int64_t out_bytes = int64_t(N) * (12 + 12 + 4 + 12 + 12 + 24 + 4 + 1 + 1);
+    const int64_t out_bytes =
+        int64_t(N) * (12 + 12 + 4 + 12 + 12 + 24 + 4 + 1 + 1) + int64_t(M) * 12;
     py::dict stats(
         "triangles"_a = st.triangles, "skipped_degenerate"_a = st.skipped_degenerate,
         "pairs"_a = st.pairs, "cells"_a = st.cells, "records"_a = st.records,
@@ -138,7 +152,8 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
         "seconds_records"_a = st.seconds_records, "threads"_a = voxgi::resolve_threads(threads));
     return py::dict("ijk"_a = ijk, "normal"_a = normal, "area"_a = area, "albedo"_a = alb,
                     "emission"_a = emi, "centroid"_a = centroid, "object_id"_a = object,
-                    "back"_a = back, "side"_a = side, "stats"_a = stats);
+                    "back"_a = back, "side"_a = side, "piece_triangle"_a = piece_tri,
+                    "piece_record"_a = piece_rec, "stats"_a = stats);
 }
 
 }  // namespace
@@ -189,6 +204,9 @@ Returns
 dict
     ``ijk`` (N, 3) int32, ``normal`` (N, 3) float32, ``area`` (N,) float32,
     ``albedo``/``emission`` (N, 3) float32, ``centroid`` (N, 3) float64,
-    ``object_id`` (N,) int32, ``back`` (N,) bool, ``side`` (N,) int8 and
-    ``stats`` (dict of counts and seconds).)doc");
+    ``object_id`` (N,) int32, ``back`` (N,) bool, ``side`` (N,) int8,
+    ``piece_triangle`` (M,) int32 and ``piece_record`` (M, 2) int32: for each
+    (triangle, voxel) piece with area whose whole area went to one record
+    pair, the triangle and the records on its winding side and on the other
+    (the voxel is theirs), and ``stats`` (dict of counts and seconds).)doc");
 }

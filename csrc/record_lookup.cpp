@@ -214,7 +214,18 @@ inline bool before(const Candidate& a, const Candidate& b) {
 }  // namespace
 
 int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3], int32_t obj,
-                       const int64_t c[3], LookupScratch& S) {
+                       const int64_t c[3], int32_t tri, bool front, LookupScratch& S) {
+    // The record y's own piece went to: the voxelization's answer, where
+    // the search below can only approach it.
+    if (g.piece_first && tri >= 0 && tri < g.piece_tris) {
+        const int64_t key = grid_key(g, c[0], c[1], c[2]);
+        for (int64_t e = g.piece_first[tri]; e < g.piece_first[tri + 1]; ++e)
+            if (g.piece_key[e] == key) {
+                const int64_t r = g.piece_record[2 * e + (front ? 0 : 1)];
+                if (dot3(g.rec[r].normal, n) > 0.f) return r;
+                break;
+            }
+    }
     const double p2 = g.pitch * g.pitch;
     int64_t best = -1, h0, h1;
     int best_apart = 0;

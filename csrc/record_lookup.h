@@ -38,6 +38,14 @@ struct RecordGrid {
     // (N, 3) in the order of sorted_key, or null: the share of each record's
     // light that its diffuse base reflects (docs/design.md §14)
     const float* share = nullptr;
+    // Or null: the records of each triangle's pieces (VoxelSet.piece_record).
+    // Triangle t < piece_tris has pieces [piece_first[t], piece_first[t + 1]),
+    // each in voxel piece_key[e] with its records at piece_record[2e] (the
+    // side t's winding faces) and piece_record[2e + 1], in sorted_key's order.
+    int64_t piece_tris = 0;
+    const int64_t* piece_first = nullptr;
+    const int64_t* piece_key = nullptr;
+    const int32_t* piece_record = nullptr;
 };
 
 // The voxel of the grid that holds y.
@@ -79,12 +87,15 @@ struct LookupScratch {
 
 // Position in the grid's order of the record that stands for the surface
 // point y, in voxel c, on object `obj` seen from the side of unit normal n,
-// or -1. Only records whose normal faces n's side qualify, and of those the
-// ones no other surface of y's voxel (or of their own) separates from y;
-// among them the nearest centroid, strongly preferring the same object and
-// orientation. The neighbouring voxels are searched only when c has no such
-// record of this surface. The answer does not depend on `scratch`.
+// or -1. Where y lies on triangle `tri` (-1: unknown), on the side its
+// winding faces when `front`, and the grid lists that triangle's piece in
+// c, the piece's record on that side. Otherwise a search: only records
+// whose normal faces n's side qualify, and of those the ones no other
+// surface of y's voxel (or of their own) separates from y; among them the
+// nearest centroid, strongly preferring the same object and orientation.
+// The neighbouring voxels are searched only when c has no such record of
+// this surface. The answer does not depend on `scratch`.
 int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3], int32_t obj,
-                       const int64_t c[3], LookupScratch& scratch);
+                       const int64_t c[3], int32_t tri, bool front, LookupScratch& scratch);
 
 }  // namespace voxgi

@@ -221,12 +221,11 @@ std::vector<int64_t> sort_pairs(std::vector<Pair>& pairs, const VoxelizeParams& 
 
 }  // namespace
 
-std::vector<std::vector<VoxelRecord>> voxelize(const double* tris, int64_t n_tris,
-                                               const int32_t* tri_object, int32_t n_objects,
-                                               const bool* two_sided, const float* albedo,
-                                               const float* emission, const VoxelizeParams& P,
-                                               int threads, const StopCheck& stop,
-                                               VoxelizeStats& st, VoxelizeProgress* progress) {
+std::vector<VoxelChunk> voxelize(const double* tris, int64_t n_tris, const int32_t* tri_object,
+                                 int32_t n_objects, const bool* two_sided, const float* albedo,
+                                 const float* emission, const VoxelizeParams& P, int threads,
+                                 const StopCheck& stop, VoxelizeStats& st,
+                                 VoxelizeProgress* progress) {
     st = VoxelizeStats{};
     st.triangles = n_tris;
     check_params(n_tris, P);

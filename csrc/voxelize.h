@@ -34,6 +34,23 @@ struct VoxelRecord {
     uint8_t side;        // 0: the winding's side, 1: the reverse side (back or two-sided)
 };
 
+// Where a triangle's surface in one voxel went: the records on its two
+// sides, where the whole of its piece there (with area) went to one record
+// pair, not split by another surface's cutting plane. A ray that lands on
+// the triangle in that voxel reads these records without a search
+// (record_lookup.h).
+struct SurfacePiece {
+    int32_t tri;    // the triangle, as given to voxelize
+    int32_t front;  // the record on the side its winding faces (index into its chunk's records)
+    int32_t back;   // the record on the other side
+};
+
+// One chunk of the output: records, and the surface pieces that point into them.
+struct VoxelChunk {
+    std::vector<VoxelRecord> records;
+    std::vector<SurfacePiece> pieces;
+};
+
 struct VoxelizeParams {
     double origin[3] = {0, 0, 0};  // world position of voxel (0,0,0)'s minimum corner
     double pitch = 1.0;            // voxel edge, scene units
@@ -97,13 +114,14 @@ constexpr double kLayerGap = 0.1;
 //   two_sided   (n_objects,) 0/1
 //   albedo, emission (n_objects, 3)
 // Returns the records in chunks, in output order (voxels in (i, j, k)
-// lexicographic order; inside a voxel by object, orientation cluster, side of
-// the cutting planes, then front before reverse). The order does not depend
-// on `threads`. Throws std::invalid_argument on bad input, Interrupted when
-// `stop` says so.
-std::vector<std::vector<VoxelRecord>> voxelize(
-    const double* tris, int64_t n_tris, const int32_t* tri_object, int32_t n_objects,
-    const bool* two_sided, const float* albedo, const float* emission, const VoxelizeParams& params,
-    int threads, const StopCheck& stop, VoxelizeStats& stats, VoxelizeProgress* progress = nullptr);
+// lexicographic order; inside a voxel by object, orientation cluster, layer,
+// side of the cutting planes, then front before reverse), each chunk with
+// its surface pieces. The order does not depend on `threads`. Throws std::invalid_argument on bad
+// input, Interrupted when `stop` says so.
+std::vector<VoxelChunk> voxelize(const double* tris, int64_t n_tris, const int32_t* tri_object,
+                                 int32_t n_objects, const bool* two_sided, const float* albedo,
+                                 const float* emission, const VoxelizeParams& params, int threads,
+                                 const StopCheck& stop, VoxelizeStats& stats,
+                                 VoxelizeProgress* progress = nullptr);
 
 }  // namespace voxgi

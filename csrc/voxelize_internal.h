@@ -203,16 +203,17 @@ inline void set_phase(VoxelizeProgress* progress, int ph, int64_t total) {
     progress->total = total;
 }
 
-// Phase 3: the records of each voxel, in chunks in voxel order. `pairs` are
-// sorted by voxel key; voxel c's pairs are [starts[c], starts[c + 1]).
+// Phase 3: the records of each voxel and its surface pieces, in chunks in
+// voxel order. `pairs` are sorted by voxel key; voxel c's pairs are
+// [starts[c], starts[c + 1]).
 // Adds its counts, peak memory and seconds to `st`.
-std::vector<std::vector<VoxelRecord>> cell_records(const double* tris, const int32_t* tri_object,
-                                                   const bool* two_sided, const float* albedo,
-                                                   const float* emission, const VoxelizeParams& P,
-                                                   const std::vector<Pair>& pairs,
-                                                   const std::vector<int64_t>& starts, int threads,
-                                                   const StopCheck& stop, VoxelizeStats& st,
-                                                   VoxelizeProgress* progress);
+std::vector<VoxelChunk> cell_records(const double* tris, const int32_t* tri_object,
+                                     const bool* two_sided, const float* albedo,
+                                     const float* emission, const VoxelizeParams& P,
+                                     const std::vector<Pair>& pairs,
+                                     const std::vector<int64_t>& starts, int threads,
+                                     const StopCheck& stop, VoxelizeStats& st,
+                                     VoxelizeProgress* progress);
 
 }  // namespace voxelize_internal
 }  // namespace voxgi

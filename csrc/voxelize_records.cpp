@@ -56,7 +56,9 @@ struct Scratch {
     std::vector<Cluster> clusters;
     std::vector<int> order, cl_start, cl_items, next;
     std::vector<PartRef> parts, parts2;
-    std::vector<int> layer_of;                           // per piece (layer_pieces)
+    std::vector<int> layer_of;  // per piece (layer_pieces)
+    std::vector<int64_t>
+        record_of;  // per piece: its record pair (chunk index), -1 none, -2 several
     std::vector<std::pair<double, double>> layer_span;   // scratch: per piece, its range
     std::vector<std::pair<double, double>> layer_range;  // scratch: per layer, its range
     std::deque<Poly> pool;                               // polygons of cut parts (stable addresses)
@@ -624,7 +626,7 @@ int layer_pieces(size_t ci, Scratch& S) {
 }
 
 void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t np, Scratch& S,
-                  std::vector<VoxelRecord>& out, ChunkStats& cs) {
+                  VoxelChunk& out, ChunkStats& cs) {
     const VoxelizeParams& P = *ctx.P;
     const uint64_t D1 = P.dims[1], D2 = P.dims[2];
     const int64_t cell[3] = {int64_t(key / (D1 * D2)), int64_t((key / D2) % D1), int64_t(key % D2)};
@@ -641,6 +643,7 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
     auto& parts = S.parts;
     S.pool.clear();
     S.layer_of.assign(size_t(n_pieces), 0);
+    S.record_of.assign(size_t(n_pieces), -1);
     for (size_t ci = 0; ci < ncl; ++ci) {
         const Cluster& cl = clusters[ci];
         const int n_layers = S.cl_start[ci + 1] - S.cl_start[ci] > 1 ? layer_pieces(ci, S) : 1;
@@ -666,7 +669,12 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
             while (e < parts.size() && parts[e].sig == parts[b].sig &&
                    parts[e].layer == parts[b].layer)
                 ++e;
-            emit_records(ctx, cell, cl, pieces, parts, b, e, out, cs);
+            const int64_t rec = int64_t(out.records.size());
+            for (size_t q = b; q < e; ++q) {
+                int64_t& r = S.record_of[size_t(parts[q].piece)];
+                if (parts[q].area > 0) r = r == -1 || r == rec ? rec : -2;
+            }
+            emit_records(ctx, cell, cl, pieces, parts, b, e, out.records, cs);
             ++n_rec;
             b = e;
         }
@@ -676,24 +684,35 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
             cs.cut_records += int64_t(n_rec) - n_layers;
         }
     }
+    // Each piece whose whole area went to one record pair: the record on
+    // its triangle's winding side is the pair's front (side 0) unless the
+    // piece was turned to its cluster (a two-sided object's reversed face).
+    for (int i = 0; i < n_pieces; ++i) {
+        const int64_t r = S.record_of[size_t(i)];
+        if (r < 0) continue;
+        const bool turned = dot3(pieces[size_t(i)].n, pieces[size_t(i)].tn) < 0.0;
+        out.pieces.push_back(SurfacePiece{int32_t(pieces[size_t(i)].tri),
+                                          int32_t(turned ? r + 1 : r),
+                                          int32_t(turned ? r : r + 1)});
+    }
 }
 
 }  // namespace
 
-std::vector<std::vector<VoxelRecord>> cell_records(const double* tris, const int32_t* tri_object,
-                                                   const bool* two_sided, const float* albedo,
-                                                   const float* emission, const VoxelizeParams& P,
-                                                   const std::vector<Pair>& pairs,
-                                                   const std::vector<int64_t>& starts, int threads,
-                                                   const StopCheck& stop, VoxelizeStats& st,
-                                                   VoxelizeProgress* progress) {
+std::vector<VoxelChunk> cell_records(const double* tris, const int32_t* tri_object,
+                                     const bool* two_sided, const float* albedo,
+                                     const float* emission, const VoxelizeParams& P,
+                                     const std::vector<Pair>& pairs,
+                                     const std::vector<int64_t>& starts, int threads,
+                                     const StopCheck& stop, VoxelizeStats& st,
+                                     VoxelizeProgress* progress) {
     const size_t n_pairs = pairs.size();
     const int64_t n_cells = int64_t(starts.size()) - 1;
     const auto t0 = Clock::now();
     const int64_t cell_chunk =
         std::max<int64_t>(256, std::min<int64_t>(16384, n_cells / (int64_t(threads) * 16) + 1));
     const int64_t n_cchunks = (n_cells + cell_chunk - 1) / cell_chunk;
-    std::vector<std::vector<VoxelRecord>> out(n_cchunks);
+    std::vector<VoxelChunk> out(n_cchunks);
     std::vector<ChunkStats> cstats(n_cchunks);
     std::vector<Scratch> scratch(threads);
     Context ctx{tris, tri_object, two_sided, albedo, emission, &P};
@@ -701,7 +720,8 @@ std::vector<std::vector<VoxelRecord>> cell_records(const double* tris, const int
     parallel_for(n_cchunks, threads, stop, [&](int64_t ch, int th) {
         const int64_t c_end = std::min(n_cells, (ch + 1) * cell_chunk);
         auto& o = out[ch];
-        o.reserve(size_t(c_end - ch * cell_chunk) * 2 + 16);  // front + reverse per voxel, usually
+        // front + reverse per voxel, usually
+        o.records.reserve(size_t(c_end - ch * cell_chunk) * 2 + 16);
         for (int64_t c = ch * cell_chunk; c < c_end; ++c)
             process_cell(ctx, pairs[starts[c]].key, pairs.data() + starts[c],
                          starts[c + 1] - starts[c], scratch[th], o, cstats[ch]);
@@ -722,7 +742,8 @@ std::vector<std::vector<VoxelRecord>> cell_records(const double* tris, const int
         st.cut_small_planes += cs.cut_small;
         st.polygon_overflows += cs.overflows;
         st.layer_records += cs.layer_records;
-        rec_bytes += out[ch].capacity() * sizeof(VoxelRecord);
+        rec_bytes += out[ch].records.capacity() * sizeof(VoxelRecord) +
+                     out[ch].pieces.capacity() * sizeof(SurfacePiece);
     }
     st.peak_bytes = std::max<int64_t>(
         st.peak_bytes,

@@ -278,6 +278,8 @@ struct GatherHit {
     float wi[3];       // unit direction; for a ray that met nothing, its direction as traced
     float cos_x;       // at the pixel
     int32_t obj;       // hit object
+    int32_t tri;       // hit triangle
+    bool front;        // met on the side its winding faces
     int64_t c[3];      // voxel of y
     int64_t key;       // its key on the grid (-1: outside), or -2: no light to look up
     bool escaped;      // met nothing: sees the environment
@@ -361,6 +363,8 @@ void gather_hit(const ShadeHits& hits, const ShadeTriangles& tris, const RecordG
     nearest_on_triangle(on_plane, v0, v1, v2, h.y);
     const bool front = dn < 0.0;
     h.obj = tris.object[t];
+    h.tri = t;
+    h.front = front;
     if (!front && !tris.two_sided[h.obj]) return;  // black back of a one-sided surface
     for (int a = 0; a < 3; ++a) h.ns[a] = float(front ? nt[a] : -nt[a]);
     if (tris.textures) {
@@ -479,7 +483,7 @@ void glossy_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
         for (int ch = 0; ch < 3; ++ch) Lz[ch] = float(Le[ch]);
     } else {
         if (z.key < 0) return;
-        const int64_t q = lookup_in_cell(grid, z.y, z.ns, z.obj, z.c, scratch);
+        const int64_t q = lookup_in_cell(grid, z.y, z.ns, z.obj, z.c, z.tri, z.front, scratch);
         if (q < 0) return;
         for (int ch = 0; ch < 3; ++ch) Lz[ch] = grid.rec[q].radiance[ch];
     }
@@ -571,7 +575,7 @@ int near_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
         for (int ch = 0; ch < 3; ++ch) Lz[ch] = float(Le[ch]);
     } else {
         if (g.key < 0) return rays;
-        const int64_t q = lookup_in_cell(grid, g.y, g.ns, g.obj, g.c, scratch);
+        const int64_t q = lookup_in_cell(grid, g.y, g.ns, g.obj, g.c, g.tri, g.front, scratch);
         if (q < 0) return rays;
         if (tris.emitter_count > 0 && tris.emits && tris.emits[g.obj]) {
             // an emitter's record, also sampled above: the balance heuristic
@@ -738,8 +742,8 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                 for (int k = 0; k < n_gather; ++k) {
                     if (transport) record_transport(*transport, int64_t(n_gather) * (p - 2) + k);
                     if (h[k].key == -2) continue;
-                    const int64_t rec =
-                        lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c, scratch);
+                    const int64_t rec = lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c,
+                                                       h[k].tri, h[k].front, scratch);
                     if (rec >= 0 && !transport && continues(mats, hits.material[p - 2], h[k])) {
                         float ratio[3] = {1.f, 1.f, 1.f};
                         if (h[k].textured)

@@ -8,15 +8,17 @@ import numpy as np
 import pytest
 
 import voxgi
+from voxgi import traced
 from voxgi._core import testing
 from voxgi.rays import Tracer
 from voxgi.traced import record_grid
 
 
-def _hits_of_rays(scene, vox, rng, count):
+def _hits_of_rays(scene, vox, rng, count, *, triangles=False):
     """Hits of cosine-distributed rays from random records, as the traced
     passes make them: the point on the hit triangle's plane, its normal on the
-    ray's side, its object."""
+    ray's side, its object; with ``triangles`` also the triangle and whether
+    its winding faces the ray (int32, uint8)."""
     with Tracer(scene, 1) as tr:
         pick = rng.integers(0, len(vox), count)
         nrm = np.asarray(vox.normal, np.float64)[pick]
@@ -36,6 +38,8 @@ def _hits_of_rays(scene, vox, rng, count):
         y = org + tt[:, None] * d
         n = -np.sign(dn)[:, None] * nt
         obj = np.asarray(scene.triangles()["object"], np.int32)[prim[ok]]
+        if triangles:
+            return y, n, obj, tr.centre, prim[ok].astype(np.int32), (dn < 0).astype(np.uint8)
         return y, n, obj, tr.centre
 
 
@@ -96,3 +100,63 @@ def test_lookup_without_the_dense_table_is_the_same():
     b = testing.record_lookup(*(searched[k] for k in keys), *hits)
     assert searched["rec_cell_start"].size == 0
     np.testing.assert_array_equal(a, b)
+
+
+def _thin_closed_slats(thickness=1e-3, spacing=0.02, tilt=30.0):
+    """A box room with a stack of 12 closed slabs `thickness` thick and
+    `spacing` apart, tilted: at resolution 16 three slabs, six faces of one
+    object and two orientations, to a voxel."""
+    import trimesh
+
+    scene = voxgi.scenes.furnace_box(albedo=0.7, emission=0.0, width=8, height=8)
+    t = np.radians(tilt)
+    rot = np.eye(4)
+    rot[:3, 0] = [np.cos(t), np.sin(t), 0.0]
+    rot[:3, 1] = [-np.sin(t), np.cos(t), 0.0]
+    slabs = []
+    for i in range(12):
+        b = trimesh.creation.box(extents=[0.3, thickness, 0.6])
+        b.apply_transform(rot)
+        b.apply_translation([0.1, -0.12 + spacing * i, 0.0])
+        slabs.append(b)
+    scene.add(trimesh.util.concatenate(slabs), voxgi.Material(albedo=0.9), name="slats")
+    return scene
+
+
+def test_a_ray_reads_the_record_its_landing_piece_went_to():
+    # Rays land on faces of slabs thinner than a voxel, several to a voxel:
+    # given the triangle and side, the lookup reads the record the
+    # voxelization put that face's piece in, in the hit's voxel and on the
+    # face's own plane, never a neighbouring slab's or another voxel's
+    # (a search by the records' points alone picks those for some hits).
+    scene = _thin_closed_slats()
+    vox = voxgi.voxelize(scene, resolution=16, progress=False)
+    assert vox.stats["layer_records"] > 0
+    rng = np.random.default_rng(5)
+    y, n, obj, centre, tri, front = _hits_of_rays(scene, vox, rng, 60_000, triangles=True)
+    grid = record_grid(vox, centre, np.zeros((len(vox), 3), np.float32))
+    pieces = traced._piece_table(vox, *traced._voxel_order(vox)[2:])
+    args = (grid["rec_sorted_key"], grid["rec_cell_start"], grid["rec_packed"],
+            grid["grid_dims"], grid["grid_lo"], grid["grid_origin"], grid["pitch"],
+            np.ascontiguousarray(y), np.ascontiguousarray(n, np.float32), obj)  # fmt: skip
+    got = testing.record_lookup(*args, tri=tri, front=front, **pieces)
+    slat = obj == scene.objects.index(next(o for o in scene.objects if o.name == "slats"))
+    assert slat.sum() > 5_000
+    rec = grid["rec_packed"][got[slat]]
+    # its own voxel
+    cell = np.floor((y[slat] - grid["grid_origin"]) / grid["pitch"]).astype(np.int64)
+    rel = cell - grid["grid_lo"]
+    dims = grid["grid_dims"]
+    key = (rel[:, 0] * dims[1] + rel[:, 1]) * dims[2] + rel[:, 2]
+    first = pieces["piece_first"]
+    piece_tri = np.repeat(np.arange(len(first) - 1), np.diff(first))
+    listed = np.isin(key * (1 << 31) + tri[slat], pieces["piece_key"] * (1 << 31) + piece_tri)
+    assert listed.mean() > 0.9
+    np.testing.assert_array_equal(grid["rec_sorted_key"][got[slat]][listed], key[listed])
+    # on the face's plane, facing the ray
+    off = np.abs(np.einsum("ij,ij->i", y[slat] - rec[:, 0:3], rec[:, 3:6]))
+    assert off[listed].max() < 1e-4 * grid["pitch"]
+    assert np.all(np.einsum("ij,ij->i", rec[:, 3:6], n[slat]) > 0.99)
+    # without the triangle the lookup searches, as before
+    searched = testing.record_lookup(*args)
+    np.testing.assert_array_equal(testing.record_lookup(*args, **pieces), searched)

@@ -259,10 +259,8 @@ def test_the_dark_rooms_picture_takes_no_light_across_the_wall(wall):
     assert image.max() == 0.0
 
 
-def _blinds_room(tilt_degrees: float, slat_albedo: float = 0.89) -> voxgi.Scene:
-    """A box (albedo 0.7) lit only by a window quad on one wall, behind 34
-    two-sided slats (albedo 0.89 unless given), 2 cm wide and 1.2 cm apart: several
-    slats in every voxel at resolution 32 and 64."""
+def _window_room() -> voxgi.Scene:
+    """A box (albedo 0.7) lit only by a window quad on one wall."""
     import trimesh
 
     scene = voxgi.scenes.furnace_box(albedo=0.7, emission=0.0, width=48, height=48)
@@ -270,6 +268,16 @@ def _blinds_room(tilt_degrees: float, slat_albedo: float = 0.89) -> voxgi.Scene:
     win = np.array([(x, -0.2, -0.3), (x, 0.2, -0.3), (x, 0.2, 0.3), (x, -0.2, 0.3)])
     window = trimesh.Trimesh(win, [[0, 2, 1], [0, 3, 2]], process=False)
     scene.add(window, voxgi.Material(albedo=0.0, emission=10.0), name="window")
+    return scene
+
+
+def _blinds_room(tilt_degrees: float, slat_albedo: float = 0.89) -> voxgi.Scene:
+    """The window room behind 34 two-sided slats (albedo 0.89 unless given),
+    2 cm wide and 1.2 cm apart: several slats in every voxel at resolution 32
+    and 64."""
+    import trimesh
+
+    scene = _window_room()
     t = np.radians(tilt_degrees)
     half = np.array([np.cos(t), np.sin(t), 0.0]) * 0.01
     e = np.array([0.0, 0.0, 0.3])
@@ -284,6 +292,29 @@ def _blinds_room(tilt_degrees: float, slat_albedo: float = 0.89) -> voxgi.Scene:
         name="blinds",
         two_sided=True,
     )
+    return scene
+
+
+def _slab_blinds_room(thickness: float) -> voxgi.Scene:
+    """The window room behind 101 closed slabs `thickness` thick, 0.4 cm
+    wide, 0.4 cm apart and turned 45 degrees (albedo 0.89), as a bathroom's
+    blinds are modelled: four slabs, eight faces, to a voxel at resolution
+    64."""
+    import trimesh
+
+    scene = _window_room()
+    t = np.radians(45.0)
+    frame = np.eye(4)
+    frame[:3, 0] = [np.cos(t), np.sin(t), 0.0]
+    frame[:3, 1] = [-np.sin(t), np.cos(t), 0.0]
+    slabs = []
+    for i in range(101):
+        b = trimesh.creation.box(extents=[0.004, thickness, 0.6])
+        b.apply_transform(frame)
+        b.apply_translation([0.45, -0.2 + 0.004 * i, 0.0])
+        slabs.append(b)
+    blinds = trimesh.util.concatenate(slabs)
+    scene.add(blinds, voxgi.Material(albedo=0.89), name="blinds", two_sided=True)
     return scene
 
 
@@ -319,3 +350,13 @@ def test_the_light_passed_on_between_slats_finer_than_a_voxel_is_right(tilt):
     # the same room with slats of albedo 0.89, the light reaching the room
     # after bounces between them: it should be within 3% as well
     assert _room_over_mitsuba(_blinds_room(tilt)) == pytest.approx(1.0, abs=0.03)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("thickness", [1e-4, 1e-3])
+def test_the_light_passed_on_by_closed_slats_finer_than_a_voxel_is_right(thickness):
+    # Slats modelled as closed slabs: a traced ray that lands on a face reads
+    # the record of that face's piece. Read from the record whose point lies
+    # nearest instead, the room came out 3.5% dark at 0.1 mm and 7.5% at
+    # 1 mm; measured 1.015 and 1.016.
+    assert _room_over_mitsuba(_slab_blinds_room(thickness)) == pytest.approx(1.0, abs=0.03)

@@ -624,6 +624,77 @@ def test_sheets_a_tenth_of_a_voxel_apart_or_nearer_stay_one_record(gap, layers):
     assert int(front(vox).sum()) == len(cells) * (2 if layers else 1)
 
 
+# ------------------------------------------------------------- pieces
+
+
+def _clipped_area(tri, lo, hi):
+    """Area of triangle tri (3, 3) inside the box [lo, hi] (Sutherland-Hodgman)."""
+    poly = [np.asarray(v, float) for v in tri]
+    for axis in range(3):
+        for bound, sign in ((lo[axis], 1.0), (hi[axis], -1.0)):
+            out = []
+            for k, p in enumerate(poly):
+                q = poly[k - 1]
+                dp, dq = sign * (p[axis] - bound), sign * (q[axis] - bound)
+                if (dp >= 0) != (dq >= 0):
+                    out.append(q + (p - q) * dq / (dq - dp))
+                if dp >= 0:
+                    out.append(p)
+            poly = out
+            if not poly:
+                return 0.0
+    fan = (np.cross(poly[k] - poly[0], poly[k + 1] - poly[0]) for k in range(1, len(poly) - 1))
+    return 0.5 * float(np.linalg.norm(sum(fan, np.zeros(3))))
+
+
+def _two_sided_quad_with_a_reversed_triangle():
+    m = quad([[0.05, 0.1, 0.3], [0.95, 0.2, 0.35], [0.9, 0.9, 0.4], [0.1, 0.85, 0.3]])
+    m.faces[1] = m.faces[1][::-1]
+    return scene_of(m, two_sided=True)
+
+
+@pytest.mark.parametrize("case", ["floor and divider", "two-sided, one face reversed"])
+def test_each_piece_names_the_records_its_whole_area_went_to(case):
+    # A piece of a triangle in a voxel is listed with the record pair its
+    # whole area went to; one split by another surface's plane is not. So
+    # the listed pieces' clipped areas make up each record's area, all of it
+    # where none of the record's pieces was split, and the record on the
+    # triangle's winding side faces that way.
+    if case == "floor and divider":
+        scene, res = _floor_and_divider(0.01), 16
+    else:
+        scene, res = _two_sided_quad_with_a_reversed_triangle(), 8
+    vox = voxgi.voxelize(scene, res)
+    tris = np.asarray(scene.triangles()["triangles"], np.float64)
+    obj = np.asarray(scene.triangles()["object"])
+    t, (f, b) = vox.piece_triangle, vox.piece_record.T
+    assert len(t) > 0
+    assert np.all(vox.area[f] > 0)
+    np.testing.assert_array_equal(vox.ijk[f], vox.ijk[b])
+    np.testing.assert_array_equal(vox.side[f] + vox.side[b], np.ones(len(t)))
+    np.testing.assert_array_equal(vox.object_id[f], obj[t])
+    tn = np.cross(tris[t, 1] - tris[t, 0], tris[t, 2] - tris[t, 0])
+    assert np.all(np.einsum("ij,ij->i", vox.normal[f], tn) > 0)
+    lo = vox.origin + vox.ijk[f] * vox.pitch
+    area = np.array([_clipped_area(tris[k], a, a + vox.pitch) for k, a in zip(t, lo, strict=True)])
+    assert np.all(area > 0)
+    # by record pair: the side-0 record's index
+    listed = np.bincount(np.minimum(f, b), weights=area, minlength=len(vox))
+    live = np.flatnonzero((vox.area > 0) & (vox.side == 0))
+    whole = np.isclose(listed[live], vox.area[live], rtol=1e-5, atol=0)
+    assert np.all(listed[live] <= vox.area[live] * (1 + 1e-5))
+    if case == "floor and divider":
+        # the floor's pieces under the wall are split three ways: none listed
+        i_wall = int(np.floor((0.5 - vox.origin[0]) / vox.pitch))
+        split = (vox.object_id[live] == 0) & (vox.ijk[live, 0] == i_wall)
+        assert vox.stats["cut_records"] > 0
+        assert np.all(listed[live][split] == 0)
+        assert np.all(whole[~split & (vox.object_id[live] == 0)])
+    else:
+        assert vox.stats["cut_records"] == 0
+        assert np.all(whole)
+
+
 # ------------------------------------------------------ order, stats, memory
 
 

@@ -84,9 +84,11 @@ class Solution:
         }
         for f in fields(VoxelSet):
             v = getattr(self.vox, f.name)
+            if f.name in _NOT_SAVED:
+                continue
             if isinstance(v, np.ndarray):
                 arrays["vox_" + f.name] = v
-            elif f.name not in ("stats", "scene"):  # the scene stays with its files
+            else:
                 meta["vox_" + f.name] = v
         arrays["radiosity"] = self.radiosity
         if self.base_radiosity is not None:
@@ -221,6 +223,12 @@ class Solution:
         sol.stats["objects"] = meta.get("objects")
         return sol
 
+
+#: Fields of the records a solution file leaves out: the scene stays with its
+#: files, and the pieces serve the solve's traced passes alone, which a
+#: loaded solution does not run again (a solve of loaded records searches
+#: each landing instead).
+_NOT_SAVED = ("stats", "scene", "piece_triangle", "piece_record")
 
 #: The arrays of a solution file: shape ("n": the record count) and dtype.
 _FILE_ARRAYS = {

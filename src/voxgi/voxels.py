@@ -65,6 +65,16 @@ class VoxelSet:
     scene : Scene or None
         The scene voxelized (set by :func:`voxelize`; None for records loaded
         from a file). The solve traces its exact triangles for direct light.
+    piece_triangle : (M,) int32 or None
+        For each piece of a triangle in a voxel whose whole area went to one
+        record and its reverse side (not split by another surface's cutting
+        plane): the triangle, by its index in ``scene.triangles()``.
+    piece_record : (M, 2) int32 or None
+        Those pieces' records in that voxel: on the side the triangle's
+        winding faces, and on the other. A traced pass's ray that lands on
+        the triangle there reads them without searching the voxel
+        (``docs/design.md`` §6). None for records loaded from a file: a
+        solve of them searches every landing.
     """
 
     ijk: np.ndarray
@@ -82,6 +92,8 @@ class VoxelSet:
     stats: dict = field(default_factory=dict)
     side: np.ndarray | None = None
     scene: object = field(default=None, repr=False, compare=False)
+    piece_triangle: np.ndarray | None = field(default=None, repr=False)
+    piece_record: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return int(self.ijk.shape[0])
@@ -385,6 +397,8 @@ def _voxel_set(res: dict, pitch: float, origin, resolution: int, scene, stats: d
         stats=stats,
         side=res["side"],
         scene=scene,
+        piece_triangle=res["piece_triangle"],
+        piece_record=res["piece_record"],
     )
 
 
@@ -492,10 +506,12 @@ def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> Voxel
     pitch, origin, dims = _grid(tri["triangles"], resolution)
     sheet = np.array([o.material.is_sheet for o in scene.objects])
     textures = surface_tables(scene)
+    kept = None
     if sheet.any():
         keep = ~sheet[tri["object"]]
         if not keep.any():
             raise ValueError("voxelize: every object is a transmitting sheet; nothing to voxelize")
+        kept = np.flatnonzero(keep).astype(np.int32)
         tri = {**tri, "triangles": tri["triangles"][keep], "object": tri["object"][keep]}
         if textures is not None:  # (one UV triple per triangle voxelized)
             textures = {**textures, "corner_uv": textures["corner_uv"][keep]}
@@ -511,6 +527,8 @@ def _voxelize(scene, resolution, *, threads, progress, max_memory, cut) -> Voxel
         progress=progress,
         textures=textures,
     )
+    if kept is not None:  # the pieces' triangles by their index in the whole scene
+        res["piece_triangle"] = kept[res["piece_triangle"]]
     stats = _voxelize_stats(dict(res["stats"]), triangles, est, scene, cut=cut, seconds=0.0)
     sealed, inner = seal(res, scene, pitch)
     stats["buried_records"] = bury(res, scene, stats["closed_objects"], pitch, sealed)
