@@ -27,6 +27,7 @@ using I64 = py::array_t<int64_t, kInput>;
 using F32 = py::array_t<float, kInput>;
 using F64 = py::array_t<double, kInput>;
 using U8 = py::array_t<uint8_t, kInput>;
+using U32 = py::array_t<uint32_t, kInput>;
 
 // Arrays a kernel writes into in place are taken as they are, never copied
 // (a copy would keep the answer from the caller): C-contiguous (noconvert),

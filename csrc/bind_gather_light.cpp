@@ -59,34 +59,51 @@ voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_cell_start
     return grid;
 }
 
-void attach_pieces(voxgi::RecordGrid& grid, const std::optional<I64>& piece_first,
-                   const std::optional<I64>& piece_key, const std::optional<I32>& piece_record) {
-    const int given =
-        int(piece_first.has_value()) + int(piece_key.has_value()) + int(piece_record.has_value());
+void attach_pieces(voxgi::RecordGrid& grid, const PieceArgs& pc) {
+    const int given = int(pc.first.has_value()) + int(pc.key.has_value()) +
+                      int(pc.record.has_value()) + int(pc.side.has_value()) +
+                      int(pc.plane_first.has_value()) + int(pc.plane.has_value());
     if (given == 0) return;
-    if (given != 3) throw py::value_error("piece_first, piece_key and piece_record go together");
-    check_1d(*piece_first, -1, "piece_first");
-    check_1d(*piece_key, -1, "piece_key");
-    const py::ssize_t M = piece_key->shape(0), T = piece_first->shape(0) - 1;
-    check_2d(*piece_record, M, 2, "piece_record");
+    if (given != 6)
+        throw py::value_error(
+            "piece_first, piece_key, piece_record, piece_side, piece_plane_first and "
+            "piece_plane go together");
+    check_1d(*pc.first, -1, "piece_first");
+    check_1d(*pc.key, -1, "piece_key");
+    const py::ssize_t M = pc.key->shape(0), T = pc.first->shape(0) - 1;
+    check_2d(*pc.record, M, 2, "piece_record");
+    check_1d(*pc.side, M, "piece_side");
+    check_1d(*pc.plane_first, M + 1, "piece_plane_first");
+    check_2d(*pc.plane, -1, 4, "piece_plane");
     if (T < 0) throw py::value_error("piece_first must have at least one entry");
-    const int64_t* first = piece_first->data();
-    if (first[0] != 0 || first[T] != M) throw py::value_error("piece_first: bad bounds");
-    for (py::ssize_t t = 0; t < T; ++t)
-        if (first[t + 1] < first[t]) throw py::value_error("piece_first must be ascending");
+    auto ascending = [](const int64_t* a, py::ssize_t n, int64_t end, const char* name) {
+        if (a[0] != 0 || a[n] != end) throw py::value_error(std::string(name) + ": bad bounds");
+        for (py::ssize_t i = 0; i < n; ++i)
+            if (a[i + 1] < a[i]) throw py::value_error(std::string(name) + " must be ascending");
+    };
+    ascending(pc.first->data(), T, M, "piece_first");
+    const int64_t* pf = pc.plane_first->data();
+    ascending(pf, M, pc.plane->shape(0), "piece_plane_first");
     const int64_t cells = grid.dims[0] * grid.dims[1] * grid.dims[2];
-    const int64_t* key = piece_key->data();
-    const int32_t* rec = piece_record->data();
+    const int64_t* key = pc.key->data();
+    const int32_t* rec = pc.record->data();
     for (py::ssize_t e = 0; e < M; ++e) {
         if (key[e] < 0 || key[e] >= cells) throw py::value_error("piece_key: key outside the grid");
         for (int s = 0; s < 2; ++s)
             if (rec[2 * e + s] < 0 || rec[2 * e + s] >= grid.count)
                 throw py::value_error("piece_record: record index out of range");
+        if (pf[e + 1] - pf[e] > 32) throw py::value_error("piece_plane_first: over 32 planes");
     }
+    const double* pl = pc.plane->data();
+    for (py::ssize_t k = 0; k < 4 * pc.plane->shape(0); ++k)
+        if (!std::isfinite(pl[k])) throw py::value_error("piece_plane: not finite");
     grid.piece_tris = T;
-    grid.piece_first = first;
+    grid.piece_first = pc.first->data();
     grid.piece_key = key;
     grid.piece_record = rec;
+    grid.piece_side = pc.side->data();
+    grid.piece_plane_first = pf;
+    grid.piece_plane = pl;
 }
 
 }  // namespace voxgi::py_helpers
@@ -132,7 +149,9 @@ int64_t gather_light_py(
     const std::optional<F64>& emitter_pos, const std::optional<F32>& emitter_normal,
     const std::optional<F32>& emitter_radiance, const std::optional<F32>& emitter_density,
     double emitter_per_set, const std::optional<I64>& piece_first,
-    const std::optional<I64>& piece_key, const std::optional<I32>& piece_record) {
+    const std::optional<I64>& piece_key, const std::optional<I32>& piece_record,
+    const std::optional<U32>& piece_side, const std::optional<I64>& piece_plane_first,
+    const std::optional<F64>& piece_plane) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     if (mat_response) {
@@ -195,7 +214,8 @@ int64_t gather_light_py(
     if (tex) tris.textures = &tex->surface;
     voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
                                        grid_lo, grid_origin, pitch);
-    attach_pieces(grid, piece_first, piece_key, piece_record);
+    attach_pieces(
+        grid, {piece_first, piece_key, piece_record, piece_side, piece_plane_first, piece_plane});
     if (rec_share) {
         check_2d(*rec_share, grid.count, 3, "rec_share");
         grid.share = rec_share->data();
@@ -232,30 +252,32 @@ int64_t gather_light_py(
 }  // namespace
 
 void bind_gather_light(py::module_& m) {
-    m.def(
-        "gather_light", &gather_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
-        "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
-        "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
-        "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "seed"_a, "frame"_a,
-        "eps"_a, "tri_v"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),
-        "rec_sorted_key"_a.noconvert(), "rec_cell_start"_a.noconvert(), "rec_packed"_a.noconvert(),
-        "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a,
-        "scene"_a, "out"_a.noconvert(), "threads"_a = 0, "env_radiance"_a.noconvert() = py::none(),
-        "env_to_world"_a.noconvert() = py::none(), "env_texel_pdf"_a.noconvert() = py::none(),
-        "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
-        "hit_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
-        "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
-        "corner_uv"_a.noconvert() = py::none(), "mat_lobe"_a.noconvert() = py::none(),
-        "transport_record"_a.noconvert() = py::none(),
-        "transport_weight"_a.noconvert() = py::none(), "mat_response"_a.noconvert() = py::none(),
-        "mat_continue"_a.noconvert() = py::none(), "rec_share"_a.noconvert() = py::none(),
-        "env_guide"_a = py::none(), "mat_base_out"_a.noconvert() = py::none(),
-        "obj_emits"_a.noconvert() = py::none(), "reach"_a = 0.0,
-        "emitter_pos"_a.noconvert() = py::none(), "emitter_normal"_a.noconvert() = py::none(),
-        "emitter_radiance"_a.noconvert() = py::none(), "emitter_density"_a.noconvert() = py::none(),
-        "emitter_per_set"_a = 1.0, "piece_first"_a.noconvert() = py::none(),
-        "piece_key"_a.noconvert() = py::none(), "piece_record"_a.noconvert() = py::none(),
-        R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
+    m.def("gather_light", &gather_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
+          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "seed"_a, "frame"_a,
+          "eps"_a, "tri_v"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),
+          "rec_sorted_key"_a.noconvert(), "rec_cell_start"_a.noconvert(),
+          "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
+          "grid_origin"_a.noconvert(), "pitch"_a, "scene"_a, "out"_a.noconvert(), "threads"_a = 0,
+          "env_radiance"_a.noconvert() = py::none(), "env_to_world"_a.noconvert() = py::none(),
+          "env_texel_pdf"_a.noconvert() = py::none(),
+          "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
+          "hit_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
+          "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
+          "corner_uv"_a.noconvert() = py::none(), "mat_lobe"_a.noconvert() = py::none(),
+          "transport_record"_a.noconvert() = py::none(),
+          "transport_weight"_a.noconvert() = py::none(), "mat_response"_a.noconvert() = py::none(),
+          "mat_continue"_a.noconvert() = py::none(), "rec_share"_a.noconvert() = py::none(),
+          "env_guide"_a = py::none(), "mat_base_out"_a.noconvert() = py::none(),
+          "obj_emits"_a.noconvert() = py::none(), "reach"_a = 0.0,
+          "emitter_pos"_a.noconvert() = py::none(), "emitter_normal"_a.noconvert() = py::none(),
+          "emitter_radiance"_a.noconvert() = py::none(),
+          "emitter_density"_a.noconvert() = py::none(), "emitter_per_set"_a = 1.0,
+          "piece_first"_a.noconvert() = py::none(), "piece_key"_a.noconvert() = py::none(),
+          "piece_record"_a.noconvert() = py::none(), "piece_side"_a.noconvert() = py::none(),
+          "piece_plane_first"_a.noconvert() = py::none(), "piece_plane"_a.noconvert() = py::none(),
+          R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit
 point (rec_*, grid_*, pitch: voxgi.traced.record_grid), MIS-weighted against
@@ -290,9 +312,11 @@ emitter_radiance (K, 3) B / pi and emitter_density (K,) their records' area
 density p(y), float32; emitter_per_set the emitter VPLs a pixel sees, by
 which a record's packed pa is divided for p(y)), one of them drawn
 uniformly with a shadow ray, the two MIS-combined (balance heuristic).
-With piece_first (T + 1,) int64, piece_key (M,) int64 and piece_record
-(M, 2) int32 (voxgi.traced.record_grid), a ray that lands on a triangle
-below T in a voxel where that triangle's piece is listed reads the piece's
-record on the side it meets without searching the voxel.
+With the piece table (piece_first (T + 1,) int64, piece_key (M,) int64,
+piece_record (M, 2) int32, piece_side (M,) uint32, piece_plane_first
+(M + 1,) int64, piece_plane (P, 4) float64; voxgi.traced's), a ray that
+lands on a triangle below T in a voxel where that triangle's piece is
+listed reads, without searching the voxel, the record on the side it meets
+of the piece's part that holds the landing point.
 Returns the number of gather rays.)doc");
 }

@@ -177,9 +177,16 @@ voxgi::RecordGrid make_grid(const I64& rec_sorted_key, const I32& rec_cell_start
                             const F32& rec_packed, const I64& grid_dims, const I64& grid_lo,
                             const F64& grid_origin, double pitch);
 
-// Adds the records of each triangle's pieces (voxgi.traced.record_grid's
-// piece_*) to grid, checked against it; all three or none.
-void attach_pieces(voxgi::RecordGrid& grid, const std::optional<I64>& piece_first,
-                   const std::optional<I64>& piece_key, const std::optional<I32>& piece_record);
+// The records of each triangle's pieces (voxgi.traced's piece table).
+struct PieceArgs {
+    std::optional<I64> first, key;
+    std::optional<I32> record;
+    std::optional<U32> side;
+    std::optional<I64> plane_first;
+    std::optional<F64> plane;
+};
+
+// Adds the pieces to grid, checked against it; all or none.
+void attach_pieces(voxgi::RecordGrid& grid, const PieceArgs& pieces);
 
 }  // namespace voxgi::py_helpers

@@ -229,10 +229,13 @@ I64 record_lookup(I64 rec_sorted_key, I32 rec_cell_start, F32 rec_packed, I64 gr
                   I64 grid_lo, F64 grid_origin, double pitch, F64 y, F32 n, I32 obj, bool reference,
                   const std::optional<I32>& tri, const std::optional<U8>& front,
                   const std::optional<I64>& piece_first, const std::optional<I64>& piece_key,
-                  const std::optional<I32>& piece_record) {
+                  const std::optional<I32>& piece_record, const std::optional<U32>& piece_side,
+                  const std::optional<I64>& piece_plane_first,
+                  const std::optional<F64>& piece_plane) {
     voxgi::RecordGrid g = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims, grid_lo,
                                     grid_origin, pitch);
-    attach_pieces(g, piece_first, piece_key, piece_record);
+    attach_pieces(
+        g, {piece_first, piece_key, piece_record, piece_side, piece_plane_first, piece_plane});
     check_2d(y, -1, 3, "y");
     const py::ssize_t H = y.shape(0);
     check_2d(n, H, 3, "n");
@@ -294,7 +297,8 @@ holds power. Returns (hd, unfound, rays, steps) as LineSystem.shoot.)doc");
           "n"_a.noconvert(), "obj"_a.noconvert(), "reference"_a = false,
           "tri"_a.noconvert() = py::none(), "front"_a.noconvert() = py::none(),
           "piece_first"_a.noconvert() = py::none(), "piece_key"_a.noconvert() = py::none(),
-          "piece_record"_a.noconvert() = py::none(),
+          "piece_record"_a.noconvert() = py::none(), "piece_side"_a.noconvert() = py::none(),
+          "piece_plane_first"_a.noconvert() = py::none(), "piece_plane"_a.noconvert() = py::none(),
           R"doc(The record each hit reads, as the gather kernels look it up.
 
 y (H, 3) float64 hit points in the tracer's frame, n (H, 3) float32 unit

@@ -1,4 +1,5 @@
 // pybind11 bindings for the voxelize kernels (the only pybind11 code for them).
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <memory>
@@ -85,9 +86,10 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
     }
     // the final state, so that a caller always hears of the end, however short the work
     if (!progress.is_none()) progress(prog.phase.load(), prog.total.load(), prog.total.load());
-    py::ssize_t N = 0, M = 0;
+    py::ssize_t N = 0, M = 0, NP = 0;
     for (const auto& c : chunks)
-        N += py::ssize_t(c.records.size()), M += py::ssize_t(c.pieces.size());
+        N += py::ssize_t(c.records.size()), M += py::ssize_t(c.pieces.size()),
+            NP += py::ssize_t(c.planes.size() / 4);
     I32 ijk({N, py::ssize_t(3)});
     F32 normal({N, py::ssize_t(3)});
     F32 area(N);
@@ -99,8 +101,15 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
     py::array_t<int8_t, py::array::c_style> side(N);
     I32 piece_tri(M);
     I32 piece_rec({M, py::ssize_t(2)});
+    py::array_t<uint32_t, py::array::c_style> piece_side(M);
+    I64 piece_plane_first(M + 1);
+    F64 piece_plane({NP, py::ssize_t(4)});
     {
         int32_t *pt = piece_tri.mutable_data(), *pr = piece_rec.mutable_data();
+        uint32_t* psd = piece_side.mutable_data();
+        int64_t* ppf = piece_plane_first.mutable_data();
+        double* ppl = piece_plane.mutable_data();
+        int64_t plane = 0;
         int32_t *pi = ijk.mutable_data(), *po = object.mutable_data();
         float *pn = normal.mutable_data(), *pa = area.mutable_data(), *pal = alb.mutable_data(),
               *pe = emi.mutable_data();
@@ -112,13 +121,20 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
         for (auto& c : chunks) {
             // the pieces' records, from the chunk's indices to the output's
             const int32_t first = int32_t(r);
+            const double* cp = c.planes.data();
             for (const auto& pc : c.pieces) {
                 pt[m] = pc.tri;
                 pr[2 * m] = first + pc.front;
                 pr[2 * m + 1] = first + pc.back;
+                psd[m] = pc.side;
+                ppf[m] = plane;
+                std::copy(cp, cp + 4 * pc.n_planes, ppl + 4 * plane);
+                cp += 4 * pc.n_planes;
+                plane += pc.n_planes;
                 ++m;
             }
             std::vector<voxgi::SurfacePiece>().swap(c.pieces);
+            std::vector<double>().swap(c.planes);
             for (const auto& rec : c.records) {
                 for (int d = 0; d < 3; ++d) {
                     pi[3 * r + d] = rec.ijk[d];
@@ -135,9 +151,10 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
             }
             std::vector<voxgi::VoxelRecord>().swap(c.records);  // free as we go: peak ~ one copy
         }
+        ppf[M] = plane;
     }
     const int64_t out_bytes =
-        int64_t(N) * (12 + 12 + 4 + 12 + 12 + 24 + 4 + 1 + 1) + int64_t(M) * 12;
+        int64_t(N) * (12 + 12 + 4 + 12 + 12 + 24 + 4 + 1 + 1) + int64_t(M) * 24 + int64_t(NP) * 32;
     py::dict stats(
         "triangles"_a = st.triangles, "skipped_degenerate"_a = st.skipped_degenerate,
         "pairs"_a = st.pairs, "cells"_a = st.cells, "records"_a = st.records,
@@ -153,7 +170,9 @@ py::dict voxelize_py(const F64& triangles, const I32& tri_object, const B8& two_
     return py::dict("ijk"_a = ijk, "normal"_a = normal, "area"_a = area, "albedo"_a = alb,
                     "emission"_a = emi, "centroid"_a = centroid, "object_id"_a = object,
                     "back"_a = back, "side"_a = side, "piece_triangle"_a = piece_tri,
-                    "piece_record"_a = piece_rec, "stats"_a = stats);
+                    "piece_record"_a = piece_rec, "piece_side"_a = piece_side,
+                    "piece_plane_first"_a = piece_plane_first, "piece_plane"_a = piece_plane,
+                    "stats"_a = stats);
 }
 
 }  // namespace
@@ -206,7 +225,13 @@ dict
     ``albedo``/``emission`` (N, 3) float32, ``centroid`` (N, 3) float64,
     ``object_id`` (N,) int32, ``back`` (N,) bool, ``side`` (N,) int8,
     ``piece_triangle`` (M,) int32 and ``piece_record`` (M, 2) int32: for each
-    (triangle, voxel) piece with area whose whole area went to one record
-    pair, the triangle and the records on its winding side and on the other
-    (the voxel is theirs), and ``stats`` (dict of counts and seconds).)doc");
+    (triangle, voxel) piece with area, the triangle and the records on its
+    winding side and on the other (the voxel is theirs), once per record
+    pair its parts went to; ``piece_plane_first`` (M + 1,) int64 and
+    ``piece_plane`` (P, 4) float64: each entry's planes [first[m],
+    first[m + 1]), n and off in voxel units (x = (world - origin) / pitch),
+    those that split a piece (none for a piece whole in one pair), and
+    ``piece_side`` (M,) uint32, bit k set where the entry's part lies on
+    its k-th plane's positive side (n·x >= off); ``stats`` (dict of counts
+    and seconds).)doc");
 }

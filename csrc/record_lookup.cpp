@@ -219,12 +219,21 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
     // the search below can only approach it.
     if (g.piece_first && tri >= 0 && tri < g.piece_tris) {
         const int64_t key = grid_key(g, c[0], c[1], c[2]);
-        for (int64_t e = g.piece_first[tri]; e < g.piece_first[tri + 1]; ++e)
-            if (g.piece_key[e] == key) {
-                const int64_t r = g.piece_record[2 * e + (front ? 0 : 1)];
-                if (dot3(g.rec[r].normal, n) > 0.f) return r;
-                break;
+        for (int64_t e = g.piece_first[tri]; e < g.piece_first[tri + 1]; ++e) {
+            if (g.piece_key[e] != key) continue;
+            // a split piece: the part on y's side of each plane that split it
+            bool part = true;
+            for (int64_t k = g.piece_plane_first[e]; part && k < g.piece_plane_first[e + 1]; ++k) {
+                const double* pl = g.piece_plane + 4 * k;
+                double s = -pl[3];
+                for (int a = 0; a < 3; ++a) s += pl[a] * (y[a] - g.origin[a]) / g.pitch;
+                part = (s >= 0.0) == bool((g.piece_side[e] >> (k - g.piece_plane_first[e])) & 1u);
             }
+            if (!part) continue;
+            const int64_t r = g.piece_record[2 * e + (front ? 0 : 1)];
+            if (dot3(g.rec[r].normal, n) > 0.f) return r;
+            break;
+        }
     }
     const double p2 = g.pitch * g.pitch;
     int64_t best = -1, h0, h1;

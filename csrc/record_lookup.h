@@ -39,13 +39,19 @@ struct RecordGrid {
     // light that its diffuse base reflects (docs/design.md §14)
     const float* share = nullptr;
     // Or null: the records of each triangle's pieces (VoxelSet.piece_record).
-    // Triangle t < piece_tris has pieces [piece_first[t], piece_first[t + 1]),
+    // Triangle t < piece_tris has entries [piece_first[t], piece_first[t + 1]),
     // each in voxel piece_key[e] with its records at piece_record[2e] (the
-    // side t's winding faces) and piece_record[2e + 1], in sorted_key's order.
+    // side t's winding faces) and piece_record[2e + 1], in sorted_key's order,
+    // for the points of the piece on the sides piece_side[e] of its planes
+    // [piece_plane_first[e], piece_plane_first[e + 1]) (n, off: 4 doubles each,
+    // in voxel units from origin; bit k of piece_side: n·x >= off for the k-th).
     int64_t piece_tris = 0;
     const int64_t* piece_first = nullptr;
     const int64_t* piece_key = nullptr;
     const int32_t* piece_record = nullptr;
+    const uint32_t* piece_side = nullptr;
+    const int64_t* piece_plane_first = nullptr;
+    const double* piece_plane = nullptr;
 };
 
 // The voxel of the grid that holds y.
@@ -89,7 +95,8 @@ struct LookupScratch {
 // point y, in voxel c, on object `obj` seen from the side of unit normal n,
 // or -1. Where y lies on triangle `tri` (-1: unknown), on the side its
 // winding faces when `front`, and the grid lists that triangle's piece in
-// c, the piece's record on that side. Otherwise a search: only records
+// c, the record on that side of the piece's part that holds y. Otherwise a
+// search: only records
 // whose normal faces n's side qualify, and of those the ones no other
 // surface of y's voxel (or of their own) separates from y; among them the
 // nearest centroid, strongly preferring the same object and orientation.

@@ -35,20 +35,27 @@ struct VoxelRecord {
 };
 
 // Where a triangle's surface in one voxel went: the records on its two
-// sides, where the whole of its piece there (with area) went to one record
-// pair, not split by another surface's cutting plane. A ray that lands on
-// the triangle in that voxel reads these records without a search
-// (record_lookup.h).
+// sides. A piece whose whole area (with area) went to one record pair is
+// one entry without planes; a piece that other surfaces' cutting planes
+// split is one entry per record pair its parts went to, each with the
+// planes that split the piece and its part's side of each. A ray that
+// lands on the triangle in that voxel reads these records without a
+// search (record_lookup.h).
 struct SurfacePiece {
-    int32_t tri;    // the triangle, as given to voxelize
-    int32_t front;  // the record on the side its winding faces (index into its chunk's records)
-    int32_t back;   // the record on the other side
+    int32_t tri;       // the triangle, as given to voxelize
+    int32_t front;     // the record on the side its winding faces (index into its chunk's records)
+    int32_t back;      // the record on the other side
+    uint32_t side;     // bit k: the part lies on the positive side of plane k (n·x >= off)
+    int32_t n_planes;  // its planes: the next n_planes of the chunk's `planes`
 };
 
-// One chunk of the output: records, and the surface pieces that point into them.
+// One chunk of the output: records, and the surface pieces that point into
+// them with their planes (n[3], off in voxel units, 4 doubles each, in the
+// pieces' order).
 struct VoxelChunk {
     std::vector<VoxelRecord> records;
     std::vector<SurfacePiece> pieces;
+    std::vector<double> planes;
 };
 
 struct VoxelizeParams {

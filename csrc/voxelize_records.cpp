@@ -57,8 +57,14 @@ struct Scratch {
     std::vector<int> order, cl_start, cl_items, next;
     std::vector<PartRef> parts, parts2;
     std::vector<int> layer_of;  // per piece (layer_pieces)
-    std::vector<int64_t>
-        record_of;  // per piece: its record pair (chunk index), -1 none, -2 several
+    // of one cluster: each part with area, with its record pair (chunk index)
+    struct PartRecord {
+        int piece;
+        uint64_t sig;
+        int64_t rec;
+    };
+    std::vector<PartRecord> part_records;
+    std::vector<int> cut_plane;  // of one cluster: the plane (index into planes) of each cut bit
     std::vector<std::pair<double, double>> layer_span;   // scratch: per piece, its range
     std::vector<std::pair<double, double>> layer_range;  // scratch: per layer, its range
     std::deque<Poly> pool;                               // polygons of cut parts (stable addresses)
@@ -495,6 +501,7 @@ int cut_cluster(const Context& ctx, size_t ci, size_t ncl, const Plane* planes, 
     auto& parts2 = S.parts2;
     auto& pool = S.pool;
     int n_cuts = 0;
+    S.cut_plane.clear();
     {
         for (size_t sj = 0; sj < ncl && sj < 64; ++sj) {
             if (sj == ci || !planes[sj].ok) continue;
@@ -532,6 +539,7 @@ int cut_cluster(const Context& ctx, size_t ci, size_t ncl, const Plane* planes, 
                 continue;
             }
             const uint64_t bit = uint64_t(1) << n_cuts++;
+            S.cut_plane.push_back(int(sj));
             parts2.clear();
             for (const PartRef& pt : parts) {
                 double mn = 0, mx = 0;
@@ -625,6 +633,41 @@ int layer_pieces(size_t ci, Scratch& S) {
     return std::max<int>(1, int(layers.size()));
 }
 
+// The surface pieces of one cluster, from its parts with area and their
+// record pairs (S.part_records): a piece whose parts all went to one pair
+// once, without planes; a piece the cutting planes split once per pair,
+// with the planes whose sides its parts differ on (S.cut_plane) and the
+// part's side of each. The record on the triangle's winding side is the
+// pair's front (side 0) unless the piece was turned to its cluster (a
+// two-sided object's reversed face).
+void list_pieces(Scratch& S, const Plane* planes, VoxelChunk& out) {
+    auto& pr = S.part_records;
+    std::sort(pr.begin(), pr.end(), [](const auto& x, const auto& y) {
+        return x.piece < y.piece || (x.piece == y.piece && x.sig < y.sig);
+    });
+    for (size_t b = 0, e; b < pr.size(); b = e) {
+        uint64_t differ = 0;
+        for (e = b + 1; e < pr.size() && pr[e].piece == pr[b].piece; ++e)
+            differ |= pr[e].sig ^ pr[b].sig;
+        const Piece& pc = S.pieces[size_t(pr[b].piece)];
+        const bool turned = dot3(pc.n, pc.tn) < 0.0;
+        for (size_t k = b; k < e; ++k) {
+            if (k > b && pr[k].sig == pr[k - 1].sig) continue;  // the same part's record
+            const int64_t r = pr[k].rec;
+            SurfacePiece sp{int32_t(pc.tri), int32_t(turned ? r + 1 : r),
+                            int32_t(turned ? r : r + 1), 0u, 0};
+            for (int bit = 0; bit < 64; ++bit) {
+                if (!((differ >> bit) & 1)) continue;
+                const Plane& pl = planes[S.cut_plane[size_t(bit)]];
+                out.planes.insert(out.planes.end(), {pl.n[0], pl.n[1], pl.n[2], pl.off});
+                if ((pr[k].sig >> bit) & 1) sp.side |= 1u << sp.n_planes;
+                ++sp.n_planes;
+            }
+            out.pieces.push_back(sp);
+        }
+    }
+}
+
 void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t np, Scratch& S,
                   VoxelChunk& out, ChunkStats& cs) {
     const VoxelizeParams& P = *ctx.P;
@@ -643,7 +686,6 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
     auto& parts = S.parts;
     S.pool.clear();
     S.layer_of.assign(size_t(n_pieces), 0);
-    S.record_of.assign(size_t(n_pieces), -1);
     for (size_t ci = 0; ci < ncl; ++ci) {
         const Cluster& cl = clusters[ci];
         const int n_layers = S.cl_start[ci + 1] - S.cl_start[ci] > 1 ? layer_pieces(ci, S) : 1;
@@ -663,6 +705,7 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
                 return x.layer < y.layer || (x.layer == y.layer && x.sig < y.sig);
             });
         // one record per layer and side of the cutting planes
+        S.part_records.clear();
         size_t b = 0, n_rec = 0;
         while (b < parts.size()) {
             size_t e = b + 1;
@@ -670,10 +713,9 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
                    parts[e].layer == parts[b].layer)
                 ++e;
             const int64_t rec = int64_t(out.records.size());
-            for (size_t q = b; q < e; ++q) {
-                int64_t& r = S.record_of[size_t(parts[q].piece)];
-                if (parts[q].area > 0) r = r == -1 || r == rec ? rec : -2;
-            }
+            for (size_t q = b; q < e; ++q)
+                if (parts[q].area > 0)
+                    S.part_records.push_back({parts[q].piece, parts[q].sig, rec});
             emit_records(ctx, cell, cl, pieces, parts, b, e, out.records, cs);
             ++n_rec;
             b = e;
@@ -683,17 +725,7 @@ void process_cell(const Context& ctx, uint64_t key, const Pair* pairs, int64_t n
             ++cs.cut_clusters;
             cs.cut_records += int64_t(n_rec) - n_layers;
         }
-    }
-    // Each piece whose whole area went to one record pair: the record on
-    // its triangle's winding side is the pair's front (side 0) unless the
-    // piece was turned to its cluster (a two-sided object's reversed face).
-    for (int i = 0; i < n_pieces; ++i) {
-        const int64_t r = S.record_of[size_t(i)];
-        if (r < 0) continue;
-        const bool turned = dot3(pieces[size_t(i)].n, pieces[size_t(i)].tn) < 0.0;
-        out.pieces.push_back(SurfacePiece{int32_t(pieces[size_t(i)].tri),
-                                          int32_t(turned ? r + 1 : r),
-                                          int32_t(turned ? r : r + 1)});
+        list_pieces(S, planes, out);
     }
 }
 
@@ -743,7 +775,8 @@ std::vector<VoxelChunk> cell_records(const double* tris, const int32_t* tri_obje
         st.polygon_overflows += cs.overflows;
         st.layer_records += cs.layer_records;
         rec_bytes += out[ch].records.capacity() * sizeof(VoxelRecord) +
-                     out[ch].pieces.capacity() * sizeof(SurfacePiece);
+                     out[ch].pieces.capacity() * sizeof(SurfacePiece) +
+                     out[ch].planes.capacity() * sizeof(double);
     }
     st.peak_bytes = std::max<int64_t>(
         st.peak_bytes,

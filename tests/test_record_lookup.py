@@ -160,3 +160,39 @@ def test_a_ray_reads_the_record_its_landing_piece_went_to():
     # without the triangle the lookup searches, as before
     searched = testing.record_lookup(*args)
     np.testing.assert_array_equal(testing.record_lookup(*args, **pieces), searched)
+
+
+def test_a_ray_on_a_split_piece_reads_the_part_on_its_side_of_the_cut():
+    # A floor under a wall 1 cm thick, off the voxel faces: in the wall's
+    # column of voxels each floor piece is cut by both wall faces into three
+    # records (left room, under the wall, right room). A point of the floor
+    # in either room reads that room's record.
+    import trimesh
+
+    floor = trimesh.Trimesh(
+        np.array([[0, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]], float), [[0, 1, 2], [0, 2, 3]]
+    )
+    wall = trimesh.creation.box(extents=[0.01, 0.5, 1.0])
+    wall.apply_translation([0.5, 0.25, 0.5])
+    scene = voxgi.Scene()
+    scene.add(floor, voxgi.Material(albedo=0.5), name="floor")
+    scene.add(wall, voxgi.Material(albedo=0.5), name="wall")
+    vox = voxgi.voxelize(scene, resolution=16, progress=False)
+    assert np.count_nonzero(np.diff(vox.piece_plane_first)) > 0
+    rng = np.random.default_rng(2)
+    x = np.where(rng.uniform(size=4000) < 0.5, 0.5 - 0.005, 0.5 + 0.005)
+    x += np.sign(x - 0.5) * rng.uniform(1e-6, 0.02, size=4000)  # either room, near the wall
+    z = rng.uniform(0.01, 0.99, size=4000)
+    y = np.stack([x, np.zeros_like(x), z], axis=1)
+    tri = np.where(x > z, 1, 0).astype(np.int32)  # (0, 1, 2) holds x <= z, (0, 2, 3) x >= z
+    centre = np.zeros(3)
+    grid = record_grid(vox, centre, np.zeros((len(vox), 3), np.float32))
+    pieces = traced._piece_table(vox, *traced._voxel_order(vox)[2:])
+    n = np.tile(np.array([0.0, 1.0, 0.0], np.float32), (len(y), 1))
+    args = (grid["rec_sorted_key"], grid["rec_cell_start"], grid["rec_packed"],
+            grid["grid_dims"], grid["grid_lo"], grid["grid_origin"], grid["pitch"],
+            np.ascontiguousarray(y), n, np.zeros(len(y), np.int32))  # fmt: skip
+    got = testing.record_lookup(*args, tri=tri, front=np.ones(len(y), np.uint8), **pieces)
+    cx = grid["rec_packed"][got, 0]
+    np.testing.assert_array_equal(np.sign(cx - 0.5), np.sign(x - 0.5))
+    assert np.all(np.abs(cx - 0.5) > 0.005)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .io import atomic_path, check_solution_records, read_npz
-from .voxels import VoxelSet
+from .voxels import PIECE_FIELDS, VoxelSet
 
 __all__ = ["Solution"]
 
@@ -228,7 +228,7 @@ class Solution:
 #: files, and the pieces serve the solve's traced passes alone, which a
 #: loaded solution does not run again (a solve of loaded records searches
 #: each landing instead).
-_NOT_SAVED = ("stats", "scene", "piece_triangle", "piece_record")
+_NOT_SAVED = ("stats", "scene", *PIECE_FIELDS)
 
 #: The arrays of a solution file: shape ("n": the record count) and dtype.
 _FILE_ARRAYS = {

@@ -141,11 +141,13 @@ def _record_grid(vox, centre, radiance, pa, voxel_order, dense_cells=DENSE_TABLE
 
 
 def _piece_table(vox: VoxelSet, key: np.ndarray, order: np.ndarray) -> dict:
-    """The records of each triangle's pieces (:attr:`VoxelSet.piece_record`)
-    by triangle, as the lookup reads them: ``piece_first`` (T + 1,) int64,
-    triangle t's pieces at ``[piece_first[t], piece_first[t + 1])``;
-    ``piece_key`` (M,) int64, each piece's voxel key; ``piece_record`` (M, 2)
-    int32, its records' positions in the grid's order. Empty without pieces."""
+    """The records of each triangle's pieces (:attr:`VoxelSet.piece_record`
+    and their planes) by triangle, as the lookup reads them:
+    ``piece_first`` (T + 1,) int64, triangle t's entries at
+    ``[piece_first[t], piece_first[t + 1])``; ``piece_key`` (M,) int64, each
+    entry's voxel key; ``piece_record`` (M, 2) int32, its records' positions
+    in the grid's order; ``piece_side``, ``piece_plane_first`` and
+    ``piece_plane`` in the same order. Empty without pieces."""
     if vox.piece_triangle is None or len(vox.piece_triangle) == 0:
         return {}
     tri = np.asarray(vox.piece_triangle, np.int64)
@@ -155,10 +157,18 @@ def _piece_table(vox: VoxelSet, key: np.ndarray, order: np.ndarray) -> dict:
     by_tri = np.argsort(tri, kind="stable")
     first = np.zeros(int(tri.max()) + 2, np.int64)
     np.cumsum(np.bincount(tri, minlength=len(first) - 1), out=first[1:])
+    plane_first = np.asarray(vox.piece_plane_first, np.int64)
+    count = np.diff(plane_first)[by_tri]
+    new_first = np.zeros(len(tri) + 1, np.int64)
+    np.cumsum(count, out=new_first[1:])
+    rows = np.repeat(plane_first[:-1][by_tri] - new_first[:-1], count) + np.arange(new_first[-1])
     return {
         "piece_first": first,
         "piece_key": np.ascontiguousarray(key[rec[by_tri, 0]]),
         "piece_record": np.ascontiguousarray(position[rec[by_tri]], dtype=np.int32),
+        "piece_side": np.ascontiguousarray(np.asarray(vox.piece_side, np.uint32)[by_tri]),
+        "piece_plane_first": new_first,
+        "piece_plane": np.ascontiguousarray(np.asarray(vox.piece_plane, np.float64)[rows]),
     }
 
 

@@ -66,15 +66,25 @@ class VoxelSet:
         The scene voxelized (set by :func:`voxelize`; None for records loaded
         from a file). The solve traces its exact triangles for direct light.
     piece_triangle : (M,) int32 or None
-        For each piece of a triangle in a voxel whose whole area went to one
-        record and its reverse side (not split by another surface's cutting
-        plane): the triangle, by its index in ``scene.triangles()``.
+        For each piece of a triangle in a voxel (with area), once per
+        record pair its area went to: the triangle, by its index in
+        ``scene.triangles()``.
     piece_record : (M, 2) int32 or None
-        Those pieces' records in that voxel: on the side the triangle's
+        That part's records in that voxel: on the side the triangle's
         winding faces, and on the other. A traced pass's ray that lands on
         the triangle there reads them without searching the voxel
-        (``docs/design.md`` §6). None for records loaded from a file: a
+        (``docs/design.md`` §5). None for records loaded from a file: a
         solve of them searches every landing.
+    piece_plane_first : (M + 1,) int64 or None
+    piece_plane : (P, 4) float64 or None
+        Entry m's planes, rows ``[piece_plane_first[m],
+        piece_plane_first[m + 1])`` of ``piece_plane``: ``(n, off)`` with
+        ``n·x = off`` in voxel units (``x = (world - origin) / pitch``),
+        the cutting planes that split its piece (none for a piece whole in
+        one record pair).
+    piece_side : (M,) uint32 or None
+        Bit k set where entry m's part lies on the positive side
+        (``n·x >= off``) of its k-th plane.
     """
 
     ijk: np.ndarray
@@ -94,6 +104,9 @@ class VoxelSet:
     scene: object = field(default=None, repr=False, compare=False)
     piece_triangle: np.ndarray | None = field(default=None, repr=False)
     piece_record: np.ndarray | None = field(default=None, repr=False)
+    piece_plane_first: np.ndarray | None = field(default=None, repr=False)
+    piece_plane: np.ndarray | None = field(default=None, repr=False)
+    piece_side: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return int(self.ijk.shape[0])
@@ -397,9 +410,13 @@ def _voxel_set(res: dict, pitch: float, origin, resolution: int, scene, stats: d
         stats=stats,
         side=res["side"],
         scene=scene,
-        piece_triangle=res["piece_triangle"],
-        piece_record=res["piece_record"],
+        **{k: res[k] for k in PIECE_FIELDS},
     )
+
+
+#: The fields of a :class:`VoxelSet` that list where each triangle's pieces
+#: went (all None, or all set).
+PIECE_FIELDS = ("piece_triangle", "piece_record", "piece_plane_first", "piece_plane", "piece_side")
 
 
 #: Voxels along the scene's longest side when :func:`voxelize` is not told:
