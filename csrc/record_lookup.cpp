@@ -215,8 +215,8 @@ inline bool before(const Candidate& a, const Candidate& b) {
 
 int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3], int32_t obj,
                        const int64_t c[3], int32_t tri, bool front, LookupScratch& S) {
-    // The record y's own piece went to: the voxelization's answer, where
-    // the search below can only approach it.
+    // The record the voxelization put y's part of its triangle in: the
+    // answer the search below can only approach by the records' points.
     if (g.piece_first && tri >= 0 && tri < g.piece_tris) {
         const int64_t key = grid_key(g, c[0], c[1], c[2]);
         for (int64_t e = g.piece_first[tri]; e < g.piece_first[tri + 1]; ++e) {
