@@ -263,9 +263,9 @@ class TracedGather:
         self._grid = _record_grid(
             source, c, np.zeros((len(source), 3), np.float32), None, voxel_order
         )
-        # A ray reads the record its landing point's piece went to, where the
-        # voxelization says which (docs/design.md §6): the search gives the
-        # solve no better answer at several times the cost.
+        # A ray reads the record the voxelization put its landing point's
+        # part of the triangle in (docs/design.md §5), not the display's
+        # search: the voxelization's own answer, at a fraction of the cost.
         self._grid.update(_piece_table(source, voxel_order[2], voxel_order[3]))
         self.rays = 0
         #: The rays of the pass called with ``keep=True``, as a sparse matrix
