@@ -20,9 +20,11 @@ __all__ = ["DEFAULT_RESOLUTION", "VoxelSet", "estimate_memory", "voxelize"]
 class VoxelSet:
     """Sparse surface records of a voxelized scene.
 
-    One record per voxel, object, orientation cluster, side of the other
-    surfaces' planes in the voxel, and side of the surface; see
-    :func:`voxelize`. All arrays have length ``N = len(vox)``.
+    One record per voxel, object, orientation cluster, sheet of a stack
+    (layer), side of the other surfaces' planes in the voxel, and side of
+    the surface; see :func:`voxelize`. The record arrays have length
+    ``N = len(vox)``; the ``piece_*`` arrays list where each triangle's
+    pieces went.
 
     Attributes
     ----------
