@@ -24,6 +24,11 @@ _TRACED_PASSES = 32
 #: rest in any case (``docs/design.md`` §5).
 _FUTILE_SHARE = 0.5
 
+#: Passes through the kept rays over which the measured ratio must hold
+#: still, twice over, before the geometric tail is trusted to stand for the
+#: rest (:func:`traced_bounces`).
+_STEADY_PASSES = 8
+
 #: At most this many passes through the kept rays (a product with a sparse
 #: matrix each, milliseconds): 1024 leave 0.99^1024 ≈ 3e-5 of the change of a
 #: mode of ratio 0.99 (a room of white walls) before the tail.
@@ -144,6 +149,25 @@ def trapped_records(rho: np.ndarray, matrix: tuple) -> np.ndarray:
     return trapped
 
 
+def _steady(history: list, lam: np.ndarray, lam_bound: float, size, Btot: float, tol: float):
+    """Whether the kept passes' changes fade steadily enough for the tail
+    ``d λ / (1 − λ)`` to stand for the rest of the series within ``tol``.
+
+    Through the same rays every pass the change becomes the slowest mode,
+    and its tail is then exact but for the error of λ, which ``1 / (1 − λ)``
+    magnifies: the ratio's spread over the last :data:`_STEADY_PASSES`
+    passes plus its drift from the window before (a slower mode still
+    taking over), over ``1 − λ``, bounds that share of what remains.
+    """
+    if not np.all(lam < lam_bound):
+        return False
+    w = _STEADY_PASSES
+    last, before = np.array(history[-w:]), np.array(history[-2 * w : -w])
+    drift = np.abs(last.mean(axis=0) - before.mean(axis=0))
+    doubt = (last.max(axis=0) - last.min(axis=0) + drift) / (1 - lam)
+    return float(np.sum(size * lam / (1 - lam) * doubt)) / Btot < tol
+
+
 def keeps_rays(p: Problem) -> tuple[bool, str | None]:
     """Whether the first traced pass's rays are kept for the later passes
     (``traced_cache``, within its memory budget), and why not. Kept rays
@@ -240,7 +264,9 @@ def traced_bounces(
         lam = lam_mode
         size = None
         done = False
+        steady = False
         stalls = 0
+        history = []
         while Btot > 0:
             size, previous = np.sum(area * np.abs(d), axis=0), size
             residuals.append(float(size.sum()) / Btot)
@@ -249,10 +275,14 @@ def traced_bounces(
                 with np.errstate(divide="ignore", invalid="ignore"):
                     measured = np.where(previous > 0, size / previous, 0.0)
                 lam = np.clip(np.maximum(lam_mode, measured), 0.0, lam_bound)
+                history.append(measured)
             # At least two passes: the first one's change is mostly local (a
             # slit, a junction) and noisy, and its tail would amplify both.
             remaining = float(np.sum(size * lam / (1 - lam))) / Btot
             done = len(residuals) >= 2 and remaining < opt.tol
+            if keep and not done and len(history) >= 2 * _STEADY_PASSES:
+                steady = _steady(history, lam, lam_bound, size, Btot, opt.tol)
+                done = steady
             # Passes that cannot halve what remains before the cap ends them
             # anyway are not run: a mode fading by 0.97 a pass or slower (the
             # light passed round the crevices of a sofa of albedo 1) keeps
@@ -268,7 +298,8 @@ def traced_bounces(
                 d = p.rho * trace(d, later, seed=len(residuals) + 1)
             R = R + d
         if len(residuals) >= 2:
-            R = R + _tail(p, d, lam, mode)
+            # once steady, the change itself has the slowest mode's shape
+            R = R + _tail(p, d, lam, None if steady else mode)
         rays = trace.rays
         t_later = time.perf_counter() - t_later
     if not np.all(np.isfinite(R)):
