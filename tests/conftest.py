@@ -97,3 +97,23 @@ def fails_to_write(write, *args, fsize: int, timeout: float = 60.0) -> str:
     text = b"".join(chunks).decode()
     assert os.waitstatus_to_exitcode(status) == 3, text
     return text
+
+
+def closed_slabs(count, width, thickness, spacing, tilt_degrees, first_centre):
+    """A stack of ``count`` closed boxes ``width`` x ``thickness`` x 0.6 (one
+    trimesh), turned ``tilt_degrees`` about z, the first centred at
+    ``first_centre`` and each next one ``spacing`` further along y: slats
+    modelled as slabs, as interiors model blinds."""
+    import trimesh
+
+    t = np.radians(tilt_degrees)
+    frame = np.eye(4)
+    frame[:3, 0] = [np.cos(t), np.sin(t), 0.0]
+    frame[:3, 1] = [-np.sin(t), np.cos(t), 0.0]
+    slabs = []
+    for i in range(count):
+        b = trimesh.creation.box(extents=[width, thickness, 0.6])
+        b.apply_transform(frame)
+        b.apply_translation(np.asarray(first_centre, float) + np.array([0.0, spacing * i, 0.0]))
+        slabs.append(b)
+    return trimesh.util.concatenate(slabs)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import closed_slabs
 
 import voxgi
 from voxgi import traced
@@ -106,20 +107,9 @@ def _thin_closed_slats(thickness=1e-3, spacing=0.02, tilt=30.0):
     """A box room with a stack of 12 closed slabs `thickness` thick and
     `spacing` apart, tilted: at resolution 16 three slabs, six faces of one
     object and two orientations, to a voxel."""
-    import trimesh
-
     scene = voxgi.scenes.furnace_box(albedo=0.7, emission=0.0, width=8, height=8)
-    t = np.radians(tilt)
-    rot = np.eye(4)
-    rot[:3, 0] = [np.cos(t), np.sin(t), 0.0]
-    rot[:3, 1] = [-np.sin(t), np.cos(t), 0.0]
-    slabs = []
-    for i in range(12):
-        b = trimesh.creation.box(extents=[0.3, thickness, 0.6])
-        b.apply_transform(rot)
-        b.apply_translation([0.1, -0.12 + spacing * i, 0.0])
-        slabs.append(b)
-    scene.add(trimesh.util.concatenate(slabs), voxgi.Material(albedo=0.9), name="slats")
+    slabs = closed_slabs(12, 0.3, thickness, spacing, tilt, (0.1, -0.12, 0.0))
+    scene.add(slabs, voxgi.Material(albedo=0.9), name="slats")
     return scene
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import closed_slabs
 
 import voxgi
 from voxgi.direct import direct_irradiance
@@ -300,20 +301,8 @@ def _slab_blinds_room(thickness: float) -> voxgi.Scene:
     wide, 0.4 cm apart and turned 45 degrees (albedo 0.89), as a bathroom's
     blinds are modelled: four slabs, eight faces, to a voxel at resolution
     64."""
-    import trimesh
-
     scene = _window_room()
-    t = np.radians(45.0)
-    frame = np.eye(4)
-    frame[:3, 0] = [np.cos(t), np.sin(t), 0.0]
-    frame[:3, 1] = [-np.sin(t), np.cos(t), 0.0]
-    slabs = []
-    for i in range(101):
-        b = trimesh.creation.box(extents=[0.004, thickness, 0.6])
-        b.apply_transform(frame)
-        b.apply_translation([0.45, -0.2 + 0.004 * i, 0.0])
-        slabs.append(b)
-    blinds = trimesh.util.concatenate(slabs)
+    blinds = closed_slabs(101, 0.004, thickness, 0.004, 45.0, (0.45, -0.2, 0.0))
     scene.add(blinds, voxgi.Material(albedo=0.89), name="blinds", two_sided=True)
     return scene
 
