@@ -1007,6 +1007,32 @@ def test_kept_traced_passes_do_not_depend_on_where_the_lines_stopped():
     assert worst > 1e-2
 
 
+def test_a_stall_of_the_lines_is_no_failure_where_traced_passes_follow(monkeypatch):
+    # The traced passes sum the rest of the series from wherever the lines
+    # stopped (design §5): lines stopped by their stall rule after one
+    # iteration leave the closed furnace's answer Le / (1 - rho) to the
+    # passes, and the solve does not warn (Bitterli's Salle de bain, walled
+    # by albedo 1, warned "the residual stalled" on every solve). The lines
+    # alone still warn: their stall is then the answer's. Measured: 17 kept
+    # passes, mean radiance off by 6.4e-6.
+    from voxgi.radiosity import iteration
+
+    monkeypatch.setattr(iteration, "_STALL_ITERATIONS", 0)
+    rho = 0.8
+    vox = voxgi.voxelize(voxgi.scenes.furnace_box(albedo=rho, emission=1.0), 8, progress=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sol = voxgi.solve(vox, progress=False)
+    assert sol.bounces == 1
+    assert "stalled" in sol.stats["lines_stopped"]
+    assert "stopped" not in sol.stats
+    np.testing.assert_allclose(_front_mean(vox, sol) * (1 - rho), 1.0, rtol=1e-4)
+    lines_only = voxgi.SolveTuning(indirect_light="lines")
+    with pytest.warns(RuntimeWarning, match="stalled"):
+        lines = voxgi.solve(vox, progress=False, tuning=lines_only)
+    assert "stalled" in lines.stats["stopped"]
+
+
 def test_the_lines_stop_at_a_hundred_times_tol_where_kept_passes_follow():
     vox = voxgi.voxelize(voxgi.scenes.cornell_box(), 8, progress=False)
     kept = voxgi.solve(vox, progress=False)

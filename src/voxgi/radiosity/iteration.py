@@ -31,6 +31,12 @@ LINES_TOL_FACTOR = 100.0
 FRESH_LINES_TOL = 1e-3
 
 
+def passes_follow(p: Problem) -> bool:
+    """Whether traced passes finish the reflected light after the lines
+    (``indirect_light="traced"``, a scene to trace, no ``max_bounces``)."""
+    return p.opt.indirect_light == "traced" and why_not_traced(p) is None
+
+
 def lines_tol(p: Problem) -> float:
     """The tolerance the lines stop at: ``tol``, or where traced passes follow
     (``indirect_light="traced"``, a scene to trace, no ``max_bounces``), the
@@ -39,7 +45,7 @@ def lines_tol(p: Problem) -> float:
     :data:`LINES_TOL_FACTOR` times ``tol``, and otherwise ``tol`` but at
     most :data:`FRESH_LINES_TOL`."""
     opt = p.opt
-    if opt.indirect_light != "traced" or why_not_traced(p) is not None:
+    if not passes_follow(p):
         return opt.tol
     if opt.lines_tol is not None:
         return opt.lines_tol
@@ -124,6 +130,7 @@ class State:
     seconds: float = 0.0
     residuals: list = field(default_factory=list)
     stopped: str | None = None
+    stalled: bool = False  # stopped because the residual made no new low
     # The last update before the first tail: from the nonnegative direct
     # light, a nonnegative vector turning into the slowest-fading mode, whose
     # ratio the traced passes measure (traced_passes._dominant_ratio).
@@ -275,6 +282,7 @@ class _Iteration:
     def stalled(self, res: float) -> bool:
         """No new lowest residual for :data:`_STALL_ITERATIONS` iterations."""
         if self.s.it - self.best[1] >= _STALL_ITERATIONS:
+            self.s.stalled = True
             self.s.stopped = (
                 f"the residual stalled at {self.best[0]:.3g} (its lowest, "
                 f"iteration {self.best[1]}) for {_STALL_ITERATIONS} iterations"
@@ -316,7 +324,12 @@ def iterate(p: Problem, gather: Gatherer, Hd: np.ndarray, progress: bool) -> Sta
             bar.close()
     p.seconds["gather"] = s.seconds
     p.stats["extrapolations"] = it.extrap.count
-    if s.stopped is not None:
+    if s.stalled and passes_follow(p):
+        # The traced passes sum the rest of the series from any start, so
+        # where the lines stopped changes how many passes run, not the
+        # answer (docs/design.md §5): a stall is no failure of the solve.
+        p.stats["lines_stopped"] = s.stopped
+    elif s.stopped is not None:
         p.stats["stopped"] = s.stopped
         warnings.warn(
             f"solve: {s.stopped}; returning the last finite iterate (iteration {s.it})",

@@ -117,7 +117,10 @@ def solve(
     Solution
         ``radiosity`` (N, 3) float32, always finite; ``stats`` with ray counts,
         ``seconds``, ``lost_fraction``, ``energy`` (of the lines), ``skipped``,
-        ``stopped`` and, after traced bounces, ``traced`` (passes, rays,
+        ``stopped`` (why the lines stopped short, with a warning), or
+        ``lines_stopped`` where traced passes followed a stall of the lines
+        (no warning: the passes sum the rest from any start) and, after
+        traced bounces, ``traced`` (passes, rays,
         residuals, the change of the reflected power against the lines, and
         the records whose sum came out negative and were set to zero).
 
@@ -129,8 +132,8 @@ def solve(
     Warns
     -----
     RuntimeWarning
-        No emitter; not converged; stalled or non-finite (the last finite
-        iterate is returned).
+        No emitter; not converged; stalled (unless traced passes follow)
+        or non-finite (the last finite iterate is returned).
     """
     t_start = time.perf_counter()
     a = check_vox(vox)
