@@ -112,8 +112,8 @@ int separation(const RecordGrid& g, const double y[3], const float n[3], const P
 // -1. Only records whose normal faces n's side qualify, and of those the
 // ones no other surface of y's voxel (or of their own) separates from y;
 // among them the nearest centroid, strongly preferring the same object and
-// orientation. The neighbouring voxels are searched only when c has no such
-// record of this surface.
+// orientation. The neighbouring voxels within reach of y are searched only
+// when c has no such record of this surface.
 int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3], int32_t obj,
                        const int64_t c[3]) {
     const double p2 = g.pitch * g.pitch;
@@ -144,7 +144,8 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
     for (int di = -1; di <= 1; ++di)
         for (int dj = -1; dj <= 1; ++dj)
             for (int dk = -1; dk <= 1; ++dk)
-                if (di || dj || dk) scan(c[0] + di, c[1] + dj, c[2] + dk, false);
+                if ((di || dj || dk) && neighbour_within_reach(g, y, c, di, dj, dk))
+                    scan(c[0] + di, c[1] + dj, c[2] + dk, false);
     return best;
 }
 

@@ -330,7 +330,7 @@ int64_t lookup_in_cell(const RecordGrid& g, const double y[3], const float n[3],
     for (int di = -1; di <= 1; ++di)
         for (int dj = -1; dj <= 1; ++dj)
             for (int dk = -1; dk <= 1; ++dk)
-                if (di || dj || dk) {
+                if ((di || dj || dk) && neighbour_within_reach(g, y, c, di, dj, dk)) {
                     int64_t q0, q1;
                     cell_records(g, c[0] + di, c[1] + dj, c[2] + dk, q0, q1);
                     collect(q0, q1, true);
