@@ -12,7 +12,7 @@ import numpy as np
 from ..scene import Camera, Scene
 from .aovs import AOVMean
 from .budget import _reflects_light, light_spread, ray_budget
-from .estimate import _MIN_BATCHES, _Mean, denoised_estimate
+from .estimate import _MIN_BATCHES, _REL_EPS, _Mean, denoised_estimate
 from .executor import FrameExecutor, FrameShaderSpec
 from .pixel_filter import _FILTER_REACH
 from .seen_emission import skip_reason
@@ -58,7 +58,11 @@ class RenderResult:
         surfaces), ``docs/design.md`` §6. With ``RenderTuning(denoise=True)``:
         ``est_rel_mse_denoised``, the denoised image's estimated relMSE (what
         ``tol`` then bounds), and ``denoise_checks``, the checks it took;
-        None otherwise.
+        None otherwise. ``seen_emission`` (None where not controlled): the
+        pixels whose seen emission is replaced by its mean over the pixel,
+        their samples and rays, and ``est_rel_mse``, the relMSE those means'
+        own error adds, which every frame shares and ``est_rel_mse`` leaves
+        out (``docs/design.md`` §6).
     solution : Solution or None
         The voxel solution displayed (computed here when none was given).
     albedo : (H, W, 3) float32 or None
@@ -327,7 +331,7 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds, 
         "est_rel_mse_denoised": None if rule is None else rule.est,
         "denoise_checks": None if rule is None else rule.checks,
         "threads": opt.threads,
-        "seen_emission": _seen_emission_stats(source),
+        "seen_emission": _seen_emission_stats(source, acc),
         "mirror_objects": int(
             np.count_nonzero(getattr(source, "mirrors", {}).get("obj_mirror", []))
         ),
@@ -344,12 +348,19 @@ def _guide_stats(source) -> dict | None:
     return {"open_share": guide.open_share, "rays": guide.rays, "seconds": guide.seconds}
 
 
-def _seen_emission_stats(source) -> dict | None:
+def _seen_emission_stats(source, acc: _Mean) -> dict | None:
     """The emission control's pixels, samples, rays and seconds, where the
-    frames were shaded here and it applied."""
+    frames were shaded here and it applied, and ``est_rel_mse``: the relMSE
+    its means' own error adds to the image, shared by every frame (None
+    with the Gaussian filter, or before any frame)."""
     ctl = getattr(source, "emission_control", None)
     if ctl is None:
         return None
+    est = None
+    if ctl.variance is not None and acc.frames > 0:
+        image = acc.mean
+        level = image[ctl.pixels]
+        est = float((ctl.variance / (level * level + _REL_EPS)).sum() / image.size)
     return {
         "pixels": len(ctl.pixels),
         "sampled": ctl.sampled,
@@ -359,6 +370,7 @@ def _seen_emission_stats(source) -> dict | None:
         "mirrored": ctl.mirrored,
         "mirror_samples": ctl.mirror_samples,
         "few": ctl.few,
+        "est_rel_mse": est,
     }
 
 

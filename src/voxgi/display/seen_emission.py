@@ -92,6 +92,14 @@ class SeenEmission:
     few : int
         Of the pixels sampled, those whose first samples saw emission only
         a few times, and took more (with the box filter).
+    variance : (T, 3) float32 or None
+        The estimated squared error of each mean: its squared gap to the
+        mean of the first half of its samples. That is the error of the
+        mean itself where the samples converge as independent ones do (a
+        mirror's lobe), and more where their stratification makes them
+        converge faster (an outline). Every frame shares the mean's error,
+        which the frames' own error estimate cannot see. None with the
+        Gaussian filter (not worked out).
     """
 
     pixels: np.ndarray
@@ -103,6 +111,7 @@ class SeenEmission:
     mirrored: int = 0
     mirror_samples: int = 0
     few: int = 0
+    variance: np.ndarray | None = None
 
 
 def skip_reason(cam, emits: bool, env) -> str | None:
@@ -263,22 +272,28 @@ def seen_emission(
     samples = _footprint_samples(per, seed, bool(mirrors))
     rays = P + M * per
     extra = n_few = 0
+    variance = None
     if reach:
         mean = _gaussian_mean(ctx, cam, sampled, target, samples)
     else:
-        mean = np.zeros((M, 3), np.float32)
+        # the mean of each pixel's samples and that of their first half
+        moments = (np.zeros((M, 3)), np.zeros((M, 3)))
         hits = np.zeros(M, np.int64)
         for s in _batches(M, per):
-            le = _seen(ctx, sampled[s], samples)
-            mean[s] = le.mean(axis=1, dtype=np.float64)
+            le = _seen(ctx, sampled[s], samples).astype(np.float64)
+            moments[0][s] = le.mean(axis=1)
+            moments[1][s] = le[:, : per // 2].mean(axis=1)
             hits[s] = np.count_nonzero(le.max(axis=2) > 0, axis=1)
         on_mirror = mirrored.ravel()[sampled]
         if mirrors:
-            extra = _mirror_means(ctx, sampled, on_mirror, mean, per, seed)
+            extra = _mirror_means(ctx, sampled, on_mirror, moments, per, seed)
             rays += extra
         few = (hits > 0) & (hits < _FEW_HITS) & ~on_mirror
         n_few = int(np.count_nonzero(few))
-        rays += _refine(ctx, sampled, few, mean, per, seed, _FEW_MOST, _FEW_BUDGET)
+        rays += _refine(ctx, sampled, few, moments, per, seed, _FEW_MOST, _FEW_BUDGET)
+        mean, half = moments
+        variance = ((half - mean) ** 2).astype(np.float32)
+        mean = mean.astype(np.float32)
     n_mirrored = int(np.count_nonzero(mirrored.ravel()[sampled])) if M else 0
     return SeenEmission(
         target,
@@ -290,25 +305,28 @@ def seen_emission(
         n_mirrored,
         per + (extra // n_mirrored if n_mirrored and not reach else 0),
         n_few,
+        variance,
     )
 
 
-def _mirror_means(ctx, sampled, mirrored, mean, per: int, seed: int) -> int:
-    """Refine ``mean`` in place at the ``mirrored`` pixels (bool, one per
-    ``sampled`` pixel) with more samples: :data:`_MIRROR_MOST`, fewer (a
-    power of two) where their rays would pass :data:`_MIRROR_BUDGET` a
-    pixel of the image. A mirror's lobe spreads a window or a lamp over
-    many pixels, in part through its lobe's rare wide directions that a few
-    samples miss, and the frames replace what each pixel sees by this mean:
-    its error stays in the picture. Returns the rays traced."""
-    return _refine(ctx, sampled, mirrored, mean, per, seed, _MIRROR_MOST, _MIRROR_BUDGET)
+def _mirror_means(ctx, sampled, mirrored, moments, per: int, seed: int) -> int:
+    """Refine ``moments`` (:func:`_refine`) in place at the ``mirrored``
+    pixels (bool, one per ``sampled`` pixel) with more samples:
+    :data:`_MIRROR_MOST`, fewer (a power of two) where their rays would
+    pass :data:`_MIRROR_BUDGET` a pixel of the image. A mirror's lobe
+    spreads a window or a lamp over many pixels, in part through its lobe's
+    rare wide directions that a few samples miss, and the frames replace
+    what each pixel sees by this mean: its error stays in the picture.
+    Returns the rays traced."""
+    return _refine(ctx, sampled, mirrored, moments, per, seed, _MIRROR_MOST, _MIRROR_BUDGET)
 
 
-def _refine(ctx, sampled, which, mean, per: int, seed: int, most: int, budget: int) -> int:
-    """Refine ``mean`` in place at the pixels ``which`` (bool, one per
-    ``sampled`` pixel) to ``most`` footprint samples, fewer (a power of two)
-    where their rays would pass ``budget`` a pixel of the image; the first
-    ``per`` of them are those already taken. Returns the rays traced."""
+def _refine(ctx, sampled, which, moments, per: int, seed: int, most: int, budget: int) -> int:
+    """Refine ``moments`` (the mean of each ``sampled`` pixel's samples and
+    of their first half) in place at the pixels ``which`` (bool, one per
+    ``sampled`` pixel) to ``most`` footprint samples, fewer (a power of
+    two) where their rays would pass ``budget`` a pixel of the image; the
+    first ``per`` of them are those already taken. Returns the rays traced."""
     idx = np.flatnonzero(which)
     if len(idx) == 0:
         return 0
@@ -317,10 +335,12 @@ def _refine(ctx, sampled, which, mean, per: int, seed: int, most: int, budget: i
     if K <= per:
         return 0
     extra = _footprint_samples(K, seed, bool(ctx["mirrors"]))[per:]
+    mean, half = moments
     for s in _batches(len(idx), len(extra)):
         q = idx[s]
-        le = _seen(ctx, sampled[q], extra).sum(axis=1, dtype=np.float64)
-        mean[q] = (mean[q] * per + le) / K
+        le = _seen(ctx, sampled[q], extra).astype(np.float64)
+        half[q] = (mean[q] * per + le[:, : K // 2 - per].sum(axis=1)) / (K // 2)
+        mean[q] = (mean[q] * per + le.sum(axis=1)) / K
     return len(idx) * len(extra)
 
 
