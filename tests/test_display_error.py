@@ -311,6 +311,32 @@ def test_furnace_stops_with_every_pixel_within_the_rule(rho):
     assert err.max() < 2 * c, (err.max(), out.frames)
 
 
+def test_the_stats_say_why_the_frames_ended(cornell, cornell16, capsys, tmp_path):
+    # At tol 1e-2 the rule stops the Cornell box's frames; at 1e-6 the cap
+    # of 8 frames comes first and the image is short of tol; tol 0 asks for
+    # the cap.
+    from voxgi import cli
+
+    def stopped(**kw):
+        return voxgi.render(cornell, cornell16, progress=False, **kw).stats
+
+    met = stopped(tol=1e-2)
+    assert met["stopped"] == "tol"
+    assert met["frames"] < 256
+    short = stopped(tol=1e-6, max_frames=8)
+    assert short["stopped"] == "max_frames"
+    assert short["est_rel_mse"] > 1e-6
+    assert stopped(tol=0, max_frames=2)["stopped"] == "max_frames"
+    # the command line says when the cap left the image short of --tol
+    args = ["render", "furnace-sphere", "--resolution", "12", "--radius", "4"]
+    args += ["--width", "8", "--height", "6", "--frames", "4"]
+    for tol, said in (("1e-9", True), ("0", False)):
+        capsys.readouterr()  # (clears what came before)
+        assert cli.main([*args, "-o", str(tmp_path / f"{tol}.exr"), "--tol", tol]) == 0
+        out = capsys.readouterr()
+        assert ("stopped at the frame cap" in out.out) == said
+
+
 def test_exr_stderr_channels_round_trip(tmp_path, rng):
     img = rng.random((5, 7, 3)).astype(np.float32)
     se = (0.01 * rng.random((5, 7, 3))).astype(np.float32)

@@ -125,6 +125,12 @@ def _report_display(args, res, interrupted: bool) -> None:
         f"(estimated relMSE of the noise {s['est_rel_mse']:.2e}, worst pixel "
         f"{s['est_max_rel_err']:.1%})"
     )
+    if s.get("stopped") == "max_frames" and s.get("tol", 0) > 0:
+        est = s["est_rel_mse_denoised"] if s.get("denoised") else s["est_rel_mse"]
+        _say(
+            f"display: stopped at the frame cap ({res.frames}) with estimated relMSE "
+            f"{est:.2e} over --tol {s['tol']:.2e}; raise --frames or --tol"
+        )
     for why in s.get("skipped", []):
         _note(args, f"display skipped {why}")
 

@@ -58,8 +58,11 @@ class RenderResult:
         surfaces), ``docs/design.md`` §6. With ``RenderTuning(denoise=True)``:
         ``est_rel_mse_denoised``, the denoised image's estimated relMSE (what
         ``tol`` then bounds), and ``denoise_checks``, the checks it took;
-        None otherwise. ``seen_emission`` (None where not controlled): the
-        pixels whose seen emission is replaced by its mean over the pixel,
+        None otherwise. ``stopped``: why the frames ended, ``"tol"`` (the
+        estimate met it), ``"max_frames"`` (the cap came first: the image
+        is short of ``tol``, or ``tol`` was 0) or ``"interrupted"``.
+        ``seen_emission`` (None where not controlled): the pixels whose seen
+        emission is replaced by its mean over the pixel,
         their samples and rays, and ``est_rel_mse``, the relMSE those means'
         own error adds, which every frame shares and ``est_rel_mse`` leaves
         out (``docs/design.md`` §6).
@@ -327,6 +330,7 @@ def _render_stats(spec, source, acc: _Mean, opt, skipped, interrupted, seconds, 
         "eps": spec.eps,
         "skipped": skipped,
         "interrupted": interrupted,
+        "stopped": _why_stopped(acc, opt, interrupted, rule),
         "denoised": bool(opt.denoise and acc.frames > 0),
         "est_rel_mse_denoised": None if rule is None else rule.est,
         "denoise_checks": None if rule is None else rule.checks,
@@ -346,6 +350,18 @@ def _guide_stats(source) -> dict | None:
     if guide is None:
         return None
     return {"open_share": guide.open_share, "rays": guide.rays, "seconds": guide.seconds}
+
+
+def _why_stopped(acc: _Mean, opt, interrupted: bool, rule) -> str:
+    """Why the frames ended: ``"tol"`` (the estimate met it), ``"max_frames"``
+    (the cap came first, or ``tol`` 0 asked for it) or ``"interrupted"``."""
+    if interrupted:
+        return "interrupted"
+    if opt.tol > 0 and acc.frames > 0:
+        met = rule.est <= opt.tol if rule is not None else acc.done(opt)
+        if met:
+            return "tol"
+    return "max_frames"
 
 
 def _seen_emission_stats(source, acc: _Mean) -> dict | None:
