@@ -337,6 +337,20 @@ def test_the_stats_say_why_the_frames_ended(cornell, cornell16, capsys, tmp_path
         assert ("stopped at the frame cap" in out.out) == said
 
 
+def test_the_command_line_says_what_the_seen_emissions_means_add(tmp_path, capsys):
+    # The Cornell box's lamp outline: its pixels' means add 7.2e-7
+    # of relMSE, said where that passes a quarter of --tol, not at 1e-2.
+    from voxgi import cli
+
+    args = ["render", "cornell-box", "--resolution", "8", "--radius", "3"]
+    args += ["--width", "32", "--height", "32", "--frames", "4"]
+    for tol, said in (("1e-9", True), ("1e-2", False)):
+        capsys.readouterr()
+        assert cli.main([*args, "-o", str(tmp_path / f"{tol}.exr"), "--tol", tol]) == 0
+        out = capsys.readouterr().out
+        assert ("the mean emission seen across pixels adds" in out) == said, out
+
+
 def test_exr_stderr_channels_round_trip(tmp_path, rng):
     img = rng.random((5, 7, 3)).astype(np.float32)
     se = (0.01 * rng.random((5, 7, 3))).astype(np.float32)

@@ -125,6 +125,13 @@ def _report_display(args, res, interrupted: bool) -> None:
         f"(estimated relMSE of the noise {s['est_rel_mse']:.2e}, worst pixel "
         f"{s['est_max_rel_err']:.1%})"
     )
+    seen = (s.get("seen_emission") or {}).get("est_rel_mse")
+    if seen is not None and seen > 0.25 * s.get("tol", 0):
+        # every frame shares it, so the estimate above does not count it
+        _say(
+            f"display: the mean emission seen across pixels adds an estimated relMSE "
+            f"{seen:.2e}, shared by every frame and not in the estimate above"
+        )
     if s.get("stopped") == "max_frames" and s.get("tol", 0) > 0:
         est = s["est_rel_mse_denoised"] if s.get("denoised") else s["est_rel_mse"]
         _say(
