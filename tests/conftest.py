@@ -11,6 +11,17 @@ import pytest
 
 import voxgi
 
+#: The tests this run will execute, once selection (``-k``, ``-m``) is done:
+#: for fixtures that prepare only what the chosen tests need.
+SELECTED = pytest.StashKey[list]()
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config, items):
+    # the list itself: the deselection that runs before this hook has
+    # already narrowed it in place
+    config.stash[SELECTED] = items
+
 
 @pytest.fixture(autouse=True, scope="session")
 def _python_handles_sigint():

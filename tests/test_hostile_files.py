@@ -26,6 +26,7 @@ from pathlib import Path
 import hostile_probes_other  # noqa: F401  (registers its probes)
 import hostile_probes_scenes  # noqa: F401
 import pytest
+from conftest import SELECTED
 from hostile_common import LOADS, PROBES, SLOW
 
 if not sys.platform.startswith("linux"):  # RLIMIT_AS, fork and /proc/self/status
@@ -175,7 +176,7 @@ def outcomes(request, tmp_path_factory):
     # the probes of the tests selected (the slow ones take seconds each)
     chosen = {
         item.callspec.params["name"]
-        for item in request.session.items
+        for item in request.config.stash[SELECTED]
         if item.originalname == "test_probe" and item.module is sys.modules[__name__]
     }
     procs = _start_servers()
