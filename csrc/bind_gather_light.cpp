@@ -151,7 +151,8 @@ int64_t gather_light_py(
     double emitter_per_set, const std::optional<I64>& piece_first,
     const std::optional<I64>& piece_key, const std::optional<I32>& piece_record,
     const std::optional<U32>& piece_side, const std::optional<I64>& piece_plane_first,
-    const std::optional<F64>& piece_plane) {
+    const std::optional<F64>& piece_plane, const std::optional<F32>& obj_lobe,
+    const std::optional<F32>& rec_emitted, std::optional<F32Out> emitted_out) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     if (mat_response) {
@@ -161,9 +162,14 @@ int64_t gather_light_py(
     }
     if (mat_continue.has_value() != rec_share.has_value())
         throw py::value_error("mat_continue and rec_share go together");
+    if (obj_lobe) {
+        // the records as pixels: their rays land on the scene's objects
+        mats.hit_lobe = lobe_rows(*obj_lobe, obj_two_sided.shape(0), "obj_lobe");
+        mats.hit_count = obj_lobe->shape(0);
+    }
     if (mat_continue) {
-        if (!mat_lobe) throw py::value_error("mat_continue needs mat_lobe");
-        check_1d(*mat_continue, mats.count, "mat_continue");
+        if (!mats.hit_lobe) throw py::value_error("mat_continue needs mat_lobe or obj_lobe");
+        check_1d(*mat_continue, mats.hit_count, "mat_continue");
         mats.continue_lobe = mat_continue->data();
     }
     if (mat_base_out) {
@@ -238,13 +244,37 @@ int64_t gather_light_py(
         transport.record = transport_record->mutable_data();
         transport.weight = transport_weight->mutable_data();
     }
+    if (transport_record && mat_continue) {
+        // the transport keeps one record a ray: the lobe's, none of the base's share
+        for (int64_t r = 0; r < grid.count; ++r) {
+            const int32_t obj = grid.rec[r].object;
+            if (obj < 0 || obj >= mats.hit_count || !mats.continue_lobe[obj]) continue;
+            for (int ch = 0; ch < 3; ++ch)
+                if (grid.share[3 * r + ch] != 0.f)
+                    throw py::value_error(
+                        "rec_share: record " + std::to_string(r) + " of object " +
+                        std::to_string(obj) +
+                        " continues its lobe with a base share; the transport keeps none");
+        }
+    }
+    voxgi::LobeEmission lobe_emission;
+    if (rec_emitted.has_value() != emitted_out.has_value())
+        throw py::value_error("rec_emitted and emitted_out go together");
+    if (rec_emitted) {
+        check_2d(*rec_emitted, grid.count, 3, "rec_emitted");
+        check_2d(*emitted_out, hits.count, 3, "emitted_out");
+        check_inplace(*emitted_out, "emitted_out");
+        lobe_emission.radiance = rec_emitted->data();
+        lobe_emission.out = emitted_out->mutable_data();
+    }
     int64_t rays = 0;
     auto stop = make_stop_check();
     {
         py::gil_scoped_release release;
         voxgi::gather_light(hits, mats, mis, n_gather, seed, frame, eps, tris, grid,
                             env ? &*env : nullptr, scene, po, &rays, threads, stop,
-                            transport_record ? &transport : nullptr);
+                            transport_record ? &transport : nullptr,
+                            rec_emitted ? &lobe_emission : nullptr);
     }
     return rays;
 }
@@ -252,32 +282,33 @@ int64_t gather_light_py(
 }  // namespace
 
 void bind_gather_light(py::module_& m) {
-    m.def("gather_light", &gather_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
-          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
-          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
-          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "seed"_a, "frame"_a,
-          "eps"_a, "tri_v"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),
-          "rec_sorted_key"_a.noconvert(), "rec_cell_start"_a.noconvert(),
-          "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
-          "grid_origin"_a.noconvert(), "pitch"_a, "scene"_a, "out"_a.noconvert(), "threads"_a = 0,
-          "env_radiance"_a.noconvert() = py::none(), "env_to_world"_a.noconvert() = py::none(),
-          "env_texel_pdf"_a.noconvert() = py::none(),
-          "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
-          "hit_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
-          "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
-          "corner_uv"_a.noconvert() = py::none(), "mat_lobe"_a.noconvert() = py::none(),
-          "transport_record"_a.noconvert() = py::none(),
-          "transport_weight"_a.noconvert() = py::none(), "mat_response"_a.noconvert() = py::none(),
-          "mat_continue"_a.noconvert() = py::none(), "rec_share"_a.noconvert() = py::none(),
-          "env_guide"_a = py::none(), "mat_base_out"_a.noconvert() = py::none(),
-          "obj_emits"_a.noconvert() = py::none(), "reach"_a = 0.0,
-          "emitter_pos"_a.noconvert() = py::none(), "emitter_normal"_a.noconvert() = py::none(),
-          "emitter_radiance"_a.noconvert() = py::none(),
-          "emitter_density"_a.noconvert() = py::none(), "emitter_per_set"_a = 1.0,
-          "piece_first"_a.noconvert() = py::none(), "piece_key"_a.noconvert() = py::none(),
-          "piece_record"_a.noconvert() = py::none(), "piece_side"_a.noconvert() = py::none(),
-          "piece_plane_first"_a.noconvert() = py::none(), "piece_plane"_a.noconvert() = py::none(),
-          R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
+    m.def(
+        "gather_light", &gather_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+        "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+        "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
+        "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "seed"_a, "frame"_a,
+        "eps"_a, "tri_v"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),
+        "rec_sorted_key"_a.noconvert(), "rec_cell_start"_a.noconvert(), "rec_packed"_a.noconvert(),
+        "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a,
+        "scene"_a, "out"_a.noconvert(), "threads"_a = 0, "env_radiance"_a.noconvert() = py::none(),
+        "env_to_world"_a.noconvert() = py::none(), "env_texel_pdf"_a.noconvert() = py::none(),
+        "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
+        "hit_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
+        "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
+        "corner_uv"_a.noconvert() = py::none(), "mat_lobe"_a.noconvert() = py::none(),
+        "transport_record"_a.noconvert() = py::none(),
+        "transport_weight"_a.noconvert() = py::none(), "mat_response"_a.noconvert() = py::none(),
+        "mat_continue"_a.noconvert() = py::none(), "rec_share"_a.noconvert() = py::none(),
+        "env_guide"_a = py::none(), "mat_base_out"_a.noconvert() = py::none(),
+        "obj_emits"_a.noconvert() = py::none(), "reach"_a = 0.0,
+        "emitter_pos"_a.noconvert() = py::none(), "emitter_normal"_a.noconvert() = py::none(),
+        "emitter_radiance"_a.noconvert() = py::none(), "emitter_density"_a.noconvert() = py::none(),
+        "emitter_per_set"_a = 1.0, "piece_first"_a.noconvert() = py::none(),
+        "piece_key"_a.noconvert() = py::none(), "piece_record"_a.noconvert() = py::none(),
+        "piece_side"_a.noconvert() = py::none(), "piece_plane_first"_a.noconvert() = py::none(),
+        "piece_plane"_a.noconvert() = py::none(), "obj_lobe"_a.noconvert() = py::none(),
+        "rec_emitted"_a.noconvert() = py::none(), "emitted_out"_a.noconvert() = py::none(),
+        R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit
 point (rec_*, grid_*, pitch: voxgi.traced.record_grid), MIS-weighted against
@@ -298,11 +329,19 @@ With mat_response (M, 33, 3) float32 (the solve's records as pixels), a
 ray's f is multiplied by its material's row of R / A at the ray's cosine
 (voxgi.incidence). With mat_continue (M,) uint8 and mat_lobe, a ray that
 lands on a material marked 1 reads its record's base share and follows the
-lobe's specular reflection one bounce further (not with the transport),
-reading rec_share (N, 3) float32 (in rec_packed's order, given with
-mat_continue) of its record's light; with mat_base_out (M, 33, 3) float32
-that share times the hit material's row at the cosine towards the ray's
-origin (the base's outgoing radiance over its mean).
+lobe's specular reflection one bounce further, reading rec_share (N, 3)
+float32 (in rec_packed's order, given with mat_continue) of its record's
+light; with mat_base_out (M, 33, 3) float32 that share times the hit
+material's row at the cosine towards the ray's origin (the base's outgoing
+radiance over its mean). mat_continue and the lobes rays land on are per
+object: the materials' own rows (mat_lobe), or obj_lobe (O, LOBE_WIDTH)
+float32 where the pixels' materials are not the objects (the solve's
+records). With the transport, such a ray is written as the record at the
+end of the lobe's ray; the transport keeps no base share, so every record
+of a continuing object must have a zero rec_share. With rec_emitted (N, 3)
+float32 (each record's emitted radiance, rec_packed's order) and
+emitted_out (P, 3) float32, a ray that follows a lobe also adds the light
+it reads of the emitter where the lobe's ray lands into emitted_out.
 With reach > 0 and obj_emits (O,) uint8 (1: the object emits), a ray that
 lands nearer than reach to its pixel's point on a diffuse object that does
 not emit continues one bounce: its albedo times one cosine-distributed ray

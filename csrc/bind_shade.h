@@ -15,6 +15,24 @@
 
 namespace voxgi::py_helpers {
 
+// (rows, kLobeWidth) float32 rows of voxgi.materials.Microfacet.lobe_row, checked.
+inline const voxgi::MicrofacetLobe* lobe_rows(const F32& lobe, py::ssize_t rows, const char* name) {
+    check_2d(lobe, rows, voxgi::kLobeWidth, name);
+    const auto* rows_in = reinterpret_cast<const voxgi::MicrofacetLobe*>(lobe.data());
+    for (py::ssize_t i = 0; i < lobe.shape(0); ++i) {
+        const voxgi::MicrofacetLobe& L = rows_in[i];
+        if (L.kind == 0.f) continue;
+        if (!(L.kind == 1.f || L.kind == 2.f) || !(L.alpha >= 1e-4f && L.alpha <= 4.f) ||
+            !(L.lobe_share >= 0.f && L.lobe_share <= 1.f) || !(L.eta > 0.f))
+            throw py::value_error(std::string(name) + ": row " + std::to_string(i) +
+                                  " is not a lobe (kind 1 or 2, alpha in [1e-4, 4], "
+                                  "lobe_share in [0, 1], eta > 0)");
+    }
+    return rows_in;
+}
+
+// The materials, one per object as the display's kernels take them: the
+// lobes gather rays land on are then the same rows (ShadeMaterials::hit_lobe).
 inline voxgi::ShadeMaterials materials(const F32& albedo, const F32& rs, const F32& nu,
                                        const F32& nv, const U8& glossy,
                                        const std::optional<F32>& lobe = std::nullopt) {
@@ -32,18 +50,9 @@ inline voxgi::ShadeMaterials materials(const F32& albedo, const F32& rs, const F
     s.nv = nv.data();
     s.glossy = glossy.data();
     if (lobe) {
-        // (M, kLobeWidth) float32 rows of voxgi.materials.Microfacet.lobe_row
-        check_2d(*lobe, m, voxgi::kLobeWidth, "mat_lobe");
-        s.lobe = reinterpret_cast<const voxgi::MicrofacetLobe*>(lobe->data());
-        for (py::ssize_t i = 0; i < m; ++i) {
-            const voxgi::MicrofacetLobe& L = s.lobe[i];
-            if (L.kind == 0.f) continue;
-            if (!(L.kind == 1.f || L.kind == 2.f) || !(L.alpha >= 1e-4f && L.alpha <= 4.f) ||
-                !(L.lobe_share >= 0.f && L.lobe_share <= 1.f) || !(L.eta > 0.f))
-                throw py::value_error("mat_lobe: row " + std::to_string(i) +
-                                      " is not a lobe (kind 1 or 2, alpha in [1e-4, 4], "
-                                      "lobe_share in [0, 1], eta > 0)");
-        }
+        s.lobe = lobe_rows(*lobe, m, "mat_lobe");
+        s.hit_lobe = s.lobe;
+        s.hit_count = m;
     }
     return s;
 }

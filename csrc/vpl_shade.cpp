@@ -407,7 +407,7 @@ static bool gather_hit_factors(const ShadeHits& hits, const ShadeMaterials& mats
     ratio[0] = ratio[1] = ratio[2] = 1.f;
     if (h.textured) {
         // the record's albedo is the solve's (a plastic's: its coat's too)
-        const MicrofacetLobe* hit_lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
+        const MicrofacetLobe* hit_lobe = mats.hit_lobe ? mats.hit_lobe + h.obj : nullptr;
         for (int ch = 0; ch < 3; ++ch)
             if (R.albedo[ch] > 0.f)
                 ratio[ch] = solve_albedo(hit_lobe, h.tex[ch], ch) / R.albedo[ch];
@@ -417,8 +417,8 @@ static bool gather_hit_factors(const ShadeHits& hits, const ShadeMaterials& mats
 
 // Whether a gather ray of a pixel of material m that lands at h follows the lobe there.
 inline bool continues(const ShadeMaterials& mats, int32_t m, const GatherHit& h) {
-    return follows_lobes(mats, m) && h.obj >= 0 && h.obj < mats.count &&
-           mats.continue_lobe[h.obj] && mats.lobe[h.obj].kind != 0.f;
+    return follows_lobes(mats, m) && h.obj >= 0 && h.obj < mats.hit_count &&
+           mats.continue_lobe[h.obj] && mats.hit_lobe[h.obj].kind != 0.f;
 }
 
 // The hit of a ray leaving gather hit h along wi, from h's point offset
@@ -435,17 +435,59 @@ void trace_on(const ShadeTriangles& tris, const RecordGrid& grid, const RayScene
     gather_hit(at_y, tris, grid, 0, ro, wi, t, out);
 }
 
+// One sample of the specular reflection of the lobe at the glossy hit h
+// (docs/design.md §14): a direction drawn from the lobe about the way back
+// and traced. Returns the record where it lands (-1: none), with `factor`
+// the lobe's f cos / pdf times the sheets' transmittance on the way, by which
+// that record's radiance (or, where the ray escaped, the environment's,
+// written into env_L) is read.
+int64_t follow_lobe(const ShadeMaterials& mats, const ShadeTriangles& tris, const RecordGrid& grid,
+                    const EnvironmentMap* env, const RayScene& scene, double eps,
+                    const GatherHit& h, uint64_t& rng, LookupScratch& scratch, double factor[3],
+                    float env_L[3]) {
+    const MicrofacetLobe& lobe = mats.hit_lobe[h.obj];
+    for (int ch = 0; ch < 3; ++ch) factor[ch] = 0.0, env_L[ch] = 0.f;
+    const float wo[3] = {-h.wi[0], -h.wi[1], -h.wi[2]};
+    rng = splitmix64(rng);
+    const double u1 = to_unit(rng);
+    rng = splitmix64(rng);
+    const double u2 = to_unit(rng);
+    float wi[3];
+    if (!microfacet_sample(lobe, h.ns, wo, u1, u2, wi)) return -1;
+    const double pdf = microfacet_pdf(lobe, h.ns, wo, wi);
+    const float cos_y = dot3(h.ns, wi);
+    if (!(pdf > 0.0) || !(cos_y > 0.f)) return -1;
+    const float zero[3] = {0.f, 0.f, 0.f};
+    float f[3];
+    microfacet_brdf(lobe, zero, h.ns, wi, wo, f);
+    float ro[3], T[3];
+    GatherHit z;
+    trace_on(tris, grid, scene, eps, h, wi, ro, T, z);
+    const double w = double(cos_y) / pdf;
+    for (int ch = 0; ch < 3; ++ch) factor[ch] = f[ch] * w * T[ch];
+    if (z.escaped) {
+        if (env) {
+            const double d[3] = {wi[0], wi[1], wi[2]};
+            const double* Le = env->radiance + 3 * environment_texel(*env, d);
+            for (int ch = 0; ch < 3; ++ch) env_L[ch] = float(Le[ch]);
+        }
+        return -1;
+    }
+    if (z.key < 0) return -1;
+    return lookup_in_cell(grid, z.y, z.ns, z.obj, z.c, z.tri, z.front, scratch);
+}
+
 // The light leaving the glossy hit h towards the ray's origin
 // (docs/design.md §14): the base's share of record rec's light (ratio: the
 // texture's over the record's albedo), read as the record's mean as VPLs
-// read it, plus one sample of the lobe's specular reflection: a direction
-// drawn from the lobe about the way back, traced, and the record where it
-// lands (or the environment) read by the specular term's f cos / pdf.
-void glossy_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
-                         const RecordGrid& grid, const EnvironmentMap* env, const RayScene& scene,
-                         double eps, const GatherHit& h, int64_t rec, const float ratio[3],
-                         uint64_t& rng, LookupScratch& scratch, float L[3], float coat[3]) {
-    const MicrofacetLobe& lobe = mats.lobe[h.obj];
+// read it, plus one sample of the lobe's specular reflection (follow_lobe),
+// the record where it lands (or the environment) read by its factor.
+// Returns the record the lobe's ray read (-1: none) and its factor.
+int64_t glossy_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
+                            const RecordGrid& grid, const EnvironmentMap* env,
+                            const RayScene& scene, double eps, const GatherHit& h, int64_t rec,
+                            const float ratio[3], uint64_t& rng, LookupScratch& scratch, float L[3],
+                            float coat[3], double factor[3]) {
     const PackedRecord& R = grid.rec[rec];
     // the base sends its share out towards the ray's origin as its
     // directional albedo at that cosine (a plastic's base, behind its
@@ -454,41 +496,15 @@ void glossy_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
     if (mats.base_out)
         incidence_response(mats.base_out + int64_t(3) * kIncidenceNodes * h.obj, -dot3(h.ns, h.wi),
                            out_y);
-    for (int ch = 0; ch < 3; ++ch) {
+    for (int ch = 0; ch < 3; ++ch)
         // (grid.share is given wherever continue_lobe is: the binding checks)
         L[ch] = float(R.radiance[ch] * ratio[ch] * grid.share[3 * rec + ch] * out_y[ch]);
-        coat[ch] = 0.f;
-    }
-    const float wo[3] = {-h.wi[0], -h.wi[1], -h.wi[2]};
-    rng = splitmix64(rng);
-    const double u1 = to_unit(rng);
-    rng = splitmix64(rng);
-    const double u2 = to_unit(rng);
-    float wi[3];
-    if (!microfacet_sample(lobe, h.ns, wo, u1, u2, wi)) return;
-    const double pdf = microfacet_pdf(lobe, h.ns, wo, wi);
-    const float cos_y = dot3(h.ns, wi);
-    if (!(pdf > 0.0) || !(cos_y > 0.f)) return;
-    const float zero[3] = {0.f, 0.f, 0.f};
-    float f[3];
-    microfacet_brdf(lobe, zero, h.ns, wi, wo, f);
-    float ro[3], T[3];
-    GatherHit z;
-    trace_on(tris, grid, scene, eps, h, wi, ro, T, z);
-    float Lz[3] = {0.f, 0.f, 0.f};
-    if (z.escaped) {
-        if (!env) return;
-        const double d[3] = {wi[0], wi[1], wi[2]};
-        const double* Le = env->radiance + 3 * environment_texel(*env, d);
-        for (int ch = 0; ch < 3; ++ch) Lz[ch] = float(Le[ch]);
-    } else {
-        if (z.key < 0) return;
-        const int64_t q = lookup_in_cell(grid, z.y, z.ns, z.obj, z.c, z.tri, z.front, scratch);
-        if (q < 0) return;
+    float Lz[3];
+    const int64_t q = follow_lobe(mats, tris, grid, env, scene, eps, h, rng, scratch, factor, Lz);
+    if (q >= 0)
         for (int ch = 0; ch < 3; ++ch) Lz[ch] = grid.rec[q].radiance[ch];
-    }
-    const double w = double(cos_y) / pdf;
-    for (int ch = 0; ch < 3; ++ch) coat[ch] = float(f[ch] * w * Lz[ch] * T[ch]);
+    for (int ch = 0; ch < 3; ++ch) coat[ch] = float(factor[ch] * Lz[ch]);
+    return q;
 }
 
 // Whether pixel p's gather ray h, landing on a diffuse object that does not
@@ -517,7 +533,7 @@ int near_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
                       float L[3]) {
     L[0] = L[1] = L[2] = 0.f;
     int rays = 1;
-    const MicrofacetLobe* lobe = mats.lobe ? mats.lobe + h.obj : nullptr;
+    const MicrofacetLobe* lobe = mats.hit_lobe ? mats.hit_lobe + h.obj : nullptr;
     float rho[3];
     for (int ch = 0; ch < 3; ++ch)
         rho[ch] = solve_albedo(lobe, h.textured ? h.tex[ch] : mats.albedo[3 * h.obj + ch], ch);
@@ -593,7 +609,7 @@ int near_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
         for (int ch = 0; ch < 3; ++ch) {
             float ratio = 1.f;
             if (g.textured && R.albedo[ch] > 0.f) {
-                const MicrofacetLobe* gl = mats.lobe ? mats.lobe + g.obj : nullptr;
+                const MicrofacetLobe* gl = mats.hit_lobe ? mats.hit_lobe + g.obj : nullptr;
                 ratio = solve_albedo(gl, g.tex[ch], ch) / R.albedo[ch];
             }
             Lz[ch] = R.radiance[ch] * ratio;
@@ -601,6 +617,33 @@ int near_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
     }
     for (int ch = 0; ch < 3; ++ch) L[ch] += rho[ch] * Lz[ch] * T[ch];
     return rays;
+}
+
+// The gather rays' own density for pixel p's ray h onto record rec: the MIS
+// denominator `denom` less the record's VPL density. The coat's part of a
+// glossy hit's light comes by the gather rays alone.
+inline double own_density(const ShadeHits& hits, const RecordGrid& grid, int64_t p,
+                          const GatherHit& h, int64_t rec, double denom) {
+    const double* x = hits.pos + 3 * p;
+    double r2 = 0.0;
+    for (int a = 0; a < 3; ++a) r2 += (h.y[a] - x[a]) * (h.y[a] - x[a]);
+    return denom - double(grid.rec[rec].pa) * r2 / double(-dot3(h.ns, h.wi));
+}
+
+// The factor by which pixel p's gather ray h, landing on record rec's glossy
+// surface, reads the record q that the lobe's ray from there read with
+// `factor` (follow_lobe): false where it reads nothing.
+bool followed_weight(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
+                     const RecordGrid& grid, int64_t p, const GatherHit& h, int64_t rec,
+                     const double factor[3], double w[3]) {
+    float f[3], ratio[3];
+    double denom;
+    if (!gather_hit_factors(hits, mats, mis, grid, p, h, rec, f, ratio, denom)) return false;
+    const double own = own_density(hits, grid, p, h, rec, denom);
+    if (!(own > 0.0)) return false;
+    for (int ch = 0; ch < 3; ++ch)
+        w[ch] = double(f[ch]) * h.through[ch] * h.cos_x / own * factor[ch];
+    return true;
 }
 
 // The MIS-weighted light of pixel p's gather ray h from record rec (-1: none)
@@ -615,11 +658,7 @@ void gather_hit_light(const ShadeHits& hits, const ShadeMaterials& mats, const S
     double denom;
     if (!gather_hit_factors(hits, mats, mis, grid, p, h, rec, f, ratio, denom)) return;
     if (base) {
-        // the gather rays' own density: denom less the record's VPL density
-        const double* x = hits.pos + 3 * p;
-        double r2 = 0.0;
-        for (int a = 0; a < 3; ++a) r2 += (h.y[a] - x[a]) * (h.y[a] - x[a]);
-        const double own = denom - double(grid.rec[rec].pa) * r2 / double(-dot3(h.ns, h.wi));
+        const double own = own_density(hits, grid, p, h, rec, denom);
         for (int ch = 0; ch < 3; ++ch) {
             double L = base[ch] / denom;
             if (own > 0.0) L += coat[ch] / own;
@@ -683,7 +722,8 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                   int n_gather, uint64_t seed, int64_t frame, double eps,
                   const ShadeTriangles& tris, const RecordGrid& grid, const EnvironmentMap* env,
                   const RayScene& scene, float* out, int64_t* rays, int threads,
-                  const StopCheck& stop, const GatherTransport* transport) {
+                  const StopCheck& stop, const GatherTransport* transport,
+                  const LobeEmission* emitted) {
     const uint64_t base = gather_base(seed, frame);
     const int64_t P = hits.count;
     if (n_gather <= 0) {
@@ -738,26 +778,38 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
             }
             if (shaded(p - 2)) {
                 const GatherHit* h = slot(p - 2);
-                double s[3] = {0.0, 0.0, 0.0};  // in ray order: the same for any thread count
+                double s[3] = {0.0, 0.0, 0.0};        // in ray order: the same for any thread count
+                double se_lobe[3] = {0.0, 0.0, 0.0};  // emitters seen in lobes (emitted)
                 for (int k = 0; k < n_gather; ++k) {
                     if (transport) record_transport(*transport, int64_t(n_gather) * (p - 2) + k);
                     if (h[k].key == -2) continue;
                     const int64_t rec = lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c,
                                                        h[k].tri, h[k].front, scratch);
-                    if (rec >= 0 && !transport && continues(mats, hits.material[p - 2], h[k])) {
+                    if (rec >= 0 && continues(mats, hits.material[p - 2], h[k])) {
                         float ratio[3] = {1.f, 1.f, 1.f};
                         if (h[k].textured)
                             for (int ch = 0; ch < 3; ++ch)
                                 if (grid.rec[rec].albedo[ch] > 0.f)
                                     ratio[ch] =
-                                        solve_albedo(mats.lobe + h[k].obj, h[k].tex[ch], ch) /
+                                        solve_albedo(mats.hit_lobe + h[k].obj, h[k].tex[ch], ch) /
                                         grid.rec[rec].albedo[ch];
                         uint64_t rng = splitmix64(base ^ 0x9E3779B97F4A7C15ull ^
                                                   (uint64_t(p - 2) * uint64_t(n_gather) + k));
                         float L[3], coat[3];
-                        glossy_hit_radiance(mats, tris, grid, env, scene, eps, h[k], rec, ratio,
-                                            rng, scratch, L, coat);
+                        double factor[3], w[3];
+                        const int64_t q =
+                            glossy_hit_radiance(mats, tris, grid, env, scene, eps, h[k], rec, ratio,
+                                                rng, scratch, L, coat, factor);
                         gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s, L, coat);
+                        if (q >= 0 && (transport || emitted) &&
+                            followed_weight(hits, mats, mis, grid, p - 2, h[k], rec, factor, w)) {
+                            const int64_t r = int64_t(n_gather) * (p - 2) + k;
+                            if (transport) transport->record[r] = int32_t(q);
+                            for (int ch = 0; ch < 3; ++ch) {
+                                if (transport) transport->weight[3 * r + ch] = float(w[ch]);
+                                if (emitted) se_lobe[ch] += w[ch] * emitted->radiance[3 * q + ch];
+                            }
+                        }
                         continue;
                     }
                     if (rec >= 0 && !transport && continues_near(hits, mats, tris, p - 2, h[k])) {
@@ -776,6 +828,9 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                                           int64_t(n_gather) * (p - 2) + k);
                 }
                 for (int ch = 0; ch < 3; ++ch) out[3 * (p - 2) + ch] += float(s[ch]);
+                if (emitted)
+                    for (int ch = 0; ch < 3; ++ch)
+                        emitted->out[3 * (p - 2) + ch] += float(se_lobe[ch]);
                 if (env) {
                     float se[3] = {0.f, 0.f, 0.f};
                     for (int k = 0; k < n_gather; ++k)

@@ -34,7 +34,13 @@ struct ShadeMaterials {
     // gather_light, where f is multiplied by the material's incidence
     // response at the gather ray's cosine (incidence_response.h)
     const float* response = nullptr;
-    // (M,) or null: 1 where a gather ray that lands on the material's
+    // (hit_count,) or null: the lobes of the surfaces gather rays land on, by
+    // object id (kind 0: none). The display's materials are its objects, so
+    // there it is `lobe`; the solve's records as pixels are white
+    // Lambertians whose rays land on the scene's objects.
+    const MicrofacetLobe* hit_lobe = nullptr;
+    int64_t hit_count = 0;
+    // (hit_count,) or null: 1 where a gather ray that lands on the object's
     // surface reads the base's share of its record and follows the lobe's
     // specular reflection one bounce further (glossy_hit_radiance)
     const uint8_t* continue_lobe = nullptr;
@@ -52,7 +58,7 @@ struct ShadeMaterials {
 // direction, not the mirror's light spread evenly over the hemisphere
 // (docs/design.md §14).
 inline bool follows_lobes(const ShadeMaterials& mats, int32_t m) {
-    return mats.continue_lobe && mats.lobe && m >= 0 && m < mats.count;
+    return mats.continue_lobe && mats.hit_lobe && m >= 0 && m < mats.count;
 }
 
 // Hit points of one frame (P pixels).
@@ -165,15 +171,29 @@ void vpl_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeVPL
 // the record it read (grid order, -1: none) and the factor its radiance was
 // multiplied by, so that the same rays can be applied to other radiances
 // without tracing them again (the solve's traced passes, traced_transport.h).
+//
+// A ray that follows a lobe (ShadeMaterials::continue_lobe) is written as
+// the record at the end of the lobe's ray, with the factor of that reading;
+// the transport keeps no base share, so with a transport only objects
+// whose records' share is zero (conductors) may continue. With `emitted`,
+// each such ray also adds its factor times the emitted radiance of the
+// record where it lands into emitted->out: the emitters' light seen in a
+// lobe, which a pass of reflected light leaves out and the records' own
+// direct light cannot see past the mirror.
 struct GatherTransport {
     int32_t* record = nullptr;  // (P * n_gather,)
     float* weight = nullptr;    // (P * n_gather, 3)
+};
+struct LobeEmission {
+    const float* radiance = nullptr;  // (N, 3) each record's emitted radiance, grid order
+    float* out = nullptr;             // (P, 3), added into
 };
 void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                   int n_gather, uint64_t seed, int64_t frame, double eps,
                   const ShadeTriangles& tris, const RecordGrid& grid, const EnvironmentMap* env,
                   const RayScene& scene, float* out, int64_t* rays, int threads,
-                  const StopCheck& stop, const GatherTransport* transport = nullptr);
+                  const StopCheck& stop, const GatherTransport* transport = nullptr,
+                  const LobeEmission* emitted = nullptr);
 
 // Light arriving along known directions: point, spot and directional lights
 // (one shadow ray each), environment samples and gather rays that leave the

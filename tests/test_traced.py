@@ -342,3 +342,81 @@ def test_a_kept_matrix_with_a_column_out_of_range_is_refused():
     for bad in ([1, 2], [-1, 0]):
         with pytest.raises(ValueError, match="column"):
             _core.transport_apply(row_ptr, np.array(bad, np.int32), weight, np.ones((2, 3)), out)
+
+
+#: A near-perfect mirror: a smooth conductor whose Fresnel reflectance is 1.
+MIRROR = voxgi.Microfacet("conductor", alpha=0.02, eta=(0.0, 0.0, 0.0), k=(1.0, 1.0, 1.0))
+#: A lamp of radiance 1 hanging over the mirror floor at x >= 0.5, facing down.
+LAMP = [[0.5, 2.0, -3.0], [3.0, 2.0, -3.0], [3.0, 2.0, 3.0], [0.5, 2.0, 3.0]]
+
+
+def _quad(corners) -> trimesh.Trimesh:
+    return trimesh.Trimesh(np.asarray(corners, float), [[0, 1, 2], [0, 2, 3]], process=False)
+
+
+def _irradiance_from_quad(x, n, corners) -> float:
+    """Irradiance at point x (unit normal n) from a quad of unit radiance
+    wholly in front of it: Lambert's polygon formula, ½ Σ β_i (γ_i · n)."""
+    v = [np.asarray(c, float) - x for c in corners]
+    v = [a / np.linalg.norm(a) for a in v]
+    total = 0.0
+    for a, b in zip(v, v[1:] + v[:1], strict=True):
+        g = np.cross(a, b)
+        total += math.acos(np.clip(np.dot(a, b), -1.0, 1.0)) * np.dot(g / np.linalg.norm(g), n)
+    return 0.5 * abs(total)
+
+
+def _wall_on_a_mirror_floor(facing: float):
+    """The default solve (resolution 64) of a grey wall (albedo 0.5) standing
+    on a mirror floor at x = -0.3 facing +x, towards the lamp and its image
+    in the mirror (``facing`` 1), or at x = +0.3 facing -x, away from both
+    (-1): the solution and the wall's records away from its edges."""
+    x0 = -0.3 * facing
+    sc = voxgi.Scene()
+    floor = [[-3, 0, -3], [-3, 0, 3], [3, 0, 3], [3, 0, -3]]
+    sc.add(_quad(floor), Material(0.5, specular=MIRROR), name="floor")
+    wall = [[x0, 0.2, -0.5], [x0, 1.2, -0.5], [x0, 1.2, 0.5], [x0, 0.2, 0.5]]
+    sc.add(_quad(wall if facing > 0 else wall[::-1]), Material(0.5), name="wall")
+    sc.add(_quad(LAMP), Material(0.0, emission=1.0), name="lamp")
+    sol = voxgi.solve(voxgi.voxelize(sc, resolution=64), progress=False)
+    c = np.asarray(sol.vox.centroid)
+    inner = (
+        (np.asarray(sol.vox.object_id) == 1)
+        & (np.asarray(sol.vox.normal)[:, 0] * facing > 0.9)  # its lit face, not its back
+        & (np.abs(c[:, 2]) < 0.35)
+        & (c[:, 1] > 0.35)
+        & (c[:, 1] < 1.05)
+    )
+    return sol, inner
+
+
+def test_a_wall_facing_away_from_a_lamp_gets_no_light_from_a_mirror_floor():
+    # Every ray from the wall that the mirror reflects goes on away from the
+    # lamp, into the open: the wall's records must stay dark. Read as its
+    # record's mean, the mirror's light (its records lit by the lamp) would
+    # reach them from every direction: 11% of the lit wall's light.
+    dark, inner_dark = _wall_on_a_mirror_floor(-1.0)
+    lit, inner_lit = _wall_on_a_mirror_floor(1.0)
+    assert inner_dark.sum() > 20
+    assert inner_lit.sum() > 20
+    b_dark = np.asarray(dark.radiosity)[inner_dark].mean(axis=0)
+    b_lit = np.asarray(lit.radiosity)[inner_lit].mean(axis=0)
+    assert np.all(b_dark < 0.01 * b_lit)
+
+
+def test_a_wall_facing_a_lamp_over_a_mirror_floor_gets_the_lamps_image_too():
+    # The wall facing the lamp takes the lamp's light straight (its direct
+    # light, by shadow rays) and through the lamp's image below the mirror,
+    # which no shadow ray finds: B = ρ (E_lamp + R E_image), Lambert's
+    # formula for both quads at each record's point, R the mirror's
+    # directional albedo at about 45°, where the image's light meets it.
+    sol, inner = _wall_on_a_mirror_floor(1.0)
+    n = np.array([1.0, 0.0, 0.0])
+    image = [[a, -b, c] for a, b, c in LAMP]
+    r = float(MIRROR.directional_albedo((0.5,) * 3, [math.sqrt(0.5)])[0, 1])
+    want = [
+        0.5 * (_irradiance_from_quad(x, n, LAMP) + r * _irradiance_from_quad(x, n, image))
+        for x in np.asarray(sol.vox.centroid)[inner]
+    ]
+    got = np.asarray(sol.radiosity, np.float64)[inner]
+    np.testing.assert_allclose(got.mean(axis=0), np.mean(want), rtol=0.02)

@@ -25,6 +25,7 @@ import numpy as np
 from . import _core, _validate
 from .direct import check_scene_and_records
 from .incidence import IncidenceResponse
+from .microfacet import LOBE_WIDTH, Microfacet
 from .rays import Tracer
 from .scene import Scene
 from .voxels import VoxelSet
@@ -32,6 +33,7 @@ from .voxels import VoxelSet
 __all__ = [
     "DENSE_TABLE_CELLS",
     "TracedGather",
+    "conductor_lobes",
     "record_grid",
     "traced_irradiance",
     "transport_bytes",
@@ -172,6 +174,30 @@ def _piece_table(vox: VoxelSet, key: np.ndarray, order: np.ndarray) -> dict:
     }
 
 
+def conductor_lobes(scene: Scene) -> dict:
+    """The gather kernel's arguments by which a record's ray that lands on a
+    conductor that does not emit follows its lobe one bounce further
+    (``docs/design.md`` §14, "Rays through mirrors in the solve"):
+    ``obj_lobe`` (O, LOBE_WIDTH) float32 and ``mat_continue`` (O,) uint8;
+    {} where the scene has no such conductor."""
+    spec = [o.material.specular for o in scene.objects]
+    follow = np.array(
+        [
+            isinstance(s, Microfacet)
+            and s.kind == "conductor"
+            and not np.any(np.asarray(o.material.emission) > 0)
+            for s, o in zip(spec, scene.objects, strict=True)
+        ],
+        bool,
+    )
+    if not follow.any():
+        return {}
+    lobes = np.zeros((len(spec), LOBE_WIDTH), np.float32)
+    for i in np.flatnonzero(follow):
+        lobes[i] = spec[i].lobe_row()
+    return {"obj_lobe": lobes, "mat_continue": follow.astype(np.uint8)}
+
+
 class TracedGather:
     """Gather the records' radiosity at every reflecting record, by rays.
 
@@ -199,6 +225,13 @@ class TracedGather:
         Weighs each ray by its record's R(μ) / A at the ray's cosine
         (:mod:`voxgi.incidence`), so that a pass gives what a glossy record
         reflects over its mean albedo. None: the plain mean.
+
+    Notes
+    -----
+    A ray that lands on a conductor does not read the conductor's record,
+    which stands for its light leaving alike in every direction: it follows
+    the conductor's lobe one bounce and reads the record where that ray
+    lands, as the display's gather rays do (:func:`conductor_lobes`).
     """
 
     def __init__(
@@ -267,6 +300,13 @@ class TracedGather:
         # part of the triangle in (docs/design.md §5), not the display's
         # search: the voxelization's own answer, at a fraction of the cost.
         self._grid.update(_piece_table(source, voxel_order[2], voxel_order[3]))
+        self._lobes = conductor_lobes(scene)
+        if self._lobes:
+            # a conductor has no base: its records' whole light is the lobe's
+            self._lobes["rec_share"] = np.zeros((len(source), 3), np.float32)
+        #: Whether some rays follow a conductor's lobe (then a pass can also
+        #: give the emitters' light seen in the lobes: ``emitted``).
+        self.follows = bool(self._lobes)
         self.rays = 0
         #: The rays of the pass called with ``keep=True``, as a sparse matrix
         #: (``row_ptr``, ``column``, ``weight``; :meth:`apply`), or None.
@@ -283,8 +323,14 @@ class TracedGather:
         self.close()
 
     def __call__(
-        self, values: np.ndarray, samples: int, seed: int, *, keep: bool = False
-    ) -> np.ndarray:
+        self,
+        values: np.ndarray,
+        samples: int,
+        seed: int,
+        *,
+        keep: bool = False,
+        emitted: np.ndarray | None = None,
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """One pass: (N, 3) float64 mean of ``values`` under ``samples`` rays
         per reflecting record (0 elsewhere), stratified in cos²θ and hashed
         from ``seed`` and the record (the same for any thread count).
@@ -294,6 +340,12 @@ class TracedGather:
         read them by (:func:`transport_bytes` of memory while it is made),
         so that :meth:`apply` gives the same pass for other values without
         tracing the rays again.
+
+        With ``emitted`` ((M, 3), each record's emitted radiosity), returns
+        the pass and, from the same rays, the (N, 3) float64 mean of the
+        emitted light that the rays following a conductor's lobe read where
+        they land: the emitters seen in mirrors, which the records' direct
+        light (shadow rays to the emitters) cannot reach.
         """
         n, m = len(self.vox), len(self.source)
         values = np.asarray(values)
@@ -307,6 +359,16 @@ class TracedGather:
                 "transport_record": np.full(n * samples, -1, np.int32),
                 "transport_weight": np.zeros((n * samples, 3), np.float32),
             }
+        seen = {}
+        if emitted is not None:
+            emitted = np.asarray(emitted)
+            if emitted.shape != (m, 3):
+                raise ValueError(f"emitted: expected shape ({m}, 3), got {emitted.shape}")
+            if self.follows:
+                seen = {
+                    "rec_emitted": np.ascontiguousarray(emitted[self._order], np.float32),
+                    "emitted_out": np.zeros((n, 3), np.float32),
+                }
         self.rays += _core.gather_light(
             *self._hits,
             *self._materials,
@@ -321,6 +383,8 @@ class TracedGather:
             threads=self.threads,
             **kept,
             **self._response,
+            **self._lobes,
+            **seen,
         )
         if keep:
             record, weight = kept["transport_record"], kept["transport_weight"]
@@ -330,7 +394,10 @@ class TracedGather:
             )
             del kept
             self.matrix = (row_ptr, record[:nnz].copy(), weight[:nnz].copy())
-        return out.astype(np.float64)
+        if emitted is None:
+            return out.astype(np.float64)
+        lobe_light = seen["emitted_out"] if seen else np.zeros((n, 3), np.float32)
+        return out.astype(np.float64), lobe_light.astype(np.float64)
 
     def apply(self, values: np.ndarray) -> np.ndarray:
         """The pass kept by ``keep=True``, applied to ``values`` (one row per

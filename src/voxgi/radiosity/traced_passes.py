@@ -201,7 +201,10 @@ def traced_bounces(
     """The reflected radiosity after passes of rays against the exact
     triangles, started from the lines' answer ``R`` (``docs/design.md`` §5).
 
-    The first pass gathers all of ``R``: ``R_1 = ρ (H_d + T R_0)``. Each later
+    The first pass gathers all of ``R``: ``R_1 = ρ (H_d + H_m + T R_0)``,
+    ``H_m`` the emitters' light that its rays read through the conductors'
+    lobes (:class:`voxgi.traced.TracedGather`), which the direct light's
+    shadow rays cannot find. Each later
     pass carries only the last change, ``d_{k+1} = ρ T d_k``, so its noise
     shrinks with the change. The changes fade, after a few passes, by the
     ratio λ of the slowest mode (per channel; :func:`_dominant_ratio`, from
@@ -230,6 +233,7 @@ def traced_bounces(
     later = max(16, opt.traced_samples // 4)
     lam_bound = float(min(max(float(p.rho.max()), 0.5), 1 - 1e-6))
     residuals = []
+    in_mirrors = None
     keep, why_fresh = keeps_rays(p)
     if why_fresh is not None:
         p.stats["skipped"]["traced_cache"] = why_fresh
@@ -239,7 +243,13 @@ def traced_bounces(
         seen_albedo = trace(np.asarray(p.rho, np.float64), _ALBEDO_SAMPLES, seed=0)
         lam_mode = np.minimum(_dominant_ratio(p, seen_albedo, mode), lam_bound)
         t_first = time.perf_counter()
-        R_new = p.rho * (Hd + trace(R, opt.traced_samples, seed=1, keep=keep))
+        if trace.follows:
+            # the emitters seen in the conductors, which no shadow ray reaches
+            gathered, in_lobes = trace(R, opt.traced_samples, seed=1, keep=keep, emitted=p.E)
+            in_mirrors = (p.rho * in_lobes * area).sum(axis=0).tolist()
+        else:
+            gathered, in_lobes = trace(R, opt.traced_samples, seed=1, keep=keep), 0.0
+        R_new = p.rho * (Hd + in_lobes + gathered)
         t_first = time.perf_counter() - t_first
         if keep and trace.matrix is not None:
             trapped = trapped_records(p.rho, trace.matrix)
@@ -342,5 +352,8 @@ def traced_bounces(
         # that adds (0.01-0.06% of the reflected power in the built-in interiors)
         "negative_records": int(np.count_nonzero(negative)),
         "negative_power": (-clamped).tolist(),
+        # the reflected power, per channel, of the emitters' light that the
+        # first pass's rays read through conductors' lobes (None: no conductor)
+        "emitters_in_mirrors": in_mirrors,
     }
     return R
