@@ -38,6 +38,11 @@ struct RecordGrid {
     // (N, 3) in the order of sorted_key, or null: the share of each record's
     // light that its diffuse base reflects (docs/design.md §14)
     const float* share = nullptr;
+    // (N,) in the order of sorted_key, or null: 1 for a record of a stack of
+    // sheets finer than a voxel, whose light a gather ray does not read as
+    // the record's mean but from one more bounce at the point it lands on
+    // (the solve's traced passes; follow_sheet in vpl_shade.cpp)
+    const uint8_t* stacked = nullptr;
     // Or null: the records of each triangle's pieces (VoxelSet.piece_record).
     // Triangle t < piece_tris has entries [piece_first[t], piece_first[t + 1]),
     // each in voxel piece_key[e] with its records at piece_record[2e] (the

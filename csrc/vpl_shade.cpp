@@ -521,6 +521,21 @@ inline bool continues_near(const ShadeHits& hits, const ShadeMaterials& mats,
     return r2 < tris.reach * tris.reach;
 }
 
+// A cosine-distributed direction wi about the unit normal n, from the next
+// two numbers of rng; returns its cosine.
+inline double cosine_direction(const float n[3], uint64_t& rng, float wi[3]) {
+    float u[3], v[3];
+    tangent_frame(n, u, v);
+    rng = splitmix64(rng);
+    const double u1 = to_unit(rng);
+    rng = splitmix64(rng);
+    const double phi = 2.0 * kPi * to_unit(rng);
+    const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
+    const double lx = r * std::cos(phi), ly = r * std::sin(phi);
+    for (int a = 0; a < 3; ++a) wi[a] = float(lx * u[a] + ly * v[a] + z * n[a]);
+    return z;
+}
+
 // The light leaving the diffuse hit h towards the ray's origin, from one
 // more bounce: its albedo (the solve's, its texture's where it has one)
 // times the radiance along one cosine-distributed ray from it, read from
@@ -537,16 +552,8 @@ int near_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
     float rho[3];
     for (int ch = 0; ch < 3; ++ch)
         rho[ch] = solve_albedo(lobe, h.textured ? h.tex[ch] : mats.albedo[3 * h.obj + ch], ch);
-    float u[3], v[3];
-    tangent_frame(h.ns, u, v);
-    rng = splitmix64(rng);
-    const double u1 = to_unit(rng);
-    rng = splitmix64(rng);
-    const double phi = 2.0 * kPi * to_unit(rng);
-    const double r = std::sqrt(u1), z = std::sqrt(std::max(0.0, 1.0 - u1));
-    const double lx = r * std::cos(phi), ly = r * std::sin(phi);
     float wi[3], ro[3], T[3];
-    for (int a = 0; a < 3; ++a) wi[a] = float(lx * u[a] + ly * v[a] + z * h.ns[a]);
+    const double z = cosine_direction(h.ns, rng, wi);
     GatherHit g;
     trace_on(tris, grid, scene, eps, h, wi, ro, T, g);
     // The emitters' light at y from one of the frame's emitter VPLs; the
@@ -617,6 +624,27 @@ int near_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
     }
     for (int ch = 0; ch < 3; ++ch) L[ch] += rho[ch] * Lz[ch] * T[ch];
     return rays;
+}
+
+// The light leaving a stacked sheet's hit h (record rec, ratio: the
+// texture's over the record's albedo) towards the ray's origin, from one
+// more bounce at the hit point rather than the record's mean: a slat's
+// record gives its lit edge and its shaded middle one radiosity, and what a
+// ray sees of the slat is the part the slats around it leave in view. One
+// cosine-distributed ray from the hit point, its albedo times the
+// radiance of the record where that lands. Returns that record (-1: none)
+// with `factor`, the albedo times the sheets' transmittance on the way.
+int64_t follow_sheet(const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
+                     double eps, const GatherHit& h, int64_t rec, const float ratio[3],
+                     uint64_t& rng, LookupScratch& scratch, double factor[3]) {
+    float wi[3], ro[3], T[3];
+    cosine_direction(h.ns, rng, wi);
+    GatherHit g;
+    trace_on(tris, grid, scene, eps, h, wi, ro, T, g);
+    for (int ch = 0; ch < 3; ++ch)
+        factor[ch] = double(grid.rec[rec].albedo[ch]) * ratio[ch] * T[ch];
+    if (g.escaped || g.key < 0) return -1;
+    return lookup_in_cell(grid, g.y, g.ns, g.obj, g.c, g.tri, g.front, scratch);
 }
 
 // The gather rays' own density for pixel p's ray h onto record rec: the MIS
@@ -785,21 +813,32 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                     if (h[k].key == -2) continue;
                     const int64_t rec = lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c,
                                                        h[k].tri, h[k].front, scratch);
-                    if (rec >= 0 && continues(mats, hits.material[p - 2], h[k])) {
+                    const bool lobe = rec >= 0 && continues(mats, hits.material[p - 2], h[k]);
+                    const bool sheet = !lobe && rec >= 0 && grid.stacked && grid.stacked[rec];
+                    if (lobe || sheet) {
                         float ratio[3] = {1.f, 1.f, 1.f};
+                        const MicrofacetLobe* hl =
+                            mats.hit_lobe ? mats.hit_lobe + h[k].obj : nullptr;
                         if (h[k].textured)
                             for (int ch = 0; ch < 3; ++ch)
                                 if (grid.rec[rec].albedo[ch] > 0.f)
-                                    ratio[ch] =
-                                        solve_albedo(mats.hit_lobe + h[k].obj, h[k].tex[ch], ch) /
-                                        grid.rec[rec].albedo[ch];
+                                    ratio[ch] = solve_albedo(hl, h[k].tex[ch], ch) /
+                                                grid.rec[rec].albedo[ch];
                         uint64_t rng = splitmix64(base ^ 0x9E3779B97F4A7C15ull ^
                                                   (uint64_t(p - 2) * uint64_t(n_gather) + k));
-                        float L[3], coat[3];
+                        float L[3] = {0.f, 0.f, 0.f}, coat[3] = {0.f, 0.f, 0.f};
                         double factor[3], w[3];
-                        const int64_t q =
-                            glossy_hit_radiance(mats, tris, grid, env, scene, eps, h[k], rec, ratio,
-                                                rng, scratch, L, coat, factor);
+                        int64_t q;
+                        if (lobe) {
+                            q = glossy_hit_radiance(mats, tris, grid, env, scene, eps, h[k], rec,
+                                                    ratio, rng, scratch, L, coat, factor);
+                        } else {
+                            q = follow_sheet(tris, grid, scene, eps, h[k], rec, ratio, rng, scratch,
+                                             factor);
+                            if (q >= 0)
+                                for (int ch = 0; ch < 3; ++ch)
+                                    coat[ch] = float(factor[ch] * grid.rec[q].radiance[ch]);
+                        }
                         gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s, L, coat);
                         if (q >= 0 && (transport || emitted) &&
                             followed_weight(hits, mats, mis, grid, p - 2, h[k], rec, factor, w)) {

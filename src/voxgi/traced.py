@@ -35,6 +35,7 @@ __all__ = [
     "TracedGather",
     "conductor_lobes",
     "record_grid",
+    "stacked_records",
     "traced_irradiance",
     "transport_bytes",
 ]
@@ -198,6 +199,41 @@ def conductor_lobes(scene: Scene) -> dict:
     return {"obj_lobe": lobes, "mat_continue": follow.astype(np.uint8)}
 
 
+def stacked_records(vox: VoxelSet) -> np.ndarray:
+    """(N,) bool: the records that share their voxel with another record of
+    the same object facing the same way (normals within about 18°) on
+    another plane (a tenth of a voxel or more apart along the normal): the
+    sheets of a stack finer than a voxel (a blind's slats, ``docs/design.md``
+    §2), whose light the record's mean does not hold. Records of one sheet
+    that other surfaces' planes split are not a stack."""
+    n = len(vox)
+    out = np.zeros(n, bool)
+    if n < 2:
+        return out
+    _, _, key, _ = _voxel_order(vox)
+    obj = np.asarray(vox.object_id, np.int64)
+    order = np.lexsort((obj, key))
+    k, o = key[order], obj[order]
+    nrm = np.asarray(vox.normal, np.float32)[order]
+    pt = np.asarray(vox.centroid, np.float64)[order]
+    apart = 0.1 * float(vox.pitch)
+    same = (k[1:] == k[:-1]) & (o[1:] == o[:-1])
+    # group sizes are small: compare each record with the next ones of its group
+    run = same.copy()
+    step = 1
+    while run.any():
+        a = np.flatnonzero(run)
+        gap = np.abs(np.einsum("ij,ij->i", nrm[a], pt[a + step] - pt[a]))
+        facing = (np.einsum("ij,ij->i", nrm[a], nrm[a + step]) > 0.95) & (gap > apart)
+        out[order[a[facing]]] = True
+        out[order[a[facing] + step]] = True
+        step += 1
+        if step >= n:
+            break
+        run = run[:-1] & same[step - 1 :]
+    return out
+
+
 class TracedGather:
     """Gather the records' radiosity at every reflecting record, by rays.
 
@@ -225,13 +261,26 @@ class TracedGather:
         Weighs each ray by its record's R(μ) / A at the ray's cosine
         (:mod:`voxgi.incidence`), so that a pass gives what a glossy record
         reflects over its mean albedo. None: the plain mean.
+    go_on : bool
+        Let rays go on past conductors and stacked sheets (below), as the
+        solve's passes do, where ``values`` are the records' reflected light
+        and the emitters' comes by ``emitted``. False (the default): every
+        ray reads the record where it lands, and a pass is the mean of
+        ``values`` under the rays.
 
     Notes
     -----
-    A ray that lands on a conductor does not read the conductor's record,
-    which stands for its light leaving alike in every direction: it follows
+    With ``go_on``, a ray that lands on a conductor does not read the
+    conductor's record, which stands for its light leaving alike in every
+    direction: it follows
     the conductor's lobe one bounce and reads the record where that ray
-    lands, as the display's gather rays do (:func:`conductor_lobes`).
+    lands, as the display's gather rays do (:func:`conductor_lobes`). One
+    that lands on a sheet of a stack finer than a voxel
+    (:func:`stacked_records`) reads the sheet's albedo times the record
+    where one cosine-distributed ray from its landing point lands: the
+    light of the sheet where it is met, not its record's mean (in scenes
+    without point lights or an environment, whose light that bounce
+    cannot find).
     """
 
     def __init__(
@@ -243,6 +292,7 @@ class TracedGather:
         offset: float | None = None,
         source: VoxelSet | None = None,
         response: IncidenceResponse | None = None,
+        go_on: bool = False,
     ):
         check_scene_and_records(scene, vox)
         if source is None:
@@ -300,12 +350,23 @@ class TracedGather:
         # part of the triangle in (docs/design.md §5), not the display's
         # search: the voxelization's own answer, at a fraction of the cost.
         self._grid.update(_piece_table(source, voxel_order[2], voxel_order[3]))
-        self._lobes = conductor_lobes(scene)
+        self._lobes = conductor_lobes(scene) if go_on else {}
         if self._lobes:
             # a conductor has no base: its records' whole light is the lobe's
             self._lobes["rec_share"] = np.zeros((len(source), 3), np.float32)
-        #: Whether some rays follow a conductor's lobe (then a pass can also
-        #: give the emitters' light seen in the lobes: ``emitted``).
+        # A ray's bounce at a stacked sheet reads the light the sheet's point
+        # takes from records and emitters, not from point lights or the sky.
+        self.sheets = 0
+        if go_on and not scene.lights and scene.environment is None:
+            stacked = stacked_records(source)
+            self.sheets = int(np.count_nonzero(stacked))
+            if self.sheets:
+                self._lobes["rec_stacked"] = np.ascontiguousarray(
+                    stacked[voxel_order[3]].astype(np.uint8)
+                )
+        #: Whether some rays go on past where they land (a conductor's lobe, a
+        #: stacked sheet); then a pass can also give the emitters' light those
+        #: rays find (``emitted``).
         self.follows = bool(self._lobes)
         self.rays = 0
         #: The rays of the pass called with ``keep=True``, as a sparse matrix
@@ -343,9 +404,10 @@ class TracedGather:
 
         With ``emitted`` ((M, 3), each record's emitted radiosity), returns
         the pass and, from the same rays, the (N, 3) float64 mean of the
-        emitted light that the rays following a conductor's lobe read where
-        they land: the emitters seen in mirrors, which the records' direct
-        light (shadow rays to the emitters) cannot reach.
+        emitted light that the rays going on past a conductor or a stacked
+        sheet read where they land: the emitters seen in mirrors or from a
+        slat's point, which the records' direct light (shadow rays to the
+        emitters from the records' own points) does not give.
         """
         n, m = len(self.vox), len(self.source)
         values = np.asarray(values)

@@ -8,7 +8,7 @@ import warnings
 
 import numpy as np
 
-from ..traced import TracedGather, transport_bytes
+from ..traced import TracedGather, stacked_records, transport_bytes
 from ..voxels import available_memory
 from .problem import Problem
 
@@ -202,9 +202,10 @@ def traced_bounces(
     triangles, started from the lines' answer ``R`` (``docs/design.md`` §5).
 
     The first pass gathers all of ``R``: ``R_1 = ρ (H_d + H_m + T R_0)``,
-    ``H_m`` the emitters' light that its rays read through the conductors'
-    lobes (:class:`voxgi.traced.TracedGather`), which the direct light's
-    shadow rays cannot find. Each later
+    ``H_m`` the emitters' light that its rays read beyond where they land,
+    through a conductor's lobe or from a stacked sheet
+    (:class:`voxgi.traced.TracedGather`), which the direct light's shadow
+    rays cannot find. Each later
     pass carries only the last change, ``d_{k+1} = ρ T d_k``, so its noise
     shrinks with the change. The changes fade, after a few passes, by the
     ratio λ of the slowest mode (per channel; :func:`_dominant_ratio`, from
@@ -233,23 +234,33 @@ def traced_bounces(
     later = max(16, opt.traced_samples // 4)
     lam_bound = float(min(max(float(p.rho.max()), 0.5), 1 - 1e-6))
     residuals = []
-    in_mirrors = None
+    beyond = None
     keep, why_fresh = keeps_rays(p)
     if why_fresh is not None:
         p.stats["skipped"]["traced_cache"] = why_fresh
     cap = _KEPT_PASSES if keep else _TRACED_PASSES
     matrix = {}
-    with TracedGather(p.vox.scene, p.vox, threads=opt.threads, response=p.response) as trace:
+    with TracedGather(
+        p.vox.scene, p.vox, threads=opt.threads, response=p.response, go_on=True
+    ) as trace:
+        sheets = trace.sheets
+        if not sheets and (p.vox.scene.lights or p.vox.scene.environment is not None):
+            if stacked_records(p.vox).any():
+                p.stats["skipped"]["stacked_sheets"] = (
+                    "the scene has point lights or an environment, whose light a ray's "
+                    "bounce at a stacked sheet cannot find: rays read those records' means"
+                )
         seen_albedo = trace(np.asarray(p.rho, np.float64), _ALBEDO_SAMPLES, seed=0)
         lam_mode = np.minimum(_dominant_ratio(p, seen_albedo, mode), lam_bound)
         t_first = time.perf_counter()
         if trace.follows:
-            # the emitters seen in the conductors, which no shadow ray reaches
-            gathered, in_lobes = trace(R, opt.traced_samples, seed=1, keep=keep, emitted=p.E)
-            in_mirrors = (p.rho * in_lobes * area).sum(axis=0).tolist()
+            # the emitters that rays find past mirrors and stacked sheets,
+            # which no shadow ray of the direct light reaches
+            gathered, H_m = trace(R, opt.traced_samples, seed=1, keep=keep, emitted=p.E)
+            beyond = (p.rho * H_m * area).sum(axis=0).tolist()
         else:
-            gathered, in_lobes = trace(R, opt.traced_samples, seed=1, keep=keep), 0.0
-        R_new = p.rho * (Hd + in_lobes + gathered)
+            gathered, H_m = trace(R, opt.traced_samples, seed=1, keep=keep), 0.0
+        R_new = p.rho * (Hd + H_m + gathered)
         t_first = time.perf_counter() - t_first
         if keep and trace.matrix is not None:
             trapped = trapped_records(p.rho, trace.matrix)
@@ -353,7 +364,11 @@ def traced_bounces(
         "negative_records": int(np.count_nonzero(negative)),
         "negative_power": (-clamped).tolist(),
         # the reflected power, per channel, of the emitters' light that the
-        # first pass's rays read through conductors' lobes (None: no conductor)
-        "emitters_in_mirrors": in_mirrors,
+        # first pass's rays read beyond where they land, through a
+        # conductor's lobe or from a stacked sheet (None: neither is here)
+        "emitters_beyond": beyond,
+        # records of stacks of sheets finer than a voxel, where a ray that
+        # lands bounces once more (docs/design.md §5)
+        "stacked_records": sheets,
     }
     return R
