@@ -51,6 +51,7 @@ __all__ = [
     "denoise_oidn",
     "facing_camera",
     "mitsuba_module",
+    "record_reference",
     "render_mitsuba",
     "to_mitsuba",
     "with_aovs",
@@ -371,6 +372,87 @@ def render_mitsuba(
     sc = mi.load_dict(to_mitsuba(scene, spp=spp, camera=camera, seed=seed))
     img = mi.render(sc, spp=int(spp), seed=int(seed))
     return np.ascontiguousarray(np.array(img, dtype=np.float32)[..., :3])
+
+
+def record_reference(
+    scene: Scene,
+    vox,
+    spp: int = 64,
+    *,
+    seed: int = 0,
+    max_depth: int = -1,
+    variant: str | None = None,
+    rays_per_call: int = 1 << 22,
+) -> np.ndarray:
+    """The irradiance Mitsuba's path tracer finds at every record's point.
+
+    From each record that reflects and has area, ``spp`` cosine-distributed
+    rays leave its ``centroid`` on the side of its ``normal`` (offset as the
+    solve's rays are, 1e-4 of the scene's diagonal), and Mitsuba's ``path``
+    integrator returns the radiance along each, emitted light included. The
+    irradiance is π times their mean. A diffuse record's reflected radiosity
+    is its albedo times it (``vox.albedo * E``): what the solve's
+    ``sol.radiosity - π vox.emission`` holds (``docs/design.md`` §9), at the
+    record's point rather than over its part of the surface. A glossy
+    record's solve weighs light by its incidence response instead (§14).
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene ``vox`` was voxelized from.
+    vox : VoxelSet
+        The records.
+    spp : int
+        Rays per record.
+    seed : int
+        Seeds the directions and Mitsuba's sampler.
+    max_depth : int
+        The path integrator's depth (-1: none; 1: the emitted light along
+        the rays, the direct light).
+    variant : str, optional
+        Mitsuba variant (default: :func:`mitsuba_module`'s).
+    rays_per_call : int
+        Rays handed to Mitsuba at once (bounds the memory).
+
+    Returns
+    -------
+    (N, 3) float64
+        Irradiance per record; 0 for records that do not reflect or have
+        no area.
+    """
+    mi = mitsuba_module(variant)
+    spp = int(spp)
+    if spp < 1:
+        raise ValueError(f"spp: expected >= 1, got {spp}")
+    cam = scene.camera if scene.camera is not None else Camera(width=2, height=2)
+    sc = mi.load_dict(to_mitsuba(scene, spp=1, camera=cam, max_depth=max_depth))
+    integrator = sc.integrator()
+    c = np.asarray(vox.centroid, np.float64)
+    n = np.asarray(vox.normal, np.float64)
+    live = np.flatnonzero((np.asarray(vox.area) > 0) & (np.asarray(vox.albedo).max(axis=1) > 0))
+    eps = 1e-4 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
+    out = np.zeros((len(vox), 3))
+    rng = np.random.default_rng(seed)
+    chunk = max(1, int(rays_per_call) // spp)
+    for start in range(0, len(live), chunk):
+        idx = live[start : start + chunk]
+        nn = np.repeat(n[idx], spp, axis=0)
+        o = np.repeat(c[idx], spp, axis=0) + eps * nn
+        u1, u2 = rng.random(len(nn)), rng.random(len(nn))
+        r, phi = np.sqrt(u1), 2.0 * np.pi * u2
+        a = np.where(np.abs(nn[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+        tx = np.cross(nn, a)
+        tx /= np.linalg.norm(tx, axis=1, keepdims=True)
+        ty = np.cross(nn, tx)
+        d = (r * np.cos(phi))[:, None] * tx + (r * np.sin(phi))[:, None] * ty
+        d += np.sqrt(1.0 - u1)[:, None] * nn
+        ray = mi.Ray3f(mi.Point3f(*o.T), mi.Vector3f(*d.T))
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(int(seed) * 1_000_003 + start, len(nn))
+        L = np.array(integrator.sample(sc, sampler, ray)[0], np.float64)
+        L = L.T if L.shape[0] == 3 else L
+        out[idx] = np.pi * L.reshape(len(idx), spp, 3).mean(axis=1)
+    return out
 
 
 #: The AOVs OIDN takes, from Mitsuba's ``aov`` integrator: the first hit's
