@@ -236,3 +236,14 @@ def test_mitsubas_direct_light_at_the_records_is_lamberts():
     up = (0.0, 1.0, 0.0)
     want = [_irradiance_from_quad(x, up, lamp) for x in np.asarray(vox.centroid)[floor]]
     np.testing.assert_allclose(E[floor].mean(axis=1).mean(), np.mean(want), rtol=0.01)
+
+
+def test_the_records_reference_refuses_records_of_another_scene():
+    pytest.importorskip("mitsuba")
+    from voxgi.mitsuba import record_reference
+
+    vox = voxgi.voxelize(voxgi.scenes.furnace_box(), 8, progress=False)
+    with pytest.raises(ValueError, match="another scene"):
+        record_reference(voxgi.scenes.cornell_box(), vox)
+    with pytest.raises(ValueError, match="spp"):
+        record_reference(voxgi.scenes.furnace_box(), vox, spp=0)

@@ -43,6 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import _validate
+from .direct import check_scene_and_records
 from .lights import DirectionalLight, Environment, SpotLight
 from .microfacet import Microfacet
 from .scene import Camera, Scene
@@ -420,10 +422,9 @@ def record_reference(
         Irradiance per record; 0 for records that do not reflect or have
         no area.
     """
+    check_scene_and_records(scene, vox)
+    spp = _validate.integer(spp, "spp", low=1, high=1 << 20)
     mi = mitsuba_module(variant)
-    spp = int(spp)
-    if spp < 1:
-        raise ValueError(f"spp: expected >= 1, got {spp}")
     cam = scene.camera if scene.camera is not None else Camera(width=2, height=2)
     sc = mi.load_dict(to_mitsuba(scene, spp=1, camera=cam, max_depth=max_depth))
     integrator = sc.integrator()
