@@ -4,10 +4,12 @@ paper's solve settings with changes (:func:`paper`)."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import signal
 
 import numpy as np
 import pytest
+import trimesh
 
 import voxgi
 
@@ -115,8 +117,6 @@ def closed_slabs(count, width, thickness, spacing, tilt_degrees, first_centre):
     trimesh), turned ``tilt_degrees`` about z, the first centred at
     ``first_centre`` and each next one ``spacing`` further along y: slats
     modelled as slabs, as interiors model blinds."""
-    import trimesh
-
     t = np.radians(tilt_degrees)
     frame = np.eye(4)
     frame[:3, 0] = [np.cos(t), np.sin(t), 0.0]
@@ -128,3 +128,20 @@ def closed_slabs(count, width, thickness, spacing, tilt_degrees, first_centre):
         b.apply_translation(np.asarray(first_centre, float) + np.array([0.0, spacing * i, 0.0]))
         slabs.append(b)
     return trimesh.util.concatenate(slabs)
+
+
+def quad(corners) -> trimesh.Trimesh:
+    """The quad with these four corners, two triangles wound 0-1-2, 0-2-3."""
+    return trimesh.Trimesh(np.asarray(corners, float), [[0, 1, 2], [0, 2, 3]], process=False)
+
+
+def irradiance_from_quad(x, n, corners) -> float:
+    """Irradiance at point x (unit normal n) from a quad of unit radiance
+    wholly in front of it: Lambert's polygon formula, ½ Σ β_i (γ_i · n)."""
+    v = [np.asarray(c, float) - x for c in corners]
+    v = [a / np.linalg.norm(a) for a in v]
+    total = 0.0
+    for a, b in zip(v, v[1:] + v[:1], strict=True):
+        g = np.cross(a, b)
+        total += math.acos(np.clip(np.dot(a, b), -1.0, 1.0)) * np.dot(g / np.linalg.norm(g), n)
+    return 0.5 * abs(total)

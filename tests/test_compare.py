@@ -222,19 +222,19 @@ def test_mitsubas_direct_light_at_the_records_is_lamberts():
     # uniformly over the hemisphere they would give the lamp's solid angle
     # instead, 25% more over the floor).
     pytest.importorskip("mitsuba")
-    from test_traced import _irradiance_from_quad, _quad
+    from conftest import irradiance_from_quad, quad
 
     from voxgi.mitsuba import record_reference
 
     scene = voxgi.Scene()
-    scene.add(_quad([[0, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]]), voxgi.Material(0.5), "floor")
+    scene.add(quad([[0, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]]), voxgi.Material(0.5), "floor")
     lamp = [[0, 0.5, 0], [1, 0.5, 0], [1, 0.5, 1], [0, 0.5, 1]]
-    scene.add(_quad(lamp), voxgi.Material(0.0, emission=1.0), "lamp")
+    scene.add(quad(lamp), voxgi.Material(0.0, emission=1.0), "lamp")
     vox = voxgi.voxelize(scene, 8, progress=False)
     E = record_reference(scene, vox, spp=1024, max_depth=1)
     floor = (np.asarray(vox.object_id) == 0) & (np.asarray(vox.normal)[:, 1] > 0.9)
     up = (0.0, 1.0, 0.0)
-    want = [_irradiance_from_quad(x, up, lamp) for x in np.asarray(vox.centroid)[floor]]
+    want = [irradiance_from_quad(x, up, lamp) for x in np.asarray(vox.centroid)[floor]]
     np.testing.assert_allclose(E[floor].mean(axis=1).mean(), np.mean(want), rtol=0.01)
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from conftest import irradiance_from_quad, quad
 
 import voxgi
 from voxgi import CONDUCTORS, Camera, Environment, Material, Microfacet, PointLight, Scene
@@ -365,10 +366,6 @@ def test_the_solves_plastic_albedo_is_mitsubas_hemispherical_reflectance(alpha, 
     assert abs(np.mean(w) - lobe.solve_albedo([base] * 3)[0]) < 4 * err + 1e-4
 
 
-def _quad(corners) -> trimesh.Trimesh:
-    return trimesh.Trimesh(np.asarray(corners, float), [[0, 1, 2], [0, 2, 3]], process=False)
-
-
 #: A near-perfect mirror: a smooth conductor whose Fresnel reflectance is 1.
 MIRROR = Microfacet("conductor", alpha=0.02, eta=(0.0, 0.0, 0.0), k=(1.0, 1.0, 1.0))
 
@@ -402,18 +399,18 @@ def _two_mirrors(follow: bool, mirror_alpha: float = 0.0) -> tuple[np.ndarray, f
     # A at the origin turns the camera's rays (-y) to +x, B at x = 2 turns
     # them to +y, onto the lamp at y = 2 facing down
     sc.add(
-        _quad([[-0.5, 0.5, -0.5], [-0.5, 0.5, 0.5], [0.5, -0.5, 0.5], [0.5, -0.5, -0.5]]),
+        quad([[-0.5, 0.5, -0.5], [-0.5, 0.5, 0.5], [0.5, -0.5, 0.5], [0.5, -0.5, -0.5]]),
         Material(0.5, specular=MIRROR),
         name="A",
     )
     sc.add(
-        _quad([[1.5, -0.5, 0.5], [2.5, 0.5, 0.5], [2.5, 0.5, -0.5], [1.5, -0.5, -0.5]]),
+        quad([[1.5, -0.5, 0.5], [2.5, 0.5, 0.5], [2.5, 0.5, -0.5], [1.5, -0.5, -0.5]]),
         Material(0.5, specular=MIRROR),
         name="B",
     )
     # (wide, so that it fills B's lobe from every point of B the rays meet)
     sc.add(
-        _quad([[0.6, 2.0, -9.0], [13.0, 2.0, -9.0], [13.0, 2.0, 9.0], [0.6, 2.0, 9.0]]),
+        quad([[0.6, 2.0, -9.0], [13.0, 2.0, -9.0], [13.0, 2.0, 9.0], [0.6, 2.0, 9.0]]),
         Material(0.0, emission=1.0),
         name="lamp",
     )
@@ -465,7 +462,7 @@ def _plastic_seen_in_a_mirror(mu_o: float):
     )
     sc = Scene(cam)
     facing = np.dot(np.cross(corners[1] - corners[0], corners[2] - corners[0]), n) > 0
-    sc.add(_quad(corners if facing else corners[::-1]), Material(0.5, specular=mirror))
+    sc.add(quad(corners if facing else corners[::-1]), Material(0.5, specular=mirror))
     far = 40.0
     v = [[-far, 0, -far], [far, 0, -far], [far, 0, far], [-far, 0, far]]
     floor = trimesh.Trimesh(v, [[0, 2, 1], [0, 3, 2]], process=False)
@@ -493,18 +490,6 @@ def test_a_plastic_seen_at_grazing_in_a_mirror_sends_its_base_light_through_its_
     np.testing.assert_allclose(got.mean(axis=0), want, rtol=0.02)
 
 
-def _irradiance_from_quad(x, n, corners) -> float:
-    """Irradiance at point x (unit normal n) from a quad of unit radiance
-    wholly in front of it: Lambert's polygon formula, ½ Σ β_i (γ_i · n)."""
-    v = [np.asarray(c, float) - x for c in corners]
-    v = [a / np.linalg.norm(a) for a in v]
-    total = 0.0
-    for a, b in zip(v, v[1:] + v[:1], strict=True):
-        g = np.cross(a, b)
-        total += math.acos(np.clip(np.dot(a, b), -1.0, 1.0)) * np.dot(g / np.linalg.norm(g), n)
-    return 0.5 * abs(total)
-
-
 def _wall_beside_a_mirror_floor(facing: float, follow: bool) -> np.ndarray:
     """The middle pixels of a grey wall patch standing on a mirror floor at
     x = -0.3 facing, ``facing`` = 1: +x, towards a lamp that hangs over the
@@ -520,10 +505,10 @@ def _wall_beside_a_mirror_floor(facing: float, follow: bool) -> np.ndarray:
         height=8,
     )
     sc = Scene(cam)
-    sc.add(_quad([[-3, 0, -3], [-3, 0, 3], [3, 0, 3], [3, 0, -3]]), Material(0.5, specular=MIRROR))
+    sc.add(quad([[-3, 0, -3], [-3, 0, 3], [3, 0, 3], [3, 0, -3]]), Material(0.5, specular=MIRROR))
     wall = [[x0, 0.2, -0.5], [x0, 1.2, -0.5], [x0, 1.2, 0.5], [x0, 0.2, 0.5]]
-    sc.add(_quad(wall if facing > 0 else wall[::-1]), Material(0.5), name="wall")
-    sc.add(_quad(LAMP), Material(0.0, emission=1.0), name="lamp")
+    sc.add(quad(wall if facing > 0 else wall[::-1]), Material(0.5), name="wall")
+    sc.add(quad(LAMP), Material(0.0, emission=1.0), name="lamp")
     return _middle_pixels(sc, follow, seed=3).mean(axis=0)
 
 
@@ -541,7 +526,7 @@ def test_a_diffuse_wall_sees_a_lamp_in_a_mirror_floor():
     # the image's light meets the floor at about 45 degrees
     r = float(MIRROR.directional_albedo((0.5,) * 3, [math.sqrt(0.5)])[0, 1])
     want = (
-        0.5 / math.pi * (_irradiance_from_quad(x, n, LAMP) + r * _irradiance_from_quad(x, n, image))
+        0.5 / math.pi * (irradiance_from_quad(x, n, LAMP) + r * irradiance_from_quad(x, n, image))
     )
     got = _wall_beside_a_mirror_floor(1.0, follow=True)
     np.testing.assert_allclose(got, want, rtol=0.02)
@@ -575,8 +560,8 @@ def _mirror_under_a_sky(mirror_alpha: float, tint: float = 0.5, seed: int = 0):
         k=(1.0, 1.0, 1.0),
         specular_reflectance=(tint,) * 3,
     )
-    quad = [[-0.4, 0.0, -0.4], [0.4, 0.0, -0.4], [0.4, 0.0, 0.4], [-0.4, 0.0, 0.4]]
-    sc.add(_quad(quad[::-1]), Material(0.5, specular=lobe), name="mirror")
+    corners = [[-0.4, 0.0, -0.4], [0.4, 0.0, -0.4], [0.4, 0.0, 0.4], [-0.4, 0.0, 0.4]]
+    sc.add(quad(corners[::-1]), Material(0.5, specular=lobe), name="mirror")
     sc.environment = Environment(1.0)
     sol = voxgi.solve(voxgi.voxelize(sc, resolution=16, progress=False), progress=False)
     out = voxgi.render(

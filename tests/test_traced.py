@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 import trimesh
+from conftest import closed_slabs, irradiance_from_quad, quad
 
 import voxgi
 from voxgi import Material
@@ -350,22 +351,6 @@ MIRROR = voxgi.Microfacet("conductor", alpha=0.02, eta=(0.0, 0.0, 0.0), k=(1.0, 
 LAMP = [[0.5, 2.0, -3.0], [3.0, 2.0, -3.0], [3.0, 2.0, 3.0], [0.5, 2.0, 3.0]]
 
 
-def _quad(corners) -> trimesh.Trimesh:
-    return trimesh.Trimesh(np.asarray(corners, float), [[0, 1, 2], [0, 2, 3]], process=False)
-
-
-def _irradiance_from_quad(x, n, corners) -> float:
-    """Irradiance at point x (unit normal n) from a quad of unit radiance
-    wholly in front of it: Lambert's polygon formula, ½ Σ β_i (γ_i · n)."""
-    v = [np.asarray(c, float) - x for c in corners]
-    v = [a / np.linalg.norm(a) for a in v]
-    total = 0.0
-    for a, b in zip(v, v[1:] + v[:1], strict=True):
-        g = np.cross(a, b)
-        total += math.acos(np.clip(np.dot(a, b), -1.0, 1.0)) * np.dot(g / np.linalg.norm(g), n)
-    return 0.5 * abs(total)
-
-
 def _wall_on_a_mirror_floor(facing: float):
     """The default solve (resolution 64) of a grey wall (albedo 0.5) standing
     on a mirror floor at x = -0.3 facing +x, towards the lamp and its image
@@ -374,10 +359,10 @@ def _wall_on_a_mirror_floor(facing: float):
     x0 = -0.3 * facing
     sc = voxgi.Scene()
     floor = [[-3, 0, -3], [-3, 0, 3], [3, 0, 3], [3, 0, -3]]
-    sc.add(_quad(floor), Material(0.5, specular=MIRROR), name="floor")
+    sc.add(quad(floor), Material(0.5, specular=MIRROR), name="floor")
     wall = [[x0, 0.2, -0.5], [x0, 1.2, -0.5], [x0, 1.2, 0.5], [x0, 0.2, 0.5]]
-    sc.add(_quad(wall if facing > 0 else wall[::-1]), Material(0.5), name="wall")
-    sc.add(_quad(LAMP), Material(0.0, emission=1.0), name="lamp")
+    sc.add(quad(wall if facing > 0 else wall[::-1]), Material(0.5), name="wall")
+    sc.add(quad(LAMP), Material(0.0, emission=1.0), name="lamp")
     sol = voxgi.solve(voxgi.voxelize(sc, resolution=64), progress=False)
     c = np.asarray(sol.vox.centroid)
     inner = (
@@ -415,7 +400,7 @@ def test_a_wall_facing_a_lamp_over_a_mirror_floor_gets_the_lamps_image_too():
     image = [[a, -b, c] for a, b, c in LAMP]
     r = float(MIRROR.directional_albedo((0.5,) * 3, [math.sqrt(0.5)])[0, 1])
     want = [
-        0.5 * (_irradiance_from_quad(x, n, LAMP) + r * _irradiance_from_quad(x, n, image))
+        0.5 * (irradiance_from_quad(x, n, LAMP) + r * irradiance_from_quad(x, n, image))
         for x in np.asarray(sol.vox.centroid)[inner]
     ]
     got = np.asarray(sol.radiosity, np.float64)[inner]
@@ -426,8 +411,6 @@ def _furnace_with_slats(emits: bool = True) -> voxgi.Scene:
     """The furnace box (albedo 0.5, every surface emitting radiance 1) with
     six closed slabs 2 cm wide, 2 mm thick and 1.5 cm apart inside, of the
     same material: several slabs to a voxel at resolution 32."""
-    from conftest import closed_slabs
-
     scene = voxgi.scenes.furnace_box(albedo=0.5, emission=1.0)
     slats = closed_slabs(6, 0.02, 0.002, 0.015, 40.0, (0.0, -0.04, 0.0))
     scene.add(slats, Material(0.5, emission=1.0 if emits else 0.0), name="slats")
