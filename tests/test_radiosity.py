@@ -1073,3 +1073,19 @@ def test_one_white_object_does_not_hold_the_lines_to_its_albedo():
     w = vox.area[:, None]
     err = float((w * np.abs(sol.radiosity - tight.radiosity)).sum() / (w * tight.radiosity).sum())
     assert err < 1e-3
+
+
+def test_the_records_no_ray_chain_links_to_direct_light_are_found():
+    # Records 0..4, record i's rays reading the columns listed: 0 is lit; 1
+    # reads 0; 2 reads 1 (a chain of two); 3 and 4 read only each other (a
+    # pocket no light enters, whatever the lines left there).
+    from voxgi.radiosity.traced_passes import unreached_records
+
+    rows = [[], [0], [1], [4], [3]]
+    row_ptr = np.cumsum([0] + [len(r) for r in rows])
+    column = np.array([c for r in rows for c in r], np.int32)
+    matrix = (row_ptr, column, np.ones((len(column), 3), np.float32))
+    lit = np.array([True, False, False, False, False])
+    np.testing.assert_array_equal(unreached_records(lit, matrix), [False, False, False, True, True])
+    lit[3] = True
+    assert not unreached_records(lit, matrix).any()

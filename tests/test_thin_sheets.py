@@ -64,14 +64,19 @@ def test_a_traced_pass_reads_nothing_across_the_wall(split):
 
 def test_the_solve_keeps_the_dark_room_dark():
     # The solve's defaults (the render's): the exact direct light and the
-    # traced passes leave in the dark room only what the lines' first guess
-    # put there, shrunk pass by pass.
+    # traced passes bring the dark room nothing, and the light the lines'
+    # first guess put there through the wall is taken out, since no chain
+    # of the first pass's rays links the dark room to a directly lit record
+    # (left to fade pass by pass, it stayed at up to 2e-8 a record).
     vox = voxgi.voxelize(split_box("sheet"), RES, progress=False)
     dark, lit, _ = rooms(vox, "sheet")
     sol = voxgi.solve(vox, progress=False)
     L = sol.radiance.mean(axis=1) * vox.area
-    ratio = (L[dark].sum() / vox.area[dark].sum()) / (L[lit].sum() / vox.area[lit].sum())
-    assert ratio <= 1e-3
+    assert L[lit].sum() > 0
+    assert L[dark].max() == 0.0
+    traced = sol.stats["traced"]
+    assert traced["unreached_records"] >= dark.sum()
+    assert min(traced["leaked_power"]) > 0  # the lines did leak
 
 
 @pytest.mark.parametrize("wall", ["slab", "two-sided slab"])

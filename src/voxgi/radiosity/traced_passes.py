@@ -7,6 +7,8 @@ import time
 import warnings
 
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import breadth_first_order
 
 from ..traced import TracedGather, stacked_records, transport_bytes
 from ..voxels import available_memory
@@ -109,6 +111,27 @@ _TRAP_LOSS = 0.02
 #: of its light; above it the kept rays may turn out trapped, and the fresh
 #: passes that then follow should start from lines converged to ``tol``.
 _KEPT_ALBEDO_MAX = 1.0 - _TRAP_LOSS
+
+
+def unreached_records(lit: np.ndarray, matrix: tuple) -> np.ndarray:
+    """(N,) bool: the records that no chain of the kept rays links to a
+    ``lit`` record (one with direct light), where ``matrix`` (row_ptr,
+    column, weight) holds, per record, the records its rays read. Light
+    reaches a record only along such a chain, so whatever light the lines
+    left on an unreached record leaked there through a wall thinner than a
+    voxel (``docs/design.md`` §5)."""
+    row_ptr, column, _ = matrix
+    n = len(row_ptr) - 1
+    # an edge from each record read to its reader, and from a source node
+    # (n) to every lit record
+    reader = np.repeat(np.arange(n, dtype=np.int64), np.diff(row_ptr))
+    lit_ids = np.flatnonzero(lit)
+    src = np.concatenate([np.asarray(column, np.int64), np.full(len(lit_ids), n)])
+    dst = np.concatenate([reader, lit_ids])
+    graph = csr_matrix((np.ones(len(src), bool), (src, dst)), shape=(n + 1, n + 1))
+    reached = np.zeros(n + 1, bool)
+    reached[breadth_first_order(graph, n, directed=True, return_predecessors=False)] = True
+    return ~reached[:n]
 
 
 def trapped_records(rho: np.ndarray, matrix: tuple) -> np.ndarray:
@@ -235,6 +258,7 @@ def traced_bounces(
     lam_bound = float(min(max(float(p.rho.max()), 0.5), 1 - 1e-6))
     residuals = []
     beyond = None
+    n_unreached, leaked = None, None
     keep, why_fresh = keeps_rays(p)
     if why_fresh is not None:
         p.stats["skipped"]["traced_cache"] = why_fresh
@@ -261,6 +285,17 @@ def traced_bounces(
         else:
             gathered, H_m = trace(R, opt.traced_samples, seed=1, keep=keep), 0.0
         R_new = p.rho * (Hd + H_m + gathered)
+        if keep and trace.matrix is not None:
+            # The lines' light on records no ray chain links to direct light
+            # leaked there through thin walls: nothing would remove it but
+            # the passes' slow fading among those records.
+            lit = np.any(Hd > 0, axis=1) | np.any(np.asarray(H_m) > 0, axis=-1)
+            unreached = unreached_records(lit, trace.matrix)
+            n_unreached = int(np.count_nonzero(unreached))
+            if n_unreached:
+                leaked = (np.where(unreached[:, None], R, 0.0) * area).sum(axis=0).tolist()
+                R = np.where(unreached[:, None], 0.0, R)
+                R_new = p.rho * (Hd + H_m + trace.apply(R))
         t_first = time.perf_counter() - t_first
         if keep and trace.matrix is not None:
             trapped = trapped_records(p.rho, trace.matrix)
@@ -370,5 +405,10 @@ def traced_bounces(
         # records of stacks of sheets finer than a voxel, where a ray that
         # lands bounces once more (docs/design.md §5)
         "stacked_records": sheets,
+        # records no chain of the first pass's rays links to direct light,
+        # and the lines' reflected power on them (leaked through thin
+        # walls), set to zero; None where the first pass's rays were not kept
+        "unreached_records": n_unreached,
+        "leaked_power": leaked,
     }
     return R
