@@ -25,7 +25,7 @@ import numpy as np
 from . import _core, _validate
 from .direct import check_scene_and_records
 from .incidence import IncidenceResponse
-from .microfacet import LOBE_WIDTH, Microfacet
+from .microfacet import LOBE_WIDTH
 from .rays import Tracer
 from .scene import Scene
 from .voxels import VoxelSet
@@ -181,21 +181,14 @@ def conductor_lobes(scene: Scene) -> dict:
     (``docs/design.md`` §14, "Rays through mirrors in the solve"):
     ``obj_lobe`` (O, LOBE_WIDTH) float32 and ``mat_continue`` (O,) uint8;
     {} where the scene has no such conductor."""
-    spec = [o.material.specular for o in scene.objects]
     follow = np.array(
-        [
-            isinstance(s, Microfacet)
-            and s.kind == "conductor"
-            and not np.any(np.asarray(o.material.emission) > 0)
-            for s, o in zip(spec, scene.objects, strict=True)
-        ],
-        bool,
+        [o.material.is_conductor and not o.material.is_emitter for o in scene.objects], bool
     )
     if not follow.any():
         return {}
-    lobes = np.zeros((len(spec), LOBE_WIDTH), np.float32)
+    lobes = np.zeros((len(follow), LOBE_WIDTH), np.float32)
     for i in np.flatnonzero(follow):
-        lobes[i] = spec[i].lobe_row()
+        lobes[i] = scene.objects[i].material.specular.lobe_row()
     return {"obj_lobe": lobes, "mat_continue": follow.astype(np.uint8)}
 
 

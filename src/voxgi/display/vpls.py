@@ -21,8 +21,7 @@ def continuing_objects(scene):
     (docs/design.md §14); or None where there is none."""
     flag = np.array(
         [
-            isinstance(o.material.specular, Microfacet)
-            and not np.any(np.asarray(o.material.emission) > 0)
+            isinstance(o.material.specular, Microfacet) and not o.material.is_emitter
             for o in scene.objects
         ],
         np.uint8,
