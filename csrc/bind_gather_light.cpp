@@ -349,10 +349,11 @@ float32 (each record's emitted radiance, rec_packed's order) and
 emitted_out (P, 3) float32, a ray that follows a lobe also adds the light
 it reads of the emitter where the lobe's ray lands into emitted_out.
 With rec_stacked (N,) uint8 (rec_packed's order), a ray that lands on a
-record marked 1 (a sheet of a stack finer than a voxel) reads, instead of
-the record, its albedo times the record where one cosine-distributed ray
-from the landing point lands, as a lobe's ray is read (the transport and
-emitted_out alike).
+record marked 1 or 2 (a sheet of a stack finer than a voxel; 2: one that
+emits) reads, instead of the record, its albedo times the record where one
+cosine-distributed ray from the landing point lands, as a lobe's ray is
+read (the transport and emitted_out alike); where that ray lands on a
+record marked 1 it bounces on in the same way, up to 8 bounces in all.
 With reach > 0 and obj_emits (O,) uint8 (1: the object emits), a ray that
 lands nearer than reach to its pixel's point on a diffuse object that does
 not emit continues one bounce: its albedo times one cosine-distributed ray

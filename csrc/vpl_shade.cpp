@@ -626,25 +626,44 @@ int near_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
     return rays;
 }
 
+// Bounces a ray takes within a stack of sheets at most (follow_sheet): at
+// a sheet's albedo of 0.9, 0.9^8 = 0.43 of the light it carries is left to
+// the record read at the last one.
+constexpr int kSheetBounces = 8;
+
 // The light leaving a stacked sheet's hit h (record rec, ratio: the
-// texture's over the record's albedo) towards the ray's origin, from one
-// more bounce at the hit point rather than the record's mean: a slat's
-// record gives its lit edge and its shaded middle one radiosity, and what a
-// ray sees of the slat is the part the slats around it leave in view. One
-// cosine-distributed ray from the hit point, its albedo times the
-// radiance of the record where that lands. Returns that record (-1: none)
-// with `factor`, the albedo times the sheets' transmittance on the way.
+// texture's over the record's albedo) towards the ray's origin, from
+// bounces at the hit point rather than the record's mean: a slat's record
+// gives its lit edge and its shaded middle one radiosity, and what a ray
+// sees of the slat is the part the slats around it leave in view. One
+// cosine-distributed ray from the hit point; where it lands on another
+// stacked sheet that does not emit (grid.stacked 1) it bounces there again
+// (up to kSheetBounces, the last one read as its record's mean), as light
+// passed on between nearly closed slats does. Returns the record read (-1: none) with `factor`, the
+// albedos on the way (the records' after the first) times the sheets'
+// transmittance.
 int64_t follow_sheet(const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
                      double eps, const GatherHit& h, int64_t rec, const float ratio[3],
                      uint64_t& rng, LookupScratch& scratch, double factor[3]) {
-    float wi[3], ro[3], T[3];
-    cosine_direction(h.ns, rng, wi);
-    GatherHit g;
-    trace_on(tris, grid, scene, eps, h, wi, ro, T, g);
-    for (int ch = 0; ch < 3; ++ch)
-        factor[ch] = double(grid.rec[rec].albedo[ch]) * ratio[ch] * T[ch];
-    if (g.escaped || g.key < 0) return -1;
-    return lookup_in_cell(grid, g.y, g.ns, g.obj, g.c, g.tri, g.front, scratch);
+    for (int ch = 0; ch < 3; ++ch) factor[ch] = double(grid.rec[rec].albedo[ch]) * ratio[ch];
+    if (!(factor[0] > 0.0 || factor[1] > 0.0 || factor[2] > 0.0)) return -1;  // a black sheet
+    GatherHit at = h;
+    int64_t q = -1;
+    for (int bounce = 0; bounce < kSheetBounces; ++bounce) {
+        float wi[3], ro[3], T[3];
+        cosine_direction(at.ns, rng, wi);
+        GatherHit g;
+        trace_on(tris, grid, scene, eps, at, wi, ro, T, g);
+        for (int ch = 0; ch < 3; ++ch) factor[ch] *= T[ch];
+        if (g.escaped || g.key < 0) return -1;
+        q = lookup_in_cell(grid, g.y, g.ns, g.obj, g.c, g.tri, g.front, scratch);
+        if (q < 0 || grid.stacked[q] != 1) return q;  // (2: an emitter, read)
+        if (bounce + 1 == kSheetBounces) break;
+        for (int ch = 0; ch < 3; ++ch) factor[ch] *= grid.rec[q].albedo[ch];
+        if (!(factor[0] > 0.0 || factor[1] > 0.0 || factor[2] > 0.0)) return -1;  // black
+        at = g;
+    }
+    return q;
 }
 
 // The gather rays' own density for pixel p's ray h onto record rec: the MIS

@@ -73,6 +73,8 @@ def record_grid(
     *,
     dense_cells: int = DENSE_TABLE_CELLS,
     share: np.ndarray | None = None,
+    stacked: np.ndarray | None = None,
+    pieces: bool = False,
 ) -> dict:
     """The records sorted by voxel, as the compiled gather kernels look them up.
 
@@ -94,6 +96,14 @@ def record_grid(
         The base's share of each record's light, which a gather ray that
         follows a glossy record's lobe reads (``docs/design.md`` §14): then
         also ``rec_share`` in the records' key order.
+    stacked : (N,) bool or None
+        The records where a gather ray bounces once more rather than read
+        the record (:func:`stacked_records`): then also ``rec_stacked`` in
+        the records' key order.
+    pieces : bool
+        Also the table of each triangle's pieces (``piece_*``), by which a
+        ray reads the record of the piece it lands on, where ``vox`` holds
+        its pieces (:attr:`VoxelSet.piece_record`).
 
     Returns
     -------
@@ -108,7 +118,21 @@ def record_grid(
     out = _record_grid(vox, centre, radiance, pa, order, dense_cells)
     if share is not None:
         out["rec_share"] = np.ascontiguousarray(np.asarray(share, np.float32)[order[3]])
+    if stacked is not None:
+        out["rec_stacked"] = sheet_codes(vox, stacked)[order[3]]
+    if pieces:
+        out.update(_piece_table(vox, order[2], order[3]))
     return out
+
+
+def sheet_codes(vox: VoxelSet, stacked: np.ndarray) -> np.ndarray:
+    """(N,) uint8, the kernels' ``rec_stacked``: 0 where a ray reads the
+    record; 1 for a stacked sheet (:func:`stacked_records`), where a ray
+    bounces on; 2 for one that emits, where a ray that lands first bounces
+    on but one bounced there from another sheet stops and reads it, its
+    emitted light with it (``docs/design.md`` §5)."""
+    emits = np.any(np.asarray(vox.emission) > 0, axis=1)
+    return np.ascontiguousarray(np.asarray(stacked, bool) * (1 + emits), np.uint8)
 
 
 def _record_grid(vox, centre, radiance, pa, voxel_order, dense_cells=DENSE_TABLE_CELLS) -> dict:
@@ -354,9 +378,7 @@ class TracedGather:
             stacked = stacked_records(source)
             self.sheets = int(np.count_nonzero(stacked))
             if self.sheets:
-                self._lobes["rec_stacked"] = np.ascontiguousarray(
-                    stacked[voxel_order[3]].astype(np.uint8)
-                )
+                self._lobes["rec_stacked"] = sheet_codes(source, stacked)[voxel_order[3]]
         #: Whether some rays go on past where they land (a conductor's lobe, a
         #: stacked sheet); then a pass can also give the emitters' light those
         #: rays find (``emitted``).
