@@ -17,7 +17,7 @@ from .executor import FrameExecutor, FrameShaderSpec
 from .pixel_filter import _FILTER_REACH
 from .seen_emission import skip_reason
 from .settings import RenderTuning, _check_executor, _check_render, _check_solution, _RenderSettings
-from .vpls import VPLSampler, base_share, continuing_objects
+from .vpls import VPLSampler, base_share, continuing_objects, followed_sheets
 
 __all__ = ["RenderResult", "render"]
 
@@ -147,6 +147,9 @@ def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
     share = None
     if opt.gather > 0 and opt.follow_lobes:
         share = base_share(scene, sol, continuing_objects(scene))
+    # gather rays bounce once more on stacked sheets, whose light then
+    # comes by those rays alone (docs/design.md §6)
+    sheets = followed_sheets(scene, sol) if opt.gather > 0 else None
     sampler = VPLSampler(
         sol,
         opt.K,
@@ -156,6 +159,7 @@ def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
         pdf=opt.vpl_pdf,
         on_surface=opt.vpl_on_surface,
         follow_share=share,
+        gather_only=sheets,
     )
     diag = float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
     # Shadow-ray offsets: well above float32 rounding of the coordinates

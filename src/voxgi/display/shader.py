@@ -183,6 +183,8 @@ class _FrameShader:
                 sampler.B / math.pi,
                 sampler.record_pa,
                 share=sampler.share if self.mat_continue is not None else None,
+                stacked=sampler.gather_only,
+                pieces=True,
             )
             self._tri = {
                 "tri_v": tracer.tris,

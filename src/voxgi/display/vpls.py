@@ -12,7 +12,7 @@ from ..incidence import NODES
 from ..lights import LUMINANCE
 from ..microfacet import Microfacet
 
-__all__ = ["VPLSampler", "continuing_objects", "place_vpls"]
+__all__ = ["VPLSampler", "continuing_objects", "followed_sheets", "place_vpls"]
 
 
 def continuing_objects(scene):
@@ -27,6 +27,24 @@ def continuing_objects(scene):
         np.uint8,
     )
     return flag if flag.any() else None
+
+
+def followed_sheets(scene, sol) -> np.ndarray | None:
+    """(N,) bool: the records of stacked sheets (:func:`voxgi.traced.stacked_records`)
+    that do not emit, where the display's gather rays bounce on
+    rather than read the record's mean, and whose light therefore comes to
+    a pixel by those rays alone, not by VPLs (``docs/design.md`` §6); None
+    where there are none, or where the scene has point lights or an
+    environment, whose light that bounce cannot find."""
+    from ..traced import stacked_records
+
+    if scene.lights or scene.environment is not None:
+        return None
+    vox = sol.vox
+    # a ray reads an emitter's light where it lands, the light it sends and
+    # the light it reflects, which MIS shares with its VPLs
+    sheets = stacked_records(vox) & ~np.any(np.asarray(vox.emission) > 0, axis=1)
+    return sheets if sheets.any() else None
 
 
 def base_outgoing(scene) -> np.ndarray:
@@ -150,6 +168,12 @@ class VPLSampler:
         Each VPL of a frame sits at a point drawn uniformly on its record's
         own surface (``docs/design.md`` §6) instead of at the
         record's fixed centroid.
+    follow_share : (N, 3) or None
+        The share of each record's light its VPLs bring a pixel whose
+        gather rays follow the lobes (:func:`base_share`).
+    gather_only : (N,) bool or None
+        Records left out of the tables, with MIS only: the gather rays
+        alone bring their light (:func:`followed_sheets`).
     """
 
     def __init__(
@@ -162,6 +186,7 @@ class VPLSampler:
         pdf: str = "power",
         on_surface: bool = True,
         follow_share: np.ndarray | None = None,
+        gather_only: np.ndarray | None = None,
     ):
         if pdf not in ("power", "area"):
             raise ValueError(f"pdf: expected 'power' or 'area', got {pdf!r}")
@@ -174,6 +199,12 @@ class VPLSampler:
         back = np.asarray(vox.back, dtype=bool) if vox.back is not None else np.zeros(n, bool)
         emit = np.any(np.asarray(vox.emission) > 0, axis=1) & ~back
         useful = ~back & (area > 0) & np.any(B > 0, axis=1)
+        #: (N,) bool or None: the records left out of the tables because the
+        #: gather rays alone bring their light (followed_sheets; with MIS only)
+        self.gather_only = None
+        if gather_only is not None and mis:
+            self.gather_only = _validate.as_c_array(gather_only, bool, (n,), "gather_only")
+            useful &= ~self.gather_only
         self.skipped_records = int(n - useful.sum())
         order = np.argsort(_morton(np.asarray(vox.ijk)), kind="stable")
         lum = B @ LUMINANCE
