@@ -153,7 +153,7 @@ int64_t gather_light_py(
     const std::optional<U32>& piece_side, const std::optional<I64>& piece_plane_first,
     const std::optional<F64>& piece_plane, const std::optional<F32>& obj_lobe,
     const std::optional<F32>& rec_emitted, std::optional<F32Out> emitted_out,
-    const std::optional<U8>& rec_stacked) {
+    const std::optional<U8>& rec_stacked, bool pieces_for_sheets) {
     voxgi::ShadeMaterials mats =
         materials(mat_albedo, mat_rs, mat_nu, mat_nv, mat_glossy, mat_lobe);
     if (mat_response) {
@@ -262,6 +262,9 @@ int64_t gather_light_py(
         check_1d(*rec_stacked, grid.count, "rec_stacked");
         grid.stacked = rec_stacked->data();
     }
+    if (pieces_for_sheets && !(rec_stacked && grid.piece_first))
+        throw py::value_error("pieces_for_sheets needs rec_stacked and the piece_* tables");
+    grid.pieces_for_sheets = pieces_for_sheets;
     voxgi::LobeEmission lobe_emission;
     if (rec_emitted.has_value() != emitted_out.has_value())
         throw py::value_error("rec_emitted and emitted_out go together");
@@ -287,34 +290,34 @@ int64_t gather_light_py(
 }  // namespace
 
 void bind_gather_light(py::module_& m) {
-    m.def("gather_light", &gather_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
-          "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
-          "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
-          "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "seed"_a, "frame"_a,
-          "eps"_a, "tri_v"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),
-          "rec_sorted_key"_a.noconvert(), "rec_cell_start"_a.noconvert(),
-          "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(),
-          "grid_origin"_a.noconvert(), "pitch"_a, "scene"_a, "out"_a.noconvert(), "threads"_a = 0,
-          "env_radiance"_a.noconvert() = py::none(), "env_to_world"_a.noconvert() = py::none(),
-          "env_texel_pdf"_a.noconvert() = py::none(),
-          "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
-          "hit_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
-          "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
-          "corner_uv"_a.noconvert() = py::none(), "mat_lobe"_a.noconvert() = py::none(),
-          "transport_record"_a.noconvert() = py::none(),
-          "transport_weight"_a.noconvert() = py::none(), "mat_response"_a.noconvert() = py::none(),
-          "mat_continue"_a.noconvert() = py::none(), "rec_share"_a.noconvert() = py::none(),
-          "env_guide"_a = py::none(), "mat_base_out"_a.noconvert() = py::none(),
-          "obj_emits"_a.noconvert() = py::none(), "reach"_a = 0.0,
-          "emitter_pos"_a.noconvert() = py::none(), "emitter_normal"_a.noconvert() = py::none(),
-          "emitter_radiance"_a.noconvert() = py::none(),
-          "emitter_density"_a.noconvert() = py::none(), "emitter_per_set"_a = 1.0,
-          "piece_first"_a.noconvert() = py::none(), "piece_key"_a.noconvert() = py::none(),
-          "piece_record"_a.noconvert() = py::none(), "piece_side"_a.noconvert() = py::none(),
-          "piece_plane_first"_a.noconvert() = py::none(), "piece_plane"_a.noconvert() = py::none(),
-          "obj_lobe"_a.noconvert() = py::none(), "rec_emitted"_a.noconvert() = py::none(),
-          "emitted_out"_a.noconvert() = py::none(), "rec_stacked"_a.noconvert() = py::none(),
-          R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
+    m.def(
+        "gather_light", &gather_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
+        "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
+        "mat_albedo"_a.noconvert(), "mat_rs"_a.noconvert(), "mat_nu"_a.noconvert(),
+        "mat_nv"_a.noconvert(), "mat_glossy"_a.noconvert(), "n_gather"_a, "seed"_a, "frame"_a,
+        "eps"_a, "tri_v"_a.noconvert(), "tri_object"_a.noconvert(), "obj_two_sided"_a.noconvert(),
+        "rec_sorted_key"_a.noconvert(), "rec_cell_start"_a.noconvert(), "rec_packed"_a.noconvert(),
+        "grid_dims"_a.noconvert(), "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a,
+        "scene"_a, "out"_a.noconvert(), "threads"_a = 0, "env_radiance"_a.noconvert() = py::none(),
+        "env_to_world"_a.noconvert() = py::none(), "env_texel_pdf"_a.noconvert() = py::none(),
+        "env_row_solid_angle"_a.noconvert() = py::none(), "env_samples"_a = 0.0,
+        "hit_albedo"_a.noconvert() = py::none(), "tex_texels"_a = py::none(),
+        "tex_info"_a.noconvert() = py::none(), "obj_texture"_a.noconvert() = py::none(),
+        "corner_uv"_a.noconvert() = py::none(), "mat_lobe"_a.noconvert() = py::none(),
+        "transport_record"_a.noconvert() = py::none(),
+        "transport_weight"_a.noconvert() = py::none(), "mat_response"_a.noconvert() = py::none(),
+        "mat_continue"_a.noconvert() = py::none(), "rec_share"_a.noconvert() = py::none(),
+        "env_guide"_a = py::none(), "mat_base_out"_a.noconvert() = py::none(),
+        "obj_emits"_a.noconvert() = py::none(), "reach"_a = 0.0,
+        "emitter_pos"_a.noconvert() = py::none(), "emitter_normal"_a.noconvert() = py::none(),
+        "emitter_radiance"_a.noconvert() = py::none(), "emitter_density"_a.noconvert() = py::none(),
+        "emitter_per_set"_a = 1.0, "piece_first"_a.noconvert() = py::none(),
+        "piece_key"_a.noconvert() = py::none(), "piece_record"_a.noconvert() = py::none(),
+        "piece_side"_a.noconvert() = py::none(), "piece_plane_first"_a.noconvert() = py::none(),
+        "piece_plane"_a.noconvert() = py::none(), "obj_lobe"_a.noconvert() = py::none(),
+        "rec_emitted"_a.noconvert() = py::none(), "emitted_out"_a.noconvert() = py::none(),
+        "rec_stacked"_a.noconvert() = py::none(), "pieces_for_sheets"_a = false,
+        R"doc(Cosine-distributed gather rays (n_gather per shaded pixel, stratified,
 hashed from seed/frame/pixel), traced in scene (a RayScene built from tri_v)
 as they are made, each shaded with the radiance of the record at its hit
 point (rec_*, grid_*, pitch: voxgi.traced.record_grid), MIS-weighted against
@@ -354,6 +357,9 @@ emits) reads, instead of the record, its albedo times the record where one
 cosine-distributed ray from the landing point lands, as a lobe's ray is
 read (the transport and emitted_out alike); where that ray lands on a
 record marked 1 it bounces on in the same way, up to 8 bounces in all.
+With the piece_* tables a ray reads the record of the piece of the
+triangle it lands on; with pieces_for_sheets only to tell whether that is
+a stacked sheet and to walk the stack, every other lookup searching.
 With reach > 0 and obj_emits (O,) uint8 (1: the object emits), a ray that
 lands nearer than reach to its pixel's point on a diffuse object that does
 not emit continues one bounce: its albedo times one cosine-distributed ray

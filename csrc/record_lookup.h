@@ -40,8 +40,9 @@ struct RecordGrid {
     const float* share = nullptr;
     // (N,) in the order of sorted_key, or null: 1 for a record of a stack of
     // sheets finer than a voxel, whose light a gather ray does not read as
-    // the record's mean but from one more bounce at the point it lands on
-    // (the solve's traced passes; follow_sheet in vpl_shade.cpp)
+    // the record's mean but from bounces on from the point it lands on
+    // (follow_sheet in vpl_shade.cpp); 2 for one that also emits, where a
+    // ray bounced on from another sheet stops
     const uint8_t* stacked = nullptr;
     // Or null: the records of each triangle's pieces (VoxelSet.piece_record).
     // Triangle t < piece_tris has entries [piece_first[t], piece_first[t + 1]),
@@ -57,6 +58,10 @@ struct RecordGrid {
     const uint32_t* piece_side = nullptr;
     const int64_t* piece_plane_first = nullptr;
     const double* piece_plane = nullptr;
+    // The pieces are read only to find the stacked sheets a ray lands on and
+    // to walk them; every other lookup searches (the display's gather rays:
+    // docs/design.md §6).
+    bool pieces_for_sheets = false;
 };
 
 // The voxel of the grid that holds y.

@@ -767,10 +767,15 @@ void gather_escape_light(const ShadeHits& hits, const ShadeMaterials& mats, cons
 
 void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const ShadeMIS& mis,
                   int n_gather, uint64_t seed, int64_t frame, double eps,
-                  const ShadeTriangles& tris, const RecordGrid& grid, const EnvironmentMap* env,
+                  const ShadeTriangles& tris, const RecordGrid& pieces, const EnvironmentMap* env,
                   const RayScene& scene, float* out, int64_t* rays, int threads,
                   const StopCheck& stop, const GatherTransport* transport,
                   const LobeEmission* emitted) {
+    // `grid` answers every lookup but the stacked sheets' (searching, where
+    // the pieces are only for those: RecordGrid::pieces_for_sheets)
+    RecordGrid searching = pieces;
+    if (pieces.pieces_for_sheets) searching.piece_first = nullptr;
+    const RecordGrid& grid = searching;
     const uint64_t base = gather_base(seed, frame);
     const int64_t P = hits.count;
     if (n_gather <= 0) {
@@ -830,10 +835,20 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                 for (int k = 0; k < n_gather; ++k) {
                     if (transport) record_transport(*transport, int64_t(n_gather) * (p - 2) + k);
                     if (h[k].key == -2) continue;
-                    const int64_t rec = lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c,
-                                                       h[k].tri, h[k].front, scratch);
+                    int64_t rec = lookup_in_cell(grid, h[k].y, h[k].ns, h[k].obj, h[k].c, h[k].tri,
+                                                 h[k].front, scratch);
                     const bool lobe = rec >= 0 && continues(mats, hits.material[p - 2], h[k]);
-                    const bool sheet = !lobe && rec >= 0 && grid.stacked && grid.stacked[rec];
+                    bool sheet = false;
+                    if (!lobe && rec >= 0 && grid.stacked) {
+                        // a stacked sheet is told by the piece the ray landed on
+                        const int64_t at =
+                            pieces.pieces_for_sheets
+                                ? lookup_in_cell(pieces, h[k].y, h[k].ns, h[k].obj, h[k].c,
+                                                 h[k].tri, h[k].front, scratch)
+                                : rec;
+                        sheet = at >= 0 && grid.stacked[at];
+                        if (sheet) rec = at;
+                    }
                     if (lobe || sheet) {
                         float ratio[3] = {1.f, 1.f, 1.f};
                         const MicrofacetLobe* hl =
@@ -852,8 +867,8 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                             q = glossy_hit_radiance(mats, tris, grid, env, scene, eps, h[k], rec,
                                                     ratio, rng, scratch, L, coat, factor);
                         } else {
-                            q = follow_sheet(tris, grid, scene, eps, h[k], rec, ratio, rng, scratch,
-                                             factor);
+                            q = follow_sheet(tris, pieces, scene, eps, h[k], rec, ratio, rng,
+                                             scratch, factor);
                             if (q >= 0)
                                 for (int ch = 0; ch < 3; ++ch)
                                     coat[ch] = float(factor[ch] * grid.rec[q].radiance[ch]);

@@ -1071,3 +1071,40 @@ def test_near_gather_rays_read_their_records_where_a_delta_light_shines():
     assert np.array_equal(out[0.0].image, out[1.0].image)
     assert any(s.startswith("near bounce") for s in out[1.0].stats["skipped"])
     assert not any(s.startswith("near bounce") for s in out[0.0].stats["skipped"])
+
+
+def test_the_stacked_sheets_that_do_not_emit_leave_the_vpl_tables():
+    # Their light comes to a pixel by the gather rays, which walk the stack;
+    # a VPL would bring the record's mean (docs/design.md §6). Emitting
+    # sheets, and scenes with point lights, keep their VPLs.
+    from conftest import closed_slabs
+
+    from voxgi.display.vpls import VPLSampler, followed_sheets
+
+    def scene(emits: bool, light: bool = False) -> voxgi.Scene:
+        s = voxgi.scenes.furnace_box(albedo=0.5, emission=1.0)
+        slats = closed_slabs(6, 0.02, 0.002, 0.015, 40.0, (0.0, -0.04, 0.0))
+        s.add(slats, voxgi.Material(0.5, emission=1.0 if emits else 0.0), name="slats")
+        if light:
+            s.add_light(voxgi.PointLight((0.0, 0.3, 0.0), (1.0, 1.0, 1.0)))
+        return s
+
+    s = scene(False)
+    sol = voxgi.solve(voxgi.voxelize(s, 32, progress=False), progress=False)
+    sheets = followed_sheets(s, sol)
+    back = np.asarray(sol.vox.back, bool)
+    np.testing.assert_array_equal(sheets, voxgi.traced.stacked_records(sol.vox) & ~back)
+    sampler = VPLSampler(sol, 16, mis=True, gather_only=sheets)
+    lit = ~np.asarray(sol.vox.back, bool) & (np.asarray(sol.radiosity).max(axis=1) > 0)
+    assert np.all(sampler.record_pa[sheets] == 0)
+    assert np.all(sampler.record_pa[lit & ~sheets] > 0)
+    # without MIS there are no gather rays to bring that light: all stay
+    assert VPLSampler(sol, 16, mis=False, gather_only=sheets).gather_only is None
+
+    def followed(s: voxgi.Scene):
+        return followed_sheets(
+            s, voxgi.solve(voxgi.voxelize(s, 32, progress=False), progress=False)
+        )
+
+    assert followed(scene(True)) is None
+    assert followed(scene(False, light=True)) is None

@@ -445,3 +445,34 @@ def test_a_furnace_with_stacked_slats_stays_exact():
     b = np.asarray(sol.radiosity, np.float64)[inside]
     assert b.mean() == pytest.approx(2 * np.pi, rel=1e-3)
     np.testing.assert_allclose(b, 2 * np.pi, rtol=0.02)
+
+
+def test_the_sheet_codes_stop_a_walk_at_an_emitter():
+    # 1: a stacked sheet a bounced ray walks on through; 2: one that emits,
+    # where a walk stops and reads its light; 0: any other record.
+    for emits, code in ((False, 1), (True, 2)):
+        vox = voxgi.voxelize(_furnace_with_slats(emits), 32, progress=False)
+        stacked = voxgi.traced.stacked_records(vox)
+        codes = voxgi.traced.sheet_codes(vox, stacked)
+        # (the slabs' inner sides are black back records, which emit nothing)
+        slats = (np.asarray(vox.object_id) == 1) & ~np.asarray(vox.back, bool)
+        assert set(np.unique(codes[stacked & slats])) == {code}
+        assert not codes[~stacked].any()
+
+
+def test_the_display_grid_reads_pieces_only_to_walk_the_sheets():
+    # The display's gather rays search for the record they land on, as they
+    # always have, and read the pieces only to tell a stacked sheet and walk
+    # it; the solve's rays read the pieces everywhere.
+    vox = voxgi.voxelize(_furnace_with_slats(False), 32, progress=False)
+    stacked = voxgi.traced.stacked_records(vox)
+    centre = np.zeros(3)
+    radiance = np.ones((len(vox), 3), np.float32)
+    display = record_grid(vox, centre, radiance, stacked=stacked, pieces="sheets")
+    solve = record_grid(vox, centre, radiance, stacked=stacked, pieces=True)
+    assert display["pieces_for_sheets"] is True
+    assert "piece_first" in display
+    assert "pieces_for_sheets" not in solve
+    assert "piece_first" in solve
+    assert "piece_first" not in record_grid(vox, centre, radiance)
+    np.testing.assert_array_equal(display["rec_stacked"], solve["rec_stacked"])

@@ -74,7 +74,7 @@ def record_grid(
     dense_cells: int = DENSE_TABLE_CELLS,
     share: np.ndarray | None = None,
     stacked: np.ndarray | None = None,
-    pieces: bool = False,
+    pieces: bool | str = False,
 ) -> dict:
     """The records sorted by voxel, as the compiled gather kernels look them up.
 
@@ -100,10 +100,12 @@ def record_grid(
         The records where a gather ray bounces once more rather than read
         the record (:func:`stacked_records`): then also ``rec_stacked`` in
         the records' key order.
-    pieces : bool
+    pieces : bool or "sheets"
         Also the table of each triangle's pieces (``piece_*``), by which a
         ray reads the record of the piece it lands on, where ``vox`` holds
-        its pieces (:attr:`VoxelSet.piece_record`).
+        its pieces (:attr:`VoxelSet.piece_record`); ``"sheets"``: only to
+        tell the ``stacked`` records a ray lands on and to walk them, every
+        other lookup searching (``pieces_for_sheets``, the display's).
 
     Returns
     -------
@@ -121,7 +123,10 @@ def record_grid(
     if stacked is not None:
         out["rec_stacked"] = sheet_codes(vox, stacked)[order[3]]
     if pieces:
-        out.update(_piece_table(vox, order[2], order[3]))
+        table = _piece_table(vox, order[2], order[3])
+        out.update(table)
+        if pieces == "sheets" and table and stacked is not None:
+            out["pieces_for_sheets"] = True
     return out
 
 

@@ -184,7 +184,7 @@ class _FrameShader:
                 sampler.record_pa,
                 share=sampler.share if self.mat_continue is not None else None,
                 stacked=sampler.gather_only,
-                pieces=True,
+                pieces="sheets" if sampler.gather_only is not None else False,
             )
             self._tri = {
                 "tri_v": tracer.tris,

@@ -42,8 +42,11 @@ def followed_sheets(scene, sol) -> np.ndarray | None:
         return None
     vox = sol.vox
     # a ray reads an emitter's light where it lands, the light it sends and
-    # the light it reflects, which MIS shares with its VPLs
+    # the light it reflects, which MIS shares with its VPLs; a black back
+    # record sends none either way
     sheets = stacked_records(vox) & ~np.any(np.asarray(vox.emission) > 0, axis=1)
+    if vox.back is not None:
+        sheets &= ~np.asarray(vox.back, bool)
     return sheets if sheets.any() else None
 
 
