@@ -265,6 +265,18 @@ int64_t gather_light_py(
     if (pieces_for_sheets && !(rec_stacked && grid.piece_first))
         throw py::value_error("pieces_for_sheets needs rec_stacked and the piece_* tables");
     grid.pieces_for_sheets = pieces_for_sheets;
+    std::vector<uint8_t> stacked_objects;
+    if (pieces_for_sheets) {
+        for (int64_t r = 0; r < grid.count; ++r) {
+            if (!grid.stacked[r]) continue;
+            const int32_t obj = grid.rec[r].object;
+            if (obj < 0) continue;
+            if (size_t(obj) >= stacked_objects.size()) stacked_objects.resize(size_t(obj) + 1, 0);
+            stacked_objects[size_t(obj)] = 1;
+        }
+        grid.stacked_objects = stacked_objects.data();
+        grid.stacked_object_count = int64_t(stacked_objects.size());
+    }
     voxgi::LobeEmission lobe_emission;
     if (rec_emitted.has_value() != emitted_out.has_value())
         throw py::value_error("rec_emitted and emitted_out go together");

@@ -60,8 +60,12 @@ struct RecordGrid {
     const double* piece_plane = nullptr;
     // The pieces are read only to find the stacked sheets a ray lands on and
     // to walk them; every other lookup searches (the display's gather rays:
-    // docs/design.md §6).
+    // docs/design.md §6). Then stacked_objects (stacked_object_count,) is 1
+    // for the objects that have stacked records: a ray that lands on any
+    // other object needs no second lookup.
     bool pieces_for_sheets = false;
+    int64_t stacked_object_count = 0;
+    const uint8_t* stacked_objects = nullptr;
 };
 
 // The voxel of the grid that holds y.

@@ -639,9 +639,9 @@ constexpr int kSheetBounces = 8;
 // cosine-distributed ray from the hit point; where it lands on another
 // stacked sheet that does not emit (grid.stacked 1) it bounces there again
 // (up to kSheetBounces, the last one read as its record's mean), as light
-// passed on between nearly closed slats does. Returns the record read (-1: none) with `factor`, the
-// albedos on the way (the records' after the first) times the sheets'
-// transmittance.
+// passed on between nearly closed slats does. Returns the record read
+// (-1: none) with `factor`, the albedos on the way (the records' after the
+// first) times the sheets' transmittance.
 int64_t follow_sheet(const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
                      double eps, const GatherHit& h, int64_t rec, const float ratio[3],
                      uint64_t& rng, LookupScratch& scratch, double factor[3]) {
@@ -839,7 +839,11 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                                                  h[k].front, scratch);
                     const bool lobe = rec >= 0 && continues(mats, hits.material[p - 2], h[k]);
                     bool sheet = false;
-                    if (!lobe && rec >= 0 && grid.stacked) {
+                    const bool may_be_sheet =
+                        !pieces.pieces_for_sheets ||
+                        (h[k].obj >= 0 && h[k].obj < pieces.stacked_object_count &&
+                         pieces.stacked_objects[h[k].obj]);
+                    if (!lobe && rec >= 0 && grid.stacked && may_be_sheet) {
                         // a stacked sheet is told by the piece the ray landed on
                         const int64_t at =
                             pieces.pieces_for_sheets

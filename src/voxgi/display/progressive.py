@@ -147,9 +147,9 @@ def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
     share = None
     if opt.gather > 0 and opt.follow_lobes:
         share = base_share(scene, sol, continuing_objects(scene))
-    # gather rays bounce once more on stacked sheets, whose light then
-    # comes by those rays alone (docs/design.md §6)
-    sheets = followed_sheets(scene, sol) if opt.gather > 0 else None
+    # gather rays walk on through stacked sheets, whose light then comes by
+    # those rays alone (docs/design.md §6)
+    sheets = followed_sheets(scene, sol) if opt.gather > 0 and opt.follow_sheets else None
     sampler = VPLSampler(
         sol,
         opt.K,
