@@ -36,15 +36,15 @@ def followed_sheets(scene, sol) -> np.ndarray | None:
     a pixel by those rays alone, not by VPLs (``docs/design.md`` §6); None
     where there are none, or where the scene has point lights or an
     environment, whose light that bounce cannot find."""
-    from ..traced import stacked_records
+    from ..traced import sheet_codes, stacked_records
 
     if scene.lights or scene.environment is not None:
         return None
     vox = sol.vox
-    # a ray reads an emitter's light where it lands, the light it sends and
-    # the light it reflects, which MIS shares with its VPLs; a black back
-    # record sends none either way
-    sheets = stacked_records(vox) & ~np.any(np.asarray(vox.emission) > 0, axis=1)
+    # the sheets a walk goes on through (code 1): a ray reads an emitter's
+    # light where it lands, the light it sends and the light it reflects,
+    # which MIS shares with its VPLs; a black back record sends none either way
+    sheets = sheet_codes(vox, stacked_records(vox)) == 1
     if vox.back is not None:
         sheets &= ~np.asarray(vox.back, bool)
     return sheets if sheets.any() else None
