@@ -131,6 +131,58 @@ voxgi::ShadeTriangles make_triangles(const F64& tri_v, const I32& tri_object,
     return tris;
 }
 
+// The frame's emitter VPLs, sampled where a ray continues (ShadeTriangles),
+// into tris; all four arrays or none. tris.emits must be set already.
+void attach_emitters(voxgi::ShadeTriangles& tris, const std::optional<F64>& emitter_pos,
+                     const std::optional<F32>& emitter_normal,
+                     const std::optional<F32>& emitter_radiance,
+                     const std::optional<F32>& emitter_density, double emitter_per_set) {
+    const int given = int(emitter_pos.has_value()) + int(emitter_normal.has_value()) +
+                      int(emitter_radiance.has_value()) + int(emitter_density.has_value());
+    if (given != 0 && given != 4)
+        throw py::value_error("emitter_pos, _normal, _radiance and _density go together");
+    if (given == 0) return;
+    // (without the emitters marked, a bounce landing on one would count it
+    // again beside its VPL sample)
+    if (!tris.emits) throw py::value_error("emitter_pos needs obj_emits");
+    check_2d(*emitter_pos, -1, 3, "emitter_pos");
+    const py::ssize_t K = emitter_pos->shape(0);
+    check_2d(*emitter_normal, K, 3, "emitter_normal");
+    check_2d(*emitter_radiance, K, 3, "emitter_radiance");
+    check_1d(*emitter_density, K, "emitter_density");
+    tris.emitter_count = K;
+    tris.emitter_pos = emitter_pos->data();
+    tris.emitter_normal = emitter_normal->data();
+    tris.emitter_radiance = emitter_radiance->data();
+    tris.emitter_density = emitter_density->data();
+    if (!(emitter_per_set >= 1.0) || !std::isfinite(emitter_per_set))
+        throw py::value_error("emitter_per_set must be >= 1");
+    tris.emitter_per_set = emitter_per_set;
+}
+
+// rec_stacked into grid and, with pieces_for_sheets, the objects that hold
+// a stacked record (into `objects`, which must outlive the grid's use).
+void attach_stacked(voxgi::RecordGrid& grid, const std::optional<U8>& rec_stacked,
+                    bool pieces_for_sheets, std::vector<uint8_t>& objects) {
+    if (rec_stacked) {
+        check_1d(*rec_stacked, grid.count, "rec_stacked");
+        grid.stacked = rec_stacked->data();
+    }
+    if (pieces_for_sheets && !(rec_stacked && grid.piece_first))
+        throw py::value_error("pieces_for_sheets needs rec_stacked and the piece_* tables");
+    grid.pieces_for_sheets = pieces_for_sheets;
+    if (!pieces_for_sheets) return;
+    for (int64_t r = 0; r < grid.count; ++r) {
+        if (!grid.stacked[r]) continue;
+        const int32_t obj = grid.rec[r].object;
+        if (obj < 0) continue;
+        if (size_t(obj) >= objects.size()) objects.resize(size_t(obj) + 1, 0);
+        objects[size_t(obj)] = 1;
+    }
+    grid.stacked_objects = objects.data();
+    grid.stacked_object_count = int64_t(objects.size());
+}
+
 int64_t gather_light_py(
     F64 hit_pos, F32 hit_normal, F32 hit_ng, F32 hit_wo, I32 hit_material, F32 mat_albedo,
     F32 mat_rs, F32 mat_nu, F32 mat_nv, U8 mat_glossy, int n_gather, uint64_t seed, int64_t frame,
@@ -195,27 +247,8 @@ int64_t gather_light_py(
         throw py::value_error("reach must be finite and >= 0");
     if (reach > 0.0 && !obj_emits) throw py::value_error("reach needs obj_emits");
     tris.reach = reach;
-    {
-        const int given = int(emitter_pos.has_value()) + int(emitter_normal.has_value()) +
-                          int(emitter_radiance.has_value()) + int(emitter_density.has_value());
-        if (given != 0 && given != 4)
-            throw py::value_error("emitter_pos, _normal, _radiance and _density go together");
-        if (given == 4) {
-            check_2d(*emitter_pos, -1, 3, "emitter_pos");
-            const py::ssize_t K = emitter_pos->shape(0);
-            check_2d(*emitter_normal, K, 3, "emitter_normal");
-            check_2d(*emitter_radiance, K, 3, "emitter_radiance");
-            check_1d(*emitter_density, K, "emitter_density");
-            tris.emitter_count = K;
-            tris.emitter_pos = emitter_pos->data();
-            tris.emitter_normal = emitter_normal->data();
-            tris.emitter_radiance = emitter_radiance->data();
-            tris.emitter_density = emitter_density->data();
-            if (!(emitter_per_set >= 1.0) || !std::isfinite(emitter_per_set))
-                throw py::value_error("emitter_per_set must be >= 1");
-            tris.emitter_per_set = emitter_per_set;
-        }
-    }
+    attach_emitters(tris, emitter_pos, emitter_normal, emitter_radiance, emitter_density,
+                    emitter_per_set);
     const auto tex = make_textures(tex_texels, tex_info, obj_texture, corner_uv, tris.count,
                                    obj_two_sided.shape(0));
     if (tex) tris.textures = &tex->surface;
@@ -258,25 +291,8 @@ int64_t gather_light_py(
                         " continues its lobe with a base share; the transport keeps none");
         }
     }
-    if (rec_stacked) {
-        check_1d(*rec_stacked, grid.count, "rec_stacked");
-        grid.stacked = rec_stacked->data();
-    }
-    if (pieces_for_sheets && !(rec_stacked && grid.piece_first))
-        throw py::value_error("pieces_for_sheets needs rec_stacked and the piece_* tables");
-    grid.pieces_for_sheets = pieces_for_sheets;
     std::vector<uint8_t> stacked_objects;
-    if (pieces_for_sheets) {
-        for (int64_t r = 0; r < grid.count; ++r) {
-            if (!grid.stacked[r]) continue;
-            const int32_t obj = grid.rec[r].object;
-            if (obj < 0) continue;
-            if (size_t(obj) >= stacked_objects.size()) stacked_objects.resize(size_t(obj) + 1, 0);
-            stacked_objects[size_t(obj)] = 1;
-        }
-        grid.stacked_objects = stacked_objects.data();
-        grid.stacked_object_count = int64_t(stacked_objects.size());
-    }
+    attach_stacked(grid, rec_stacked, pieces_for_sheets, stacked_objects);
     voxgi::LobeEmission lobe_emission;
     if (rec_emitted.has_value() != emitted_out.has_value())
         throw py::value_error("rec_emitted and emitted_out go together");
@@ -299,9 +315,87 @@ int64_t gather_light_py(
     return rays;
 }
 
+py::array_t<float> sheet_radiance_py(
+    F64 point_pos, F32 point_normal, I64 point_record, int walks, uint64_t seed, int64_t frame,
+    double eps, F64 tri_v, I32 tri_object, U8 obj_two_sided, U8 obj_emits, I64 rec_sorted_key,
+    I32 rec_cell_start, F32 rec_packed, I64 grid_dims, I64 grid_lo, F64 grid_origin, double pitch,
+    U8 rec_stacked, const voxgi::RayScene& scene, int threads,
+    const std::optional<F64>& emitter_pos, const std::optional<F32>& emitter_normal,
+    const std::optional<F32>& emitter_radiance, const std::optional<F32>& emitter_density,
+    double emitter_per_set, const std::optional<I64>& piece_first,
+    const std::optional<I64>& piece_key, const std::optional<I32>& piece_record,
+    const std::optional<U32>& piece_side, const std::optional<I64>& piece_plane_first,
+    const std::optional<F64>& piece_plane, bool pieces_for_sheets) {
+    if (walks < 1 || walks > 4096) throw py::value_error("walks must be in [1, 4096]");
+    if (!(eps >= 0.0) || !std::isfinite(eps)) throw py::value_error("eps must be finite and >= 0");
+    voxgi::ShadeTriangles tris = make_triangles(tri_v, tri_object, obj_two_sided);
+    check_scene(scene, tris.count);
+    check_1d(obj_emits, obj_two_sided.shape(0), "obj_emits");
+    tris.emits = obj_emits.data();
+    attach_emitters(tris, emitter_pos, emitter_normal, emitter_radiance, emitter_density,
+                    emitter_per_set);
+    voxgi::RecordGrid grid = make_grid(rec_sorted_key, rec_cell_start, rec_packed, grid_dims,
+                                       grid_lo, grid_origin, pitch);
+    attach_pieces(
+        grid, {piece_first, piece_key, piece_record, piece_side, piece_plane_first, piece_plane});
+    std::vector<uint8_t> stacked_objects;
+    attach_stacked(grid, rec_stacked, pieces_for_sheets, stacked_objects);
+    check_2d(point_pos, -1, 3, "point_pos");
+    const py::ssize_t K = point_pos.shape(0);
+    check_2d(point_normal, K, 3, "point_normal");
+    check_1d(point_record, K, "point_record");
+    voxgi::SheetPoints at;
+    at.count = K;
+    at.pos = point_pos.data();
+    at.normal = point_normal.data();
+    at.record = point_record.data();
+    for (py::ssize_t i = 0; i < K; ++i) {
+        const int64_t r = at.record[i];
+        if (r < 0 || r >= grid.count)
+            throw py::value_error("point_record: record " + std::to_string(r) + " out of range");
+        if (grid.stacked[r] != 1)
+            throw py::value_error("point_record: record " + std::to_string(r) +
+                                  " is not a stacked sheet that walks on (rec_stacked 1)");
+        for (int a = 0; a < 3; ++a)
+            if (!std::isfinite(at.pos[3 * i + a]) || !std::isfinite(at.normal[3 * i + a]))
+                throw py::value_error("point_pos, point_normal: not finite at point " +
+                                      std::to_string(i));
+    }
+    py::array_t<float> out({K, py::ssize_t(3)});
+    int64_t rays = 0;
+    auto stop = make_stop_check();
+    {
+        py::gil_scoped_release release;
+        voxgi::sheet_radiance(tris, grid, scene, eps, at, walks, seed, frame, out.mutable_data(),
+                              &rays, threads, stop);
+    }
+    return out;
+}
+
 }  // namespace
 
 void bind_gather_light(py::module_& m) {
+    m.def("sheet_radiance", &sheet_radiance_py, "point_pos"_a.noconvert(),
+          "point_normal"_a.noconvert(), "point_record"_a.noconvert(), "walks"_a, "seed"_a,
+          "frame"_a, "eps"_a, "tri_v"_a.noconvert(), "tri_object"_a.noconvert(),
+          "obj_two_sided"_a.noconvert(), "obj_emits"_a.noconvert(), "rec_sorted_key"_a.noconvert(),
+          "rec_cell_start"_a.noconvert(), "rec_packed"_a.noconvert(), "grid_dims"_a.noconvert(),
+          "grid_lo"_a.noconvert(), "grid_origin"_a.noconvert(), "pitch"_a,
+          "rec_stacked"_a.noconvert(), "scene"_a, "threads"_a = 0,
+          "emitter_pos"_a.noconvert() = py::none(), "emitter_normal"_a.noconvert() = py::none(),
+          "emitter_radiance"_a.noconvert() = py::none(),
+          "emitter_density"_a.noconvert() = py::none(), "emitter_per_set"_a = 1.0,
+          "piece_first"_a.noconvert() = py::none(), "piece_key"_a.noconvert() = py::none(),
+          "piece_record"_a.noconvert() = py::none(), "piece_side"_a.noconvert() = py::none(),
+          "piece_plane_first"_a.noconvert() = py::none(), "piece_plane"_a.noconvert() = py::none(),
+          "pieces_for_sheets"_a = false,
+          R"doc(The radiance leaving points on stacked sheets (K, 3) float32: per point
+(point_pos (K, 3) float64 in the grid's frame, point_normal (K, 3) float32,
+point_record (K,) int64, a record marked 1 in rec_stacked), the mean of
+`walks` walks through its stack as gather_light's rays walk on from a sheet
+they land on, seeded by (seed, frame, point, walk); with the frame's emitter
+VPLs (emitter_*, as gather_light takes them) the emitters' light is sampled
+at every bounce. The other arguments as gather_light's.)doc");
     m.def(
         "gather_light", &gather_light_py, "hit_pos"_a.noconvert(), "hit_normal"_a.noconvert(),
         "hit_ng"_a.noconvert(), "hit_wo"_a.noconvert(), "hit_material"_a.noconvert(),
@@ -368,7 +462,9 @@ record marked 1 or 2 (a sheet of a stack finer than a voxel; 2: one that
 emits) reads, instead of the record, its albedo times the record where one
 cosine-distributed ray from the landing point lands, as a lobe's ray is
 read (the transport and emitted_out alike); where that ray lands on a
-record marked 1 it bounces on in the same way, up to 8 bounces in all.
+record marked 1 it bounces on in the same way, up to 8 bounces in all;
+given the emitter VPLs (below), each bounce also draws one of them with a
+shadow ray, MIS-combined with the bounce that lands on an emitter.
 With the piece_* tables a ray reads the record of the piece of the
 triangle it lands on; with pieces_for_sheets only to tell whether that is
 a stacked sheet and to walk the stack, every other lookup searching.

@@ -536,6 +536,57 @@ inline double cosine_direction(const float n[3], uint64_t& rng, float wi[3]) {
     return z;
 }
 
+// The emitters' light at the hit h (unit normal h.ns) from one of the
+// frame's emitter VPLs, drawn uniformly (ShadeTriangles::emitter_pos), its
+// shadow ray from ro (the offset origin of the bounce ray from h), weighed
+// by the balance heuristic against a cosine-distributed ray from h, whose
+// density per unit area at the VPL's point is cos_y cos_e / (pi r²): the
+// bounce ray then reads the emitters it meets by emitter_hit_weight. Ld is
+// the irradiance over pi that the sample brings. Returns the rays traced.
+int emitter_vpl_light(const ShadeTriangles& tris, const RayScene& scene, double eps,
+                      const GatherHit& h, const float ro[3], uint64_t& rng, float Ld[3]) {
+    Ld[0] = Ld[1] = Ld[2] = 0.f;
+    if (tris.emitter_count <= 0) return 0;
+    rng = splitmix64(rng);
+    const int64_t k =
+        std::min(tris.emitter_count - 1, int64_t(to_unit(rng) * double(tris.emitter_count)));
+    const double* e = tris.emitter_pos + 3 * k;
+    const float* ne = tris.emitter_normal + 3 * k;
+    const double dx = e[0] - h.y[0], dy = e[1] - h.y[1], dz = e[2] - h.y[2];
+    const double r2 = dx * dx + dy * dy + dz * dz;
+    if (!(r2 > 0.0) || !(tris.emitter_density[k] > 0.f)) return 0;
+    const double r = std::sqrt(r2);
+    const float we[3] = {float(dx / r), float(dy / r), float(dz / r)};
+    const float cos_y = dot3(h.ns, we), cos_e = -dot3(ne, we);
+    if (!(cos_y > 0.f) || !(cos_e > 0.f)) return 0;
+    const double cc = double(cos_y) * cos_e;
+    const double gb = cc / (r2 * double(tris.emitter_density[k]) + cc / kPi) / kPi;
+    const double tx = e[0] + eps * ne[0] - ro[0], ty = e[1] + eps * ne[1] - ro[1],
+                 tz = e[2] + eps * ne[2] - ro[2];
+    const double len = std::sqrt(tx * tx + ty * ty + tz * tz);
+    float sd[3] = {we[0], we[1], we[2]}, Ts[3];
+    if (len > 0.0) sd[0] = float(tx / len), sd[1] = float(ty / len), sd[2] = float(tz / len);
+    if (!scene.occluded(ro, sd, float(std::max(len - eps, 0.0)), Ts))
+        for (int ch = 0; ch < 3; ++ch)
+            Ld[ch] = float(gb * tris.emitter_radiance[3 * k + ch] * Ts[ch]);
+    return 1;
+}
+
+// The balance heuristic's weight of a cosine-distributed ray from h (cosine
+// z there) that landed at g on the emitter record q, against the emitter
+// VPL sample of emitter_vpl_light at the same point: 1 where no emitter VPLs
+// are sampled, or the object g lies on does not emit.
+double emitter_hit_weight(const ShadeTriangles& tris, const RecordGrid& grid, const GatherHit& h,
+                          double z, const GatherHit& g, int64_t q) {
+    if (tris.emitter_count <= 0 || !tris.emits || g.obj < 0 || !tris.emits[g.obj]) return 1.0;
+    const float cos_z = -dot3(g.ns, g.wi);
+    const double pa = double(grid.rec[q].pa) / tris.emitter_per_set;
+    double dz2 = 0.0;
+    for (int a = 0; a < 3; ++a) dz2 += (g.y[a] - h.y[a]) * (g.y[a] - h.y[a]);
+    const double pc = z * std::max(cos_z, 0.f) / kPi;
+    return pc > 0.0 ? pc / (pc + dz2 * pa) : 0.0;
+}
+
 // The light leaving the diffuse hit h towards the ray's origin, from one
 // more bounce: its albedo (the solve's, its texture's where it has one)
 // times the radiance along one cosine-distributed ray from it, read from
@@ -558,37 +609,8 @@ int near_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
     trace_on(tris, grid, scene, eps, h, wi, ro, T, g);
     // The emitters' light at y from one of the frame's emitter VPLs; the
     // ray above then reads only the light of surfaces that do not emit.
-    float Ld[3] = {0.f, 0.f, 0.f};
-    if (tris.emitter_count > 0) {
-        rng = splitmix64(rng);
-        const int64_t k =
-            std::min(tris.emitter_count - 1, int64_t(to_unit(rng) * double(tris.emitter_count)));
-        const double* e = tris.emitter_pos + 3 * k;
-        const float* ne = tris.emitter_normal + 3 * k;
-        const double dx = e[0] - h.y[0], dy = e[1] - h.y[1], dz = e[2] - h.y[2];
-        const double r2 = dx * dx + dy * dy + dz * dz;
-        if (r2 > 0.0 && tris.emitter_density[k] > 0.f) {
-            const double r = std::sqrt(r2);
-            const float we[3] = {float(dx / r), float(dy / r), float(dz / r)};
-            const float cos_y = dot3(h.ns, we), cos_e = -dot3(ne, we);
-            if (cos_y > 0.f && cos_e > 0.f) {
-                // balance heuristic with the ray below, whose density per
-                // unit area at e is cos_y cos_e / (pi r²)
-                const double cc = double(cos_y) * cos_e;
-                const double gb = cc / (r2 * double(tris.emitter_density[k]) + cc / kPi) / kPi;
-                const double tx = e[0] + eps * ne[0] - ro[0], ty = e[1] + eps * ne[1] - ro[1],
-                             tz = e[2] + eps * ne[2] - ro[2];
-                const double len = std::sqrt(tx * tx + ty * ty + tz * tz);
-                float sd[3] = {we[0], we[1], we[2]}, Ts[3];
-                if (len > 0.0)
-                    sd[0] = float(tx / len), sd[1] = float(ty / len), sd[2] = float(tz / len);
-                ++rays;
-                if (!scene.occluded(ro, sd, float(std::max(len - eps, 0.0)), Ts))
-                    for (int ch = 0; ch < 3; ++ch)
-                        Ld[ch] = float(gb * tris.emitter_radiance[3 * k + ch] * Ts[ch]);
-            }
-        }
-    }
+    float Ld[3];
+    rays += emitter_vpl_light(tris, scene, eps, h, ro, rng, Ld);
     for (int ch = 0; ch < 3; ++ch) L[ch] = rho[ch] * Ld[ch];
     float Lz[3] = {0.f, 0.f, 0.f};
     if (g.escaped) {
@@ -602,12 +624,7 @@ int near_hit_radiance(const ShadeMaterials& mats, const ShadeTriangles& tris,
         if (q < 0) return rays;
         if (tris.emitter_count > 0 && tris.emits && tris.emits[g.obj]) {
             // an emitter's record, also sampled above: the balance heuristic
-            const float cos_z = -dot3(g.ns, wi);
-            const double pa = double(grid.rec[q].pa) / tris.emitter_per_set;
-            double dz2 = 0.0;
-            for (int a = 0; a < 3; ++a) dz2 += (g.y[a] - h.y[a]) * (g.y[a] - h.y[a]);
-            const double pc = double(z) * std::max(cos_z, 0.f) / kPi;
-            const double w = pc > 0.0 ? pc / (pc + dz2 * pa) : 0.0;
+            const double w = emitter_hit_weight(tris, grid, h, z, g, q);
             for (int ch = 0; ch < 3; ++ch)
                 L[ch] += float(rho[ch] * grid.rec[q].radiance[ch] * T[ch] * w);
             return rays;
@@ -641,23 +658,37 @@ constexpr int kSheetBounces = 8;
 // (up to kSheetBounces, the last one read as its record's mean), as light
 // passed on between nearly closed slats does. Returns the record read
 // (-1: none) with `factor`, the albedos on the way (the records' after the
-// first) times the sheets' transmittance.
+// first) times the sheets' transmittance, and, with the frame's emitter
+// VPLs (the display), the emitters' light at every bounce from one of
+// them in `direct` (emitter_vpl_light): a lamp seen through the gaps of a
+// blind is then found by a shadow ray from each slat, not only by the few
+// walks that escape to it, whose reading the balance heuristic weighs
+// into `factor`. Adds the rays traced to *rays.
 int64_t follow_sheet(const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
                      double eps, const GatherHit& h, int64_t rec, const float ratio[3],
-                     uint64_t& rng, LookupScratch& scratch, double factor[3]) {
-    for (int ch = 0; ch < 3; ++ch) factor[ch] = double(grid.rec[rec].albedo[ch]) * ratio[ch];
+                     uint64_t& rng, LookupScratch& scratch, double factor[3], double direct[3],
+                     int64_t* rays) {
+    for (int ch = 0; ch < 3; ++ch)
+        factor[ch] = double(grid.rec[rec].albedo[ch]) * ratio[ch], direct[ch] = 0.0;
     if (!(factor[0] > 0.0 || factor[1] > 0.0 || factor[2] > 0.0)) return -1;  // a black sheet
     GatherHit at = h;
     int64_t q = -1;
     for (int bounce = 0; bounce < kSheetBounces; ++bounce) {
-        float wi[3], ro[3], T[3];
-        cosine_direction(at.ns, rng, wi);
+        float wi[3], ro[3], T[3], Ld[3];
+        const double z = cosine_direction(at.ns, rng, wi);
         GatherHit g;
         trace_on(tris, grid, scene, eps, at, wi, ro, T, g);
+        *rays += 1 + emitter_vpl_light(tris, scene, eps, at, ro, rng, Ld);
+        for (int ch = 0; ch < 3; ++ch) direct[ch] += factor[ch] * Ld[ch];
         for (int ch = 0; ch < 3; ++ch) factor[ch] *= T[ch];
         if (g.escaped || g.key < 0) return -1;
         q = lookup_in_cell(grid, g.y, g.ns, g.obj, g.c, g.tri, g.front, scratch);
-        if (q < 0 || grid.stacked[q] != 1) return q;  // (2: an emitter, read)
+        if (q < 0) return q;
+        if (grid.stacked[q] != 1) {  // (2: an emitter, read)
+            const double w = emitter_hit_weight(tris, grid, at, z, g, q);
+            for (int ch = 0; ch < 3; ++ch) factor[ch] *= w;
+            return q;
+        }
         if (bounce + 1 == kSheetBounces) break;
         for (int ch = 0; ch < 3; ++ch) factor[ch] *= grid.rec[q].albedo[ch];
         if (!(factor[0] > 0.0 || factor[1] > 0.0 || factor[2] > 0.0)) return -1;  // black
@@ -871,11 +902,15 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                             q = glossy_hit_radiance(mats, tris, grid, env, scene, eps, h[k], rec,
                                                     ratio, rng, scratch, L, coat, factor);
                         } else {
+                            // the light leaving the sheet's point, which its
+                            // VPLs carry too (sheet_radiance): MIS-shared
+                            double direct[3];
                             q = follow_sheet(tris, pieces, scene, eps, h[k], rec, ratio, rng,
-                                             scratch, factor);
-                            if (q >= 0)
-                                for (int ch = 0; ch < 3; ++ch)
-                                    coat[ch] = float(factor[ch] * grid.rec[q].radiance[ch]);
+                                             scratch, factor, direct, &n_traced);
+                            for (int ch = 0; ch < 3; ++ch)
+                                L[ch] =
+                                    float(direct[ch] +
+                                          (q >= 0 ? factor[ch] * grid.rec[q].radiance[ch] : 0.0));
                         }
                         gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s, L, coat);
                         if (q >= 0 && (transport || emitted) &&
@@ -918,6 +953,34 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
             }
         }
         return n_traced;
+    });
+}
+
+void sheet_radiance(const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
+                    double eps, const SheetPoints& at, int walks, uint64_t seed, int64_t frame,
+                    float* out, int64_t* rays, int threads, const StopCheck& stop) {
+    const uint64_t base = gather_base(seed, frame) ^ 0x94D049BB133111EBull;
+    *rays = sum_over_pixel_chunks(at.count, threads, stop, [&](int64_t i0, int64_t i1) {
+        LookupScratch scratch;
+        int64_t traced = 0;
+        for (int64_t i = i0; i < i1; ++i) {
+            GatherHit h{};
+            for (int a = 0; a < 3; ++a) h.y[a] = at.pos[3 * i + a], h.ns[a] = at.normal[3 * i + a];
+            const int64_t rec = at.record[i];
+            h.obj = grid.rec[rec].object;
+            double sum[3] = {0.0, 0.0, 0.0};
+            const float ratio[3] = {1.f, 1.f, 1.f};
+            for (int w = 0; w < walks; ++w) {
+                uint64_t rng = splitmix64(base ^ (uint64_t(i) * uint64_t(walks) + uint64_t(w)));
+                double factor[3], direct[3];
+                const int64_t q = follow_sheet(tris, grid, scene, eps, h, rec, ratio, rng, scratch,
+                                               factor, direct, &traced);
+                for (int ch = 0; ch < 3; ++ch)
+                    sum[ch] += direct[ch] + (q >= 0 ? factor[ch] * grid.rec[q].radiance[ch] : 0.0);
+            }
+            for (int ch = 0; ch < 3; ++ch) out[3 * i + ch] = float(sum[ch] / walks);
+        }
+        return traced;
     });
 }
 

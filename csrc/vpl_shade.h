@@ -195,6 +195,26 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                   const StopCheck& stop, const GatherTransport* transport = nullptr,
                   const LobeEmission* emitted = nullptr);
 
+// Points on stacked sheets (RecordGrid::stacked 1): the VPLs drawn on them.
+struct SheetPoints {
+    int64_t count = 0;
+    const double* pos = nullptr;      // (count, 3) on the sheet, in the grid's frame
+    const float* normal = nullptr;    // (count, 3) unit normal of the record's side
+    const int64_t* record = nullptr;  // (count,) the record each lies on (grid order)
+};
+
+// The radiance leaving each point of `at` (a diffuse sheet's: the same in
+// every direction), into out (count, 3): the mean of `walks` walks from the
+// point through its stack as gather_light's rays walk on from a sheet they
+// land on (the emitters' light sampled at every bounce given the frame's
+// emitter VPLs in tris), seeded by (seed, frame, point, walk). A VPL on a
+// slat then carries the light leaving its own point, as the gather rays
+// that land there read it, not its record's mean over the lit edge and the
+// shaded middle. Writes the rays traced into *rays.
+void sheet_radiance(const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
+                    double eps, const SheetPoints& at, int walks, uint64_t seed, int64_t frame,
+                    float* out, int64_t* rays, int threads, const StopCheck& stop);
+
 // Light arriving along known directions: point, spot and directional lights
 // (one shadow ray each), environment samples and gather rays that leave the
 // scene (docs/design.md §11). Rays are pixel-major, `ray_count` (P,) per

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['EnvironmentGuide', 'LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_emission', 'camera_hits', 'camera_rays', 'direct_light_traced', 'environment_irradiance', 'environment_light', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'learn_environment_guide', 'light_accumulate', 'shade_brdf', 'transport_apply', 'transport_compact', 'voxelize', 'vpl_light']
+__all__: list[str] = ['EnvironmentGuide', 'LineSystem', 'PairTable', 'RayScene', 'batch_error', 'camera_emission', 'camera_hits', 'camera_rays', 'direct_light_traced', 'environment_irradiance', 'environment_light', 'gather_families', 'gather_light', 'geometry_filter', 'hardware_threads', 'learn_environment_guide', 'light_accumulate', 'shade_brdf', 'sheet_radiance', 'transport_apply', 'transport_compact', 'voxelize', 'vpl_light']
 class PairTable:
     """
     The pairs of one direction set's gathering, recorded for replay
@@ -327,7 +327,9 @@ def gather_light(hit_pos: numpy.typing.NDArray[numpy.float64], hit_normal: numpy
     emits) reads, instead of the record, its albedo times the record where one
     cosine-distributed ray from the landing point lands, as a lobe's ray is
     read (the transport and emitted_out alike); where that ray lands on a
-    record marked 1 it bounces on in the same way, up to 8 bounces in all.
+    record marked 1 it bounces on in the same way, up to 8 bounces in all;
+    given the emitter VPLs (below), each bounce also draws one of them with a
+    shadow ray, MIS-combined with the bounce that lands on an emitter.
     With the piece_* tables a ray reads the record of the piece of the
     triangle it lands on; with pieces_for_sheets only to tell whether that is
     a stacked sheet and to walk the stack, every other lookup searching.
@@ -384,6 +386,16 @@ def shade_brdf(mat_albedo: numpy.typing.NDArray[numpy.float32], mat_rs: numpy.ty
     rho/pi, or Ashikhmin-Shirley coupled diffuse + specular where mat_glossy, or
     where mat_lobe (M, 85) float32 has a row of kind 1 or 2 the microfacet lobe
     (voxgi.Microfacet.lobe_row) with k1 towards the light.
+    """
+def sheet_radiance(point_pos: numpy.typing.NDArray[numpy.float64], point_normal: numpy.typing.NDArray[numpy.float32], point_record: numpy.typing.NDArray[numpy.int64], walks: typing.SupportsInt | typing.SupportsIndex, seed: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, eps: typing.SupportsFloat | typing.SupportsIndex, tri_v: numpy.typing.NDArray[numpy.float64], tri_object: numpy.typing.NDArray[numpy.int32], obj_two_sided: numpy.typing.NDArray[numpy.uint8], obj_emits: numpy.typing.NDArray[numpy.uint8], rec_sorted_key: numpy.typing.NDArray[numpy.int64], rec_cell_start: numpy.typing.NDArray[numpy.int32], rec_packed: numpy.typing.NDArray[numpy.float32], grid_dims: numpy.typing.NDArray[numpy.int64], grid_lo: numpy.typing.NDArray[numpy.int64], grid_origin: numpy.typing.NDArray[numpy.float64], pitch: typing.SupportsFloat | typing.SupportsIndex, rec_stacked: numpy.typing.NDArray[numpy.uint8], scene: ..., threads: typing.SupportsInt | typing.SupportsIndex = 0, emitter_pos: numpy.typing.NDArray[numpy.float64] | None = None, emitter_normal: numpy.typing.NDArray[numpy.float32] | None = None, emitter_radiance: numpy.typing.NDArray[numpy.float32] | None = None, emitter_density: numpy.typing.NDArray[numpy.float32] | None = None, emitter_per_set: typing.SupportsFloat | typing.SupportsIndex = 1.0, piece_first: numpy.typing.NDArray[numpy.int64] | None = None, piece_key: numpy.typing.NDArray[numpy.int64] | None = None, piece_record: numpy.typing.NDArray[numpy.int32] | None = None, piece_side: numpy.typing.NDArray[numpy.uint32] | None = None, piece_plane_first: numpy.typing.NDArray[numpy.int64] | None = None, piece_plane: numpy.typing.NDArray[numpy.float64] | None = None, pieces_for_sheets: bool = False) -> numpy.typing.NDArray[numpy.float32]:
+    """
+    The radiance leaving points on stacked sheets (K, 3) float32: per point
+    (point_pos (K, 3) float64 in the grid's frame, point_normal (K, 3) float32,
+    point_record (K,) int64, a record marked 1 in rec_stacked), the mean of
+    `walks` walks through its stack as gather_light's rays walk on from a sheet
+    they land on, seeded by (seed, frame, point, walk); with the frame's emitter
+    VPLs (emitter_*, as gather_light takes them) the emitters' light is sampled
+    at every bounce. The other arguments as gather_light's.
     """
 def transport_apply(row_ptr: numpy.typing.NDArray[numpy.int64], column: numpy.typing.NDArray[numpy.int32], weight: numpy.typing.NDArray[numpy.float32], val: numpy.typing.NDArray[numpy.float64], out: numpy.typing.NDArray[numpy.float64], threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
     """

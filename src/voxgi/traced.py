@@ -34,6 +34,7 @@ __all__ = [
     "DENSE_TABLE_CELLS",
     "TracedGather",
     "conductor_lobes",
+    "grid_positions",
     "record_grid",
     "stacked_records",
     "traced_irradiance",
@@ -57,6 +58,15 @@ def _voxel_order(vox: VoxelSet) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
     rel = ijk - lo
     key = (rel[:, 0] * dims[1] + rel[:, 1]) * dims[2] + rel[:, 2]
     return lo, dims, key, np.argsort(key, kind="stable")
+
+
+def grid_positions(vox: VoxelSet) -> np.ndarray:
+    """(N,) int64: each record's row in :func:`record_grid`'s tables (the
+    kernels' ``point_record`` and ``transport_record`` index these rows)."""
+    order = _voxel_order(vox)[3]
+    position = np.empty(len(order), np.int64)
+    position[order] = np.arange(len(order))
+    return position
 
 
 #: Cells of the records' bounding grid up to which a lookup reads a dense

@@ -147,8 +147,8 @@ def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
     share = None
     if opt.gather > 0 and opt.follow_lobes:
         share = base_share(scene, sol, continuing_objects(scene))
-    # gather rays walk on through stacked sheets, whose light then comes by
-    # those rays alone (docs/design.md §6)
+    # gather rays walk on through stacked sheets, and the VPLs on them carry
+    # the light walked from their own points (docs/design.md §6)
     sheets = followed_sheets(scene, sol) if opt.gather > 0 and opt.follow_sheets else None
     sampler = VPLSampler(
         sol,
@@ -159,7 +159,7 @@ def _shader_spec(scene: Scene, sol, opt: _RenderSettings) -> FrameShaderSpec:
         pdf=opt.vpl_pdf,
         on_surface=opt.vpl_on_surface,
         follow_share=share,
-        gather_only=sheets,
+        walked=sheets,
     )
     diag = float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
     # Shadow-ray offsets: well above float32 rounding of the coordinates

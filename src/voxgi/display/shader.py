@@ -22,7 +22,7 @@ from ..microfacet import LOBE_WIDTH, Microfacet
 from ..rays import Tracer
 from ..scene import Camera, Scene
 from ..textures import surface_tables
-from ..traced import record_grid
+from ..traced import grid_positions, record_grid
 from .aovs import EMISSION_COLUMN, frame_aovs
 from .environment_guide import environment_guide
 from .lighting import _HIT_KEYS, _SceneLights
@@ -35,6 +35,16 @@ __all__ = ["frame_surface"]
 
 #: What the VPL kernel reads of each VPL.
 _VPL_KEYS = ("pos", "normal", "weight", "area", "pa")
+# the record grid's arguments of the walks from the VPLs on stacked sheets
+_SHEET_GRID_KEYS = ("rec_sorted_key", "rec_cell_start", "rec_packed", "grid_dims", "grid_lo",
+                    "grid_origin", "pitch", "rec_stacked", "piece_first", "piece_key",
+                    "piece_record", "piece_side", "piece_plane_first", "piece_plane",
+                    "pieces_for_sheets")  # fmt: skip
+
+#: Walks from each VPL on a stacked sheet a frame (:meth:`_FrameShader._walk_vpls`):
+#: a VPL lights every pixel of its set, so its walks' noise is shared by
+#: them; they cost little beside the pixels' own rays.
+SHEET_WALKS = 16
 
 
 def _vpl_part(vpls: dict, lo: int, hi: int | None) -> dict:
@@ -183,18 +193,24 @@ class _FrameShader:
                 sampler.B / math.pi,
                 sampler.record_pa,
                 share=sampler.share if self.mat_continue is not None else None,
-                stacked=sampler.gather_only,
-                pieces="sheets" if sampler.gather_only is not None else False,
+                stacked=sampler.walked,
+                pieces="sheets" if sampler.walked is not None else False,
             )
+            # the rows of the VPLs' records in the grid, for their walks
+            if sampler.walked is not None:
+                self._grid_row = grid_positions(sampler.vox)
             self._tri = {
                 "tri_v": tracer.tris,
                 "tri_object": tracer.obj,
                 "obj_two_sided": self.two_sided.astype(np.uint8),
             }
             # A near hit continues with the emitters' light sampled at it; a
-            # delta light it could not sample (docs/design.md §6).
-            if near_reach > 0 and not scene.lights:
+            # delta light it could not sample (docs/design.md §6). A walk
+            # through stacked sheets samples them at every bounce.
+            near = near_reach > 0 and not scene.lights
+            if near or sampler.walked is not None:
                 self._tri["obj_emits"] = (self.mat_emission.max(axis=1) > 0).astype(np.uint8)
+            if near:
                 self._tri["reach"] = float(near_reach) * float(sampler.vox.pitch)
             self._env = self.lights.environment_tables()
 
@@ -371,6 +387,10 @@ class _FrameShader:
         # together, or the cancellation between them is lost. The emitters'
         # VPLs, which carry the sharp shadows, are never filtered.
         reflected = np.zeros_like(out) if self.indirect_filter else None
+        if self.gather:
+            self._near = self._near_emitters(vpls)
+        if self.sampler.walked is not None:
+            self._walk_vpls(vpls)
         nd = self.sampler.counts[0]
         parts = [(vpls, out)]
         if reflected is not None:
@@ -379,13 +399,43 @@ class _FrameShader:
             if len(part["index"]) > 0:
                 into += self._vpl_light(h, part)
         if self.gather:
-            self._near = self._near_emitters(vpls)
             for a in range(0, P, self.tile):
                 b = min(P, a + self.tile)
                 self._gather(h, a, b, out if reflected is None else reflected)
         if reflected is not None:
             self._filter(h, reflected, out)
         return out
+
+    def _walk_vpls(self, vpls: dict) -> None:
+        """Give the frame's VPLs on stacked sheets (:attr:`VPLSampler.walked`)
+        the light leaving their own points, walked through their stacks
+        (:data:`SHEET_WALKS` walks each, the emitters sampled at every
+        bounce) as the gather rays that land there read it, in place of
+        their record's mean ``B/π`` (``docs/design.md`` §6)."""
+        on = np.flatnonzero(self.sampler.walked[vpls["index"]])
+        if len(on) == 0:
+            return
+        t0 = time.perf_counter()
+        grid = {k: v for k, v in self._grid.items() if k in _SHEET_GRID_KEYS}
+        near = {k: v for k, v in self._near.items() if k.startswith("emitter_")}
+        vpls["weight"][on] = _core.sheet_radiance(
+            np.ascontiguousarray(vpls["pos"][on]),
+            np.ascontiguousarray(vpls["normal"][on]),
+            self._grid_row[vpls["index"][on]],
+            SHEET_WALKS,
+            self.seed,
+            self._frame,
+            self.eps,
+            self._tri["tri_v"],
+            self._tri["tri_object"],
+            self._tri["obj_two_sided"],
+            self._tri["obj_emits"],
+            **grid,
+            scene=self.tracer.native,
+            threads=self.threads,
+            **near,
+        )
+        self.seconds["sheets"] = self.seconds.get("sheets", 0.0) + time.perf_counter() - t0
 
     def _near_emitters(self, vpls: dict) -> dict:
         """The gather kernel's arguments for the emitters' light where a
@@ -394,7 +444,8 @@ class _FrameShader:
         table, so that one picked uniformly among them is a sample of that
         density (empty: no ray continues, or no emitter to sample)."""
         nd = self.sampler.counts[0]
-        if self._tri.get("reach", 0.0) <= 0 or nd == 0 or not self.sampler.mis:
+        continues = self._tri.get("reach", 0.0) > 0 or self.sampler.walked is not None
+        if not continues or nd == 0 or not self.sampler.mis:
             return {}
         e = _vpl_part(vpls, 0, nd)
         density = self.sampler.sets[0][3]

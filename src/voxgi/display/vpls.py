@@ -32,8 +32,8 @@ def continuing_objects(scene):
 def followed_sheets(scene, sol) -> np.ndarray | None:
     """(N,) bool: the records of stacked sheets (:func:`voxgi.traced.stacked_records`)
     that do not emit, where the display's gather rays bounce on
-    rather than read the record's mean, and whose light therefore comes to
-    a pixel by those rays alone, not by VPLs (``docs/design.md`` §6); None
+    rather than read the record's mean, and whose VPLs carry the light
+    leaving their own point, walked alike (``docs/design.md`` §6); None
     where there are none, or where the scene has point lights or an
     environment, whose light that bounce cannot find."""
     from ..traced import sheet_codes, stacked_records
@@ -174,9 +174,11 @@ class VPLSampler:
     follow_share : (N, 3) or None
         The share of each record's light its VPLs bring a pixel whose
         gather rays follow the lobes (:func:`base_share`).
-    gather_only : (N,) bool or None
-        Records left out of the tables, with MIS only: the gather rays
-        alone bring their light (:func:`followed_sheets`).
+    walked : (N,) bool or None
+        With MIS only: the records of stacked sheets whose VPLs carry, each
+        frame, the light leaving their own point (walked through the stack
+        by the shader, :func:`followed_sheets`) rather than their record's
+        mean ``B/π``; they keep their place in the tables.
     """
 
     def __init__(
@@ -189,7 +191,7 @@ class VPLSampler:
         pdf: str = "power",
         on_surface: bool = True,
         follow_share: np.ndarray | None = None,
-        gather_only: np.ndarray | None = None,
+        walked: np.ndarray | None = None,
     ):
         if pdf not in ("power", "area"):
             raise ValueError(f"pdf: expected 'power' or 'area', got {pdf!r}")
@@ -202,12 +204,11 @@ class VPLSampler:
         back = np.asarray(vox.back, dtype=bool) if vox.back is not None else np.zeros(n, bool)
         emit = np.any(np.asarray(vox.emission) > 0, axis=1) & ~back
         useful = ~back & (area > 0) & np.any(B > 0, axis=1)
-        #: (N,) bool or None: the records left out of the tables because the
-        #: gather rays alone bring their light (followed_sheets; with MIS only)
-        self.gather_only = None
-        if gather_only is not None and mis:
-            self.gather_only = _validate.as_c_array(gather_only, bool, (n,), "gather_only")
-            useful &= ~self.gather_only
+        #: (N,) bool or None: the records whose VPLs' light is walked each
+        #: frame (followed_sheets; with MIS only)
+        self.walked = None
+        if walked is not None and mis:
+            self.walked = _validate.as_c_array(walked, bool, (n,), "walked")
         self.skipped_records = int(n - useful.sum())
         order = np.argsort(_morton(np.asarray(vox.ijk)), kind="stable")
         lum = B @ LUMINANCE
