@@ -438,8 +438,9 @@ class _FrameShader:
         self.seconds["sheets"] = self.seconds.get("sheets", 0.0) + time.perf_counter() - t0
 
     def _near_emitters(self, vpls: dict) -> dict:
-        """The gather kernel's arguments for the emitters' light where a
-        near gather ray continues: this frame's emitter VPLs (every set's),
+        """The kernels' arguments for the emitters' light where a near
+        gather ray continues or a walk bounces through stacked sheets
+        (:meth:`_walk_vpls`): this frame's emitter VPLs (every set's),
         each drawn with its record's density per unit area in the emitters'
         table, so that one picked uniformly among them is a sample of that
         density (empty: no ray continues, or no emitter to sample)."""
