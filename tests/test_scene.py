@@ -349,3 +349,16 @@ def test_the_fingerprint_writes_plain_values_as_repr_does():
     # numpy values read as the Python numbers they hold, in full
     assert _stable_repr(np.array([0.52994119123, 0.5])) == repr((0.52994119123, 0.5))
     assert _stable_repr((np.float32(0.5), np.int64(3))) == repr((0.5, 3))
+
+
+def test_the_triangles_objects_come_without_their_corners():
+    # The shading kernels need each triangle's object only; it is the same
+    # array as triangles()'s, in the same order.
+    s = voxgi.scenes.cornell_box()
+    obj = s.triangle_objects()
+    assert obj.dtype == np.int32
+    np.testing.assert_array_equal(obj, s.triangles()["object"])
+    assert obj[-1] == len(s.objects) - 1
+    assert np.all(np.diff(obj) >= 0)
+    with pytest.raises(ValueError, match="scene is empty"):
+        voxgi.Scene().triangle_objects()

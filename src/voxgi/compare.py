@@ -152,7 +152,7 @@ def _non_emitter_mask(scene: Scene, cam) -> np.ndarray:
     does not emit, and with the Gaussian pixel filter, whose samples reach 2
     pixels out, so do its neighbours within 2 pixels.
     """
-    obj = scene.triangles()["object"]
+    obj = scene.triangle_objects()
     emit = np.array([o.material.is_emitter for o in scene.objects])
     ok = np.ones(cam.height * cam.width, bool)
     with Tracer(scene, 1) as tr:

@@ -341,17 +341,22 @@ class Scene:
         self.check_nonempty()
         self.check_ranges()
         tri = np.concatenate([o.vertices[o.faces] for o in self.objects])
-        obj = np.concatenate(
-            [np.full(len(o.faces), i, np.int32) for i, o in enumerate(self.objects)]
-        )
         return {
             "triangles": np.ascontiguousarray(tri),
-            "object": obj,
+            "object": self.triangle_objects(),
             "albedo": np.array([o.material.albedo for o in self.objects], np.float32),
             "emission": np.array([o.material.emission for o in self.objects], np.float32),
             "transmittance": np.array([o.material.transmittance for o in self.objects], np.float32),
             "two_sided": np.array([o.two_sided for o in self.objects], bool),
         }
+
+    def triangle_objects(self) -> np.ndarray:
+        """(F,) int32: the index into :attr:`objects` of each triangle, in the
+        order of :meth:`triangles` (without building the corners: the
+        shading kernels need only this)."""
+        self.check_nonempty()
+        sizes = [len(o.faces) for o in self.objects]
+        return np.repeat(np.arange(len(sizes), dtype=np.int32), sizes)
 
     @property
     def has_sheets(self) -> bool:

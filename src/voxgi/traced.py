@@ -369,7 +369,7 @@ class TracedGather:
         )
         self._tri = {
             "tri_v": self.tracer.tris,
-            "tri_object": np.ascontiguousarray(scene.triangles()["object"], np.int32),
+            "tri_object": scene.triangle_objects(),
             "obj_two_sided": np.array([o.two_sided for o in scene.objects], np.uint8),
         }
         self.source = source

@@ -68,7 +68,7 @@ class _Tracer(Tracer):
 
     def __init__(self, scene: Scene, threads: int):
         super().__init__(scene, threads)
-        self.obj = scene.triangles()["object"]  # (F,) int32
+        self.obj = scene.triangle_objects()  # (F,) int32
         e1 = self.tris[:, 1] - self.tris[:, 0]
         e2 = self.tris[:, 2] - self.tris[:, 0]
         n = np.cross(e1, e2)
