@@ -383,3 +383,18 @@ def test_texture_srgb_decoding_by_hand():
     tex = voxgi.Texture(np.array([[[128, 10, 255]]], np.uint8), filter="nearest")
     np.testing.assert_allclose(tex.eval([[0.5, 0.5]]), [[0.2158605, 0.0030353, 1.0]], rtol=1e-5)
     np.testing.assert_allclose(tex.mean(), [0.2158605, 0.0030353, 1.0], rtol=1e-5)
+
+
+def test_the_surface_tables_are_built_once_for_a_scene_as_it_stands():
+    # The voxelization and the display read the same tables; a texture or a
+    # mesh changed in place gives new ones.
+    from voxgi.textures import surface_tables
+
+    sc = _textured_plane(_random_texture())
+    first = surface_tables(sc)
+    assert surface_tables(sc) is first
+    assert not first["corner_uv"].flags.writeable
+    sc.objects[0].material = voxgi.Material(texture=_random_texture(seed=2))
+    second = surface_tables(sc)
+    assert second is not first
+    assert not np.array_equal(second["tex_texels"][0], first["tex_texels"][0])
