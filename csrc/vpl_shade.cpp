@@ -658,18 +658,19 @@ constexpr int kSheetBounces = 8;
 // (up to kSheetBounces, the last one read as its record's mean), as light
 // passed on between nearly closed slats does. Returns the record read
 // (-1: none) with `factor`, the albedos on the way (the records' after the
-// first) times the sheets' transmittance, and, with the frame's emitter
-// VPLs (the display), the emitters' light at every bounce from one of
-// them in `direct` (emitter_vpl_light): a lamp seen through the gaps of a
-// blind is then found by a shadow ray from each slat, not only by the few
-// walks that escape to it, whose reading the balance heuristic weighs
-// into `factor`. Adds the rays traced to *rays.
+// first) times the sheets' transmittance, and in `light` the light the
+// walk brings: that record's radiance by `factor` and, with the frame's
+// emitter VPLs (the display), the emitters' light at every bounce from one
+// of them (emitter_vpl_light): a lamp seen through the gaps of a blind is
+// then found by a shadow ray from each slat, not only by the few walks
+// that escape to it, whose reading the balance heuristic weighs into
+// `factor`. Adds the rays traced to *rays.
 int64_t follow_sheet(const ShadeTriangles& tris, const RecordGrid& grid, const RayScene& scene,
                      double eps, const GatherHit& h, int64_t rec, const float ratio[3],
-                     uint64_t& rng, LookupScratch& scratch, double factor[3], double direct[3],
+                     uint64_t& rng, LookupScratch& scratch, double factor[3], double light[3],
                      int64_t* rays) {
     for (int ch = 0; ch < 3; ++ch)
-        factor[ch] = double(grid.rec[rec].albedo[ch]) * ratio[ch], direct[ch] = 0.0;
+        factor[ch] = double(grid.rec[rec].albedo[ch]) * ratio[ch], light[ch] = 0.0;
     if (!(factor[0] > 0.0 || factor[1] > 0.0 || factor[2] > 0.0)) return -1;  // a black sheet
     GatherHit at = h;
     int64_t q = -1;
@@ -679,17 +680,23 @@ int64_t follow_sheet(const ShadeTriangles& tris, const RecordGrid& grid, const R
         GatherHit g;
         trace_on(tris, grid, scene, eps, at, wi, ro, T, g);
         *rays += 1 + emitter_vpl_light(tris, scene, eps, at, ro, rng, Ld);
-        for (int ch = 0; ch < 3; ++ch) direct[ch] += factor[ch] * Ld[ch];
+        for (int ch = 0; ch < 3; ++ch) light[ch] += factor[ch] * Ld[ch];
         for (int ch = 0; ch < 3; ++ch) factor[ch] *= T[ch];
         if (g.escaped || g.key < 0) return -1;
         q = lookup_in_cell(grid, g.y, g.ns, g.obj, g.c, g.tri, g.front, scratch);
         if (q < 0) return q;
         if (grid.stacked[q] != 1) {  // (2: an emitter, read)
             const double w = emitter_hit_weight(tris, grid, at, z, g, q);
-            for (int ch = 0; ch < 3; ++ch) factor[ch] *= w;
+            for (int ch = 0; ch < 3; ++ch) {
+                factor[ch] *= w;
+                light[ch] += factor[ch] * grid.rec[q].radiance[ch];
+            }
             return q;
         }
-        if (bounce + 1 == kSheetBounces) break;
+        if (bounce + 1 == kSheetBounces) {  // the last one read as its record's mean
+            for (int ch = 0; ch < 3; ++ch) light[ch] += factor[ch] * grid.rec[q].radiance[ch];
+            return q;
+        }
         for (int ch = 0; ch < 3; ++ch) factor[ch] *= grid.rec[q].albedo[ch];
         if (!(factor[0] > 0.0 || factor[1] > 0.0 || factor[2] > 0.0)) return -1;  // black
         at = g;
@@ -904,13 +911,10 @@ void gather_light(const ShadeHits& hits, const ShadeMaterials& mats, const Shade
                         } else {
                             // the light leaving the sheet's point, which its
                             // VPLs carry too (sheet_radiance): MIS-shared
-                            double direct[3];
+                            double light[3];
                             q = follow_sheet(tris, pieces, scene, eps, h[k], rec, ratio, rng,
-                                             scratch, factor, direct, &n_traced);
-                            for (int ch = 0; ch < 3; ++ch)
-                                L[ch] =
-                                    float(direct[ch] +
-                                          (q >= 0 ? factor[ch] * grid.rec[q].radiance[ch] : 0.0));
+                                             scratch, factor, light, &n_traced);
+                            for (int ch = 0; ch < 3; ++ch) L[ch] = float(light[ch]);
                         }
                         gather_hit_light(hits, mats, mis, grid, p - 2, h[k], rec, s, L, coat);
                         if (q >= 0 && (transport || emitted) &&
@@ -972,11 +976,10 @@ void sheet_radiance(const ShadeTriangles& tris, const RecordGrid& grid, const Ra
             const float ratio[3] = {1.f, 1.f, 1.f};
             for (int w = 0; w < walks; ++w) {
                 uint64_t rng = splitmix64(base ^ (uint64_t(i) * uint64_t(walks) + uint64_t(w)));
-                double factor[3], direct[3];
-                const int64_t q = follow_sheet(tris, grid, scene, eps, h, rec, ratio, rng, scratch,
-                                               factor, direct, &traced);
-                for (int ch = 0; ch < 3; ++ch)
-                    sum[ch] += direct[ch] + (q >= 0 ? factor[ch] * grid.rec[q].radiance[ch] : 0.0);
+                double factor[3], light[3];
+                follow_sheet(tris, grid, scene, eps, h, rec, ratio, rng, scratch, factor, light,
+                             &traced);
+                for (int ch = 0; ch < 3; ++ch) sum[ch] += light[ch];
             }
             for (int ch = 0; ch < 3; ++ch) out[3 * i + ch] = float(sum[ch] / walks);
         }

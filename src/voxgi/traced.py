@@ -63,7 +63,11 @@ def _voxel_order(vox: VoxelSet) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
 def grid_positions(vox: VoxelSet) -> np.ndarray:
     """(N,) int64: each record's row in :func:`record_grid`'s tables (the
     kernels' ``point_record`` and ``transport_record`` index these rows)."""
-    order = _voxel_order(vox)[3]
+    return _rows(_voxel_order(vox)[3])
+
+
+def _rows(order: np.ndarray) -> np.ndarray:
+    """(N,) int64: the inverse of the permutation ``order``, each record's row."""
     position = np.empty(len(order), np.int64)
     position[order] = np.arange(len(order))
     return position
@@ -194,8 +198,7 @@ def _piece_table(vox: VoxelSet, key: np.ndarray, order: np.ndarray) -> dict:
         return {}
     tri = np.asarray(vox.piece_triangle, np.int64)
     rec = np.asarray(vox.piece_record, np.int64)
-    position = np.empty(len(order), np.int64)
-    position[order] = np.arange(len(order))
+    position = _rows(order)
     by_tri = np.argsort(tri, kind="stable")
     first = np.zeros(int(tri.max()) + 2, np.int64)
     np.cumsum(np.bincount(tri, minlength=len(first) - 1), out=first[1:])

@@ -109,12 +109,13 @@ class _Experiment(RenderTuning):
         mean whatever the direction.
     follow_sheets : bool
         A pixel's gather ray that lands on a sheet of a stack finer than a
-        voxel (a slat of a blind) walks on through the stack, and those
-        records light no VPL (default; ``docs/design.md`` §6): the light
-        they pass on is right, at the price of more noise (twice as much in
-        Bitterli's Contemporary Bathroom at 64 frames, a quarter more in the
-        Country Kitchen). False reads the records' means, which can leave a
-        room lit through blinds a few percent off.
+        voxel (a slat of a blind) walks on through the stack, and the VPLs
+        on those records carry the light walked from their own points
+        (default; ``docs/design.md`` §6): the light they pass on is right,
+        at the price of some noise and time (in Bitterli's Contemporary
+        Bathroom a sixth more noise at 64 frames, in the Country Kitchen a
+        quarter more time a frame). False reads the records' means, which
+        can leave a room lit through blinds a few percent off.
     guide_environment : bool
         Each pixel's environment samples are drawn where the environment's
         light reaches its place (default; :mod:`voxgi.display.environment_guide`);
